@@ -1,0 +1,47 @@
+# The two commands of the README:
+#   make run    installs what is missing, builds Release, starts tesserad on 127.0.0.1:8080 (data in ./data)
+#   make test   installs what is missing, builds, runs the whole test suite
+# Other targets: build, asan (sanitizer build + tests), bench, format, clean.
+
+BUILD ?= build
+ASAN_BUILD ?= build-asan
+JOBS ?= $(shell nproc)
+DATA_DIR ?= $(CURDIR)/data
+PORT ?= 8080
+
+.PHONY: run test build deps test-deps asan bench format clean
+
+deps:
+	deploy/install-deps.sh build
+
+test-deps:
+	deploy/install-deps.sh test
+
+$(BUILD)/build.ninja:
+	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release
+
+build: deps $(BUILD)/build.ninja
+	cmake --build $(BUILD) -j $(JOBS)
+
+run: build
+	@mkdir -p $(DATA_DIR)
+	exec $(BUILD)/server/tesserad --listen 127.0.0.1 --port $(PORT) --data-dir $(DATA_DIR)
+
+test: test-deps $(BUILD)/build.ninja
+	cmake --build $(BUILD) -j $(JOBS)
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) --timeout 900
+
+asan: test-deps
+	cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTESSERA_SANITIZE=ON
+	cmake --build $(ASAN_BUILD) -j $(JOBS)
+	cd $(ASAN_BUILD) && ctest --output-on-failure -j $(JOBS) -LE slow --timeout 1800
+
+bench: deps
+	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_BUILD_BENCH=ON
+	cmake --build $(BUILD) -j $(JOBS)
+
+format:
+	clang-format -i $$(git ls-files '*.cpp' '*.h')
+
+clean:
+	rm -rf $(BUILD) $(ASAN_BUILD)

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Installs what tessera needs to build, run and test on Debian 12, idempotently: nothing is installed twice and a
+# machine that has everything is left alone. Usage: deploy/install-deps.sh [build|test]
+set -euo pipefail
+mode=${1:-build}
+cd "$(dirname "$0")/.."
+
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+
+packages=(
+  build-essential cmake ninja-build pkg-config git ca-certificates curl python3
+  libembree-dev libopenimageio-dev openimageio-tools libcpp-httplib-dev nlohmann-json3-dev libtinygltf-dev
+  libsqlite3-dev libtbb-dev libssl-dev libstb-dev
+)
+if [ "$mode" = "test" ]; then
+  packages+=(libgtest-dev libgmock-dev libbenchmark-dev nodejs npm)
+fi
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then missing+=("$p"); fi
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "install-deps: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+else
+  echo "install-deps: all Debian packages present"
+fi
+
+# npm packages for the contract and browser tests live in tests/js (a package.json with a lock file).
+if [ "$mode" = "test" ] && [ -f tests/js/package.json ]; then
+  if [ ! -d tests/js/node_modules ] || [ tests/js/package-lock.json -nt tests/js/node_modules/.stamp ]; then
+    echo "install-deps: npm packages for tests/js"
+    (cd tests/js && npm ci --no-audit --no-fund --loglevel=error && touch node_modules/.stamp)
+  fi
+fi

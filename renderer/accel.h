@@ -1,0 +1,44 @@
+// Ray queries. This module owns every Embree call; nothing else includes Embree headers.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "renderer/math.h"
+
+namespace tessera {
+
+struct Mesh;
+struct Sphere;
+
+struct RayHit {
+  float t = kInfinity;
+  float u = 0, v = 0;  // barycentrics of vertices 1 and 2 (triangles)
+  Vec3 ng;             // unnormalised geometric normal, world
+  uint32_t geom_id = 0;
+  uint32_t prim_id = 0;
+  bool is_sphere = false;
+  uint32_t object = 0;  // index into Scene::meshes or Scene::spheres
+};
+
+class Accel {
+ public:
+  Accel();
+  ~Accel();
+  Accel(const Accel&) = delete;
+  Accel& operator=(const Accel&) = delete;
+
+  void build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& spheres);
+  bool intersect(const Ray& ray, RayHit* hit) const;
+  bool occluded(const Ray& ray) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Sets flush-to-zero and denormals-are-zero on the calling thread, as Embree asks of every thread that traces rays.
+void enable_flush_to_zero();
+
+}  // namespace tessera

@@ -1,0 +1,62 @@
+// The BSDF interface (seed 000, 2.5: the BRDF f_r(x, Psi -> Theta), extended to transmission).
+//
+// Conventions, shared by every model:
+// - Directions are unit vectors in the local shading frame: +z is the shading normal of the surface as modelled
+//   (the side the mesh's winding or the sphere's outward normal points to). `wo` points towards the viewer (where
+//   the path came from), `wi` towards the light. Both may lie on either side.
+// - `eval` returns f(wo, wi) alone, without the cosine factor; the integrator multiplies by |cos theta_i|.
+// - Opaque reflectors reflect on both sides of a surface: a back-side `wo` is treated like a front-side one
+//   mirrored through the surface (the pbrt convention), so a closed object seen from inside is lit like from outside.
+// - `sample` returns the sampled direction, f and the solid-angle pdf. For a delta (specular) lobe, pdf is the
+//   discrete probability of choosing that lobe and f is the lobe's weight divided by |cos theta_i|, so that
+//   f |cos| / pdf is the path weight; `eval` and `pdf` return 0 for delta lobes.
+// - `eta` of a sample is the relative index of refraction crossed (1 for reflection), for radiance scaling.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+
+#include "renderer/math.h"
+
+namespace tessera {
+
+enum BsdfFlags : uint32_t {
+  kBsdfNone = 0,
+  kBsdfReflection = 1u << 0,
+  kBsdfTransmission = 1u << 1,
+  kBsdfDiffuse = 1u << 2,
+  kBsdfGlossy = 1u << 3,
+  kBsdfSpecular = 1u << 4,  // a Dirac delta lobe
+};
+
+inline bool is_delta(uint32_t flags) { return (flags & kBsdfSpecular) != 0; }
+inline bool has_non_delta(uint32_t flags) { return (flags & (kBsdfDiffuse | kBsdfGlossy)) != 0; }
+
+struct BsdfSample {
+  Rgb f;
+  Vec3 wi;
+  float pdf = 0;
+  uint32_t flags = 0;  // the lobe that was sampled
+  float eta = 1;
+};
+
+class Bsdf {
+ public:
+  virtual Rgb eval(const Vec3& wo, const Vec3& wi) const = 0;
+  // `uc` chooses a lobe, `u` samples within it; both uniform in [0,1).
+  virtual std::optional<BsdfSample> sample(const Vec3& wo, float uc, Vec2 u) const = 0;
+  virtual float pdf(const Vec3& wo, const Vec3& wi) const = 0;
+  // Union of the lobes this BSDF has.
+  virtual uint32_t flags() const = 0;
+  // Albedo-like colour for the first-hit albedo AOV and for Russian roulette heuristics.
+  virtual Rgb albedo_hint() const { return Rgb(0.5f); }
+
+ protected:
+  ~Bsdf() = default;  // BSDFs live in a ScratchArena and are never destroyed through a base pointer.
+};
+
+inline float cos_theta(const Vec3& w) { return w.z; }
+inline float abs_cos_theta(const Vec3& w) { return std::abs(w.z); }
+inline bool same_hemisphere(const Vec3& a, const Vec3& b) { return a.z * b.z > 0; }
+
+}  // namespace tessera

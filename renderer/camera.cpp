@@ -1,0 +1,65 @@
+#include "renderer/camera.h"
+
+#include "renderer/sampling.h"
+
+namespace tessera {
+
+Camera::Camera(const CameraDesc& desc, int width, int height) : desc_(desc), width_(width), height_(height) {
+  Vec3 forward = normalize(desc.to - desc.from);
+  Vec3 right = cross(forward, desc.up);
+  if (length_squared(right) < 1e-12f) right = cross(forward, std::abs(forward.y) < 0.9f ? Vec3(0, 1, 0) : Vec3(1, 0, 0));
+  right = normalize(right);
+  Vec3 up = cross(right, forward);
+  frame_ = Frame(right, up, forward);
+  float aspect = static_cast<float>(width) / static_cast<float>(height);
+  if (desc.projection == CameraDesc::Projection::kPerspective) {
+    half_h_ = std::tan(desc.fov_deg * kPi / 360.0f);
+  } else {
+    half_h_ = desc.ortho_height * 0.5f;
+  }
+  half_w_ = half_h_ * aspect;
+  focus_ = desc.focus_distance > 0 ? desc.focus_distance : length(desc.to - desc.from);
+}
+
+Ray Camera::generate_ray(Vec2 film, Vec2 u_lens) const {
+  // Screen coordinates in [-1,1], y up.
+  float sx = (2 * film.x / static_cast<float>(width_) - 1) * half_w_;
+  float sy = (1 - 2 * film.y / static_cast<float>(height_)) * half_h_;
+  Ray ray;
+  if (desc_.projection == CameraDesc::Projection::kOrthographic) {
+    ray.origin = desc_.from + frame_.s * sx + frame_.t * sy;
+    ray.dir = frame_.n;
+    return ray;
+  }
+  Vec3 dir_local(sx, sy, 1);
+  if (desc_.aperture_radius > 0) {
+    // Thin lens: every ray through the lens point reaches the same point on the plane of focus.
+    Vec3 focus_point = dir_local * focus_;
+    Vec2 lens = sample_concentric_disk(u_lens) * desc_.aperture_radius;
+    Vec3 lens_local(lens.x, lens.y, 0);
+    ray.origin = desc_.from + frame_.to_world(lens_local);
+    ray.dir = normalize(frame_.to_world(focus_point - lens_local));
+  } else {
+    ray.origin = desc_.from;
+    ray.dir = normalize(frame_.to_world(dir_local));
+  }
+  return ray;
+}
+
+bool Camera::project(const Vec3& p, Vec2* film) const {
+  Vec3 local = frame_.to_local(p - desc_.from);
+  float sx, sy;
+  if (desc_.projection == CameraDesc::Projection::kOrthographic) {
+    sx = local.x;
+    sy = local.y;
+  } else {
+    if (local.z <= 0) return false;
+    sx = local.x / local.z;
+    sy = local.y / local.z;
+  }
+  film->x = (sx / half_w_ + 1) * 0.5f * static_cast<float>(width_);
+  film->y = (1 - sy / half_h_) * 0.5f * static_cast<float>(height_);
+  return true;
+}
+
+}  // namespace tessera

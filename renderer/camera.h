@@ -1,0 +1,39 @@
+// Cameras: map a point on the film (continuous pixel coordinates) and a lens sample to a primary ray.
+#pragma once
+
+#include "renderer/math.h"
+
+namespace tessera {
+
+struct CameraDesc {
+  enum class Projection { kPerspective, kOrthographic };
+  Projection projection = Projection::kPerspective;
+  Vec3 from{0, 0, 5};
+  Vec3 to{0, 0, 0};
+  Vec3 up{0, 1, 0};
+  float fov_deg = 40;        // vertical field of view (perspective)
+  float ortho_height = 2;    // vertical extent of the view in scene units (orthographic)
+  float aperture_radius = 0; // thin lens radius; 0 is a pinhole
+  float focus_distance = 0;  // 0: the distance from `from` to `to`
+};
+
+class Camera {
+ public:
+  Camera() = default;
+  Camera(const CameraDesc& desc, int width, int height);
+  // `film` in pixels: (0,0) is the top-left corner of the image, (width,height) the bottom-right.
+  Ray generate_ray(Vec2 film, Vec2 u_lens) const;
+  // Pixel position where the world point `p` projects (for tests); false if behind the camera.
+  bool project(const Vec3& p, Vec2* film) const;
+  const CameraDesc& desc() const { return desc_; }
+
+ private:
+  CameraDesc desc_;
+  int width_ = 1, height_ = 1;
+  Frame frame_;       // s = right, t = up, n = forward
+  float half_h_ = 1;  // tan(fov/2) or ortho half height
+  float half_w_ = 1;
+  float focus_ = 1;
+};
+
+}  // namespace tessera

@@ -1,0 +1,138 @@
+#include "renderer/integrator.h"
+
+#include "renderer/scene.h"
+
+namespace tessera {
+
+const char* estimator_name(Estimator e) {
+  switch (e) {
+    case Estimator::kHemisphere: return "hemisphere";
+    case Estimator::kArea: return "area";
+    case Estimator::kMis: return "mis";
+  }
+  return "mis";
+}
+
+bool parse_estimator(const std::string& name, Estimator* out) {
+  if (name == "hemisphere") *out = Estimator::kHemisphere;
+  else if (name == "area") *out = Estimator::kArea;
+  else if (name == "mis") *out = Estimator::kMis;
+  else return false;
+  return true;
+}
+
+Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler, const IntegratorSettings& settings,
+               ScratchArena& arena, RayCounters& counters) {
+  const LightSet& lights = scene.lights();
+  const bool use_light_sampling = settings.estimator != Estimator::kHemisphere;
+  const bool use_bsdf_hits = settings.estimator != Estimator::kArea;
+  const bool mis = settings.estimator == Estimator::kMis;
+
+  Rgb radiance(0);
+  Rgb throughput(1);
+  Ray ray = camera_ray;
+  // State of the previous scattering event, for weighting emission found by BSDF sampling.
+  bool prev_delta = true;  // the camera ray counts as a delta event: emitters it sees are added fully
+  float prev_pdf = 0;
+  Vec3 prev_p;
+  float eta_scale = 1;  // product of eta^2 across refractions, kept out of Russian roulette
+  ++counters.camera;
+
+  for (int depth = 0;; ++depth) {
+    arena.reset();
+    SurfaceInteraction si;
+    if (!scene.intersect(ray, &si)) {
+      if (!scene.environment.black()) {
+        Rgb le = scene.environment.radiance(ray.dir);
+        if (prev_delta) {
+          radiance += throughput * le;
+        } else if (use_bsdf_hits) {
+          float w = mis ? power_heuristic(prev_pdf, lights.pdf_environment(ray.dir)) : 1.0f;
+          radiance += throughput * le * w;
+        }
+      }
+      break;
+    }
+    const Vec3 wo_world = -ray.dir;
+    if (si.material->emissive()) {
+      Rgb le = si.material->emitted(si.sp, wo_world);
+      if (!is_black(le)) {
+        if (prev_delta) {
+          radiance += throughput * le;
+        } else if (use_bsdf_hits) {
+          float w = mis ? power_heuristic(prev_pdf, lights.pdf_hit(scene, prev_p, si)) : 1.0f;
+          radiance += throughput * le * w;
+        }
+      }
+    }
+    if (depth >= settings.max_depth) break;
+    const Bsdf* bsdf = si.material->bsdf(si.sp, arena);
+    if (!bsdf) break;
+    const uint32_t flags = bsdf->flags();
+    const Frame& frame = si.sp.frame;
+    const Vec3 wo = frame.to_local(wo_world);
+    if (wo.z == 0) break;
+
+    // Next-event estimation: one light sample, unless every lobe is a delta (a light sample cannot hit it).
+    // Draw the light sample's numbers unconditionally so the dimension layout does not depend on the estimator.
+    const float u_light_select = sampler.get1d();
+    const Vec2 u_light = sampler.get2d();
+    if (use_light_sampling && has_non_delta(flags)) {
+      LightSample ls;
+      if (lights.sample(scene, si.sp.p, u_light_select, u_light, &ls) && ls.pdf > 0 && !is_black(ls.radiance)) {
+        Vec3 wi = frame.to_local(ls.wi);
+        // Which side of the geometric surface the light is on decides reflection or transmission, whatever the
+        // shading normal says (otherwise light leaks through surfaces with interpolated normals).
+        const bool light_transmits = dot(ls.wi, si.sp.ng) * dot(wo_world, si.sp.ng) <= 0;
+        const uint32_t needed = light_transmits ? kBsdfTransmission : kBsdfReflection;
+        Rgb f = (flags & needed) ? bsdf->eval(wo, wi) * std::abs(wi.z) : Rgb(0);
+        if (!is_black(f)) {
+          Ray shadow;
+          shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, ls.wi);
+          shadow.dir = ls.wi;
+          shadow.tmin = 0;
+          shadow.tmax = std::isinf(ls.dist) ? kInfinity : ls.dist * (1 - 1e-4f);
+          ++counters.shadow;
+          if (!scene.occluded(shadow)) {
+            float w = (mis && !ls.delta) ? power_heuristic(ls.pdf, bsdf->pdf(wo, wi)) : 1.0f;
+            radiance += throughput * f * ls.radiance * (w / ls.pdf);
+          }
+        }
+      }
+    }
+
+    // Continue the path by sampling the BSDF.
+    const float u_lobe = sampler.get1d();
+    const Vec2 u_dir = sampler.get2d();
+    std::optional<BsdfSample> bs = bsdf->sample(wo, u_lobe, u_dir);
+    if (!bs || !(bs->pdf > 0) || is_black(bs->f)) break;
+    const Vec3 wi_world = frame.to_world(bs->wi);
+    // Reject directions whose shading and geometric sides disagree (shading normals can make these).
+    const bool transmit = (bs->flags & kBsdfTransmission) != 0;
+    if ((dot(wi_world, si.sp.ng) * dot(wo_world, si.sp.ng) > 0) == transmit) break;
+    throughput *= bs->f * (std::abs(bs->wi.z) / bs->pdf);
+    if (!is_finite(throughput)) break;
+    if (transmit) eta_scale *= sqr(bs->eta);
+    prev_delta = is_delta(bs->flags);
+    prev_pdf = bs->pdf;
+    prev_p = si.sp.p;
+
+    // Russian roulette on the throughput with the radiance-scaling of refraction removed.
+    const float u_rr = sampler.get1d();
+    if (depth + 1 >= settings.rr_start_depth) {
+      float q = std::max(0.05f, 1 - max_component(throughput) * eta_scale);
+      if (q > 0) {
+        if (u_rr < q) break;
+        throughput /= 1 - q;
+      }
+    }
+    ray.origin = offset_ray_origin(si.sp.p, si.sp.ng, wi_world);
+    ray.dir = wi_world;
+    ray.tmin = 0;
+    ray.tmax = kInfinity;
+    ++counters.bounce;
+  }
+  return radiance;
+}
+
+}  // namespace tessera

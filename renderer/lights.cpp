@@ -1,0 +1,231 @@
+#include "renderer/lights.h"
+
+#include "renderer/scene.h"
+
+namespace tessera {
+
+namespace {
+
+struct TrianglePoints {
+  Vec3 a, b, c;
+};
+TrianglePoints triangle(const Mesh& mesh, uint32_t prim) {
+  return {mesh.positions[mesh.indices[3 * prim]], mesh.positions[mesh.indices[3 * prim + 1]],
+          mesh.positions[mesh.indices[3 * prim + 2]]};
+}
+
+ShadingPoint triangle_point(const Mesh& mesh, uint32_t prim, float b1, float b2) {
+  TrianglePoints t = triangle(mesh, prim);
+  ShadingPoint sp;
+  float b0 = 1 - b1 - b2;
+  sp.p = t.a * b0 + t.b * b1 + t.c * b2;
+  sp.ng = normalize(cross(t.b - t.a, t.c - t.a));
+  sp.frame = Frame::from_normal(sp.ng);
+  if (!mesh.uvs.empty()) {
+    const uint32_t* idx = &mesh.indices[3 * prim];
+    sp.uv = mesh.uvs[idx[0]] * b0 + mesh.uvs[idx[1]] * b1 + mesh.uvs[idx[2]] * b2;
+    sp.uv1 = sp.uv;
+  }
+  return sp;
+}
+
+float emitted_power(const Rgb& average_radiance, float area, bool one_sided) {
+  return luminance(average_radiance) * area * kPi * (one_sided ? 1.0f : 2.0f);
+}
+
+}  // namespace
+
+void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punctual) {
+  entries_.clear();
+  punctual_ = punctual;
+  environment_ = kNoLight;
+  scene_radius_ = std::max(scene.bounds().radius(), 1e-3f);
+  std::vector<float> power;
+  for (uint32_t m = 0; m < scene.meshes.size(); ++m) {
+    const Mesh& mesh = scene.meshes[m];
+    const Material& mat = *scene.materials[mesh.material];
+    if (!mat.emissive()) continue;
+    for (uint32_t t = 0; t < mesh.triangle_count(); ++t) {
+      TrianglePoints tp = triangle(mesh, t);
+      float area = 0.5f * length(cross(tp.b - tp.a, tp.c - tp.a));
+      // Degenerate triangles keep their slot (light indices follow triangle order) but are never chosen.
+      entries_.push_back({Kind::kTriangle, m, t});
+      power.push_back(area > 0 ? emitted_power(mat.emission.average(), area, mat.emission_one_sided) : -1.0f);
+    }
+  }
+  for (uint32_t s = 0; s < scene.spheres.size(); ++s) {
+    const Sphere& sphere = scene.spheres[s];
+    const Material& mat = *scene.materials[sphere.material];
+    if (!mat.emissive()) continue;
+    entries_.push_back({Kind::kSphere, s, 0});
+    power.push_back(emitted_power(mat.emission.average(), 4 * kPi * sqr(sphere.radius), mat.emission_one_sided));
+  }
+  for (uint32_t i = 0; i < punctual_.size(); ++i) {
+    const PunctualLight& l = punctual_[i];
+    entries_.push_back({Kind::kPunctual, i, 0});
+    float phi = l.kind == PunctualLight::Kind::kDirectional ? kPi * sqr(scene_radius_) * luminance(l.intensity)
+                                                            : 4 * kPi * luminance(l.intensity);
+    power.push_back(phi);
+  }
+  if (!scene.environment.black()) {
+    environment_ = static_cast<uint32_t>(entries_.size());
+    entries_.push_back({Kind::kEnvironment, 0, 0});
+    // Power the environment delivers into the scene's bounding sphere.
+    power.push_back(kPi * kPi * sqr(scene_radius_) * luminance(scene.environment.radiance(Vec3(0, 0, 1))));
+  }
+  // A light whose power estimate is zero (e.g. a pure blue light has nonzero luminance, but guard anyway) keeps a
+  // small share so that it is never impossible to sample.
+  float total = 0;
+  for (float p : power) total += std::max(p, 0.0f);
+  for (float& p : power) p = p < 0 ? 0.0f : std::max(p, 1e-6f * total + 1e-30f);
+  distribution_ = power.empty() ? Distribution1D() : Distribution1D(power.data(), power.size());
+}
+
+bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u, LightSample* out) const {
+  if (entries_.empty()) return false;
+  float pmf = 0;
+  const Entry& e = entries_[distribution_.sample(u_select, &pmf)];
+  switch (e.kind) {
+    case Kind::kTriangle: {
+      const Mesh& mesh = scene.meshes[e.object];
+      Vec2 b = sample_uniform_triangle(u);
+      ShadingPoint sp = triangle_point(mesh, e.prim, b.x, b.y);
+      TrianglePoints tp = triangle(mesh, e.prim);
+      float area = 0.5f * length(cross(tp.b - tp.a, tp.c - tp.a));
+      if (!(area > 0)) return false;
+      Vec3 d = sp.p - p;
+      float dist2 = length_squared(d);
+      if (!(dist2 > 0)) return false;
+      float dist = std::sqrt(dist2);
+      Vec3 wi = d / dist;
+      float cos_light = std::abs(dot(sp.ng, wi));
+      if (cos_light < 1e-7f) return false;
+      out->wi = wi;
+      out->dist = dist;
+      out->pdf = pmf * dist2 / (cos_light * area);
+      out->radiance = scene.materials[mesh.material]->emitted(sp, -wi);
+      out->delta = false;
+      return true;
+    }
+    case Kind::kSphere: {
+      const Sphere& s = scene.spheres[e.object];
+      Vec3 to_center = s.center - p;
+      float dc2 = length_squared(to_center);
+      float r2 = sqr(s.radius);
+      ShadingPoint sp;
+      if (dc2 > r2 * 1.0001f) {
+        // Outside: sample the cone of directions the sphere subtends, uniformly.
+        float dc = std::sqrt(dc2);
+        float sin2_max = r2 / dc2;
+        float cos_max = safe_sqrt(1 - sin2_max);
+        Frame f = Frame::from_normal(to_center / dc);
+        Vec3 wi = f.to_world(sample_uniform_cone(u, cos_max));
+        // Nearest intersection with the sphere along wi (clamped to the tangent point on grazing rounding).
+        float b = dot(wi, to_center);
+        float disc = b * b - (dc2 - r2);
+        float t = b - safe_sqrt(disc);
+        sp.p = p + wi * t;
+        sp.ng = normalize(sp.p - s.center);
+        out->wi = wi;
+        out->dist = t;
+        out->pdf = pmf * uniform_cone_pdf(cos_max);
+      } else {
+        // Inside (or on): sample the whole surface uniformly by area.
+        Vec3 n = sample_uniform_sphere(u);
+        sp.p = s.center + n * s.radius;
+        sp.ng = n;
+        Vec3 d = sp.p - p;
+        float dist2 = length_squared(d);
+        if (!(dist2 > 0)) return false;
+        float dist = std::sqrt(dist2);
+        out->wi = d / dist;
+        out->dist = dist;
+        float cos_light = std::abs(dot(n, out->wi));
+        if (cos_light < 1e-7f) return false;
+        out->pdf = pmf * dist2 / (cos_light * 4 * kPi * r2);
+      }
+      sp.frame = Frame::from_normal(sp.ng);
+      out->radiance = scene.materials[s.material]->emitted(sp, -out->wi);
+      out->delta = false;
+      return true;
+    }
+    case Kind::kPunctual: {
+      const PunctualLight& l = punctual_[e.object];
+      out->delta = true;
+      out->pdf = pmf;
+      if (l.kind == PunctualLight::Kind::kDirectional) {
+        out->wi = -normalize(l.direction);
+        out->dist = kInfinity;
+        out->radiance = l.intensity;
+        return true;
+      }
+      Vec3 d = l.position - p;
+      float dist2 = length_squared(d);
+      if (!(dist2 > 0)) return false;
+      out->dist = std::sqrt(dist2);
+      out->wi = d / out->dist;
+      float falloff = 1;
+      if (l.kind == PunctualLight::Kind::kSpot) {
+        float cd = dot(-out->wi, normalize(l.direction));
+        if (cd <= l.cos_outer) return false;
+        if (cd < l.cos_inner) {
+          // glTF's KHR_lights_punctual smooth falloff between the outer and inner cone.
+          float t = (cd - l.cos_outer) / std::max(l.cos_inner - l.cos_outer, 1e-6f);
+          falloff = t * t;
+        }
+      }
+      out->radiance = l.intensity * (falloff / dist2);
+      return true;
+    }
+    case Kind::kEnvironment: {
+      Vec3 wi = sample_uniform_sphere(u);
+      out->wi = wi;
+      out->dist = kInfinity;
+      out->pdf = pmf * uniform_sphere_pdf();
+      out->radiance = scene.environment.radiance(wi);
+      out->delta = false;
+      return true;
+    }
+  }
+  return false;
+}
+
+float LightSet::pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteraction& si) const {
+  if (si.light == kNoLight || si.light >= entries_.size()) return 0;
+  const Entry& e = entries_[si.light];
+  float pmf = distribution_.pmf(si.light);
+  if (e.kind == Kind::kTriangle) {
+    const Mesh& mesh = scene.meshes[e.object];
+    TrianglePoints tp = triangle(mesh, e.prim);
+    float area = 0.5f * length(cross(tp.b - tp.a, tp.c - tp.a));
+    Vec3 d = si.sp.p - p;
+    float dist2 = length_squared(d);
+    if (!(area > 0) || !(dist2 > 0)) return 0;
+    float cos_light = std::abs(dot(si.sp.ng, d)) / std::sqrt(dist2);
+    if (cos_light < 1e-7f) return 0;
+    return pmf * dist2 / (cos_light * area);
+  }
+  if (e.kind == Kind::kSphere) {
+    const Sphere& s = scene.spheres[e.object];
+    Vec3 to_center = s.center - p;
+    float dc2 = length_squared(to_center);
+    float r2 = sqr(s.radius);
+    if (dc2 > r2 * 1.0001f) {
+      float cos_max = safe_sqrt(1 - r2 / dc2);
+      return pmf * uniform_cone_pdf(cos_max);
+    }
+    Vec3 d = si.sp.p - p;
+    float dist2 = length_squared(d);
+    float cos_light = std::abs(dot(si.sp.ng, d)) / std::sqrt(dist2);
+    if (cos_light < 1e-7f) return 0;
+    return pmf * dist2 / (cos_light * 4 * kPi * r2);
+  }
+  return 0;
+}
+
+float LightSet::pdf_environment(const Vec3& /*dir*/) const {
+  if (environment_ == kNoLight) return 0;
+  return distribution_.pmf(environment_) * uniform_sphere_pdf();
+}
+
+}  // namespace tessera

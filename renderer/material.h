@@ -1,0 +1,81 @@
+// Materials: created by type name from JSON through one registry; at a hit they build the BSDF of that point.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "renderer/arena.h"
+#include "renderer/bsdf/bsdf.h"
+#include "renderer/texture.h"
+
+namespace tessera {
+
+class Material {
+ public:
+  virtual ~Material() = default;
+  // The BSDF at `sp`, built in `arena`; nullptr for a surface that does not scatter (a pure emitter).
+  virtual const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const = 0;
+
+  // Emitted radiance towards `w` (world direction, away from the surface). Any material may emit.
+  Rgb emitted(const ShadingPoint& sp, const Vec3& w) const {
+    if (!emissive()) return {};
+    if (emission_one_sided && dot(w, sp.ng) <= 0) return {};
+    return emission.eval(sp);
+  }
+  bool emissive() const { return !is_black(emission.value); }
+
+  RgbParam emission;               // radiance, W/(m^2 sr) per channel
+  bool emission_one_sided = false; // emit only to the side the geometric normal points to
+};
+
+// Where texture files named by a material may come from.
+struct MaterialContext {
+  std::filesystem::path asset_root;  // empty: no file textures allowed
+};
+
+// Makes a material from its JSON object; throws SceneError naming the field (`pointer` is the object's pointer).
+using MaterialFactory =
+    std::function<std::unique_ptr<Material>(const nlohmann::json& params, const std::string& pointer,
+                                            const MaterialContext& ctx)>;
+
+class MaterialRegistry {
+ public:
+  // The registry with every built-in model.
+  static const MaterialRegistry& builtin();
+
+  void add(const std::string& type, MaterialFactory factory);
+  bool has(const std::string& type) const { return factories_.count(type) != 0; }
+  std::vector<std::string> types() const;
+  // Creates the material described by `params` (which holds "type"), including the common "emission" keys.
+  std::unique_ptr<Material> create(const nlohmann::json& params, const std::string& pointer,
+                                   const MaterialContext& ctx) const;
+
+ private:
+  std::map<std::string, MaterialFactory> factories_;
+};
+
+// Adds every model the renderer ships to `registry` (one line per model in material_registry.cpp).
+void register_builtin_materials(MaterialRegistry& registry);
+
+// Helpers for factories: read a parameter, check its range, raise SceneError naming the field.
+namespace params {
+float number(const nlohmann::json& obj, const std::string& key, const std::string& pointer, float fallback,
+             float min_value, float max_value);
+Rgb rgb(const nlohmann::json& obj, const std::string& key, const std::string& pointer, Rgb fallback, float min_value,
+        float max_value);
+RgbParam rgb_param(const nlohmann::json& obj, const std::string& key, const std::string& pointer, Rgb fallback,
+                   float min_value, float max_value, const MaterialContext& ctx);
+FloatParam float_param(const nlohmann::json& obj, const std::string& key, const std::string& pointer, float fallback,
+                       float min_value, float max_value, const MaterialContext& ctx);
+bool boolean(const nlohmann::json& obj, const std::string& key, const std::string& pointer, bool fallback);
+std::string string(const nlohmann::json& obj, const std::string& key, const std::string& pointer,
+                   const std::string& fallback);
+}  // namespace params
+
+}  // namespace tessera

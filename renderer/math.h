@@ -1,0 +1,122 @@
+// Small vector algebra for the renderer: 3-vectors of float, used for points, directions and RGB radiance.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+namespace tessera {
+
+inline constexpr float kPi = 3.14159265358979323846f;
+inline constexpr float kInvPi = 0.31830988618379067154f;
+inline constexpr float kInv2Pi = 0.15915494309189533577f;
+inline constexpr float kInv4Pi = 0.07957747154594766788f;
+inline constexpr float kInfinity = std::numeric_limits<float>::infinity();
+
+struct Vec2 {
+  float x = 0, y = 0;
+  constexpr Vec2() = default;
+  constexpr Vec2(float x_, float y_) : x(x_), y(y_) {}
+  constexpr Vec2 operator+(Vec2 b) const { return {x + b.x, y + b.y}; }
+  constexpr Vec2 operator-(Vec2 b) const { return {x - b.x, y - b.y}; }
+  constexpr Vec2 operator*(float s) const { return {x * s, y * s}; }
+};
+
+struct Vec3 {
+  float x = 0, y = 0, z = 0;
+  constexpr Vec3() = default;
+  constexpr explicit Vec3(float s) : x(s), y(s), z(s) {}
+  constexpr Vec3(float x_, float y_, float z_) : x(x_), y(y_), z(z_) {}
+  constexpr float operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
+  constexpr float& operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
+  constexpr Vec3 operator-() const { return {-x, -y, -z}; }
+  constexpr Vec3 operator+(const Vec3& b) const { return {x + b.x, y + b.y, z + b.z}; }
+  constexpr Vec3 operator-(const Vec3& b) const { return {x - b.x, y - b.y, z - b.z}; }
+  constexpr Vec3 operator*(const Vec3& b) const { return {x * b.x, y * b.y, z * b.z}; }
+  constexpr Vec3 operator/(const Vec3& b) const { return {x / b.x, y / b.y, z / b.z}; }
+  constexpr Vec3 operator*(float s) const { return {x * s, y * s, z * s}; }
+  constexpr Vec3 operator/(float s) const { return {x / s, y / s, z / s}; }
+  constexpr Vec3& operator+=(const Vec3& b) { x += b.x; y += b.y; z += b.z; return *this; }
+  constexpr Vec3& operator-=(const Vec3& b) { x -= b.x; y -= b.y; z -= b.z; return *this; }
+  constexpr Vec3& operator*=(const Vec3& b) { x *= b.x; y *= b.y; z *= b.z; return *this; }
+  constexpr Vec3& operator*=(float s) { x *= s; y *= s; z *= s; return *this; }
+  constexpr Vec3& operator/=(float s) { x /= s; y /= s; z /= s; return *this; }
+  constexpr bool operator==(const Vec3&) const = default;
+};
+constexpr Vec3 operator*(float s, const Vec3& v) { return v * s; }
+
+// Linear RGB radiance, reflectance or throughput.
+using Rgb = Vec3;
+
+constexpr float dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+constexpr Vec3 cross(const Vec3& a, const Vec3& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline float length(const Vec3& v) { return std::sqrt(dot(v, v)); }
+constexpr float length_squared(const Vec3& v) { return dot(v, v); }
+inline Vec3 normalize(const Vec3& v) { return v / length(v); }
+inline Vec3 vabs(const Vec3& v) { return {std::abs(v.x), std::abs(v.y), std::abs(v.z)}; }
+inline Vec3 vmin(const Vec3& a, const Vec3& b) { return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)}; }
+inline Vec3 vmax(const Vec3& a, const Vec3& b) { return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)}; }
+constexpr float max_component(const Vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
+constexpr bool is_black(const Vec3& v) { return v.x == 0 && v.y == 0 && v.z == 0; }
+inline bool is_finite(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+// Rec. 709 / sRGB luminance of linear RGB.
+constexpr float luminance(const Rgb& c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
+constexpr float average(const Rgb& c) { return (c.x + c.y + c.z) * (1.0f / 3.0f); }
+
+inline Vec3 reflect(const Vec3& wo, const Vec3& n) { return -wo + n * (2 * dot(wo, n)); }
+
+// Orthonormal basis with `n` as its z axis (Duff et al., "Building an Orthonormal Basis, Revisited", JCGT 2017).
+struct Frame {
+  Vec3 s, t, n;
+  Frame() : s(1, 0, 0), t(0, 1, 0), n(0, 0, 1) {}
+  Frame(const Vec3& s_, const Vec3& t_, const Vec3& n_) : s(s_), t(t_), n(n_) {}
+  static Frame from_normal(const Vec3& n) {
+    float sign = std::copysign(1.0f, n.z);
+    float a = -1.0f / (sign + n.z);
+    float b = n.x * n.y * a;
+    return Frame(Vec3(1 + sign * n.x * n.x * a, sign * b, -sign * n.x), Vec3(b, sign + n.y * n.y * a, -n.y), n);
+  }
+  // Frame with normal n whose s axis follows the tangent direction `tangent` projected into the plane.
+  static Frame from_normal_tangent(const Vec3& n, const Vec3& tangent) {
+    Vec3 s = tangent - n * dot(n, tangent);
+    float len2 = length_squared(s);
+    if (!(len2 > 1e-12f)) return from_normal(n);
+    s = s / std::sqrt(len2);
+    return Frame(s, cross(n, s), n);
+  }
+  Vec3 to_local(const Vec3& v) const { return {dot(v, s), dot(v, t), dot(v, n)}; }
+  Vec3 to_world(const Vec3& v) const { return s * v.x + t * v.y + n * v.z; }
+};
+
+struct Ray {
+  Vec3 origin;
+  Vec3 dir;
+  float tmin = 0;
+  float tmax = kInfinity;
+};
+
+// 4x4 affine transform (row-major, last row implied 0 0 0 1).
+struct Transform {
+  float m[3][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}};
+  Vec3 point(const Vec3& p) const {
+    return {m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3],
+            m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3],
+            m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3]};
+  }
+  Vec3 vector(const Vec3& v) const {
+    return {m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z, m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
+            m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z};
+  }
+};
+
+template <typename T>
+constexpr T clamp(T v, T lo, T hi) {
+  return v < lo ? lo : (v > hi ? hi : v);
+}
+constexpr float sqr(float x) { return x * x; }
+inline float safe_sqrt(float x) { return std::sqrt(std::max(0.0f, x)); }
+
+}  // namespace tessera

@@ -1,0 +1,91 @@
+#include "renderer/sampling.h"
+
+#include <algorithm>
+
+namespace tessera {
+
+Vec2 sample_concentric_disk(Vec2 u) {
+  float ox = 2 * u.x - 1, oy = 2 * u.y - 1;
+  if (ox == 0 && oy == 0) return {0, 0};
+  float r, theta;
+  if (std::abs(ox) > std::abs(oy)) {
+    r = ox;
+    theta = (kPi / 4) * (oy / ox);
+  } else {
+    r = oy;
+    theta = kPi / 2 - (kPi / 4) * (ox / oy);
+  }
+  return {r * std::cos(theta), r * std::sin(theta)};
+}
+
+Vec3 sample_cosine_hemisphere(Vec2 u) {
+  // Malley's method: project the uniform disk up onto the hemisphere.
+  Vec2 d = sample_concentric_disk(u);
+  float z = safe_sqrt(1 - d.x * d.x - d.y * d.y);
+  return {d.x, d.y, z};
+}
+
+Vec3 sample_uniform_hemisphere(Vec2 u) {
+  float z = u.x;
+  float r = safe_sqrt(1 - z * z);
+  float phi = 2 * kPi * u.y;
+  return {r * std::cos(phi), r * std::sin(phi), z};
+}
+
+Vec3 sample_uniform_sphere(Vec2 u) {
+  float z = 1 - 2 * u.x;
+  float r = safe_sqrt(1 - z * z);
+  float phi = 2 * kPi * u.y;
+  return {r * std::cos(phi), r * std::sin(phi), z};
+}
+
+Vec3 sample_uniform_cone(Vec2 u, float cos_theta_max) {
+  float cos_theta = (1 - u.x) + u.x * cos_theta_max;
+  float sin_theta = safe_sqrt(1 - cos_theta * cos_theta);
+  float phi = 2 * kPi * u.y;
+  return {sin_theta * std::cos(phi), sin_theta * std::sin(phi), cos_theta};
+}
+
+Vec2 sample_uniform_triangle(Vec2 u) {
+  // Heitz, "A Low-Distortion Map Between Triangle and Square" (2019).
+  float b0, b1;
+  if (u.x < u.y) {
+    b0 = u.x / 2;
+    b1 = u.y - b0;
+  } else {
+    b1 = u.y / 2;
+    b0 = u.x - b1;
+  }
+  return {b1, 1 - b0 - b1};
+}
+
+Distribution1D::Distribution1D(const float* weights, size_t n) : pdf_(n), cdf_(n + 1) {
+  cdf_[0] = 0;
+  for (size_t i = 0; i < n; ++i) cdf_[i + 1] = cdf_[i] + std::max(0.0f, weights[i]);
+  total_ = cdf_[n];
+  for (size_t i = 0; i < n; ++i) {
+    pdf_[i] = total_ > 0 ? static_cast<float>(std::max(0.0f, weights[i]) / total_) : 1.0f / static_cast<float>(n);
+  }
+  if (!(total_ > 0)) {
+    for (size_t i = 0; i <= n; ++i) cdf_[i] = static_cast<double>(i);
+    total_ = 0;
+  }
+}
+
+size_t Distribution1D::sample(float u, float* pmf, float* u_remapped) const {
+  const double scale = cdf_.back();
+  const double target = static_cast<double>(u) * scale;
+  // First bucket whose upper bound exceeds the target, skipping empty buckets.
+  auto it = std::upper_bound(cdf_.begin() + 1, cdf_.end(), target);
+  size_t i = static_cast<size_t>(std::min<std::ptrdiff_t>(it - cdf_.begin() - 1, static_cast<std::ptrdiff_t>(size() - 1)));
+  while (i + 1 < size() && pdf_[i] == 0) ++i;
+  if (pmf) *pmf = pdf_[i];
+  if (u_remapped) {
+    double width = cdf_[i + 1] - cdf_[i];
+    double r = width > 0 ? (target - cdf_[i]) / width : 0.5;
+    *u_remapped = static_cast<float>(std::clamp(r, 0.0, 0.99999994));
+  }
+  return i;
+}
+
+}  // namespace tessera

@@ -1,0 +1,54 @@
+// Warps from the unit square to the domains the path tracer integrates over, each with its density
+// (the seeds' chapter on Monte Carlo integration: sample proportionally to the integrand's known factors).
+#pragma once
+
+#include <vector>
+
+#include "renderer/math.h"
+
+namespace tessera {
+
+// Uniform on the unit disk, by Shirley and Chiu's concentric map (area-preserving, low distortion).
+Vec2 sample_concentric_disk(Vec2 u);
+// Cosine-weighted on the hemisphere z > 0: pdf = cos(theta) / pi.
+Vec3 sample_cosine_hemisphere(Vec2 u);
+inline float cosine_hemisphere_pdf(float cos_theta) { return cos_theta > 0 ? cos_theta * kInvPi : 0.0f; }
+// Uniform on the hemisphere z > 0: pdf = 1 / (2 pi).
+Vec3 sample_uniform_hemisphere(Vec2 u);
+inline constexpr float uniform_hemisphere_pdf() { return kInv2Pi; }
+// Uniform on the unit sphere: pdf = 1 / (4 pi).
+Vec3 sample_uniform_sphere(Vec2 u);
+inline constexpr float uniform_sphere_pdf() { return kInv4Pi; }
+// Uniform in the cone around +z with the given cos of its half-angle: pdf = 1 / (2 pi (1 - cos_max)).
+Vec3 sample_uniform_cone(Vec2 u, float cos_theta_max);
+inline float uniform_cone_pdf(float cos_theta_max) { return 1.0f / (2 * kPi * (1 - cos_theta_max)); }
+// Uniform on a triangle: barycentric coordinates (b1, b2) of the second and third vertex (Heitz's low-distortion map).
+Vec2 sample_uniform_triangle(Vec2 u);
+
+// Veach's power heuristic with beta = 2, for two strategies taking one sample each.
+inline float power_heuristic(float pdf_a, float pdf_b) {
+  float a = pdf_a * pdf_a, b = pdf_b * pdf_b;
+  if (std::isinf(a)) return 1.0f;
+  return a + b > 0 ? a / (a + b) : 0.0f;
+}
+
+// A discrete distribution over n weights, sampled in O(log n) from its cumulative sum.
+class Distribution1D {
+ public:
+  Distribution1D() = default;
+  explicit Distribution1D(const float* weights, size_t n);
+  size_t size() const { return pdf_.size(); }
+  bool empty() const { return pdf_.empty(); }
+  // Picks index i with probability pdf(i); `u` in [0,1). `u_remapped` (optional) receives u rescaled to [0,1) within
+  // the chosen bucket, so one uniform number can serve twice.
+  size_t sample(float u, float* pmf = nullptr, float* u_remapped = nullptr) const;
+  float pmf(size_t i) const { return pdf_[i]; }
+  double total() const { return total_; }
+
+ private:
+  std::vector<float> pdf_;
+  std::vector<double> cdf_;  // n + 1 entries
+  double total_ = 0;
+};
+
+}  // namespace tessera

@@ -1,0 +1,118 @@
+#include "renderer/scene.h"
+
+#include <chrono>
+
+namespace tessera {
+
+void Scene::finalize() { finalize_with_lights({}); }
+
+void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
+  auto start = std::chrono::steady_clock::now();
+  bounds_ = Bounds();
+  for (Mesh& mesh : meshes) {
+    for (const Vec3& p : mesh.positions) bounds_.extend(p);
+    // Embree reads vertex buffers with 16-byte loads: keep 4 bytes readable past the last vertex.
+    mesh.positions.reserve(mesh.positions.size() + 1);
+  }
+  for (const Sphere& s : spheres) {
+    bounds_.extend(s.center - Vec3(s.radius));
+    bounds_.extend(s.center + Vec3(s.radius));
+  }
+  accel_.build(meshes, spheres);
+  lights_.build(*this, punctual);
+  // Record each emitter's light index on its geometry, in the order LightSet::build enumerates them.
+  uint32_t next = 0;
+  for (Mesh& mesh : meshes) {
+    if (!materials[mesh.material]->emissive()) continue;
+    mesh.first_light = next;
+    next += static_cast<uint32_t>(mesh.triangle_count());
+  }
+  for (Sphere& s : spheres) {
+    if (!materials[s.material]->emissive()) continue;
+    s.light = next++;
+  }
+  build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+size_t Scene::triangle_count() const {
+  size_t n = 0;
+  for (const Mesh& m : meshes) n += m.triangle_count();
+  return n;
+}
+
+bool Scene::intersect(const Ray& ray, SurfaceInteraction* si) const {
+  RayHit hit;
+  if (!accel_.intersect(ray, &hit)) return false;
+  si->t = hit.t;
+  ShadingPoint& sp = si->sp;
+  sp.p = ray.origin + ray.dir * hit.t;
+  if (hit.is_sphere) {
+    const Sphere& s = spheres[hit.object];
+    Vec3 n = normalize(sp.p - s.center);
+    // Re-project onto the surface to keep ray origins from drifting inside or outside.
+    sp.p = s.center + n * s.radius;
+    sp.ng = n;
+    sp.frame = Frame::from_normal_tangent(n, Vec3(-n.z, 0, n.x));
+    float phi = std::atan2(n.z, n.x);
+    sp.uv = Vec2(0.5f + phi * kInv2Pi, std::acos(clamp(n.y, -1.0f, 1.0f)) * kInvPi);
+    sp.uv1 = sp.uv;
+    sp.vertex_color = Rgb(1);
+    si->material = materials[s.material].get();
+    si->light = si->material->emissive() ? s.light : kNoLight;
+  } else {
+    const Mesh& mesh = meshes[hit.object];
+    const uint32_t* idx = &mesh.indices[3 * hit.prim_id];
+    float b1 = hit.u, b2 = hit.v, b0 = 1 - b1 - b2;
+    const Vec3& p0 = mesh.positions[idx[0]];
+    const Vec3& p1 = mesh.positions[idx[1]];
+    const Vec3& p2 = mesh.positions[idx[2]];
+    Vec3 e1 = p1 - p0, e2 = p2 - p0;
+    Vec3 ng = cross(e1, e2);
+    float ng_len = length(ng);
+    ng = ng_len > 0 ? ng / ng_len : Vec3(0, 0, 1);
+    sp.ng = ng;
+    Vec3 ns = ng;
+    if (!mesh.normals.empty()) {
+      Vec3 n = mesh.normals[idx[0]] * b0 + mesh.normals[idx[1]] * b1 + mesh.normals[idx[2]] * b2;
+      float len2 = length_squared(n);
+      if (len2 > 0 && std::isfinite(len2)) {
+        ns = n / std::sqrt(len2);
+        if (dot(ns, ng) < 0) sp.ng = -ng;  // shading normals define the front side
+      }
+    }
+    Vec2 uv0(0, 0), uv1(1, 0), uv2(1, 1);
+    if (!mesh.uvs.empty()) {
+      uv0 = mesh.uvs[idx[0]];
+      uv1 = mesh.uvs[idx[1]];
+      uv2 = mesh.uvs[idx[2]];
+    }
+    sp.uv = uv0 * b0 + uv1 * b1 + uv2 * b2;
+    sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
+    // Tangent: from the mesh when given, else along dp/du.
+    Vec3 tangent;
+    if (!mesh.tangents.empty()) {
+      tangent = mesh.tangents[idx[0]] * b0 + mesh.tangents[idx[1]] * b1 + mesh.tangents[idx[2]] * b2;
+    } else {
+      Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
+      float det = d1.x * d2.y - d1.y * d2.x;
+      tangent = std::abs(det) > 1e-12f ? (e1 * d2.y - e2 * d1.y) / det : e1;
+    }
+    sp.frame = Frame::from_normal_tangent(ns, tangent);
+    sp.vertex_color = mesh.colors.empty()
+                          ? Rgb(1)
+                          : mesh.colors[idx[0]] * b0 + mesh.colors[idx[1]] * b1 + mesh.colors[idx[2]] * b2;
+    si->material = materials[mesh.material].get();
+    si->light = si->material->emissive() ? mesh.first_light + hit.prim_id : kNoLight;
+  }
+  sp.front_face = dot(ray.dir, sp.ng) < 0;
+  return true;
+}
+
+Vec3 offset_ray_origin(const Vec3& p, const Vec3& ng, const Vec3& dir) {
+  // An offset proportional to the coordinates' magnitude covers float rounding of the hit point.
+  float scale = 1e-4f * std::max(1.0f, std::max(std::abs(p.x), std::max(std::abs(p.y), std::abs(p.z))));
+  Vec3 offset = ng * scale;
+  return dot(dir, ng) >= 0 ? p + offset : p - offset;
+}
+
+}  // namespace tessera

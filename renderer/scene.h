@@ -1,0 +1,94 @@
+// The renderable scene: geometry, materials, lights, camera, environment, and the acceleration structure.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "renderer/accel.h"
+#include "renderer/camera.h"
+#include "renderer/lights.h"
+#include "renderer/material.h"
+
+namespace tessera {
+
+struct Mesh {
+  std::vector<Vec3> positions;
+  std::vector<uint32_t> indices;  // 3 per triangle
+  std::vector<Vec3> normals;      // per vertex, optional
+  std::vector<Vec2> uvs;          // per vertex, optional
+  std::vector<Vec2> uvs1;         // per vertex, optional second set
+  std::vector<Rgb> colors;        // per vertex, optional
+  std::vector<Vec3> tangents;     // per vertex, optional (with normals)
+  std::vector<float> tangent_signs;  // per vertex bitangent sign, optional
+  uint32_t material = 0;
+  uint32_t first_light = 0;  // index of its first triangle's light when the material emits
+  size_t triangle_count() const { return indices.size() / 3; }
+};
+
+struct Sphere {
+  Vec3 center;
+  float radius = 1;
+  uint32_t material = 0;
+  uint32_t light = 0;  // its light index when the material emits
+};
+
+struct Environment {
+  Rgb color{0, 0, 0};  // constant radiance from every direction
+  float intensity = 1;
+  Rgb radiance(const Vec3& /*dir*/) const { return color * intensity; }
+  bool black() const { return is_black(color) || intensity == 0; }
+};
+
+struct Bounds {
+  Vec3 lo{kInfinity, kInfinity, kInfinity};
+  Vec3 hi{-kInfinity, -kInfinity, -kInfinity};
+  void extend(const Vec3& p) {
+    lo = vmin(lo, p);
+    hi = vmax(hi, p);
+  }
+  bool empty() const { return lo.x > hi.x; }
+  Vec3 center() const { return (lo + hi) * 0.5f; }
+  float radius() const { return empty() ? 0 : 0.5f * length(hi - lo); }
+};
+
+// A surface point found by a ray, with what shading needs.
+struct SurfaceInteraction {
+  ShadingPoint sp;
+  const Material* material = nullptr;
+  uint32_t light = kNoLight;  // its light index if the surface emits
+  float t = 0;
+};
+
+class Scene {
+ public:
+  std::vector<std::unique_ptr<Material>> materials;
+  std::vector<std::string> material_names;
+  std::vector<Mesh> meshes;
+  std::vector<Sphere> spheres;
+  CameraDesc camera;
+  Environment environment;
+  std::vector<std::string> warnings;
+
+  // Builds lights and the acceleration structure; call once after filling the fields above.
+  void finalize();
+  void finalize_with_lights(const std::vector<PunctualLight>& punctual);
+
+  bool intersect(const Ray& ray, SurfaceInteraction* si) const;
+  bool occluded(const Ray& ray) const { return accel_.occluded(ray); }
+  const LightSet& lights() const { return lights_; }
+  const Bounds& bounds() const { return bounds_; }
+  size_t triangle_count() const;
+  double build_seconds() const { return build_seconds_; }
+
+ private:
+  Accel accel_;
+  LightSet lights_;
+  Bounds bounds_;
+  double build_seconds_ = 0;
+};
+
+// Offsets a ray origin off the surface at `p` along the geometric normal towards `dir`, against self-intersection.
+Vec3 offset_ray_origin(const Vec3& p, const Vec3& ng, const Vec3& dir);
+
+}  // namespace tessera

@@ -1,0 +1,285 @@
+#include "renderer/scene_loader.h"
+
+#include <cmath>
+
+#include "renderer/scene_error.h"
+
+namespace tessera {
+
+using nlohmann::json;
+
+namespace {
+
+std::string at(const std::string& pointer, const std::string& key) { return pointer + "/" + json_pointer_token(key); }
+std::string at(const std::string& pointer, size_t index) { return pointer + "/" + std::to_string(index); }
+
+const json& require(const json& obj, const std::string& key, const std::string& pointer) {
+  auto it = obj.find(key);
+  if (it == obj.end()) throw SceneError(at(pointer, key), "\"" + key + "\" is required");
+  return *it;
+}
+
+double finite_number(const json& v, const std::string& pointer) {
+  if (!v.is_number()) throw SceneError(pointer, "must be a number");
+  double d = v.get<double>();
+  if (!std::isfinite(d) || std::abs(d) > 1e30) throw SceneError(pointer, "must be a finite number");
+  return d;
+}
+
+Vec3 vec3(const json& v, const std::string& pointer) {
+  if (!v.is_array() || v.size() != 3) throw SceneError(pointer, "must be an array of 3 numbers");
+  return Vec3(static_cast<float>(finite_number(v[0], at(pointer, 0))),
+              static_cast<float>(finite_number(v[1], at(pointer, 1))),
+              static_cast<float>(finite_number(v[2], at(pointer, 2))));
+}
+
+Vec3 vec3_key(const json& obj, const std::string& key, const std::string& pointer) {
+  return vec3(require(obj, key, pointer), at(pointer, key));
+}
+
+float number_key(const json& obj, const std::string& key, const std::string& pointer, float fallback, double lo,
+                 double hi, bool lo_exclusive = false) {
+  auto it = obj.find(key);
+  if (it == obj.end()) return fallback;
+  double d = finite_number(*it, at(pointer, key));
+  if (d < lo || d > hi || (lo_exclusive && d == lo)) {
+    throw SceneError(at(pointer, key), std::string("must be ") + (lo_exclusive ? "greater than " : "at least ") +
+                                           json(lo).dump() + " and at most " + json(hi).dump());
+  }
+  return static_cast<float>(d);
+}
+
+template <typename T, int N>
+std::vector<T> flat_array(const json& obj, const std::string& key, const std::string& pointer, bool required) {
+  std::vector<T> out;
+  auto it = obj.find(key);
+  if (it == obj.end()) {
+    if (required) throw SceneError(at(pointer, key), "\"" + key + "\" is required");
+    return out;
+  }
+  const std::string p = at(pointer, key);
+  if (!it->is_array()) throw SceneError(p, "must be a flat array of numbers");
+  if (it->size() % N != 0) throw SceneError(p, "must hold a multiple of " + std::to_string(N) + " numbers");
+  out.resize(it->size() / N);
+  for (size_t i = 0; i < it->size(); ++i) {
+    float v = static_cast<float>(finite_number((*it)[i], at(p, i)));
+    reinterpret_cast<float*>(out.data())[i] = v;
+  }
+  return out;
+}
+
+uint32_t material_index(const json& obj, const std::string& pointer, const std::map<std::string, uint32_t>& names) {
+  const json& m = require(obj, "material", pointer);
+  if (!m.is_string()) throw SceneError(at(pointer, "material"), "must be the name of a material");
+  auto it = names.find(m.get<std::string>());
+  if (it == names.end())
+    throw SceneError(at(pointer, "material"), "unknown material \"" + m.get<std::string>() + "\"");
+  return it->second;
+}
+
+void load_mesh(const json& obj, const std::string& pointer, uint32_t material, Scene& scene, size_t* triangles,
+               size_t max_triangles) {
+  Mesh mesh;
+  mesh.material = material;
+  mesh.positions = flat_array<Vec3, 3>(obj, "positions", pointer, true);
+  const json& idx = require(obj, "indices", pointer);
+  const std::string ip = at(pointer, "indices");
+  if (!idx.is_array() || idx.size() % 3 != 0 || idx.empty())
+    throw SceneError(ip, "must be a non-empty flat array of vertex indices, 3 per triangle");
+  *triangles += idx.size() / 3;
+  if (*triangles > max_triangles)
+    throw SceneError(ip, "the scene exceeds the limit of " + std::to_string(max_triangles) + " triangles");
+  mesh.indices.resize(idx.size());
+  for (size_t i = 0; i < idx.size(); ++i) {
+    const json& v = idx[i];
+    if (!v.is_number_integer() || v.get<int64_t>() < 0 ||
+        v.get<int64_t>() >= static_cast<int64_t>(mesh.positions.size()))
+      throw SceneError(at(ip, i), "must be a vertex index below " + std::to_string(mesh.positions.size()));
+    mesh.indices[i] = static_cast<uint32_t>(v.get<int64_t>());
+  }
+  mesh.normals = flat_array<Vec3, 3>(obj, "normals", pointer, false);
+  if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size())
+    throw SceneError(at(pointer, "normals"), "must have one normal per position");
+  mesh.uvs = flat_array<Vec2, 2>(obj, "uvs", pointer, false);
+  if (!mesh.uvs.empty() && mesh.uvs.size() != mesh.positions.size())
+    throw SceneError(at(pointer, "uvs"), "must have one uv pair per position");
+  for (Vec2& uv : mesh.uvs) uv.y = 1 - uv.y;  // scene uvs have v up; textures are addressed top-down
+  scene.meshes.push_back(std::move(mesh));
+}
+
+void load_rectangle(const json& obj, const std::string& pointer, uint32_t material, Scene& scene) {
+  // A parallelogram: corner + edge1 + edge2; its front faces along edge1 x edge2.
+  Vec3 c = vec3_key(obj, "corner", pointer);
+  Vec3 e1 = vec3_key(obj, "edge1", pointer);
+  Vec3 e2 = vec3_key(obj, "edge2", pointer);
+  if (!(length(cross(e1, e2)) > 0)) throw SceneError(at(pointer, "edge2"), "edge1 and edge2 must not be parallel");
+  Mesh mesh;
+  mesh.material = material;
+  mesh.positions = {c, c + e1, c + e1 + e2, c + e2};
+  mesh.indices = {0, 1, 2, 0, 2, 3};
+  mesh.uvs = {Vec2(0, 1), Vec2(1, 1), Vec2(1, 0), Vec2(0, 0)};
+  scene.meshes.push_back(std::move(mesh));
+}
+
+CameraDesc load_camera(const json& cam, const std::string& pointer) {
+  if (!cam.is_object()) throw SceneError(pointer, "must be an object");
+  CameraDesc desc;
+  std::string type = cam.value("type", std::string("perspective"));
+  if (type == "perspective") desc.projection = CameraDesc::Projection::kPerspective;
+  else if (type == "orthographic") desc.projection = CameraDesc::Projection::kOrthographic;
+  else throw SceneError(at(pointer, "type"), "must be \"perspective\" or \"orthographic\"");
+  desc.from = vec3_key(cam, "from", pointer);
+  desc.to = vec3_key(cam, "to", pointer);
+  if (cam.contains("up")) desc.up = vec3(cam["up"], at(pointer, "up"));
+  if (!(length(desc.to - desc.from) > 0)) throw SceneError(at(pointer, "to"), "must differ from \"from\"");
+  if (!(length(desc.up) > 0)) throw SceneError(at(pointer, "up"), "must not be the zero vector");
+  if (length(cross(normalize(desc.to - desc.from), normalize(desc.up))) < 1e-6f)
+    throw SceneError(at(pointer, "up"), "must not be parallel to the viewing direction");
+  desc.fov_deg = number_key(cam, "fov_deg", pointer, 40, 0, 179, true);
+  desc.ortho_height = number_key(cam, "height", pointer, 2, 0, 1e9, true);
+  desc.aperture_radius = number_key(cam, "aperture_radius", pointer, 0, 0, 1e6);
+  desc.focus_distance = number_key(cam, "focus_distance", pointer, 0, 0, 1e9);
+  return desc;
+}
+
+}  // namespace
+
+std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, const SceneLoadOptions& options) {
+  if (!doc.is_object()) throw SceneError(pointer, "the scene must be an object");
+  auto scene = std::make_shared<Scene>();
+  MaterialContext mctx{options.asset_root};
+
+  // Materials by name.
+  std::map<std::string, uint32_t> names;
+  if (auto it = doc.find("materials"); it != doc.end()) {
+    const std::string mp = at(pointer, "materials");
+    if (!it->is_object()) throw SceneError(mp, "must be an object mapping names to materials");
+    for (const auto& [name, m] : it->items()) {
+      if (name.empty() || name.size() > 256) throw SceneError(mp, "material names must have 1 to 256 characters");
+      names[name] = static_cast<uint32_t>(scene->materials.size());
+      scene->materials.push_back(MaterialRegistry::builtin().create(m, at(mp, name), mctx));
+      scene->material_names.push_back(name);
+    }
+  }
+
+  // Objects.
+  const json& objects = require(doc, "objects", pointer);
+  const std::string op = at(pointer, "objects");
+  if (!objects.is_array()) throw SceneError(op, "must be an array of objects");
+  size_t triangles = 0;
+  for (size_t i = 0; i < objects.size(); ++i) {
+    const json& obj = objects[i];
+    const std::string p = at(op, i);
+    if (!obj.is_object()) throw SceneError(p, "must be an object");
+    const json& shape = require(obj, "shape", p);
+    if (!shape.is_string()) throw SceneError(at(p, "shape"), "must be \"mesh\", \"sphere\" or \"rectangle\"");
+    uint32_t material = material_index(obj, p, names);
+    const std::string s = shape.get<std::string>();
+    if (s == "sphere") {
+      Sphere sphere;
+      sphere.center = vec3_key(obj, "center", p);
+      sphere.radius = number_key(obj, "radius", p, 1, 0, 1e9, true);
+      if (!obj.contains("radius")) throw SceneError(at(p, "radius"), "\"radius\" is required");
+      sphere.material = material;
+      scene->spheres.push_back(sphere);
+    } else if (s == "mesh") {
+      load_mesh(obj, p, material, *scene, &triangles, options.max_triangles);
+    } else if (s == "rectangle") {
+      load_rectangle(obj, p, material, *scene);
+    } else {
+      throw SceneError(at(p, "shape"), "unknown shape \"" + s + "\"; expected \"mesh\", \"sphere\" or \"rectangle\"");
+    }
+  }
+
+  scene->camera = load_camera(require(doc, "camera", pointer), at(pointer, "camera"));
+
+  if (auto it = doc.find("environment"); it != doc.end()) {
+    const std::string ep = at(pointer, "environment");
+    if (!it->is_object()) throw SceneError(ep, "must be an object");
+    scene->environment.color = params::rgb(*it, "color", ep, Rgb(0), 0.0f, 1e9f);
+    scene->environment.intensity = number_key(*it, "intensity", ep, 1, 0, 1e9);
+  }
+
+  std::vector<PunctualLight> punctual;
+  if (auto it = doc.find("lights"); it != doc.end()) {
+    const std::string lp = at(pointer, "lights");
+    if (!it->is_array()) throw SceneError(lp, "must be an array of lights");
+    for (size_t i = 0; i < it->size(); ++i) {
+      const json& l = (*it)[i];
+      const std::string p = at(lp, i);
+      if (!l.is_object()) throw SceneError(p, "must be an object");
+      PunctualLight light;
+      std::string type = l.value("type", std::string());
+      if (type == "point") {
+        light.kind = PunctualLight::Kind::kPoint;
+        light.position = vec3_key(l, "position", p);
+        light.intensity = params::rgb(l, "intensity", p, Rgb(1), 0.0f, 1e12f);
+      } else if (type == "spot") {
+        light.kind = PunctualLight::Kind::kSpot;
+        light.position = vec3_key(l, "position", p);
+        light.direction = normalize(vec3_key(l, "direction", p));
+        light.intensity = params::rgb(l, "intensity", p, Rgb(1), 0.0f, 1e12f);
+        float inner = number_key(l, "inner_cone_deg", p, 0, 0, 90);
+        float outer = number_key(l, "outer_cone_deg", p, 45, 0, 90, true);
+        if (inner > outer) throw SceneError(at(p, "inner_cone_deg"), "must not exceed outer_cone_deg");
+        light.cos_inner = std::cos(inner * kPi / 180);
+        light.cos_outer = std::cos(outer * kPi / 180);
+      } else if (type == "directional") {
+        light.kind = PunctualLight::Kind::kDirectional;
+        light.direction = vec3_key(l, "direction", p);
+        if (!(length(light.direction) > 0)) throw SceneError(at(p, "direction"), "must not be the zero vector");
+        light.direction = normalize(light.direction);
+        light.intensity = params::rgb(l, "irradiance", p, Rgb(1), 0.0f, 1e12f);
+      } else {
+        throw SceneError(at(p, "type"), "must be \"point\", \"spot\" or \"directional\"");
+      }
+      punctual.push_back(light);
+    }
+  }
+
+  if (scene->meshes.empty() && scene->spheres.empty() && scene->environment.black() && punctual.empty())
+    throw SceneError(op, "the scene has nothing to render");
+  scene->finalize_with_lights(punctual);
+  return scene;
+}
+
+RenderSettings parse_render_settings(const json& render, const std::string& pointer, const RenderLimits& limits) {
+  RenderSettings s;
+  if (render.is_null()) return s;
+  if (!render.is_object()) throw SceneError(pointer, "must be an object");
+  auto integer = [&](const std::string& key, int64_t fallback, int64_t lo, int64_t hi) -> int64_t {
+    auto it = render.find(key);
+    if (it == render.end()) return fallback;
+    if (!it->is_number_integer() && !(it->is_number_float() && std::isfinite(it->get<double>()) &&
+                                      it->get<double>() == std::floor(it->get<double>())))
+      throw SceneError(at(pointer, key), "must be an integer");
+    double v = it->get<double>();
+    if (v < static_cast<double>(lo) || v > static_cast<double>(hi))
+      throw SceneError(at(pointer, key), "must be between " + std::to_string(lo) + " and " + std::to_string(hi));
+    return static_cast<int64_t>(v);
+  };
+  s.width = static_cast<int>(integer("width", 512, 1, limits.max_width));
+  s.height = static_cast<int>(integer("height", 512, 1, limits.max_height));
+  s.spp = static_cast<uint32_t>(integer("spp", 64, 1, limits.max_spp));
+  s.integrator.max_depth = static_cast<int>(integer("max_depth", 8, 0, limits.max_depth));
+  s.seed = static_cast<uint64_t>(integer("seed", 0, 0, (int64_t{1} << 53)));
+  if (auto it = render.find("estimator"); it != render.end()) {
+    if (!it->is_string() || !parse_estimator(it->get<std::string>(), &s.integrator.estimator))
+      throw SceneError(at(pointer, "estimator"), "must be \"mis\", \"area\" or \"hemisphere\"");
+  }
+  s.time_limit_s = number_key(render, "time_limit_s", pointer, 0, 0, 7 * 24 * 3600.0);
+  s.noise_target = number_key(render, "noise_target", pointer, 0, 0, 1);
+  s.display.exposure_ev = number_key(render, "exposure_ev", pointer, 0, -20, 20);
+  if (auto it = render.find("tonemap"); it != render.end()) {
+    if (!it->is_string() || !parse_tonemap(it->get<std::string>(), &s.display.tonemap))
+      throw SceneError(at(pointer, "tonemap"), "must be \"clamp\" or \"aces\"");
+  }
+  if (auto it = render.find("exr_precision"); it != render.end()) {
+    if (!it->is_string() || (*it != "half" && *it != "float"))
+      throw SceneError(at(pointer, "exr_precision"), "must be \"half\" or \"float\"");
+    s.exr_half = *it == "half";
+  }
+  return s;
+}
+
+}  // namespace tessera

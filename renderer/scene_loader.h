@@ -1,0 +1,37 @@
+// Reading documents into renderer objects: a JSON scene (format v1, proto/schemas/scene.schema.json) and render
+// settings. Every error is a SceneError carrying the JSON pointer of the offending field.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+
+#include <nlohmann/json.hpp>
+
+#include "renderer/scene.h"
+#include "renderer/session.h"
+
+namespace tessera {
+
+struct SceneLoadOptions {
+  // Folder that file references inside the scene (textures, glTF) resolve against; empty: none allowed.
+  std::filesystem::path asset_root;
+  size_t max_triangles = 50'000'000;
+};
+
+// Builds a scene from the "scene" object of a job. `pointer` is that object's JSON pointer (e.g. "/scene").
+// The result is finalized (lights and acceleration structure built).
+std::shared_ptr<Scene> load_scene(const nlohmann::json& scene, const std::string& pointer,
+                                  const SceneLoadOptions& options);
+
+struct RenderLimits {
+  int max_width = 8192;
+  int max_height = 8192;
+  uint32_t max_spp = 1u << 16;
+  int max_depth = 1024;
+};
+
+// Reads the "render" object of a job (defaults for absent keys). `pointer` is its JSON pointer.
+RenderSettings parse_render_settings(const nlohmann::json& render, const std::string& pointer,
+                                     const RenderLimits& limits);
+
+}  // namespace tessera

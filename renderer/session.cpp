@@ -1,0 +1,133 @@
+#include "renderer/session.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <optional>
+
+#include "renderer/scene.h"
+
+namespace tessera {
+
+const char* stop_reason_name(StopReason r) {
+  switch (r) {
+    case StopReason::kSamples: return "samples";
+    case StopReason::kTimeLimit: return "time_limit";
+    case StopReason::kNoiseTarget: return "noise_target";
+    case StopReason::kStopped: return "stopped";
+    case StopReason::kCancelled: return "cancelled";
+  }
+  return "samples";
+}
+
+RenderSession::RenderSession(std::shared_ptr<const Scene> scene, const RenderSettings& settings, ThreadPool& pool)
+    : scene_(std::move(scene)),
+      settings_(settings),
+      pool_(pool),
+      camera_(scene_->camera, settings.width, settings.height),
+      film_(settings.width, settings.height) {
+  tiles_x_ = (settings.width + settings.tile_size - 1) / settings.tile_size;
+  tiles_y_ = (settings.height + settings.tile_size - 1) / settings.tile_size;
+  for (int i = 0; i < pool.size(); ++i) arenas_.push_back(std::make_unique<ScratchArena>());
+  counters_.resize(pool.size());
+  nonfinite_.resize(pool.size());
+  progress_.samples_total = settings.spp;
+}
+
+void RenderSession::restore(Film film, uint32_t passes, double elapsed_s) {
+  film_ = std::move(film);
+  progress_.pass = passes;
+  progress_.samples_done = film_.samples();
+  progress_.elapsed_s = elapsed_s;
+}
+
+void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, uint32_t sample_count) {
+  const int tx = static_cast<int>(tile % tiles_x_), ty = static_cast<int>(tile / tiles_x_);
+  const int x0 = tx * settings_.tile_size, y0 = ty * settings_.tile_size;
+  const int x1 = std::min(x0 + settings_.tile_size, settings_.width);
+  const int y1 = std::min(y0 + settings_.tile_size, settings_.height);
+  ScratchArena& arena = *arenas_[worker];
+  RayCounters& counters = counters_[worker];
+  const Scene& scene = *scene_;
+  for (int y = y0; y < y1; ++y) {
+    for (int x = x0; x < x1; ++x) {
+      const uint32_t pixel = static_cast<uint32_t>(y) * static_cast<uint32_t>(settings_.width) + static_cast<uint32_t>(x);
+      for (uint32_t s = first_sample; s < first_sample + sample_count; ++s) {
+        PixelSampler sampler(settings_.seed, pixel, s);
+        Vec2 jitter = sampler.get2d();
+        Vec2 lens = sampler.get2d();
+        Ray ray = camera_.generate_ray(Vec2(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y), lens);
+        Rgb l = trace_path(scene, ray, sampler, settings_.integrator, arena, counters);
+        if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
+          ++nonfinite_[worker];
+          l = Rgb(0);
+        }
+        film_.add_sample(x, y, l);
+      }
+    }
+  }
+}
+
+StopReason RenderSession::run(const std::function<void(const RenderProgress&, const Film&)>& on_pass) {
+  using clock = std::chrono::steady_clock;
+  const auto start = clock::now();
+  const double elapsed_before = progress_.elapsed_s;
+  const uint32_t samples_before = progress_.samples_done;
+  const size_t tile_count = static_cast<size_t>(tiles_x_) * static_cast<size_t>(tiles_y_);
+  const double pixels = static_cast<double>(settings_.width) * settings_.height;
+  auto budget_met = [&]() -> std::optional<StopReason> {
+    if (progress_.samples_done >= settings_.spp) return StopReason::kSamples;
+    if (settings_.time_limit_s > 0 && progress_.elapsed_s >= settings_.time_limit_s) return StopReason::kTimeLimit;
+    if (settings_.noise_target > 0 && progress_.samples_done >= 4 &&
+        progress_.relative_error <= settings_.noise_target)
+      return StopReason::kNoiseTarget;
+    return std::nullopt;
+  };
+  if (auto r = budget_met()) return *r;
+  // Passes start at one sample and grow geometrically, so the first preview comes fast and later passes amortise
+  // the per-pass work (previews, checkpoints); a pass is kept near two seconds so previews stay fresh.
+  uint32_t pass_samples = std::max<uint32_t>(1, std::min<uint32_t>(progress_.samples_done, 1));
+  for (;;) {
+    if (cancel_.load()) return StopReason::kCancelled;
+    if (stop_.load()) return StopReason::kStopped;
+    const uint32_t first = progress_.samples_done;
+    const uint32_t count = std::min(pass_samples, settings_.spp - first);
+    const auto pass_start = clock::now();
+    pool_.parallel_for(tile_count, [&](size_t tile, int worker) {
+      if (cancel_.load(std::memory_order_relaxed)) return;
+      render_tile(tile, worker, first, count);
+    });
+    if (cancel_.load()) return StopReason::kCancelled;
+    const double pass_s = std::chrono::duration<double>(clock::now() - pass_start).count();
+    film_.set_samples(first + count);
+    progress_.pass += 1;
+    progress_.samples_done = first + count;
+    progress_.elapsed_s = elapsed_before + std::chrono::duration<double>(clock::now() - start).count();
+    const double run_s = progress_.elapsed_s - elapsed_before;
+    const uint32_t run_samples = progress_.samples_done - samples_before;
+    progress_.samples_per_s = run_s > 0 ? pixels * run_samples / run_s : 0;
+    const double per_sample_s = run_samples > 0 ? run_s / run_samples : 0;
+    progress_.eta_s = per_sample_s * (settings_.spp - progress_.samples_done);
+    if (settings_.time_limit_s > 0)
+      progress_.eta_s = std::min(progress_.eta_s, std::max(0.0, settings_.time_limit_s - progress_.elapsed_s));
+    if (settings_.noise_target > 0) progress_.relative_error = film_.relative_error();
+    else if (progress_.samples_done >= 2 && (progress_.pass % 4 == 0 || progress_.samples_done >= settings_.spp))
+      progress_.relative_error = film_.relative_error();
+    RayCounters rays;
+    uint64_t nonfinite = 0;
+    for (size_t i = 0; i < counters_.size(); ++i) {
+      rays += counters_[i];
+      nonfinite += nonfinite_[i];
+    }
+    progress_.rays = rays;
+    progress_.nonfinite_samples = nonfinite;
+    if (on_pass) on_pass(progress_, film_);
+    if (auto r = budget_met()) return *r;
+    // Next pass: double, but aim at about two seconds.
+    const double per_pass_sample_s = pass_s / std::max<uint32_t>(count, 1);
+    uint32_t by_time = per_pass_sample_s > 0 ? static_cast<uint32_t>(std::max(1.0, 2.0 / per_pass_sample_s)) : 64;
+    pass_samples = std::max<uint32_t>(1, std::min({count * 2, by_time, 256u}));
+  }
+}
+
+}  // namespace tessera

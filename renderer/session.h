@@ -1,0 +1,86 @@
+// A progressive render: the image is cut into tiles, and each pass adds samples to every pixel with the tiles as the
+// thread pool's work items. After each pass the caller gets the progress and the film (for a preview and a
+// checkpoint). Sampling is deterministic in (seed, pixel, sample index), so the image after N samples is the same
+// whatever the thread count, the pass sizes, or a resume from a checkpoint.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+
+#include "renderer/camera.h"
+#include "renderer/film.h"
+#include "renderer/image_io.h"
+#include "renderer/integrator.h"
+#include "renderer/thread_pool.h"
+
+namespace tessera {
+
+class Scene;
+
+struct RenderSettings {
+  int width = 512;
+  int height = 512;
+  uint32_t spp = 64;            // samples per pixel budget
+  uint64_t seed = 0;
+  IntegratorSettings integrator;
+  double time_limit_s = 0;      // stop after the pass that crosses this; 0: none
+  double noise_target = 0;      // stop when Film::relative_error() falls below; 0: none
+  int tile_size = 32;
+  DisplaySettings display;      // for PNG outputs and previews
+  bool exr_half = true;         // EXR channel precision
+};
+
+enum class StopReason { kSamples, kTimeLimit, kNoiseTarget, kStopped, kCancelled };
+const char* stop_reason_name(StopReason r);
+
+struct RenderProgress {
+  uint32_t pass = 0;          // passes completed
+  uint32_t samples_done = 0;  // per pixel
+  uint32_t samples_total = 0; // per pixel, the spp budget
+  double elapsed_s = 0;       // render time, including time before a resume
+  double eta_s = 0;           // estimated seconds to the end of the budget
+  double samples_per_s = 0;   // pixel samples per second over the whole render
+  double relative_error = 0;  // Film::relative_error() (infinity before 2 samples)
+  RayCounters rays;           // totals since the start (or the resume)
+  uint64_t nonfinite_samples = 0;
+};
+
+class RenderSession {
+ public:
+  RenderSession(std::shared_ptr<const Scene> scene, const RenderSettings& settings, ThreadPool& pool);
+
+  // Continues from a checkpoint: `film` holds the state after `passes` passes and `elapsed_s` seconds.
+  void restore(Film film, uint32_t passes, double elapsed_s);
+
+  // Renders until a budget is met, stop() or cancel(). `on_pass` runs on the calling thread after every pass.
+  StopReason run(const std::function<void(const RenderProgress&, const Film&)>& on_pass = {});
+
+  // From any thread: stop() ends the render after the pass under way (its film is complete and valid);
+  // cancel() abandons it within one tile's time (the film is then incomplete).
+  void stop() { stop_.store(true); }
+  void cancel() { cancel_.store(true); }
+
+  const Film& film() const { return film_; }
+  const RenderSettings& settings() const { return settings_; }
+  const RenderProgress& progress() const { return progress_; }
+
+ private:
+  void render_tile(size_t tile, int worker, uint32_t first_sample, uint32_t sample_count);
+
+  std::shared_ptr<const Scene> scene_;
+  RenderSettings settings_;
+  ThreadPool& pool_;
+  Camera camera_;
+  Film film_;
+  RenderProgress progress_;
+  int tiles_x_ = 0, tiles_y_ = 0;
+  std::vector<std::unique_ptr<ScratchArena>> arenas_;  // one per pool worker
+  std::vector<RayCounters> counters_;                  // one per pool worker
+  std::vector<uint64_t> nonfinite_;                    // one per pool worker
+  std::atomic<bool> stop_{false};
+  std::atomic<bool> cancel_{false};
+};
+
+}  // namespace tessera

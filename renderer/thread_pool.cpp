@@ -1,0 +1,85 @@
+#include "renderer/thread_pool.h"
+
+#include <algorithm>
+#include <exception>
+
+#include "renderer/accel.h"
+
+namespace tessera {
+
+struct ThreadPool::Batch {
+  const std::function<void(size_t, int)>* fn;
+  size_t count;
+  size_t next = 0;      // next item to hand out (guarded by the pool mutex)
+  size_t finished = 0;  // items done (guarded by the pool mutex)
+  std::exception_ptr error;
+  std::condition_variable done_cv;
+};
+
+ThreadPool::ThreadPool(int threads) {
+  int n = threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  workers_.reserve(n);
+  for (int i = 0; i < n; ++i) workers_.emplace_back([this, i] { worker_main(i); });
+}
+
+ThreadPool::~ThreadPool() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+  }
+  work_cv_.notify_all();
+  for (std::thread& t : workers_) t.join();
+}
+
+int ThreadPool::busy() const {
+  std::lock_guard lock(mutex_);
+  return busy_;
+}
+
+void ThreadPool::parallel_for(size_t count, const std::function<void(size_t, int)>& fn) {
+  if (count == 0) return;
+  Batch batch;
+  batch.fn = &fn;
+  batch.count = count;
+  std::unique_lock lock(mutex_);
+  active_.push_back(&batch);
+  work_cv_.notify_all();
+  batch.done_cv.wait(lock, [&] { return batch.finished == batch.count; });
+  lock.unlock();
+  if (batch.error) std::rethrow_exception(batch.error);
+}
+
+void ThreadPool::worker_main(int index) {
+  enable_flush_to_zero();
+  std::unique_lock lock(mutex_);
+  for (;;) {
+    work_cv_.wait(lock, [&] { return stopping_ || !active_.empty(); });
+    if (stopping_ && active_.empty()) return;
+    // Take one item from the next batch in turn.
+    round_robin_ = round_robin_ % active_.size();
+    Batch* batch = active_[round_robin_];
+    size_t item = batch->next++;
+    if (batch->next >= batch->count) {
+      active_.erase(active_.begin() + static_cast<std::ptrdiff_t>(round_robin_));
+    } else {
+      ++round_robin_;
+    }
+    ++busy_;
+    const bool skip = batch->error != nullptr;  // a failed batch drains without running more items
+    lock.unlock();
+    std::exception_ptr error;
+    if (!skip) {
+      try {
+        (*batch->fn)(item, index);
+      } catch (...) {
+        error = std::current_exception();
+      }
+    }
+    lock.lock();
+    --busy_;
+    if (error && !batch->error) batch->error = error;
+    if (++batch->finished == batch->count) batch->done_cv.notify_all();
+  }
+}
+
+}  // namespace tessera

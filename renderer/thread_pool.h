@@ -1,0 +1,45 @@
+// A fixed pool of render threads shared by every render session of the process. Work arrives as batches of
+// independent items (the tiles of a pass); idle threads take items from the active batches in turn, so concurrent
+// sessions share the threads fairly.
+#pragma once
+
+#include <condition_variable>
+#include <cstddef>
+#include <functional>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace tessera {
+
+class ThreadPool {
+ public:
+  // `threads` <= 0 uses every hardware thread.
+  explicit ThreadPool(int threads = 0);
+  ~ThreadPool();
+  ThreadPool(const ThreadPool&) = delete;
+  ThreadPool& operator=(const ThreadPool&) = delete;
+
+  int size() const { return static_cast<int>(workers_.size()); }
+  // Number of threads running an item right now.
+  int busy() const;
+
+  // Runs fn(item, worker) for every item in [0, count) and returns when all have finished. `worker` is in
+  // [0, size()) and no two items run on the same worker at once, so it can index per-thread scratch state.
+  // The first exception thrown by an item is rethrown here after the batch has drained.
+  void parallel_for(size_t count, const std::function<void(size_t item, int worker)>& fn);
+
+ private:
+  struct Batch;
+  void worker_main(int index);
+
+  mutable std::mutex mutex_;
+  std::condition_variable work_cv_;
+  std::vector<Batch*> active_;
+  size_t round_robin_ = 0;
+  int busy_ = 0;
+  bool stopping_ = false;
+  std::vector<std::thread> workers_;
+};
+
+}  // namespace tessera
