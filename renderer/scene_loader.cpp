@@ -239,7 +239,7 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
 
   if (scene->meshes.empty() && scene->spheres.empty() && scene->environment.black() && punctual.empty())
     throw SceneError(op, "the scene has nothing to render");
-  scene->finalize_with_lights(punctual);
+  if (options.build) scene->finalize_with_lights(punctual);
   return scene;
 }
 

@@ -16,6 +16,9 @@ struct SceneLoadOptions {
   // Folder that file references inside the scene (textures, glTF) resolve against; empty: none allowed.
   std::filesystem::path asset_root;
   size_t max_triangles = 50'000'000;
+  // false: check the document and make its objects but build no lights or acceleration structure (for validating
+  // a job at submission, cheaply); the scene is then not renderable.
+  bool build = true;
 };
 
 // Builds a scene from the "scene" object of a job. `pointer` is that object's JSON pointer (e.g. "/scene").
