@@ -89,9 +89,17 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
         if (!is_black(f)) {
           Ray shadow;
           shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, ls.wi);
-          shadow.dir = ls.wi;
           shadow.tmin = 0;
-          shadow.tmax = std::isinf(ls.dist) ? kInfinity : ls.dist * (1 - 1e-4f);
+          if (std::isinf(ls.dist)) {
+            shadow.dir = ls.wi;
+            shadow.tmax = kInfinity;
+          } else {
+            // Aim from the offset origin at a target offset off the light's surface, with an unnormalised
+            // direction so that t = 1 is the target: both ends are clear of self-intersection.
+            Vec3 target = is_black(ls.n_light) ? ls.p_light : offset_ray_origin(ls.p_light, ls.n_light, -ls.wi);
+            shadow.dir = target - shadow.origin;
+            shadow.tmax = 1 - 1e-5f;
+          }
           ++counters.shadow;
           if (!scene.occluded(shadow)) {
             float w = (mis && !ls.delta) ? power_heuristic(ls.pdf, bsdf->pdf(wo, wi)) : 1.0f;

@@ -104,6 +104,8 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       out->dist = dist;
       out->pdf = pmf * dist2 / (cos_light * area);
       out->radiance = scene.materials[mesh.material]->emitted(sp, -wi);
+      out->p_light = sp.p;
+      out->n_light = sp.ng;
       out->delta = false;
       return true;
     }
@@ -146,6 +148,8 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       }
       sp.frame = Frame::from_normal(sp.ng);
       out->radiance = scene.materials[s.material]->emitted(sp, -out->wi);
+      out->p_light = sp.p;
+      out->n_light = sp.ng;
       out->delta = false;
       return true;
     }
@@ -164,6 +168,8 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       if (!(dist2 > 0)) return false;
       out->dist = std::sqrt(dist2);
       out->wi = d / out->dist;
+      out->p_light = l.position;
+      out->n_light = Vec3(0);
       float falloff = 1;
       if (l.kind == PunctualLight::Kind::kSpot) {
         float cd = dot(-out->wi, normalize(l.direction));

@@ -31,6 +31,8 @@ struct LightSample {
   float dist = 0; // distance to the sampled point (infinity for the environment and directional lights)
   float pdf = 0;  // solid-angle density including the choice of light; for delta lights, the choice probability
   bool delta = false;
+  Vec3 p_light;   // the sampled point (finite lights)
+  Vec3 n_light;   // the surface normal there (area lights; zero for points)
 };
 
 class LightSet {

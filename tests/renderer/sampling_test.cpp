@@ -1,0 +1,192 @@
+// Every warp against its density: a chi-square test over a histogram whose expected counts integrate the pdf.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "renderer/sampler.h"
+#include "renderer/sampling.h"
+#include "tests/renderer/test_util.h"
+
+namespace tessera {
+namespace {
+
+constexpr int kSamples = 400000;
+constexpr double kAlpha = 0.001;
+
+// Histogram of directions over (cos theta in [-1,1], phi in [0, 2pi)); cells have equal solid angle.
+struct DirectionHistogram {
+  int rows = 20, cols = 40;
+  std::vector<double> counts = std::vector<double>(rows * cols, 0.0);
+  void add(const Vec3& w) {
+    float z = clamp(w.z, -1.0f, 1.0f);
+    int r = std::min(rows - 1, static_cast<int>((z + 1) * 0.5f * rows));
+    float phi = std::atan2(w.y, w.x);
+    if (phi < 0) phi += 2 * kPi;
+    int c = std::min(cols - 1, static_cast<int>(phi / (2 * kPi) * cols));
+    counts[r * cols + c] += 1;
+  }
+  // Expected counts from a pdf over solid angle, integrated over each cell in (cos theta, phi).
+  std::vector<double> expected(const std::function<double(const Vec3&)>& pdf, int n) const {
+    std::vector<double> e(rows * cols);
+    for (int r = 0; r < rows; ++r) {
+      for (int c = 0; c < cols; ++c) {
+        double z0 = -1 + 2.0 * r / rows, z1 = -1 + 2.0 * (r + 1) / rows;
+        double p0 = 2 * M_PI * c / cols, p1 = 2 * M_PI * (c + 1) / cols;
+        e[r * cols + c] = n * test::integrate_2d(
+                                  [&](double z, double phi) {
+                                    double s = std::sqrt(std::max(0.0, 1 - z * z));
+                                    return pdf(Vec3(static_cast<float>(s * std::cos(phi)),
+                                                    static_cast<float>(s * std::sin(phi)), static_cast<float>(z)));
+                                  },
+                                  z0, z1, p0, p1);
+      }
+    }
+    return e;
+  }
+};
+
+Vec2 uniform2(std::mt19937_64& rng) {
+  std::uniform_real_distribution<float> u(0, 1);
+  float a = u(rng);
+  return {a, u(rng)};
+}
+
+TEST(Sampling, CosineHemisphereMatchesPdf) {
+  std::mt19937_64 rng(1);
+  DirectionHistogram h;
+  for (int i = 0; i < kSamples; ++i) h.add(sample_cosine_hemisphere(uniform2(rng)));
+  auto e = h.expected([](const Vec3& w) { return cosine_hemisphere_pdf(w.z); }, kSamples);
+  EXPECT_GT(test::chi_square_p_value(h.counts, e), kAlpha);
+}
+
+TEST(Sampling, UniformHemisphereMatchesPdf) {
+  std::mt19937_64 rng(2);
+  DirectionHistogram h;
+  for (int i = 0; i < kSamples; ++i) h.add(sample_uniform_hemisphere(uniform2(rng)));
+  auto e = h.expected([](const Vec3& w) { return w.z > 0 ? uniform_hemisphere_pdf() : 0.0; }, kSamples);
+  EXPECT_GT(test::chi_square_p_value(h.counts, e), kAlpha);
+}
+
+TEST(Sampling, UniformSphereMatchesPdf) {
+  std::mt19937_64 rng(3);
+  DirectionHistogram h;
+  for (int i = 0; i < kSamples; ++i) h.add(sample_uniform_sphere(uniform2(rng)));
+  auto e = h.expected([](const Vec3&) { return uniform_sphere_pdf(); }, kSamples);
+  EXPECT_GT(test::chi_square_p_value(h.counts, e), kAlpha);
+}
+
+TEST(Sampling, UniformConeMatchesPdf) {
+  std::mt19937_64 rng(4);
+  const float cos_max = 0.3f;
+  DirectionHistogram h;
+  for (int i = 0; i < kSamples; ++i) h.add(sample_uniform_cone(uniform2(rng), cos_max));
+  auto e = h.expected([&](const Vec3& w) { return w.z >= cos_max ? uniform_cone_pdf(cos_max) : 0.0; }, kSamples);
+  EXPECT_GT(test::chi_square_p_value(h.counts, e), kAlpha);
+}
+
+TEST(Sampling, ChiSquareRejectsAWrongPdf) {
+  // The harness must be able to fail: uniform hemisphere samples judged against the cosine pdf.
+  std::mt19937_64 rng(5);
+  DirectionHistogram h;
+  for (int i = 0; i < kSamples; ++i) h.add(sample_uniform_hemisphere(uniform2(rng)));
+  auto e = h.expected([](const Vec3& w) { return cosine_hemisphere_pdf(w.z); }, kSamples);
+  EXPECT_LT(test::chi_square_p_value(h.counts, e), 1e-6);
+}
+
+TEST(Sampling, ConcentricDiskIsUniform) {
+  std::mt19937_64 rng(6);
+  // Histogram over (r^2, angle): uniform on the disk means uniform in both.
+  const int rows = 16, cols = 32;
+  std::vector<double> counts(rows * cols, 0), expected(rows * cols, double(kSamples) / (rows * cols));
+  for (int i = 0; i < kSamples; ++i) {
+    Vec2 d = sample_concentric_disk(uniform2(rng));
+    float r2 = d.x * d.x + d.y * d.y;
+    ASSERT_LE(r2, 1.0f + 1e-5f);
+    float a = std::atan2(d.y, d.x);
+    if (a < 0) a += 2 * kPi;
+    counts[std::min(rows - 1, int(r2 * rows)) * cols + std::min(cols - 1, int(a / (2 * kPi) * cols))] += 1;
+  }
+  EXPECT_GT(test::chi_square_p_value(counts, expected), kAlpha);
+}
+
+TEST(Sampling, TriangleIsUniform) {
+  std::mt19937_64 rng(8);
+  // A grid of n steps in (b1, b2) cuts the triangle into n^2 congruent small triangles: n(n+1)/2 upright cells
+  // (fractional parts summing below 1) and n(n-1)/2 inverted ones. Uniform sampling fills them equally.
+  const int n = 8;
+  std::vector<double> counts(2 * n * n, 0), expected(2 * n * n, 0);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      if (i + j <= n - 1) expected[i * n + j] = double(kSamples) / (n * n);
+      if (i + j <= n - 2) expected[n * n + i * n + j] = double(kSamples) / (n * n);
+    }
+  }
+  for (int s = 0; s < kSamples; ++s) {
+    Vec2 b = sample_uniform_triangle(uniform2(rng));
+    ASSERT_GE(b.x, 0);
+    ASSERT_GE(b.y, 0);
+    ASSERT_LE(b.x + b.y, 1.0f + 1e-6f);
+    int i = std::min(n - 1, int(b.x * n)), j = std::min(n - 1, int(b.y * n));
+    bool inverted = (b.x * n - i) + (b.y * n - j) >= 1;
+    counts[(inverted ? n * n : 0) + i * n + j] += 1;
+  }
+  EXPECT_GT(test::chi_square_p_value(counts, expected), kAlpha);
+}
+
+TEST(Sampling, Distribution1DPicksByWeight) {
+  std::vector<float> w = {1, 0, 3, 6};
+  Distribution1D d(w.data(), w.size());
+  EXPECT_FLOAT_EQ(d.pmf(0), 0.1f);
+  EXPECT_FLOAT_EQ(d.pmf(1), 0.0f);
+  EXPECT_FLOAT_EQ(d.pmf(3), 0.6f);
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<float> u(0, 1);
+  std::vector<double> counts(4, 0);
+  for (int i = 0; i < kSamples; ++i) {
+    float remapped = -1;
+    size_t k = d.sample(u(rng), nullptr, &remapped);
+    ASSERT_GE(remapped, 0.0f);
+    ASSERT_LT(remapped, 1.0f);
+    counts[k] += 1;
+  }
+  EXPECT_EQ(counts[1], 0);
+  std::vector<double> obs = {counts[0], counts[2], counts[3]};
+  std::vector<double> exp = {0.1 * kSamples, 0.3 * kSamples, 0.6 * kSamples};
+  EXPECT_GT(test::chi_square_p_value(obs, exp), kAlpha);
+}
+
+TEST(Sampling, PowerHeuristic) {
+  EXPECT_FLOAT_EQ(power_heuristic(1, 1), 0.5f);
+  EXPECT_FLOAT_EQ(power_heuristic(3, 1), 0.9f);
+  EXPECT_FLOAT_EQ(power_heuristic(1, 0), 1.0f);
+  EXPECT_FLOAT_EQ(power_heuristic(0, 0), 0.0f);
+  EXPECT_NEAR(power_heuristic(2, 5) + power_heuristic(5, 2), 1.0f, 1e-6);
+}
+
+TEST(PixelSampler, IsDeterministicAndUniform) {
+  PixelSampler a(42, 1000, 7), b(42, 1000, 7), c(42, 1000, 8);
+  for (int i = 0; i < 16; ++i) {
+    float va = a.get1d();
+    EXPECT_EQ(va, b.get1d());
+    EXPECT_NE(va, c.get1d());
+  }
+  // Uniformity of one dimension across pixels and samples.
+  const int bins = 50;
+  std::vector<double> counts(bins, 0);
+  int n = 0;
+  for (uint32_t px = 0; px < 2000; ++px) {
+    for (uint64_t s = 0; s < 100; ++s) {
+      PixelSampler ps(1, px, s);
+      ps.get1d();
+      float v = ps.get1d();
+      ASSERT_GE(v, 0.0f);
+      ASSERT_LT(v, 1.0f);
+      counts[int(v * bins)] += 1;
+      ++n;
+    }
+  }
+  EXPECT_GT(test::chi_square_p_value(counts, std::vector<double>(bins, double(n) / bins)), kAlpha);
+}
+
+}  // namespace
+}  // namespace tessera

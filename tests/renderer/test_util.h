@@ -1,0 +1,79 @@
+// Shared helpers for renderer tests: chi-square statistics and small scenes built in code.
+#pragma once
+
+#include <cmath>
+#include <functional>
+#include <vector>
+
+namespace tessera::test {
+
+// Regularised upper incomplete gamma Q(a, x), for the chi-square survival function (Numerical Recipes 6.2).
+inline double gamma_q(double a, double x) {
+  if (x <= 0) return 1.0;
+  const double gln = std::lgamma(a);
+  if (x < a + 1) {
+    double ap = a, sum = 1.0 / a, del = sum;
+    for (int n = 0; n < 10000; ++n) {
+      ap += 1;
+      del *= x / ap;
+      sum += del;
+      if (std::abs(del) < std::abs(sum) * 1e-15) break;
+    }
+    return 1.0 - sum * std::exp(-x + a * std::log(x) - gln);
+  }
+  double b = x + 1 - a, c = 1e300, d = 1 / b, h = d;
+  for (int i = 1; i < 10000; ++i) {
+    double an = -i * (i - a);
+    b += 2;
+    d = an * d + b;
+    if (std::abs(d) < 1e-300) d = 1e-300;
+    c = b + an / c;
+    if (std::abs(c) < 1e-300) c = 1e-300;
+    d = 1 / d;
+    double del = d * c;
+    h *= del;
+    if (std::abs(del - 1) < 1e-15) break;
+  }
+  return std::exp(-x + a * std::log(x) - gln) * h;
+}
+
+// Pearson's chi-square test of observed against expected counts, pooling cells expected below 5 into one.
+// Returns the p-value.
+inline double chi_square_p_value(const std::vector<double>& observed, const std::vector<double>& expected) {
+  double chi2 = 0, pooled_obs = 0, pooled_exp = 0;
+  int dof = -1;
+  for (size_t i = 0; i < observed.size(); ++i) {
+    if (expected[i] < 5) {
+      pooled_obs += observed[i];
+      pooled_exp += expected[i];
+      continue;
+    }
+    chi2 += (observed[i] - expected[i]) * (observed[i] - expected[i]) / expected[i];
+    ++dof;
+  }
+  if (pooled_exp >= 5) {
+    chi2 += (pooled_obs - pooled_exp) * (pooled_obs - pooled_exp) / pooled_exp;
+    ++dof;
+  } else if (pooled_obs > 0 && pooled_exp == 0) {
+    return 0.0;  // samples where the density is zero
+  }
+  if (dof < 1) return 1.0;
+  return gamma_q(dof / 2.0, chi2 / 2.0);
+}
+
+// Integrates f over [a0,a1]x[b0,b1] with 2-point Gauss-Legendre rules on an n x n grid of sub-cells. The nodes lie
+// strictly inside every sub-cell, so a density that jumps on a cell boundary is integrated exactly per side.
+inline double integrate_2d(const std::function<double(double, double)>& f, double a0, double a1, double b0, double b1,
+                           int n = 6) {
+  const double g = 0.5 / std::sqrt(3.0);
+  double ha = (a1 - a0) / n, hb = (b1 - b0) / n, sum = 0;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      double ca = a0 + (i + 0.5) * ha, cb = b0 + (j + 0.5) * hb;
+      for (double sa : {-g, g})
+        for (double sb : {-g, g}) sum += f(ca + sa * ha, cb + sb * hb);
+    }
+  return sum * ha * hb / 4.0;
+}
+
+}  // namespace tessera::test
