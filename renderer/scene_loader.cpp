@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "renderer/gltf_loader.h"
 #include "renderer/scene_error.h"
 
 namespace tessera {
@@ -142,6 +143,29 @@ CameraDesc load_camera(const json& cam, const std::string& pointer) {
   return desc;
 }
 
+std::filesystem::path resolve(const SceneLoadOptions& options, const json& ref, const std::string& pointer) {
+  if (!ref.is_string() || ref.get<std::string>().empty()) throw SceneError(pointer, "must name an asset");
+  const std::string name = ref.get<std::string>();
+  if (options.resolve_asset) return options.resolve_asset(name, pointer);
+  if (options.asset_root.empty()) throw SceneError(pointer, "this document cannot reference files");
+  std::filesystem::path p = options.asset_root / name;
+  if (!std::filesystem::is_regular_file(p)) throw SceneError(pointer, "no such file: " + name);
+  return p;
+}
+
+// A camera that sees the whole of `b` from the front and a little above.
+CameraDesc framing_camera(const Bounds& b) {
+  CameraDesc desc;
+  desc.fov_deg = 40;
+  Vec3 c = b.empty() ? Vec3(0) : b.center();
+  float r = b.empty() ? 1.0f : std::max(b.radius(), 1e-3f);
+  float dist = r / std::sin(desc.fov_deg * kPi / 360.0f) * 1.1f;
+  desc.to = c;
+  desc.from = c + normalize(Vec3(0, 0.25f, 1)) * dist;
+  desc.up = Vec3(0, 1, 0);
+  return desc;
+}
+
 }  // namespace
 
 std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, const SceneLoadOptions& options) {
@@ -162,11 +186,25 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     }
   }
 
+  // A glTF asset: its nodes, materials (unless the job overrides them by name), cameras and lights.
+  GltfImport gltf;
+  bool has_gltf = false;
+  if (auto it = doc.find("gltf"); it != doc.end()) {
+    const std::string gp = at(pointer, "gltf");
+    GltfImportOptions gopts;
+    gopts.material_overrides = names;
+    gopts.max_triangles = options.max_triangles;
+    gltf = import_gltf(resolve(options, *it, gp), gp, *scene, gopts);
+    has_gltf = true;
+    for (const std::string& w : gltf.warnings) scene->warnings.push_back(w);
+  }
+
   // Objects.
-  const json& objects = require(doc, "objects", pointer);
+  static const json kNoObjects = json::array();
+  const json& objects = has_gltf && !doc.contains("objects") ? kNoObjects : require(doc, "objects", pointer);
   const std::string op = at(pointer, "objects");
   if (!objects.is_array()) throw SceneError(op, "must be an array of objects");
-  size_t triangles = 0;
+  size_t triangles = scene->triangle_count();
   for (size_t i = 0; i < objects.size(); ++i) {
     const json& obj = objects[i];
     const std::string p = at(op, i);
@@ -191,7 +229,32 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     }
   }
 
-  scene->camera = load_camera(require(doc, "camera", pointer), at(pointer, "camera"));
+  // The camera: the document's, a glTF camera chosen by index or name, the asset's first camera, or one that
+  // frames the asset.
+  const std::string cp = at(pointer, "camera");
+  auto cam_it = doc.find("camera");
+  if (has_gltf && (cam_it == doc.end() || (cam_it->is_object() && cam_it->contains("gltf")))) {
+    if (cam_it != doc.end()) {
+      const json& sel = (*cam_it)["gltf"];
+      const GltfCamera* found = nullptr;
+      if (sel.is_number_integer() && sel.get<int64_t>() >= 0 && sel.get<int64_t>() < static_cast<int64_t>(gltf.cameras.size()))
+        found = &gltf.cameras[sel.get<size_t>()];
+      if (sel.is_string())
+        for (const GltfCamera& c : gltf.cameras)
+          if (c.name == sel.get<std::string>()) found = &c;
+      if (!found) throw SceneError(at(cp, "gltf"), "no such camera in the glTF asset (it has " + std::to_string(gltf.cameras.size()) + ")");
+      scene->camera = found->desc;
+    } else if (!gltf.cameras.empty()) {
+      scene->camera = gltf.cameras[0].desc;
+    } else {
+      Bounds b = gltf.bounds;
+      for (const Sphere& sp : scene->spheres) { b.extend(sp.center - Vec3(sp.radius)); b.extend(sp.center + Vec3(sp.radius)); }
+      for (const Mesh& m : scene->meshes) for (const Vec3& p : m.positions) b.extend(p);
+      scene->camera = framing_camera(b);
+    }
+  } else {
+    scene->camera = load_camera(require(doc, "camera", pointer), cp);
+  }
 
   if (auto it = doc.find("environment"); it != doc.end()) {
     const std::string ep = at(pointer, "environment");
@@ -200,7 +263,7 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     scene->environment.intensity = number_key(*it, "intensity", ep, 1, 0, 1e9);
   }
 
-  std::vector<PunctualLight> punctual;
+  std::vector<PunctualLight> punctual = gltf.lights;
   if (auto it = doc.find("lights"); it != doc.end()) {
     const std::string lp = at(pointer, "lights");
     if (!it->is_array()) throw SceneError(lp, "must be an array of lights");
@@ -239,6 +302,14 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
 
   if (scene->meshes.empty() && scene->spheres.empty() && scene->environment.black() && punctual.empty())
     throw SceneError(op, "the scene has nothing to render");
+  // glTF assets usually rely on the viewer's image-based light, and their emissive materials are decorative
+  // (screens, LEDs) rather than illumination. With no environment in the job and no punctual lights, light the asset
+  // as a viewer would, and say so.
+  if (has_gltf && !doc.contains("environment") && punctual.empty()) {
+    scene->environment.color = Rgb(1);
+    scene->warnings.push_back("the scene has no environment or punctual light; a uniform white environment of "
+                              "radiance 1 was added");
+  }
   if (options.build) scene->finalize_with_lights(punctual);
   return scene;
 }

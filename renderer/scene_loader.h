@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <memory>
 
 #include <nlohmann/json.hpp>
@@ -19,6 +20,9 @@ struct SceneLoadOptions {
   // false: check the document and make its objects but build no lights or acceleration structure (for validating
   // a job at submission, cheaply); the scene is then not renderable.
   bool build = true;
+  // Maps an asset reference of the document ("gltf": "<ref>", an environment map) to a file; throws SceneError at
+  // `pointer` when the reference is unknown. Unset: references are paths relative to asset_root.
+  std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
 };
 
 // Builds a scene from the "scene" object of a job. `pointer` is that object's JSON pointer (e.g. "/scene").

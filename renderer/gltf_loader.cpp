@@ -1,0 +1,673 @@
+#include "renderer/gltf_loader.h"
+
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
+#include <tiny_gltf.h>
+
+#include <array>
+#include <cstring>
+#include <fstream>
+#include <set>
+
+#include "renderer/scene_error.h"
+
+namespace tessera {
+
+using nlohmann::json;
+
+namespace {
+
+// Extensions whose meaning tessera renders (or, for KHR_materials_variants-like metadata, safely ignores).
+const std::set<std::string> kSupportedExtensions = {
+    "KHR_lights_punctual",         "KHR_materials_emissive_strength", "KHR_materials_ior",
+    "KHR_materials_transmission",  "KHR_materials_volume",            "KHR_materials_specular",
+    "KHR_materials_clearcoat",     "KHR_materials_sheen",             "KHR_texture_transform",
+    "KHR_mesh_quantization",       "KHR_materials_unlit",
+};
+
+using Mat4 = std::array<double, 16>;  // column-major, as glTF stores matrices
+
+Mat4 identity() { return {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}; }
+
+Mat4 multiply(const Mat4& a, const Mat4& b) {
+  Mat4 r{};
+  for (int c = 0; c < 4; ++c)
+    for (int row = 0; row < 4; ++row) {
+      double s = 0;
+      for (int k = 0; k < 4; ++k) s += a[k * 4 + row] * b[c * 4 + k];
+      r[c * 4 + row] = s;
+    }
+  return r;
+}
+
+Mat4 local_matrix(const tinygltf::Node& node) {
+  if (node.matrix.size() == 16) {
+    Mat4 m;
+    std::copy(node.matrix.begin(), node.matrix.end(), m.begin());
+    return m;
+  }
+  double t[3] = {0, 0, 0}, s[3] = {1, 1, 1}, q[4] = {0, 0, 0, 1};
+  if (node.translation.size() == 3) std::copy(node.translation.begin(), node.translation.end(), t);
+  if (node.scale.size() == 3) std::copy(node.scale.begin(), node.scale.end(), s);
+  if (node.rotation.size() == 4) std::copy(node.rotation.begin(), node.rotation.end(), q);
+  double x = q[0], y = q[1], z = q[2], w = q[3];
+  // T * R * S (glTF 2.0 spec, 5.25 node.rotation: a unit quaternion (x, y, z, w)).
+  double r[9] = {1 - 2 * (y * y + z * z), 2 * (x * y + z * w),     2 * (x * z - y * w),
+                 2 * (x * y - z * w),     1 - 2 * (x * x + z * z), 2 * (y * z + x * w),
+                 2 * (x * z + y * w),     2 * (y * z - x * w),     1 - 2 * (x * x + y * y)};
+  Mat4 m{};
+  for (int c = 0; c < 3; ++c)
+    for (int row = 0; row < 3; ++row) m[c * 4 + row] = r[c * 3 + row] * s[c];
+  m[12] = t[0];
+  m[13] = t[1];
+  m[14] = t[2];
+  m[15] = 1;
+  return m;
+}
+
+Vec3 apply_point(const Mat4& m, const Vec3& p) {
+  return Vec3(static_cast<float>(m[0] * p.x + m[4] * p.y + m[8] * p.z + m[12]),
+              static_cast<float>(m[1] * p.x + m[5] * p.y + m[9] * p.z + m[13]),
+              static_cast<float>(m[2] * p.x + m[6] * p.y + m[10] * p.z + m[14]));
+}
+Vec3 apply_vector(const Mat4& m, const Vec3& v) {
+  return Vec3(static_cast<float>(m[0] * v.x + m[4] * v.y + m[8] * v.z),
+              static_cast<float>(m[1] * v.x + m[5] * v.y + m[9] * v.z),
+              static_cast<float>(m[2] * v.x + m[6] * v.y + m[10] * v.z));
+}
+double det3(const Mat4& m) {
+  return m[0] * (m[5] * m[10] - m[9] * m[6]) - m[4] * (m[1] * m[10] - m[9] * m[2]) +
+         m[8] * (m[1] * m[6] - m[5] * m[2]);
+}
+// Inverse transpose of the upper 3x3 (for normals), as a Mat4 without translation.
+Mat4 normal_matrix(const Mat4& m) {
+  double d = det3(m);
+  Mat4 n{};
+  if (d == 0) return identity();
+  // Cofactor matrix / det = inverse transpose.
+  auto a = [&](int row, int col) { return m[col * 4 + row]; };
+  double cof[3][3];
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      int r1 = (r + 1) % 3, r2 = (r + 2) % 3, c1 = (c + 1) % 3, c2 = (c + 2) % 3;
+      cof[r][c] = a(r1, c1) * a(r2, c2) - a(r1, c2) * a(r2, c1);
+    }
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) n[c * 4 + r] = cof[r][c] / d;
+  n[15] = 1;
+  return n;
+}
+
+// ---- reading accessors, with every offset checked against the bytes that exist ----
+
+class AccessorReader {
+ public:
+  AccessorReader(const tinygltf::Model& model, const std::string& pointer) : model_(model), pointer_(pointer) {}
+
+  // Reads accessor `index` as floats, `components` per element (normalised integers are mapped to [0,1] / [-1,1]).
+  std::vector<float> floats(int index, int components) const {
+    const tinygltf::Accessor& acc = accessor(index);
+    int have = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(acc.type));
+    if (have != components)
+      fail(index, "has " + std::to_string(have) + " components where " + std::to_string(components) + " are needed");
+    std::vector<float> out(acc.count * components, 0.0f);
+    read(acc, index, [&](size_t i, int c, const unsigned char* p) { out[i * components + c] = to_float(acc, p); });
+    return out;
+  }
+
+  std::vector<uint32_t> indices(int index, size_t vertex_count) const {
+    const tinygltf::Accessor& acc = accessor(index);
+    if (acc.type != TINYGLTF_TYPE_SCALAR) fail(index, "indices must be scalars");
+    std::vector<uint32_t> out(acc.count);
+    read(acc, index, [&](size_t i, int, const unsigned char* p) {
+      uint32_t v;
+      switch (acc.componentType) {
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: v = *p; break;
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t s; std::memcpy(&s, p, 2); v = s; break; }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: std::memcpy(&v, p, 4); break;
+        default: fail(index, "indices must be unsigned integers");
+      }
+      if (v >= vertex_count) fail(index, "index " + std::to_string(v) + " is beyond the " + std::to_string(vertex_count) + " vertices");
+      out[i] = v;
+    });
+    return out;
+  }
+
+  size_t count(int index) const { return accessor(index).count; }
+
+ private:
+  [[noreturn]] void fail(int index, const std::string& what) const {
+    throw SceneError(pointer_, "accessor " + std::to_string(index) + " " + what);
+  }
+
+  const tinygltf::Accessor& accessor(int index) const {
+    if (index < 0 || index >= static_cast<int>(model_.accessors.size())) fail(index, "does not exist");
+    const tinygltf::Accessor& acc = model_.accessors[index];
+    if (acc.count > (size_t{1} << 28)) fail(index, "has an implausible count");
+    return acc;
+  }
+
+  static float to_float(const tinygltf::Accessor& acc, const unsigned char* p) {
+    switch (acc.componentType) {
+      case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; std::memcpy(&f, p, 4); return std::isfinite(f) ? f : 0.0f; }
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return acc.normalized ? *p / 255.0f : *p;
+      case TINYGLTF_COMPONENT_TYPE_BYTE: {
+        int8_t b; std::memcpy(&b, p, 1);
+        return acc.normalized ? std::max(b / 127.0f, -1.0f) : b;
+      }
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t s; std::memcpy(&s, p, 2); return acc.normalized ? s / 65535.0f : s; }
+      case TINYGLTF_COMPONENT_TYPE_SHORT: { int16_t s; std::memcpy(&s, p, 2); return acc.normalized ? std::max(s / 32767.0f, -1.0f) : s; }
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: { uint32_t u; std::memcpy(&u, p, 4); return static_cast<float>(u); }
+      default: return 0.0f;
+    }
+  }
+
+  // Calls fn(element, component, bytes) for every component, dense data first, then sparse substitutions.
+  template <typename Fn>
+  void read(const tinygltf::Accessor& acc, int index, Fn&& fn) const {
+    const int comps = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(acc.type));
+    const int csize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(acc.componentType));
+    if (comps <= 0 || csize <= 0) fail(index, "has an unknown type or component type");
+    const size_t elem = static_cast<size_t>(comps) * csize;
+    if (acc.bufferView >= 0) {
+      const unsigned char* base;
+      size_t stride, available;
+      view(acc.bufferView, index, &base, &available, &stride);
+      if (stride == 0) stride = elem;
+      if (stride < elem) fail(index, "has a byte stride smaller than its element");
+      if (acc.count > 0 && (acc.byteOffset > available || (acc.count - 1) * stride + elem > available - acc.byteOffset))
+        fail(index, "reads beyond the end of its buffer view");
+      for (size_t i = 0; i < acc.count; ++i)
+        for (int c = 0; c < comps; ++c) fn(i, c, base + acc.byteOffset + i * stride + static_cast<size_t>(c) * csize);
+    } else {
+      std::vector<unsigned char> zero(elem, 0);
+      for (size_t i = 0; i < acc.count; ++i)
+        for (int c = 0; c < comps; ++c) fn(i, c, zero.data() + static_cast<size_t>(c) * csize);
+    }
+    if (acc.sparse.isSparse) {
+      const auto& sp = acc.sparse;
+      if (sp.count < 0 || static_cast<size_t>(sp.count) > acc.count) fail(index, "has a bad sparse count");
+      const unsigned char *ibase, *vbase;
+      size_t iavail, vavail, istride, vstride;
+      view(sp.indices.bufferView, index, &ibase, &iavail, &istride);
+      view(sp.values.bufferView, index, &vbase, &vavail, &vstride);
+      const int isize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(sp.indices.componentType));
+      if (isize <= 0 || static_cast<size_t>(sp.indices.byteOffset) + static_cast<size_t>(sp.count) * isize > iavail ||
+          static_cast<size_t>(sp.values.byteOffset) + static_cast<size_t>(sp.count) * elem > vavail)
+        fail(index, "has sparse data beyond its buffer views");
+      for (int k = 0; k < sp.count; ++k) {
+        const unsigned char* ip = ibase + sp.indices.byteOffset + static_cast<size_t>(k) * isize;
+        uint32_t target = 0;
+        if (isize == 1) target = *ip;
+        else if (isize == 2) { uint16_t s; std::memcpy(&s, ip, 2); target = s; }
+        else std::memcpy(&target, ip, 4);
+        if (target >= acc.count) fail(index, "has a sparse index beyond its count");
+        for (int c = 0; c < comps; ++c)
+          fn(target, c, vbase + sp.values.byteOffset + static_cast<size_t>(k) * elem + static_cast<size_t>(c) * csize);
+      }
+    }
+  }
+
+  void view(int view_index, int accessor_index, const unsigned char** base, size_t* length, size_t* stride) const {
+    if (view_index < 0 || view_index >= static_cast<int>(model_.bufferViews.size()))
+      fail(accessor_index, "names a buffer view that does not exist");
+    const tinygltf::BufferView& v = model_.bufferViews[view_index];
+    if (v.buffer < 0 || v.buffer >= static_cast<int>(model_.buffers.size()))
+      fail(accessor_index, "uses a buffer view whose buffer does not exist");
+    const tinygltf::Buffer& b = model_.buffers[v.buffer];
+    if (v.byteOffset > b.data.size() || v.byteLength > b.data.size() - v.byteOffset)
+      throw SceneError(pointer_, "buffer view " + std::to_string(view_index) + " declares " +
+                                     std::to_string(v.byteOffset + v.byteLength) + " bytes but buffer " +
+                                     std::to_string(v.buffer) + " has " + std::to_string(b.data.size()));
+    *base = b.data.data() + v.byteOffset;
+    *length = v.byteLength;
+    *stride = v.byteStride;
+  }
+
+  const tinygltf::Model& model_;
+  std::string pointer_;
+};
+
+// ---- confined file access for tinygltf ----
+
+struct FsContext {
+  std::filesystem::path folder;  // canonical
+  size_t max_bytes;
+};
+
+bool inside(const FsContext& ctx, const std::string& path, std::filesystem::path* resolved) {
+  std::error_code ec;
+  std::filesystem::path p = std::filesystem::weakly_canonical(std::filesystem::path(path), ec);
+  if (ec) return false;
+  if (p.parent_path() != ctx.folder) return false;  // only files directly in the asset's folder
+  *resolved = p;
+  return true;
+}
+
+bool fs_exists(const std::string& path, void* user) {
+  std::filesystem::path p;
+  return inside(*static_cast<FsContext*>(user), path, &p) && std::filesystem::is_regular_file(p);
+}
+std::string fs_expand(const std::string& path, void*) { return path; }
+bool fs_read(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
+  const FsContext& ctx = *static_cast<FsContext*>(user);
+  std::filesystem::path p;
+  if (!inside(ctx, path, &p)) {
+    if (err) *err += "refused to read " + path + " (outside the asset)\n";
+    return false;
+  }
+  std::error_code ec;
+  auto size = std::filesystem::file_size(p, ec);
+  if (ec || size > ctx.max_bytes) {
+    if (err) *err += "cannot read " + p.filename().string() + "\n";
+    return false;
+  }
+  std::ifstream in(p, std::ios::binary);
+  out->resize(size);
+  in.read(reinterpret_cast<char*>(out->data()), static_cast<std::streamsize>(size));
+  return static_cast<bool>(in);
+}
+bool fs_write(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+  if (err) *err += "writing is not allowed\n";
+  return false;
+}
+
+struct ImageContext {
+  size_t max_pixels;
+};
+
+// Decodes glTF images with OpenImageIO (PNG, JPEG, and whatever else it reads) into 8-bit RGBA.
+bool load_image(tinygltf::Image* image, const int index, std::string* err, std::string*, int, int,
+                const unsigned char* bytes, int size, void* user) {
+  const ImageContext& ctx = *static_cast<ImageContext*>(user);
+  OIIO::Filesystem::IOMemReader reader(const_cast<unsigned char*>(bytes), static_cast<size_t>(size));
+  std::string name = "image.png";
+  if (size >= 2 && bytes[0] == 0xFF && bytes[1] == 0xD8) name = "image.jpg";
+  // No config spec: with one, OpenImageIO 2.4 ignores the proxy and looks for a file of that name.
+  auto in = OIIO::ImageInput::open(name, nullptr, &reader);
+  if (!in) {
+    if (err) *err += "image " + std::to_string(index) + " cannot be decoded: " + OIIO::geterror() + "\n";
+    return false;
+  }
+  const OIIO::ImageSpec& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 ||
+      static_cast<size_t>(spec.width) * static_cast<size_t>(spec.height) > ctx.max_pixels) {
+    if (err) *err += "image " + std::to_string(index) + " is too large\n";
+    return false;
+  }
+  std::vector<unsigned char> pixels(static_cast<size_t>(spec.width) * spec.height * spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UINT8, pixels.data())) {
+    if (err) *err += "image " + std::to_string(index) + ": " + in->geterror() + "\n";
+    return false;
+  }
+  image->width = spec.width;
+  image->height = spec.height;
+  image->component = 4;
+  image->bits = 8;
+  image->pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
+  image->image.assign(static_cast<size_t>(spec.width) * spec.height * 4, 255);
+  for (size_t i = 0; i < static_cast<size_t>(spec.width) * spec.height; ++i) {
+    const unsigned char* src = &pixels[i * spec.nchannels];
+    unsigned char* dst = &image->image[i * 4];
+    if (spec.nchannels >= 3) {
+      dst[0] = src[0]; dst[1] = src[1]; dst[2] = src[2];
+      if (spec.nchannels >= 4) dst[3] = src[3];
+    } else {
+      dst[0] = dst[1] = dst[2] = src[0];
+      if (spec.nchannels == 2) dst[3] = src[1];
+    }
+  }
+  return true;
+}
+
+json parse_extensions(const std::string& text) {
+  if (text.empty()) return json::object();
+  json j = json::parse(text, nullptr, false);
+  return j.is_object() ? j : json::object();
+}
+
+// Reads the JSON part of a .gltf or .glb, checking the binary container's framing.
+json container_json(const std::vector<unsigned char>& bytes, bool* binary, const std::string& pointer) {
+  *binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+  if (!*binary) {
+    json j = json::parse(bytes.begin(), bytes.end(), nullptr, false);
+    if (j.is_discarded() || !j.is_object()) throw SceneError(pointer, "the file is neither a .glb nor glTF JSON");
+    return j;
+  }
+  auto u32 = [&](size_t off) {
+    uint32_t v;
+    std::memcpy(&v, bytes.data() + off, 4);
+    return v;
+  };
+  if (bytes.size() < 20) throw SceneError(pointer, "the .glb is truncated (no header)");
+  if (u32(4) != 2) throw SceneError(pointer, "the .glb has container version " + std::to_string(u32(4)) + ", not 2");
+  if (u32(8) > bytes.size())
+    throw SceneError(pointer, "the .glb declares " + std::to_string(u32(8)) + " bytes but has " + std::to_string(bytes.size()));
+  uint32_t json_len = u32(12);
+  if (u32(16) != 0x4E4F534Au) throw SceneError(pointer, "the .glb's first chunk is not JSON");
+  if (json_len > bytes.size() - 20) throw SceneError(pointer, "the .glb's JSON chunk is longer than the file");
+  json j = json::parse(bytes.begin() + 20, bytes.begin() + 20 + json_len, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) throw SceneError(pointer, "the .glb's JSON chunk is not valid JSON");
+  size_t next = 20 + ((json_len + 3) & ~3u);
+  if (next + 8 <= bytes.size()) {
+    uint32_t bin_len = u32(next);
+    if (bin_len > bytes.size() - next - 8) throw SceneError(pointer, "the .glb's binary chunk is longer than the file");
+  }
+  return j;
+}
+
+// gltf_pbr parameters for one glTF material (spec 3.9 and appendix B; the KHR_materials_* extensions).
+json material_params(const tinygltf::Material& m, std::vector<std::string>* warnings) {
+  const auto& pbr = m.pbrMetallicRoughness;
+  json p = {{"type", "gltf_pbr"}};
+  if (pbr.baseColorFactor.size() == 4)
+    p["base_color"] = {pbr.baseColorFactor[0], pbr.baseColorFactor[1], pbr.baseColorFactor[2]};
+  p["metallic"] = pbr.metallicFactor;
+  p["roughness"] = pbr.roughnessFactor;
+  json ext = parse_extensions(m.extensions_json_string);
+  double strength = 1;
+  if (ext.contains("KHR_materials_emissive_strength"))
+    strength = ext["KHR_materials_emissive_strength"].value("emissiveStrength", 1.0);
+  if (m.emissiveFactor.size() == 3 && (m.emissiveFactor[0] > 0 || m.emissiveFactor[1] > 0 || m.emissiveFactor[2] > 0)) {
+    p["emission"] = {m.emissiveFactor[0] * strength, m.emissiveFactor[1] * strength, m.emissiveFactor[2] * strength};
+    p["one_sided"] = !m.doubleSided;
+  }
+  if (ext.contains("KHR_materials_ior")) p["ior"] = ext["KHR_materials_ior"].value("ior", 1.5);
+  if (ext.contains("KHR_materials_transmission"))
+    p["transmission"] = ext["KHR_materials_transmission"].value("transmissionFactor", 0.0);
+  if (ext.contains("KHR_materials_specular")) {
+    const json& s = ext["KHR_materials_specular"];
+    p["specular"] = s.value("specularFactor", 1.0);
+    if (s.contains("specularColorFactor")) p["specular_color"] = s["specularColorFactor"];
+  }
+  if (ext.contains("KHR_materials_clearcoat")) {
+    const json& c = ext["KHR_materials_clearcoat"];
+    p["clearcoat"] = c.value("clearcoatFactor", 0.0);
+    p["clearcoat_roughness"] = c.value("clearcoatRoughnessFactor", 0.0);
+  }
+  if (ext.contains("KHR_materials_sheen")) {
+    const json& s = ext["KHR_materials_sheen"];
+    if (s.contains("sheenColorFactor")) p["sheen_color"] = s["sheenColorFactor"];
+    p["sheen_roughness"] = s.value("sheenRoughnessFactor", 0.0);
+  }
+  (void)warnings;
+  return p;
+}
+
+}  // namespace
+
+std::string gltf_uri_problem(const std::string& uri) {
+  if (uri.rfind("data:", 0) == 0) return "";
+  if (uri.empty()) return "an empty URI";
+  if (uri.find("://") != std::string::npos || uri.rfind("file:", 0) == 0 || uri.find(':') != std::string::npos)
+    return "URIs with a scheme are not allowed; only files of the same upload and data: URIs";
+  if (uri[0] == '/' || uri[0] == '\\') return "absolute paths are not allowed";
+  if (uri.find("..") != std::string::npos) return "\"..\" is not allowed";
+  if (uri.find('/') != std::string::npos || uri.find('\\') != std::string::npos || uri.find('%') != std::string::npos)
+    return "only plain file names of the same upload are allowed";
+  return "";
+}
+
+GltfImport import_gltf(const std::filesystem::path& path, const std::string& pointer, Scene& scene,
+                       const GltfImportOptions& options) {
+  GltfImport result;
+  std::error_code ec;
+  auto size = std::filesystem::file_size(path, ec);
+  if (ec) throw SceneError(pointer, "the glTF asset cannot be read");
+  std::vector<unsigned char> bytes(size);
+  {
+    std::ifstream in(path, std::ios::binary);
+    in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(size));
+    if (!in) throw SceneError(pointer, "the glTF asset cannot be read");
+  }
+  bool binary = false;
+  json doc = container_json(bytes, &binary, pointer);
+
+  // Refuse references that could leave the asset's folder before tinygltf resolves anything.
+  for (const char* section : {"buffers", "images"}) {
+    if (!doc.contains(section) || !doc[section].is_array()) continue;
+    for (size_t i = 0; i < doc[section].size(); ++i) {
+      const json& item = doc[section][i];
+      if (!item.is_object() || !item.contains("uri")) continue;
+      if (!item["uri"].is_string()) throw SceneError(pointer, std::string(section) + "[" + std::to_string(i) + "].uri must be a string");
+      std::string problem = gltf_uri_problem(item["uri"].get<std::string>());
+      if (!problem.empty())
+        throw SceneError(pointer, "refused URI \"" + item["uri"].get<std::string>() + "\" in " + section + "[" +
+                                      std::to_string(i) + "]: " + problem);
+    }
+  }
+  // Required extensions we cannot honour fail the job; optional ones are warnings.
+  if (doc.contains("extensionsRequired") && doc["extensionsRequired"].is_array())
+    for (const json& e : doc["extensionsRequired"])
+      if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>()))
+        throw SceneError(pointer, "the asset requires the unsupported extension " + e.get<std::string>());
+  if (doc.contains("extensionsUsed") && doc["extensionsUsed"].is_array())
+    for (const json& e : doc["extensionsUsed"])
+      if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>()))
+        result.warnings.push_back("extension " + e.get<std::string>() + " is not supported and was ignored");
+
+  tinygltf::TinyGLTF loader;
+  FsContext fs_ctx{std::filesystem::weakly_canonical(path.parent_path()), size_t{1} << 31};
+  loader.SetFsCallbacks(tinygltf::FsCallbacks{&fs_exists, &fs_expand, &fs_read, &fs_write, &fs_ctx});
+  ImageContext image_ctx{options.max_texture_pixels};
+  loader.SetImageLoader(&load_image, &image_ctx);
+  loader.SetStoreOriginalJSONForExtrasAndExtensions(true);
+  tinygltf::Model model;
+  std::string err, warn;
+  const std::string base = fs_ctx.folder.string();
+  bool ok = binary ? loader.LoadBinaryFromMemory(&model, &err, &warn, bytes.data(),
+                                                 static_cast<unsigned int>(bytes.size()), base)
+                   : loader.LoadASCIIFromString(&model, &err, &warn, reinterpret_cast<const char*>(bytes.data()),
+                                                static_cast<unsigned int>(bytes.size()), base);
+  if (!ok) {
+    while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
+    throw SceneError(pointer, "the glTF asset is invalid: " + (err.empty() ? std::string("tinygltf failed") : err));
+  }
+
+  // Materials: glTF materials by index, replaced by the job's materials of the same name.
+  const MaterialRegistry& registry = MaterialRegistry::builtin();
+  std::vector<uint32_t> material_index(model.materials.size());
+  for (size_t i = 0; i < model.materials.size(); ++i) {
+    const tinygltf::Material& m = model.materials[i];
+    if (auto it = options.material_overrides.find(m.name); !m.name.empty() && it != options.material_overrides.end()) {
+      material_index[i] = it->second;
+      continue;
+    }
+    json params = material_params(m, &result.warnings);
+    if (!registry.has("gltf_pbr")) {
+      params = json{{"type", "lambert"}, {"albedo", params.value("base_color", json{0.8, 0.8, 0.8})}};
+      if (m.emissiveFactor.size() == 3) params["emission"] = material_params(m, nullptr).value("emission", json{0, 0, 0});
+    }
+    material_index[i] = static_cast<uint32_t>(scene.materials.size());
+    scene.materials.push_back(registry.create(params, pointer + "/materials/" + std::to_string(i), MaterialContext{}));
+    scene.material_names.push_back(m.name.empty() ? "gltf:" + std::to_string(i) : m.name);
+  }
+  // The glTF default material (spec 3.9.6): white, fully rough dielectric... metallic 1 by the spec's defaults.
+  uint32_t default_material = kNoLight;
+  auto get_default_material = [&]() {
+    if (default_material == kNoLight) {
+      json params = registry.has("gltf_pbr") ? json{{"type", "gltf_pbr"}, {"base_color", {1, 1, 1}}, {"metallic", 1.0}, {"roughness", 1.0}}
+                                             : json{{"type", "lambert"}, {"albedo", {1, 1, 1}}};
+      default_material = static_cast<uint32_t>(scene.materials.size());
+      scene.materials.push_back(registry.create(params, pointer, MaterialContext{}));
+      scene.material_names.push_back("gltf:default");
+    }
+    return default_material;
+  };
+
+  AccessorReader reader(model, pointer);
+  size_t triangles = scene.triangle_count();
+  std::map<int, size_t> camera_instances;
+
+  std::function<void(int, const Mat4&, int)> visit = [&](int node_index, const Mat4& parent, int depth) {
+    if (node_index < 0 || node_index >= static_cast<int>(model.nodes.size()))
+      throw SceneError(pointer, "node " + std::to_string(node_index) + " does not exist");
+    if (depth > 256) throw SceneError(pointer, "the node hierarchy is deeper than 256 levels (a cycle?)");
+    const tinygltf::Node& node = model.nodes[node_index];
+    const Mat4 world = multiply(parent, local_matrix(node));
+    const bool flip = det3(world) < 0;  // a mirroring transform reverses the winding
+    const Mat4 nmat = normal_matrix(world);
+
+    if (node.mesh >= 0) {
+      if (node.mesh >= static_cast<int>(model.meshes.size()))
+        throw SceneError(pointer, "node " + std::to_string(node_index) + " names mesh " + std::to_string(node.mesh) + ", which does not exist");
+      for (const tinygltf::Primitive& prim : model.meshes[node.mesh].primitives) {
+        if (prim.mode != TINYGLTF_MODE_TRIANGLES && prim.mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
+            prim.mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+          result.warnings.push_back("mesh " + std::to_string(node.mesh) + ": points and lines are not rendered");
+          continue;
+        }
+        auto pos_it = prim.attributes.find("POSITION");
+        if (pos_it == prim.attributes.end()) continue;
+        Mesh mesh;
+        std::vector<float> pos = reader.floats(pos_it->second, 3);
+        const size_t nv = pos.size() / 3;
+        mesh.positions.resize(nv);
+        for (size_t v = 0; v < nv; ++v) {
+          mesh.positions[v] = apply_point(world, Vec3(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]));
+          result.bounds.extend(mesh.positions[v]);
+        }
+        auto attr = [&](const char* name) { auto it = prim.attributes.find(name); return it == prim.attributes.end() ? -1 : it->second; };
+        auto check_count = [&](int acc, const char* name) {
+          if (reader.count(acc) != nv)
+            throw SceneError(pointer, std::string("mesh ") + std::to_string(node.mesh) + ": " + name + " has " +
+                                          std::to_string(reader.count(acc)) + " elements for " + std::to_string(nv) + " positions");
+        };
+        if (int a = attr("NORMAL"); a >= 0) {
+          check_count(a, "NORMAL");
+          std::vector<float> n = reader.floats(a, 3);
+          mesh.normals.resize(nv);
+          for (size_t v = 0; v < nv; ++v) {
+            Vec3 wn = apply_vector(nmat, Vec3(n[3 * v], n[3 * v + 1], n[3 * v + 2]));
+            float len = length(wn);
+            mesh.normals[v] = len > 0 ? wn / len : Vec3(0, 0, 1);
+          }
+        }
+        if (int a = attr("TANGENT"); a >= 0 && !mesh.normals.empty()) {
+          check_count(a, "TANGENT");
+          std::vector<float> t = reader.floats(a, 4);
+          mesh.tangents.resize(nv);
+          mesh.tangent_signs.resize(nv);
+          for (size_t v = 0; v < nv; ++v) {
+            Vec3 wt = apply_vector(world, Vec3(t[4 * v], t[4 * v + 1], t[4 * v + 2]));
+            float len = length(wt);
+            mesh.tangents[v] = len > 0 ? wt / len : Vec3(1, 0, 0);
+            mesh.tangent_signs[v] = (t[4 * v + 3] < 0 ? -1.0f : 1.0f) * (flip ? -1.0f : 1.0f);
+          }
+        }
+        for (int set = 0; set < 2; ++set) {
+          int a = attr(set == 0 ? "TEXCOORD_0" : "TEXCOORD_1");
+          if (a < 0) continue;
+          check_count(a, set == 0 ? "TEXCOORD_0" : "TEXCOORD_1");
+          std::vector<float> uv = reader.floats(a, 2);
+          auto& dst = set == 0 ? mesh.uvs : mesh.uvs1;
+          dst.resize(nv);
+          for (size_t v = 0; v < nv; ++v) dst[v] = Vec2(uv[2 * v], uv[2 * v + 1]);  // glTF: origin top-left
+        }
+        if (int a = attr("COLOR_0"); a >= 0) {
+          check_count(a, "COLOR_0");
+          int comps = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(model.accessors[a].type));
+          std::vector<float> c = reader.floats(a, comps == 4 ? 4 : 3);
+          mesh.colors.resize(nv);
+          for (size_t v = 0; v < nv; ++v) mesh.colors[v] = Rgb(c[comps * v], c[comps * v + 1], c[comps * v + 2]);
+        }
+        std::vector<uint32_t> idx;
+        if (prim.indices >= 0) {
+          idx = reader.indices(prim.indices, nv);
+        } else {
+          idx.resize(nv);
+          for (size_t v = 0; v < nv; ++v) idx[v] = static_cast<uint32_t>(v);
+        }
+        // Triangulate strips and fans (spec 3.7.2.1).
+        std::vector<uint32_t> tri;
+        if (prim.mode == TINYGLTF_MODE_TRIANGLES) {
+          tri.assign(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(idx.size() / 3 * 3));
+        } else if (prim.mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+          for (size_t i = 0; i + 2 < idx.size(); ++i) {
+            if (i % 2 == 0) tri.insert(tri.end(), {idx[i], idx[i + 1], idx[i + 2]});
+            else tri.insert(tri.end(), {idx[i + 1], idx[i], idx[i + 2]});
+          }
+        } else {
+          for (size_t i = 1; i + 1 < idx.size(); ++i) tri.insert(tri.end(), {idx[0], idx[i], idx[i + 1]});
+        }
+        if (flip)
+          for (size_t i = 0; i + 2 < tri.size(); i += 3) std::swap(tri[i + 1], tri[i + 2]);
+        triangles += tri.size() / 3;
+        if (triangles > options.max_triangles)
+          throw SceneError(pointer, "the asset exceeds the limit of " + std::to_string(options.max_triangles) + " triangles");
+        mesh.indices = std::move(tri);
+        if (prim.material >= static_cast<int>(model.materials.size()))
+          throw SceneError(pointer, "a primitive names material " + std::to_string(prim.material) + ", which does not exist");
+        mesh.material = prim.material >= 0 ? material_index[prim.material] : get_default_material();
+        if (!mesh.indices.empty()) scene.meshes.push_back(std::move(mesh));
+      }
+    }
+
+    if (node.camera >= 0 && node.camera < static_cast<int>(model.cameras.size()) && !camera_instances.count(node.camera)) {
+      const tinygltf::Camera& cam = model.cameras[node.camera];
+      GltfCamera gc;
+      gc.name = cam.name;
+      // A glTF camera looks down its local -Z with +Y up (spec 3.10).
+      gc.desc.from = apply_point(world, Vec3(0, 0, 0));
+      gc.desc.to = gc.desc.from + normalize(apply_vector(world, Vec3(0, 0, -1)));
+      gc.desc.up = normalize(apply_vector(world, Vec3(0, 1, 0)));
+      if (cam.type == "orthographic") {
+        gc.desc.projection = CameraDesc::Projection::kOrthographic;
+        gc.desc.ortho_height = static_cast<float>(2 * cam.orthographic.ymag);
+        if (cam.orthographic.ymag > 0) gc.aspect_ratio = static_cast<float>(cam.orthographic.xmag / cam.orthographic.ymag);
+      } else {
+        gc.desc.fov_deg = static_cast<float>(cam.perspective.yfov * 180 / M_PI);
+        gc.aspect_ratio = static_cast<float>(cam.perspective.aspectRatio);
+      }
+      camera_instances[node.camera] = result.cameras.size();
+      result.cameras.push_back(gc);
+    }
+
+    json ext = parse_extensions(node.extensions_json_string);
+    if (ext.contains("KHR_lights_punctual") && ext["KHR_lights_punctual"].contains("light")) {
+      int li = ext["KHR_lights_punctual"]["light"].is_number_integer() ? ext["KHR_lights_punctual"]["light"].get<int>() : -1;
+      if (li < 0 || li >= static_cast<int>(model.lights.size()))
+        throw SceneError(pointer, "node " + std::to_string(node_index) + " names a light that does not exist");
+      const tinygltf::Light& l = model.lights[li];
+      PunctualLight pl;
+      Rgb color(1);
+      if (l.color.size() == 3) color = Rgb(static_cast<float>(l.color[0]), static_cast<float>(l.color[1]), static_cast<float>(l.color[2]));
+      // KHR_lights_punctual units: point and spot in candela, directional in lux; used as W/sr and W/m^2 (the
+      // luminous efficacy is a constant factor that exposure absorbs).
+      pl.intensity = color * static_cast<float>(l.intensity);
+      pl.position = apply_point(world, Vec3(0, 0, 0));
+      pl.direction = normalize(apply_vector(world, Vec3(0, 0, -1)));
+      if (l.type == "directional") {
+        pl.kind = PunctualLight::Kind::kDirectional;
+      } else if (l.type == "spot") {
+        pl.kind = PunctualLight::Kind::kSpot;
+        pl.cos_inner = static_cast<float>(std::cos(l.spot.innerConeAngle));
+        pl.cos_outer = static_cast<float>(std::cos(l.spot.outerConeAngle));
+      } else {
+        pl.kind = PunctualLight::Kind::kPoint;
+      }
+      result.lights.push_back(pl);
+    }
+
+    for (int child : node.children) visit(child, world, depth + 1);
+  };
+
+  std::vector<int> roots;
+  int scene_index = model.defaultScene >= 0 ? model.defaultScene : (model.scenes.empty() ? -1 : 0);
+  if (scene_index >= 0 && scene_index < static_cast<int>(model.scenes.size())) {
+    roots = model.scenes[scene_index].nodes;
+  } else {
+    // No scenes: render every node that is nobody's child.
+    std::vector<bool> is_child(model.nodes.size(), false);
+    for (const auto& n : model.nodes)
+      for (int c : n.children)
+        if (c >= 0 && c < static_cast<int>(is_child.size())) is_child[c] = true;
+    for (size_t i = 0; i < model.nodes.size(); ++i)
+      if (!is_child[i]) roots.push_back(static_cast<int>(i));
+  }
+  for (int r : roots) visit(r, identity(), 0);
+  if (!warn.empty()) result.warnings.push_back(warn);
+  return result;
+}
+
+}  // namespace tessera

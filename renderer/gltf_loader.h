@@ -1,0 +1,44 @@
+// glTF 2.0 import through tinygltf: the node hierarchy, meshes, cameras, materials (onto the gltf_pbr model),
+// KHR_lights_punctual, with every external reference confined to the asset's own folder.
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "renderer/scene.h"
+
+namespace tessera {
+
+struct GltfCamera {
+  std::string name;
+  CameraDesc desc;
+  float aspect_ratio = 0;  // glTF's aspectRatio, 0 when absent
+};
+
+struct GltfImport {
+  std::vector<GltfCamera> cameras;      // in glTF camera order... one per node that carries a camera
+  std::vector<PunctualLight> lights;    // KHR_lights_punctual instances, in world space
+  std::vector<std::string> warnings;
+  Bounds bounds;
+};
+
+struct GltfImportOptions {
+  // Materials of the job that replace glTF materials of the same name (already created).
+  std::map<std::string, uint32_t> material_overrides;
+  size_t max_triangles = 50'000'000;
+  size_t max_texture_pixels = 64u << 20;
+};
+
+// Appends the default scene of the glTF file `path` (.glb or .gltf) to `scene`. URIs inside may name only files in
+// the same folder as `path` or data: URIs. Throws SceneError at `pointer` naming what is wrong.
+GltfImport import_gltf(const std::filesystem::path& path, const std::string& pointer, Scene& scene,
+                       const GltfImportOptions& options);
+
+// Checks one glTF URI: empty string when it is acceptable, else the reason it is refused.
+std::string gltf_uri_problem(const std::string& uri);
+
+}  // namespace tessera
