@@ -47,7 +47,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
         if (prev_delta) {
           radiance += throughput * le;
         } else if (use_bsdf_hits) {
-          float w = mis ? power_heuristic(prev_pdf, lights.pdf_environment(ray.dir)) : 1.0f;
+          float w = mis ? power_heuristic(prev_pdf, lights.pdf_environment(scene, ray.dir)) : 1.0f;
           radiance += throughput * le * w;
         }
       }

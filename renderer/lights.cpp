@@ -71,7 +71,7 @@ void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punct
     environment_ = static_cast<uint32_t>(entries_.size());
     entries_.push_back({Kind::kEnvironment, 0, 0});
     // Power the environment delivers into the scene's bounding sphere.
-    power.push_back(kPi * kPi * sqr(scene_radius_) * luminance(scene.environment.radiance(Vec3(0, 0, 1))));
+    power.push_back(kPi * kPi * sqr(scene_radius_) * luminance(scene.environment.average()));
   }
   // A light whose power estimate is zero (e.g. a pure blue light has nonzero luminance, but guard anyway) keeps a
   // small share so that it is never impossible to sample.
@@ -184,10 +184,19 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       return true;
     }
     case Kind::kEnvironment: {
-      Vec3 wi = sample_uniform_sphere(u);
+      const Environment& env = scene.environment;
+      Vec3 wi;
+      float pdf_dir;
+      if (env.map) {
+        wi = env.from_map(env.map->sample(u, &pdf_dir));
+      } else {
+        wi = sample_uniform_sphere(u);
+        pdf_dir = uniform_sphere_pdf();
+      }
+      if (!(pdf_dir > 0)) return false;
       out->wi = wi;
       out->dist = kInfinity;
-      out->pdf = pmf * uniform_sphere_pdf();
+      out->pdf = pmf * pdf_dir;
       out->radiance = scene.environment.radiance(wi);
       out->delta = false;
       return true;
@@ -229,9 +238,11 @@ float LightSet::pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteract
   return 0;
 }
 
-float LightSet::pdf_environment(const Vec3& /*dir*/) const {
+float LightSet::pdf_environment(const Scene& scene, const Vec3& dir) const {
   if (environment_ == kNoLight) return 0;
-  return distribution_.pmf(environment_) * uniform_sphere_pdf();
+  const Environment& env = scene.environment;
+  float pdf_dir = env.map ? env.map->pdf(env.to_map(dir)) : uniform_sphere_pdf();
+  return distribution_.pmf(environment_) * pdf_dir;
 }
 
 }  // namespace tessera

@@ -46,7 +46,7 @@ class LightSet {
   // Solid-angle density with which `sample` from `p` would have produced the emitting point of `si`.
   float pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteraction& si) const;
   // Solid-angle density with which `sample` would have produced the environment direction `dir`.
-  float pdf_environment(const Vec3& dir) const;
+  float pdf_environment(const Scene& scene, const Vec3& dir) const;
 
  private:
   enum class Kind : uint8_t { kTriangle, kSphere, kEnvironment, kPunctual };

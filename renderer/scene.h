@@ -7,6 +7,7 @@
 
 #include "renderer/accel.h"
 #include "renderer/camera.h"
+#include "renderer/environment.h"
 #include "renderer/lights.h"
 #include "renderer/material.h"
 
@@ -31,13 +32,6 @@ struct Sphere {
   float radius = 1;
   uint32_t material = 0;
   uint32_t light = 0;  // its light index when the material emits
-};
-
-struct Environment {
-  Rgb color{0, 0, 0};  // constant radiance from every direction
-  float intensity = 1;
-  Rgb radiance(const Vec3& /*dir*/) const { return color * intensity; }
-  bool black() const { return is_black(color) || intensity == 0; }
 };
 
 struct Bounds {

@@ -259,8 +259,20 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
   if (auto it = doc.find("environment"); it != doc.end()) {
     const std::string ep = at(pointer, "environment");
     if (!it->is_object()) throw SceneError(ep, "must be an object");
-    scene->environment.color = params::rgb(*it, "color", ep, Rgb(0), 0.0f, 1e9f);
     scene->environment.intensity = number_key(*it, "intensity", ep, 1, 0, 1e9);
+    if (auto m = it->find("map"); m != it->end()) {
+      // An equirectangular HDR/EXR map; "color" tints it.
+      std::filesystem::path file = resolve(options, *m, at(ep, "map"));
+      try {
+        scene->environment.map = EnvironmentMap::load(file.string());
+      } catch (const std::exception& e) {
+        throw SceneError(at(ep, "map"), std::string("cannot read the environment map: ") + e.what());
+      }
+      scene->environment.color = params::rgb(*it, "color", ep, Rgb(1), 0.0f, 1e9f);
+      scene->environment.rotation_deg = number_key(*it, "rotation_deg", ep, 0, -360, 360);
+    } else {
+      scene->environment.color = params::rgb(*it, "color", ep, Rgb(0), 0.0f, 1e9f);
+    }
   }
 
   std::vector<PunctualLight> punctual = gltf.lights;

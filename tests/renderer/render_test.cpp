@@ -268,3 +268,59 @@ TEST(SceneLoading, ErrorsNameTheField) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Estimators agree under a strongly non-uniform environment map (importance sampling of the map vs BSDF sampling):
+// a grey sphere on a grey floor under a small bright "sun".
+TEST(Transport, EstimatorsAgreeUnderAnEnvironmentMap) {
+  const int w = 64, h = 32;
+  std::vector<float> rgb(static_cast<size_t>(w) * h * 3, 0.3f);
+  for (int y = 6; y < 9; ++y)
+    for (int x = 36; x < 40; ++x)
+      for (int c = 0; c < 3; ++c) rgb[(static_cast<size_t>(y) * w + x) * 3 + c] = 60.0f;
+  auto map = std::make_shared<EnvironmentMap>(w, h, rgb);
+  json doc = {
+      {"materials", {{"grey", {{"type", "lambert"}, {"albedo", 0.6}}}}},
+      {"objects", json::array({{{"shape", "sphere"}, {"center", {0, 1, 0}}, {"radius", 1}, {"material", "grey"}},
+                               {{"shape", "rectangle"}, {"corner", {-4, 0, 4}}, {"edge1", {8, 0, 0}},
+                                {"edge2", {0, 0, -8}}, {"material", "grey"}}})},
+      {"camera", {{"from", {0, 2, 5}}, {"to", {0, 0.8, 0}}, {"fov_deg", 45}}},
+  };
+  const int size = 32, runs = 24;
+  std::vector<std::vector<double>> means(3);
+  std::vector<double> mean(3), se(3);
+  for (int e = 0; e < 3; ++e) {
+    for (int k = 0; k < runs; ++k) {
+      SceneLoadOptions unbuilt;
+      unbuilt.build = false;
+      auto scene = load_scene(doc, "/scene", unbuilt);
+      scene->environment.map = map;
+      scene->environment.color = Rgb(1);
+      scene->environment.rotation_deg = 30;
+      scene->finalize();
+      ThreadPool pool(2);
+      RenderSession session(scene, settings(size, size, 8, kEstimators[e], 500 + 31 * k + 7777 * e, 6), pool);
+      session.run();
+      Image img{size, size, session.film().resolve()};
+      means[e].push_back(img.mean_luminance());
+    }
+    for (double m : means[e]) mean[e] += m / runs;
+    double v = 0;
+    for (double m : means[e]) v += (m - mean[e]) * (m - mean[e]) / (runs - 1);
+    se[e] = std::sqrt(v / runs);
+  }
+  for (int a = 0; a < 3; ++a)
+    for (int b = a + 1; b < 3; ++b) {
+      double z = std::abs(mean[a] - mean[b]) / std::sqrt(se[a] * se[a] + se[b] * se[b]);
+      std::printf("env map: %s %.4f vs %s %.4f, z = %.2f\n", estimator_name(kEstimators[a]), mean[a],
+                  estimator_name(kEstimators[b]), mean[b], z);
+      EXPECT_LT(z, 4.5);
+    }
+  // Importance sampling the map pays: the light-sampling estimators are less noisy than BSDF sampling alone.
+  EXPECT_LT(se[2], se[0]);
+}
+
+}  // namespace
+}  // namespace tessera

@@ -13,38 +13,6 @@ namespace {
 constexpr int kSamples = 400000;
 constexpr double kAlpha = 0.001;
 
-// Histogram of directions over (cos theta in [-1,1], phi in [0, 2pi)); cells have equal solid angle.
-struct DirectionHistogram {
-  int rows = 20, cols = 40;
-  std::vector<double> counts = std::vector<double>(rows * cols, 0.0);
-  void add(const Vec3& w) {
-    float z = clamp(w.z, -1.0f, 1.0f);
-    int r = std::min(rows - 1, static_cast<int>((z + 1) * 0.5f * rows));
-    float phi = std::atan2(w.y, w.x);
-    if (phi < 0) phi += 2 * kPi;
-    int c = std::min(cols - 1, static_cast<int>(phi / (2 * kPi) * cols));
-    counts[r * cols + c] += 1;
-  }
-  // Expected counts from a pdf over solid angle, integrated over each cell in (cos theta, phi).
-  std::vector<double> expected(const std::function<double(const Vec3&)>& pdf, int n) const {
-    std::vector<double> e(rows * cols);
-    for (int r = 0; r < rows; ++r) {
-      for (int c = 0; c < cols; ++c) {
-        double z0 = -1 + 2.0 * r / rows, z1 = -1 + 2.0 * (r + 1) / rows;
-        double p0 = 2 * M_PI * c / cols, p1 = 2 * M_PI * (c + 1) / cols;
-        e[r * cols + c] = n * test::integrate_2d(
-                                  [&](double z, double phi) {
-                                    double s = std::sqrt(std::max(0.0, 1 - z * z));
-                                    return pdf(Vec3(static_cast<float>(s * std::cos(phi)),
-                                                    static_cast<float>(s * std::sin(phi)), static_cast<float>(z)));
-                                  },
-                                  z0, z1, p0, p1);
-      }
-    }
-    return e;
-  }
-};
-
 Vec2 uniform2(std::mt19937_64& rng) {
   std::uniform_real_distribution<float> u(0, 1);
   float a = u(rng);
@@ -53,7 +21,7 @@ Vec2 uniform2(std::mt19937_64& rng) {
 
 TEST(Sampling, CosineHemisphereMatchesPdf) {
   std::mt19937_64 rng(1);
-  DirectionHistogram h;
+  test::DirectionHistogram h;
   for (int i = 0; i < kSamples; ++i) h.add(sample_cosine_hemisphere(uniform2(rng)));
   auto e = h.expected([](const Vec3& w) { return cosine_hemisphere_pdf(w.z); }, kSamples);
   EXPECT_GT(test::chi_square_p_value(h.counts, e), kAlpha);
@@ -61,7 +29,7 @@ TEST(Sampling, CosineHemisphereMatchesPdf) {
 
 TEST(Sampling, UniformHemisphereMatchesPdf) {
   std::mt19937_64 rng(2);
-  DirectionHistogram h;
+  test::DirectionHistogram h;
   for (int i = 0; i < kSamples; ++i) h.add(sample_uniform_hemisphere(uniform2(rng)));
   auto e = h.expected([](const Vec3& w) { return w.z > 0 ? uniform_hemisphere_pdf() : 0.0; }, kSamples);
   EXPECT_GT(test::chi_square_p_value(h.counts, e), kAlpha);
@@ -69,7 +37,7 @@ TEST(Sampling, UniformHemisphereMatchesPdf) {
 
 TEST(Sampling, UniformSphereMatchesPdf) {
   std::mt19937_64 rng(3);
-  DirectionHistogram h;
+  test::DirectionHistogram h;
   for (int i = 0; i < kSamples; ++i) h.add(sample_uniform_sphere(uniform2(rng)));
   auto e = h.expected([](const Vec3&) { return uniform_sphere_pdf(); }, kSamples);
   EXPECT_GT(test::chi_square_p_value(h.counts, e), kAlpha);
@@ -78,7 +46,7 @@ TEST(Sampling, UniformSphereMatchesPdf) {
 TEST(Sampling, UniformConeMatchesPdf) {
   std::mt19937_64 rng(4);
   const float cos_max = 0.3f;
-  DirectionHistogram h;
+  test::DirectionHistogram h;
   for (int i = 0; i < kSamples; ++i) h.add(sample_uniform_cone(uniform2(rng), cos_max));
   auto e = h.expected([&](const Vec3& w) { return w.z >= cos_max ? uniform_cone_pdf(cos_max) : 0.0; }, kSamples);
   EXPECT_GT(test::chi_square_p_value(h.counts, e), kAlpha);
@@ -87,7 +55,7 @@ TEST(Sampling, UniformConeMatchesPdf) {
 TEST(Sampling, ChiSquareRejectsAWrongPdf) {
   // The harness must be able to fail: uniform hemisphere samples judged against the cosine pdf.
   std::mt19937_64 rng(5);
-  DirectionHistogram h;
+  test::DirectionHistogram h;
   for (int i = 0; i < kSamples; ++i) h.add(sample_uniform_hemisphere(uniform2(rng)));
   auto e = h.expected([](const Vec3& w) { return cosine_hemisphere_pdf(w.z); }, kSamples);
   EXPECT_LT(test::chi_square_p_value(h.counts, e), 1e-6);

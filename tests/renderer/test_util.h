@@ -5,6 +5,8 @@
 #include <functional>
 #include <vector>
 
+#include "renderer/math.h"
+
 namespace tessera::test {
 
 // Regularised upper incomplete gamma Q(a, x), for the chi-square survival function (Numerical Recipes 6.2).
@@ -75,5 +77,37 @@ inline double integrate_2d(const std::function<double(double, double)>& f, doubl
     }
   return sum * ha * hb / 4.0;
 }
+
+// Histogram of directions over (cos theta in [-1,1], phi in [0, 2pi)); cells have equal solid angle.
+struct DirectionHistogram {
+  int rows = 20, cols = 40;
+  std::vector<double> counts = std::vector<double>(rows * cols, 0.0);
+  void add(const Vec3& w) {
+    float z = clamp(w.z, -1.0f, 1.0f);
+    int r = std::min(rows - 1, static_cast<int>((z + 1) * 0.5f * rows));
+    float phi = std::atan2(w.y, w.x);
+    if (phi < 0) phi += 2 * kPi;
+    int c = std::min(cols - 1, static_cast<int>(phi / (2 * kPi) * cols));
+    counts[r * cols + c] += 1;
+  }
+  // Expected counts from a pdf over solid angle, integrated over each cell in (cos theta, phi).
+  std::vector<double> expected(const std::function<double(const Vec3&)>& pdf, int n, int subdivisions = 6) const {
+    std::vector<double> e(rows * cols);
+    for (int r = 0; r < rows; ++r) {
+      for (int c = 0; c < cols; ++c) {
+        double z0 = -1 + 2.0 * r / rows, z1 = -1 + 2.0 * (r + 1) / rows;
+        double p0 = 2 * M_PI * c / cols, p1 = 2 * M_PI * (c + 1) / cols;
+        e[r * cols + c] = n * integrate_2d(
+                                  [&](double z, double phi) {
+                                    double s = std::sqrt(std::max(0.0, 1 - z * z));
+                                    return pdf(Vec3(static_cast<float>(s * std::cos(phi)),
+                                                    static_cast<float>(s * std::sin(phi)), static_cast<float>(z)));
+                                  },
+                                  z0, z1, p0, p1, subdivisions);
+      }
+    }
+    return e;
+  }
+};
 
 }  // namespace tessera::test

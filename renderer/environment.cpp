@@ -1,0 +1,103 @@
+#include "renderer/environment.h"
+
+#include <stdexcept>
+
+#include "renderer/image_io.h"
+
+namespace tessera {
+
+// Map coordinates: u = 0.5 + atan2(x, -z) / 2pi (u = 0.5 looks down -z), v = acos(y) / pi (v = 0 at +y).
+Vec2 EnvironmentMap::direction_to_uv(const Vec3& d) {
+  float u = 0.5f + std::atan2(d.x, -d.z) * kInv2Pi;
+  float v = std::acos(clamp(d.y, -1.0f, 1.0f)) * kInvPi;
+  return {u - std::floor(u), v};
+}
+
+Vec3 EnvironmentMap::uv_to_direction(Vec2 uv) {
+  float phi = (uv.x - 0.5f) * 2 * kPi;
+  float theta = uv.y * kPi;
+  float st = std::sin(theta);
+  return {st * std::sin(phi), std::cos(theta), -st * std::cos(phi)};
+}
+
+EnvironmentMap::EnvironmentMap(int width, int height, std::vector<float> rgb)
+    : width_(width), height_(height), rgb_(std::move(rgb)) {
+  std::vector<float> row_weights(height_);
+  std::vector<float> w(width_);
+  double sum_r = 0, sum_g = 0, sum_b = 0, solid = 0;
+  rows_.reserve(height_);
+  for (int y = 0; y < height_; ++y) {
+    // Each texel covers a solid angle proportional to sin(theta) at its centre.
+    float sin_theta = std::sin((y + 0.5f) * kPi / height_);
+    double row_sum = 0;
+    for (int x = 0; x < width_; ++x) {
+      Rgb c = texel(x, y);
+      // A small floor keeps every direction with radiance possible to sample.
+      w[x] = (std::max(luminance(c), 0.0f) + 1e-6f) * sin_theta;
+      row_sum += w[x];
+      sum_r += c.x * sin_theta;
+      sum_g += c.y * sin_theta;
+      sum_b += c.z * sin_theta;
+      solid += sin_theta;
+    }
+    rows_.emplace_back(w.data(), w.size());
+    row_weights[y] = static_cast<float>(row_sum);
+  }
+  marginal_ = Distribution1D(row_weights.data(), row_weights.size());
+  average_ = solid > 0 ? Rgb(static_cast<float>(sum_r / solid), static_cast<float>(sum_g / solid),
+                             static_cast<float>(sum_b / solid))
+                       : Rgb(0);
+}
+
+std::shared_ptr<EnvironmentMap> EnvironmentMap::load(const std::string& path) {
+  ImageData img = read_image(path);
+  if (img.width < 2 || img.height < 1) throw std::runtime_error("the environment map is too small");
+  std::vector<float> rgb(static_cast<size_t>(img.width) * img.height * 3);
+  for (size_t i = 0; i < static_cast<size_t>(img.width) * img.height; ++i) {
+    const float* p = &img.pixels[i * img.channels];
+    for (int c = 0; c < 3; ++c) {
+      float v = p[img.channels >= 3 ? c : 0];
+      rgb[i * 3 + c] = std::isfinite(v) && v > 0 ? v : 0.0f;
+    }
+  }
+  return std::make_shared<EnvironmentMap>(img.width, img.height, std::move(rgb));
+}
+
+Rgb EnvironmentMap::texel(int x, int y) const {
+  x = ((x % width_) + width_) % width_;
+  y = clamp(y, 0, height_ - 1);
+  const float* p = &rgb_[(static_cast<size_t>(y) * width_ + x) * 3];
+  return {p[0], p[1], p[2]};
+}
+
+Rgb EnvironmentMap::lookup(const Vec3& dir) const {
+  Vec2 uv = direction_to_uv(dir);
+  float fx = uv.x * width_ - 0.5f, fy = uv.y * height_ - 0.5f;
+  int x0 = static_cast<int>(std::floor(fx)), y0 = static_cast<int>(std::floor(fy));
+  float tx = fx - x0, ty = fy - y0;
+  return texel(x0, y0) * ((1 - tx) * (1 - ty)) + texel(x0 + 1, y0) * (tx * (1 - ty)) +
+         texel(x0, y0 + 1) * ((1 - tx) * ty) + texel(x0 + 1, y0 + 1) * (tx * ty);
+}
+
+Vec3 EnvironmentMap::sample(Vec2 u, float* pdf) const {
+  float pmf_row = 0, pmf_col = 0, ur = 0, uc = 0;
+  size_t row = marginal_.sample(u.y, &pmf_row, &ur);
+  size_t col = rows_[row].sample(u.x, &pmf_col, &uc);
+  Vec2 uv((col + uc) / width_, (row + ur) / height_);
+  Vec3 dir = uv_to_direction(uv);
+  float sin_theta = std::sin(uv.y * kPi);
+  // Density over the unit square is pmf * (width * height); dω = 2π² sinθ du dv.
+  *pdf = sin_theta > 0 ? pmf_row * pmf_col * width_ * height_ / (2 * kPi * kPi * sin_theta) : 0.0f;
+  return dir;
+}
+
+float EnvironmentMap::pdf(const Vec3& dir) const {
+  Vec2 uv = direction_to_uv(dir);
+  int col = std::min(width_ - 1, static_cast<int>(uv.x * width_));
+  int row = std::min(height_ - 1, static_cast<int>(uv.y * height_));
+  float sin_theta = std::sin(uv.y * kPi);
+  if (sin_theta <= 0) return 0;
+  return marginal_.pmf(row) * rows_[row].pmf(col) * width_ * height_ / (2 * kPi * kPi * sin_theta);
+}
+
+}  // namespace tessera

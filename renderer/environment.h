@@ -1,0 +1,65 @@
+// Light from infinitely far away: a constant radiance, or an equirectangular map (latitude-longitude, +y up)
+// importance-sampled by a piecewise-constant 2D distribution over luminance x sin(theta).
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "renderer/math.h"
+#include "renderer/sampling.h"
+
+namespace tessera {
+
+class EnvironmentMap {
+ public:
+  // `rgb` is width*height linear RGB, row 0 at the top (the +y pole).
+  EnvironmentMap(int width, int height, std::vector<float> rgb);
+  static std::shared_ptr<EnvironmentMap> load(const std::string& path);  // through OpenImageIO; throws on failure
+
+  // Radiance towards the viewer from direction `dir` (a direction in map space), bilinearly filtered.
+  Rgb lookup(const Vec3& dir) const;
+  // Samples a direction with density pdf (solid angle) proportional to the map's luminance.
+  Vec3 sample(Vec2 u, float* pdf) const;
+  float pdf(const Vec3& dir) const;
+  Rgb average() const { return average_; }
+  int width() const { return width_; }
+  int height() const { return height_; }
+
+  static Vec2 direction_to_uv(const Vec3& dir);
+  static Vec3 uv_to_direction(Vec2 uv);
+
+ private:
+  Rgb texel(int x, int y) const;
+  int width_, height_;
+  std::vector<float> rgb_;
+  std::vector<Distribution1D> rows_;  // conditional distribution of u within each row
+  Distribution1D marginal_;           // distribution of rows
+  Rgb average_;
+};
+
+struct Environment {
+  Rgb color{0, 0, 0};  // constant radiance, or a tint of the map
+  float intensity = 1;
+  std::shared_ptr<const EnvironmentMap> map;
+  float rotation_deg = 0;  // rotation of the map about +y
+
+  Rgb radiance(const Vec3& dir) const {
+    if (!map) return color * intensity;
+    return map->lookup(to_map(dir)) * color * intensity;
+  }
+  bool black() const { return intensity == 0 || is_black(color); }
+  Rgb average() const { return map ? map->average() * color * intensity : color * intensity; }
+
+  Vec3 to_map(const Vec3& d) const { return rotate(d, -rotation_deg); }
+  Vec3 from_map(const Vec3& d) const { return rotate(d, rotation_deg); }
+
+ private:
+  static Vec3 rotate(const Vec3& d, float deg) {
+    if (deg == 0) return d;
+    float a = deg * kPi / 180, c = std::cos(a), s = std::sin(a);
+    return Vec3(c * d.x + s * d.z, d.y, -s * d.x + c * d.z);
+  }
+};
+
+}  // namespace tessera
