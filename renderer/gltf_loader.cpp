@@ -475,8 +475,11 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     }
     json params = material_params(m, &result.warnings);
     if (!registry.has("gltf_pbr")) {
-      params = json{{"type", "lambert"}, {"albedo", params.value("base_color", json{0.8, 0.8, 0.8})}};
-      if (m.emissiveFactor.size() == 3) params["emission"] = material_params(m, nullptr).value("emission", json{0, 0, 0});
+      // Without the metallic-roughness model, keep colour and emission on a diffuse surface.
+      json lambert = {{"type", "lambert"}, {"albedo", params.value("base_color", json{0.8, 0.8, 0.8})}};
+      for (const char* key : {"emission", "one_sided"})
+        if (params.contains(key)) lambert[key] = params[key];
+      params = lambert;
     }
     material_index[i] = static_cast<uint32_t>(scene.materials.size());
     scene.materials.push_back(registry.create(params, pointer + "/materials/" + std::to_string(i), MaterialContext{}));

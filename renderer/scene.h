@@ -62,7 +62,8 @@ class Scene {
   std::vector<Sphere> spheres;
   CameraDesc camera;
   Environment environment;
-  std::vector<std::string> warnings;
+  std::vector<std::string> warnings;  // things the user should fix or know were ignored
+  std::vector<std::string> notes;     // defaults that were applied
 
   // Builds lights and the acceleration structure; call once after filling the fields above.
   void finalize();

@@ -319,8 +319,8 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
   // as a viewer would, and say so.
   if (has_gltf && !doc.contains("environment") && punctual.empty()) {
     scene->environment.color = Rgb(1);
-    scene->warnings.push_back("the scene has no environment or punctual light; a uniform white environment of "
-                              "radiance 1 was added");
+    scene->notes.push_back("the scene has no environment or punctual light; a uniform white environment of "
+                           "radiance 1 was added");
   }
   if (options.build) scene->finalize_with_lights(punctual);
   return scene;

@@ -1,0 +1,370 @@
+// glTF import: fixtures written here, rendered, and checked against where things must land and what light must
+// arrive; malformed and hostile files must be refused with a SceneError, never a crash.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "renderer/gltf_loader.h"
+#include "renderer/job.h"
+#include "renderer/scene_error.h"
+#include "tests/renderer/gltf_fixture.h"
+
+namespace tessera {
+namespace {
+
+using nlohmann::json;
+using test::GltfBuilder;
+
+std::filesystem::path fixture_dir() {
+  auto dir = std::filesystem::temp_directory_path() / ("tessera-gltf-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+struct Rendered {
+  int width, height;
+  std::vector<float> rgb;
+  Rgb at(int x, int y) const { const float* p = &rgb[(static_cast<size_t>(y) * width + x) * 3]; return {p[0], p[1], p[2]}; }
+};
+
+Rendered render_job(const json& job) {
+  JobLoadOptions opts;
+  opts.scene.asset_root = fixture_dir();
+  RenderJob rj = load_job(job, opts);
+  ThreadPool pool(2);
+  RenderSession session(rj.scene, rj.settings, pool);
+  session.run();
+  return {rj.settings.width, rj.settings.height, session.film().resolve()};
+}
+
+// A small square in the local xy plane facing +z (counter-clockwise seen from +z), centred at (cx, cy).
+void square(GltfBuilder& b, float cx, float cy, float half, int material, int* mesh) {
+  *mesh = b.mesh({cx - half, cy - half, 0, cx + half, cy - half, 0, cx + half, cy + half, 0, cx - half, cy + half, 0},
+                 {0, 1, 2, 0, 2, 3}, material);
+}
+
+TEST(Gltf, NestedTransformsPutAVertexOnItsPixel) {
+  for (bool mirrored : {false, true}) {
+    GltfBuilder b;
+    // One-sided emission: only visible if the winding (and so the normal) survives a mirroring transform.
+    int m = b.material({{"emissiveFactor", {1, 1, 1}}, {"doubleSided", false}});
+    int mesh;
+    square(b, 0.25f, 0.1f, 0.01f, m, &mesh);
+    int child = b.node({{"mesh", mesh}, {"translation", {0, 0.5, 0}}, {"rotation", {0, 0, std::sqrt(0.5), std::sqrt(0.5)}}}, false);
+    b.node({{"children", {child}}, {"translation", {1, 0, 0}}, {"scale", {mirrored ? -2 : 2, 2, 2}}}, true);
+    b.write(fixture_dir(), mirrored ? "nested_mirror" : "nested");
+    // Local (0.25, 0.1, 0) -> rotate 90 deg about z: (-0.1, 0.25) -> +(0, 0.5): (-0.1, 0.75) -> scale -> + (1, 0, 0).
+    Vec3 expected(1 + (mirrored ? 0.2f : -0.2f), 1.5f, 0);
+    json job = {{"kind", "scene"},
+                {"scene", {{"gltf", mirrored ? "nested_mirror.gltf" : "nested.gltf"},
+                           {"camera", {{"from", {0, 1, 10}}, {"to", {0, 1, 0}}, {"fov_deg", 30}}},
+                           {"environment", {{"color", 0}}}}},
+                {"render", {{"width", 101}, {"height", 101}, {"spp", 16}, {"max_depth", 1}}}};
+    Rendered img = render_job(job);
+    int bx = 0, by = 0;
+    float best = -1;
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x)
+        if (img.at(x, y).y > best) { best = img.at(x, y).y; bx = x; by = y; }
+    CameraDesc cd;
+    cd.from = Vec3(0, 1, 10);
+    cd.to = Vec3(0, 1, 0);
+    cd.fov_deg = 30;
+    Vec2 px;
+    ASSERT_TRUE(Camera(cd, 101, 101).project(expected, &px));
+    EXPECT_GT(best, 0.1f) << (mirrored ? "mirrored: the winding was not flipped" : "nothing visible");
+    EXPECT_NEAR(bx + 0.5, px.x, 1.0) << "mirrored=" << mirrored;
+    EXPECT_NEAR(by + 0.5, px.y, 1.0) << "mirrored=" << mirrored;
+  }
+}
+
+// A floor under a light, seen from straight above by a camera with a narrow view: the radiance of a Lambert
+// surface of albedo rho is rho / pi times the irradiance.
+json lit_floor_job(const std::string& file) {
+  return {{"kind", "scene"},
+          {"scene", {{"gltf", file},
+                     {"materials", {{"floor", {{"type", "lambert"}, {"albedo", 0.5}}}}},
+                     {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}},
+                     {"environment", {{"color", 0}}}}},
+          {"render", {{"width", 8}, {"height", 8}, {"spp", 16}, {"max_depth", 1}}}};
+}
+
+int floor_mesh(GltfBuilder& b) {
+  int m = b.material({{"name", "floor"}});
+  return b.mesh({-10, 0, 10, 10, 0, 10, 10, 0, -10, -10, 0, -10}, {0, 1, 2, 0, 2, 3}, m);
+}
+
+double mean_green(const Rendered& img) {
+  double s = 0;
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) s += img.at(x, y).y;
+  return s / (img.width * img.height);
+}
+
+TEST(Gltf, PointLightGivesTheInverseSquareIrradiance) {
+  GltfBuilder b;
+  b.node({{"mesh", floor_mesh(b)}}, true);
+  const double intensity = 10, d = 2;
+  b.doc["extensionsUsed"] = {"KHR_lights_punctual"};
+  b.doc["extensions"] = {{"KHR_lights_punctual", {{"lights", {{{"type", "point"}, {"intensity", intensity}}}}}}};
+  b.node({{"translation", {0, d, 0}}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}}, true);
+  b.write(fixture_dir(), "point");
+  double expected = 0.5 / M_PI * intensity / (d * d);  // rho/pi * I/d^2 (cos = 1 straight below)
+  EXPECT_NEAR(mean_green(render_job(lit_floor_job("point.gltf"))), expected, 0.01 * expected);
+}
+
+TEST(Gltf, DirectionalLightGivesItsIlluminance) {
+  for (double tilt_deg : {0.0, 60.0}) {
+    GltfBuilder b;
+    b.node({{"mesh", floor_mesh(b)}}, true);
+    const double lux = 3;
+    b.doc["extensionsUsed"] = {"KHR_lights_punctual"};
+    b.doc["extensions"] = {{"KHR_lights_punctual", {{"lights", {{{"type", "directional"}, {"intensity", lux}}}}}}};
+    // The light shines down its local -z: rotate -90 deg about x to point it down -y, then tilt about z.
+    double a = -M_PI / 4, t = tilt_deg * M_PI / 360;
+    json qx = {std::sin(a), 0, 0, std::cos(a)};
+    int inner = b.node({{"rotation", qx}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}}, false);
+    b.node({{"rotation", {0, 0, std::sin(t), std::cos(t)}}, {"children", {inner}}}, true);
+    b.write(fixture_dir(), "sun");
+    double expected = 0.5 / M_PI * lux * std::cos(tilt_deg * M_PI / 180);
+    EXPECT_NEAR(mean_green(render_job(lit_floor_job("sun.gltf"))), expected, 0.01 * expected) << tilt_deg;
+  }
+}
+
+TEST(Gltf, OrthographicCameraSpansItsMagnification) {
+  GltfBuilder b;
+  int m = b.material({{"emissiveFactor", {1, 1, 1}}});
+  int mesh;
+  square(b, 0, 0, 0.5f, m, &mesh);  // 1 x 1 at the origin
+  b.node({{"mesh", mesh}}, true);
+  b.doc["cameras"] = {{{"type", "orthographic"}, {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.1}, {"zfar", 100}}}}};
+  b.node({{"camera", 0}, {"translation", {0, 0, 5}}}, true);
+  b.write(fixture_dir(), "ortho");
+  json job = {{"kind", "scene"},
+              {"scene", {{"gltf", "ortho.gltf"}, {"environment", {{"color", 0}}}}},
+              {"render", {{"width", 64}, {"height", 64}, {"spp", 4}, {"max_depth", 1}}}};
+  Rendered img = render_job(job);
+  // The view is 2 units tall (ymag is the half height): the unit square covers a quarter of the image.
+  int lit = 0;
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) lit += img.at(x, y).y > 0.5f;
+  EXPECT_NEAR(lit, 32 * 32, 64);
+  EXPECT_GT(img.at(32, 32).y, 0.9f);
+  EXPECT_EQ(img.at(2, 2).y, 0.0f);
+}
+
+TEST(Gltf, PerspectiveCameraUsesItsVerticalFieldOfView) {
+  GltfBuilder b;
+  int m = b.material({{"emissiveFactor", {1, 1, 1}}});
+  int mesh;
+  square(b, 0, 0, 0.5f, m, &mesh);
+  b.node({{"mesh", mesh}}, true);
+  // yfov chosen so that the unit square at distance d spans half the image height: tan(yfov/2) = 1 / d.
+  const double d = 4;
+  b.doc["cameras"] = {{{"type", "perspective"}, {"perspective", {{"yfov", 2 * std::atan(1 / d)}, {"aspectRatio", 2.0}, {"znear", 0.1}}}}};
+  b.node({{"camera", 0}, {"translation", {0, 0, d}}}, true);
+  b.write(fixture_dir(), "persp");
+  json job = {{"kind", "scene"},
+              {"scene", {{"gltf", "persp.gltf"}, {"environment", {{"color", 0}}}}},
+              {"render", {{"width", 128}, {"height", 64}, {"spp", 4}, {"max_depth", 1}}}};
+  Rendered img = render_job(job);
+  int rows = 0, cols = 0;
+  for (int y = 0; y < 64; ++y) rows += img.at(64, y).y > 0.5f;
+  for (int x = 0; x < 128; ++x) cols += img.at(x, 32).y > 0.5f;
+  EXPECT_NEAR(rows, 32, 1);  // half the height
+  EXPECT_NEAR(cols, 32, 1);  // square pixels: the same count across
+}
+
+TEST(Gltf, EmissiveStrengthScalesEmission) {
+  GltfBuilder b;
+  b.doc["extensionsUsed"] = {"KHR_materials_emissive_strength"};
+  int m = b.material({{"emissiveFactor", {1, 0.5, 0.25}},
+                      {"extensions", {{"KHR_materials_emissive_strength", {{"emissiveStrength", 4}}}}}});
+  int mesh;
+  square(b, 0, 0, 1, m, &mesh);
+  b.node({{"mesh", mesh}}, true);
+  b.write(fixture_dir(), "strength");
+  json job = {{"kind", "scene"},
+              {"scene", {{"gltf", "strength.gltf"}, {"camera", {{"from", {0, 0, 3}}, {"to", {0, 0, 0}}, {"fov_deg", 10}}},
+                         {"environment", {{"color", 0}}}}},
+              {"render", {{"width", 8}, {"height", 8}, {"spp", 1}, {"max_depth", 0}}}};
+  Rgb c = render_job(job).at(4, 4);
+  EXPECT_NEAR(c.x, 4, 1e-4);
+  EXPECT_NEAR(c.y, 2, 1e-4);
+  EXPECT_NEAR(c.z, 1, 1e-4);
+}
+
+TEST(Gltf, GlbAndGltfGiveTheSameScene) {
+  GltfBuilder b;
+  int m = b.material({{"emissiveFactor", {1, 1, 1}}});
+  int mesh;
+  square(b, 0, 0, 0.5f, m, &mesh);
+  b.node({{"mesh", mesh}}, true);
+  GltfBuilder copy = b;
+  b.write(fixture_dir(), "same");
+  copy.write_glb(fixture_dir(), "same");
+  Scene a, c;
+  import_gltf(fixture_dir() / "same.gltf", "/scene/gltf", a, {});
+  import_gltf(fixture_dir() / "same.glb", "/scene/gltf", c, {});
+  ASSERT_EQ(a.meshes.size(), 1u);
+  ASSERT_EQ(c.meshes.size(), 1u);
+  EXPECT_EQ(a.meshes[0].positions, c.meshes[0].positions);
+  EXPECT_EQ(a.meshes[0].indices, c.meshes[0].indices);
+}
+
+// ---- hostile and malformed files ----
+
+void expect_refused(const std::filesystem::path& file, const std::string& fragment) {
+  Scene scene;
+  try {
+    import_gltf(file, "/scene/gltf", scene, {});
+    ADD_FAILURE() << file << " was accepted";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.pointer(), "/scene/gltf");
+    EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << "message: " << e.what();
+  }
+}
+
+GltfBuilder one_triangle() {
+  GltfBuilder b;
+  int mesh = b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, -1);
+  b.node({{"mesh", mesh}}, true);
+  return b;
+}
+
+std::filesystem::path write_bytes(const std::string& name, const std::vector<unsigned char>& bytes) {
+  auto p = fixture_dir() / name;
+  std::ofstream(p, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  return p;
+}
+
+std::vector<unsigned char> read_bytes(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::vector<unsigned char>(std::istreambuf_iterator<char>(in), {});
+}
+
+TEST(GltfHostile, UrisThatLeaveTheUploadAreRefused) {
+  for (const std::string uri : {"../secret.bin", "/etc/passwd", "http://example.com/a.bin", "file:///etc/passwd",
+                                "sub/dir.bin", "C:\\x.bin", "%2e%2e/x.bin"}) {
+    GltfBuilder b = one_triangle();
+    b.write(fixture_dir(), "uri");
+    json doc = json::parse(std::ifstream(fixture_dir() / "uri.gltf"));
+    doc["buffers"][0]["uri"] = uri;
+    std::ofstream(fixture_dir() / "uri.gltf") << doc.dump();
+    expect_refused(fixture_dir() / "uri.gltf", "refused URI");
+  }
+  EXPECT_EQ(gltf_uri_problem("data:application/octet-stream;base64,AAAA"), "");
+  EXPECT_EQ(gltf_uri_problem("mesh.bin"), "");
+}
+
+TEST(GltfHostile, MalformedContainersAreRefused) {
+  GltfBuilder b = one_triangle();
+  auto glb = read_bytes(b.write_glb(fixture_dir(), "good"));
+  {
+    auto bad = glb;
+    bad[0] = 'X';  // wrong magic: then it is not JSON either
+    expect_refused(write_bytes("magic.glb", bad), "neither");
+  }
+  {
+    auto bad = glb;
+    bad[20] = '!';  // break the JSON chunk
+    expect_refused(write_bytes("json.glb", bad), "JSON chunk");
+  }
+  {
+    auto bad = glb;
+    bad.resize(bad.size() - 8);  // shorter than the header declares
+    expect_refused(write_bytes("short.glb", bad), "declares");
+  }
+  {
+    auto bad = glb;
+    bad[4] = 1;  // container version 1
+    expect_refused(write_bytes("version.glb", bad), "version");
+  }
+  expect_refused(write_bytes("empty.glb", {}), "neither");
+}
+
+TEST(GltfHostile, InconsistentBuffersAndAccessorsAreRefused) {
+  {
+    GltfBuilder b = one_triangle();
+    b.write(fixture_dir(), "acc");
+    json doc = json::parse(std::ifstream(fixture_dir() / "acc.gltf"));
+    doc["accessors"][0]["count"] = 1000;  // beyond its buffer view
+    std::ofstream(fixture_dir() / "acc.gltf") << doc.dump();
+    expect_refused(fixture_dir() / "acc.gltf", "accessor 0");
+  }
+  {
+    GltfBuilder b = one_triangle();
+    b.write(fixture_dir(), "huge");
+    json doc = json::parse(std::ifstream(fixture_dir() / "huge.gltf"));
+    doc["accessors"][0]["count"] = 1099511627776LL;  // 2^40
+    std::ofstream(fixture_dir() / "huge.gltf") << doc.dump();
+    expect_refused(fixture_dir() / "huge.gltf", "");
+  }
+  {
+    GltfBuilder b = one_triangle();
+    b.write(fixture_dir(), "view");
+    json doc = json::parse(std::ifstream(fixture_dir() / "view.gltf"));
+    doc["bufferViews"][0]["byteLength"] = 4096;  // more than the buffer holds
+    std::ofstream(fixture_dir() / "view.gltf") << doc.dump();
+    expect_refused(fixture_dir() / "view.gltf", "");
+  }
+  {
+    GltfBuilder b = one_triangle();
+    b.write(fixture_dir(), "index");
+    json doc = json::parse(std::ifstream(fixture_dir() / "index.gltf"));
+    doc["meshes"][0]["primitives"][0]["indices"] = 0;  // positions used as indices: wrong type
+    std::ofstream(fixture_dir() / "index.gltf") << doc.dump();
+    expect_refused(fixture_dir() / "index.gltf", "");
+  }
+  {
+    GltfBuilder b = one_triangle();
+    b.node({{"children", {0}}}, false);
+    b.doc["nodes"][0]["children"] = {1};  // a cycle
+    b.write(fixture_dir(), "cycle");
+    expect_refused(fixture_dir() / "cycle.gltf", "");
+  }
+}
+
+TEST(GltfHostile, RequiredUnsupportedExtensionFailsOptionalWarns) {
+  GltfBuilder b = one_triangle();
+  b.doc["extensionsUsed"] = {"EXT_unknown_thing"};
+  b.doc["extensionsRequired"] = {"EXT_unknown_thing"};
+  b.write(fixture_dir(), "required");
+  expect_refused(fixture_dir() / "required.gltf", "EXT_unknown_thing");
+  b.doc.erase("extensionsRequired");
+  b.write(fixture_dir(), "optional");
+  Scene scene;
+  GltfImport imp = import_gltf(fixture_dir() / "optional.gltf", "/scene/gltf", scene, {});
+  ASSERT_EQ(imp.warnings.size(), 1u);
+  EXPECT_NE(imp.warnings[0].find("EXT_unknown_thing"), std::string::npos);
+}
+
+// The public sample assets import without warnings and render something.
+TEST(Gltf, SampleAssetsRenderWithoutWarnings) {
+  std::filesystem::path scenes = "../shared/scenes";
+  if (!std::filesystem::exists(scenes)) GTEST_SKIP() << "../shared/scenes is not beside the repository";
+  int found = 0;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(scenes)) {
+    if (entry.path().extension() != ".glb" && entry.path().extension() != ".gltf") continue;
+    ++found;
+    JobLoadOptions opts;
+    opts.scene.asset_root = entry.path().parent_path();
+    json job = {{"kind", "scene"},
+                {"scene", {{"gltf", entry.path().filename().string()}}},
+                {"render", {{"width", 48}, {"height", 32}, {"spp", 2}}}};
+    RenderJob rj = load_job(job, opts);
+    EXPECT_TRUE(rj.scene->warnings.empty()) << entry.path() << ": " << rj.scene->warnings.front();
+    EXPECT_GT(rj.scene->triangle_count(), 0u) << entry.path();
+    ThreadPool pool(2);
+    RenderSession session(rj.scene, rj.settings, pool);
+    session.run();
+    std::vector<float> rgb = session.film().resolve();
+    double sum = 0;
+    for (float v : rgb) sum += v;
+    EXPECT_GT(sum, 0) << entry.path();
+  }
+  EXPECT_GE(found, 4);
+}
+
+}  // namespace
+}  // namespace tessera
