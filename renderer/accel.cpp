@@ -36,46 +36,65 @@ void check(RTCDevice device, const char* what) {
 
 struct GeometryRef {
   bool is_sphere;
-  uint32_t object;
+  uint32_t object;  // mesh, sphere or (in the top scene) instance index
+  bool is_instance = false;
 };
+
+// Attaches a triangle geometry reading `mesh`'s arrays in place; returns its geometry id.
+uint32_t attach_mesh(RTCDevice device, RTCScene scene, const Mesh& mesh) {
+  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  // Shared buffers: Embree reads our arrays in place. Vertex buffers need 4 bytes readable past the last vertex
+  // (Embree loads 16 bytes at a time), which Scene::finalize guarantees by reserving capacity.
+  rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh.positions.data(), 0,
+                             sizeof(Vec3), mesh.positions.size());
+  rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, mesh.indices.data(), 0,
+                             3 * sizeof(uint32_t), mesh.triangle_count());
+  rtcCommitGeometry(geom);
+  uint32_t id = rtcAttachGeometry(scene, geom);
+  rtcReleaseGeometry(geom);
+  return id;
+}
+
+void set_ref(std::vector<GeometryRef>& refs, uint32_t id, GeometryRef ref) {
+  if (refs.size() <= id) refs.resize(id + 1);
+  refs[id] = ref;
+}
 
 }  // namespace
 
 struct Accel::Impl {
   RTCScene scene = nullptr;
-  std::vector<GeometryRef> refs;  // by Embree geometry id
-  ~Impl() {
+  std::vector<GeometryRef> refs;  // by Embree geometry id in the top scene
+  std::vector<RTCScene> group_scenes;
+  std::vector<std::vector<GeometryRef>> group_refs;  // by geometry id within each group scene
+  std::vector<uint32_t> instance_group;              // by instance index
+  void release() {
     if (scene) rtcReleaseScene(scene);
+    for (RTCScene g : group_scenes) rtcReleaseScene(g);
+    scene = nullptr;
+    group_scenes.clear();
+    group_refs.clear();
+    refs.clear();
+    instance_group.clear();
   }
+  ~Impl() { release(); }
 };
 
 Accel::Accel() : impl_(std::make_unique<Impl>()) {}
 Accel::~Accel() = default;
 
-void Accel::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& spheres) {
+void Accel::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& spheres,
+                  const std::vector<MeshGroup>& groups, const std::vector<Instance>& instances) {
   RTCDevice device = shared_device();
-  if (impl_->scene) rtcReleaseScene(impl_->scene);
-  impl_->refs.clear();
+  impl_->release();
   impl_->scene = rtcNewScene(device);
   // Medium quality traced as fast as high quality on our scenes and builds several times faster.
   rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_MEDIUM);
   rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
 
   for (uint32_t m = 0; m < meshes.size(); ++m) {
-    const Mesh& mesh = meshes[m];
-    if (mesh.indices.empty()) continue;
-    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    // Shared buffers: Embree reads our arrays in place. Vertex buffers need 16 bytes readable past the last vertex
-    // (Embree loads 4 floats), which Scene::finalize guarantees by reserving capacity.
-    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh.positions.data(), 0,
-                               sizeof(Vec3), mesh.positions.size());
-    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, mesh.indices.data(), 0,
-                               3 * sizeof(uint32_t), mesh.triangle_count());
-    rtcCommitGeometry(geom);
-    uint32_t id = rtcAttachGeometry(impl_->scene, geom);
-    rtcReleaseGeometry(geom);
-    if (impl_->refs.size() <= id) impl_->refs.resize(id + 1);
-    impl_->refs[id] = {false, m};
+    if (meshes[m].indices.empty() || meshes[m].prototype) continue;
+    set_ref(impl_->refs, attach_mesh(device, impl_->scene, meshes[m]), {false, m});
     check(device, "triangle geometry");
   }
   for (uint32_t s = 0; s < spheres.size(); ++s) {
@@ -89,9 +108,33 @@ void Accel::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& sp
     rtcCommitGeometry(geom);
     uint32_t id = rtcAttachGeometry(impl_->scene, geom);
     rtcReleaseGeometry(geom);
-    if (impl_->refs.size() <= id) impl_->refs.resize(id + 1);
-    impl_->refs[id] = {true, s};
+    set_ref(impl_->refs, id, {true, s});
     check(device, "sphere geometry");
+  }
+  // One Embree scene per group, shared by all of its instances.
+  for (const MeshGroup& group : groups) {
+    RTCScene gs = rtcNewScene(device);
+    rtcSetSceneBuildQuality(gs, RTC_BUILD_QUALITY_MEDIUM);
+    rtcSetSceneFlags(gs, RTC_SCENE_FLAG_ROBUST);
+    std::vector<GeometryRef> refs;
+    for (uint32_t m : group.meshes)
+      if (!meshes[m].indices.empty()) set_ref(refs, attach_mesh(device, gs, meshes[m]), {false, m});
+    rtcCommitScene(gs);
+    check(device, "instanced scene build");
+    impl_->group_scenes.push_back(gs);
+    impl_->group_refs.push_back(std::move(refs));
+  }
+  for (uint32_t i = 0; i < instances.size(); ++i) {
+    const Instance& inst = instances[i];
+    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(geom, impl_->group_scenes.at(inst.group));
+    rtcSetGeometryTransform(geom, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, &inst.to_world.m[0][0]);
+    rtcCommitGeometry(geom);
+    uint32_t id = rtcAttachGeometry(impl_->scene, geom);
+    rtcReleaseGeometry(geom);
+    set_ref(impl_->refs, id, {false, i, true});
+    impl_->instance_group.push_back(inst.group);
+    check(device, "instance");
   }
   rtcCommitScene(impl_->scene);
   check(device, "scene build");
@@ -123,9 +166,19 @@ bool Accel::intersect(const Ray& ray, RayHit* hit) const {
   hit->ng = Vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
   hit->geom_id = rh.hit.geomID;
   hit->prim_id = rh.hit.primID;
+  if (rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID) {
+    // Instanced: instID names the instance in the top scene, geomID the mesh within its group's scene.
+    const GeometryRef& inst = impl_->refs[rh.hit.instID[0]];
+    hit->instance = inst.object;
+    const GeometryRef& ref = impl_->group_refs[impl_->instance_group[inst.object]][rh.hit.geomID];
+    hit->is_sphere = false;
+    hit->object = ref.object;
+    return true;
+  }
   const GeometryRef& ref = impl_->refs[rh.hit.geomID];
   hit->is_sphere = ref.is_sphere;
   hit->object = ref.object;
+  hit->instance = kNoInstance;
   return true;
 }
 

@@ -11,6 +11,9 @@ namespace tessera {
 
 struct Mesh;
 struct Sphere;
+struct MeshGroup;
+struct Instance;
+inline constexpr uint32_t kNoInstance = ~0u;
 
 struct RayHit {
   float t = kInfinity;
@@ -20,6 +23,7 @@ struct RayHit {
   uint32_t prim_id = 0;
   bool is_sphere = false;
   uint32_t object = 0;  // index into Scene::meshes or Scene::spheres
+  uint32_t instance = kNoInstance;  // index into Scene::instances for instanced geometry
 };
 
 class Accel {
@@ -29,7 +33,8 @@ class Accel {
   Accel(const Accel&) = delete;
   Accel& operator=(const Accel&) = delete;
 
-  void build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& spheres);
+  void build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& spheres, const std::vector<MeshGroup>& groups,
+             const std::vector<Instance>& instances);
   bool intersect(const Ray& ray, RayHit* hit) const;
   bool occluded(const Ray& ray) const;
 

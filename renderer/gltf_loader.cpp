@@ -98,6 +98,13 @@ Mat4 normal_matrix(const Mat4& m) {
   return n;
 }
 
+Transform to_transform(const Mat4& m) {
+  Transform t;
+  for (int row = 0; row < 3; ++row)
+    for (int col = 0; col < 4; ++col) t.m[row][col] = static_cast<float>(m[col * 4 + row]);
+  return t;
+}
+
 // ---- reading accessors, with every offset checked against the bytes that exist ----
 
 class AccessorReader {
@@ -500,24 +507,19 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
 
   AccessorReader reader(model, pointer);
   size_t triangles = scene.triangle_count();
+  std::set<int> instanced;
+  std::map<int, uint32_t> group_of_mesh;
   std::map<int, size_t> camera_instances;
 
-  std::function<void(int, const Mat4&, int)> visit = [&](int node_index, const Mat4& parent, int depth) {
-    if (node_index < 0 || node_index >= static_cast<int>(model.nodes.size()))
-      throw SceneError(pointer, "node " + std::to_string(node_index) + " does not exist");
-    if (depth > 256) throw SceneError(pointer, "the node hierarchy is deeper than 256 levels (a cycle?)");
-    const tinygltf::Node& node = model.nodes[node_index];
-    const Mat4 world = multiply(parent, local_matrix(node));
+  // The triangles of glTF mesh `mesh_index` under transform `world` (identity for instanced prototypes).
+  auto build_meshes = [&](int mesh_index, const Mat4& world) {
     const bool flip = det3(world) < 0;  // a mirroring transform reverses the winding
     const Mat4 nmat = normal_matrix(world);
-
-    if (node.mesh >= 0) {
-      if (node.mesh >= static_cast<int>(model.meshes.size()))
-        throw SceneError(pointer, "node " + std::to_string(node_index) + " names mesh " + std::to_string(node.mesh) + ", which does not exist");
-      for (const tinygltf::Primitive& prim : model.meshes[node.mesh].primitives) {
+    std::vector<Mesh> out;
+    for (const tinygltf::Primitive& prim : model.meshes[mesh_index].primitives) {
         if (prim.mode != TINYGLTF_MODE_TRIANGLES && prim.mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
             prim.mode != TINYGLTF_MODE_TRIANGLE_FAN) {
-          result.warnings.push_back("mesh " + std::to_string(node.mesh) + ": points and lines are not rendered");
+          result.warnings.push_back("mesh " + std::to_string(mesh_index) + ": points and lines are not rendered");
           continue;
         }
         auto pos_it = prim.attributes.find("POSITION");
@@ -528,12 +530,11 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
         mesh.positions.resize(nv);
         for (size_t v = 0; v < nv; ++v) {
           mesh.positions[v] = apply_point(world, Vec3(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]));
-          result.bounds.extend(mesh.positions[v]);
         }
         auto attr = [&](const char* name) { auto it = prim.attributes.find(name); return it == prim.attributes.end() ? -1 : it->second; };
         auto check_count = [&](int acc, const char* name) {
           if (reader.count(acc) != nv)
-            throw SceneError(pointer, std::string("mesh ") + std::to_string(node.mesh) + ": " + name + " has " +
+            throw SceneError(pointer, std::string("mesh ") + std::to_string(mesh_index) + ": " + name + " has " +
                                           std::to_string(reader.count(acc)) + " elements for " + std::to_string(nv) + " positions");
         };
         if (int a = attr("NORMAL"); a >= 0) {
@@ -602,7 +603,51 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
         if (prim.material >= static_cast<int>(model.materials.size()))
           throw SceneError(pointer, "a primitive names material " + std::to_string(prim.material) + ", which does not exist");
         mesh.material = prim.material >= 0 ? material_index[prim.material] : get_default_material();
-        if (!mesh.indices.empty()) scene.meshes.push_back(std::move(mesh));
+        if (!mesh.indices.empty()) out.push_back(std::move(mesh));
+      }
+    return out;
+
+  };
+
+  std::function<void(int, const Mat4&, int)> visit = [&](int node_index, const Mat4& parent, int depth) {
+    if (node_index < 0 || node_index >= static_cast<int>(model.nodes.size()))
+      throw SceneError(pointer, "node " + std::to_string(node_index) + " does not exist");
+    if (depth > 256) throw SceneError(pointer, "the node hierarchy is deeper than 256 levels (a cycle?)");
+    const tinygltf::Node& node = model.nodes[node_index];
+    const Mat4 world = multiply(parent, local_matrix(node));
+
+    if (node.mesh >= 0) {
+      if (node.mesh >= static_cast<int>(model.meshes.size()))
+        throw SceneError(pointer, "node " + std::to_string(node_index) + " names mesh " + std::to_string(node.mesh) + ", which does not exist");
+      if (instanced.count(node.mesh)) {
+        // Shared by several nodes: one object-space copy, one Embree instance per node.
+        auto [it, fresh] = group_of_mesh.try_emplace(node.mesh, static_cast<uint32_t>(scene.groups.size()));
+        if (fresh) {
+          MeshGroup group;
+          for (Mesh& m : build_meshes(node.mesh, identity())) {
+            m.prototype = true;
+            group.meshes.push_back(static_cast<uint32_t>(scene.meshes.size()));
+            scene.meshes.push_back(std::move(m));
+          }
+          scene.groups.push_back(std::move(group));
+        }
+        Instance inst;
+        inst.group = it->second;
+        inst.to_world = to_transform(world);
+        inst.normal_to_world = to_transform(normal_matrix(world));
+        inst.mirrored = det3(world) < 0;
+        for (uint32_t m : scene.groups[inst.group].meshes) {
+          if (!fresh) triangles += scene.meshes[m].triangle_count();  // build_meshes counted the first
+          for (const Vec3& p : scene.meshes[m].positions) result.bounds.extend(inst.to_world.point(p));
+        }
+        if (triangles > options.max_triangles)
+          throw SceneError(pointer, "the asset exceeds the limit of " + std::to_string(options.max_triangles) + " triangles");
+        scene.instances.push_back(inst);
+      } else {
+        for (Mesh& m : build_meshes(node.mesh, world)) {
+          for (const Vec3& p : m.positions) result.bounds.extend(p);
+          scene.meshes.push_back(std::move(m));
+        }
       }
     }
 
@@ -667,6 +712,22 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
         if (c >= 0 && c < static_cast<int>(is_child.size())) is_child[c] = true;
     for (size_t i = 0; i < model.nodes.size(); ++i)
       if (!is_child[i]) roots.push_back(static_cast<int>(i));
+  }
+  // Meshes that several nodes reference are instanced, unless they emit (lights are sampled in world space).
+  std::map<int, int> references;
+  std::function<void(int, int)> census = [&](int n, int depth) {
+    if (n < 0 || n >= static_cast<int>(model.nodes.size()) || depth > 256) return;
+    if (model.nodes[n].mesh >= 0) ++references[model.nodes[n].mesh];
+    for (int c : model.nodes[n].children) census(c, depth + 1);
+  };
+  for (int r : roots) census(r, 0);
+  for (auto [mesh_index, count] : references) {
+    if (count < 2 || mesh_index >= static_cast<int>(model.meshes.size())) continue;
+    bool emits = false;
+    for (const tinygltf::Primitive& prim : model.meshes[mesh_index].primitives)
+      if (prim.material >= 0 && prim.material < static_cast<int>(material_index.size()))
+        emits = emits || scene.materials[material_index[prim.material]]->emissive();
+    if (!emits) instanced.insert(mesh_index);
   }
   for (int r : roots) visit(r, identity(), 0);
   if (!warn.empty()) result.warnings.push_back(warn);

@@ -44,7 +44,7 @@ void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punct
   for (uint32_t m = 0; m < scene.meshes.size(); ++m) {
     const Mesh& mesh = scene.meshes[m];
     const Material& mat = *scene.materials[mesh.material];
-    if (!mat.emissive()) continue;
+    if (mesh.prototype || !mat.emissive()) continue;
     for (uint32_t t = 0; t < mesh.triangle_count(); ++t) {
       TrianglePoints tp = triangle(mesh, t);
       float area = 0.5f * length(cross(tp.b - tp.a, tp.c - tp.a));

@@ -10,20 +10,31 @@ void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
   auto start = std::chrono::steady_clock::now();
   bounds_ = Bounds();
   for (Mesh& mesh : meshes) {
-    for (const Vec3& p : mesh.positions) bounds_.extend(p);
+    if (!mesh.prototype)
+      for (const Vec3& p : mesh.positions) bounds_.extend(p);
     // Embree reads vertex buffers with 16-byte loads: keep 4 bytes readable past the last vertex.
     mesh.positions.reserve(mesh.positions.size() + 1);
+  }
+  for (const Instance& inst : instances) {
+    for (uint32_t m : groups.at(inst.group).meshes) {
+      Bounds local;
+      for (const Vec3& p : meshes[m].positions) local.extend(p);
+      if (local.empty()) continue;
+      for (int c = 0; c < 8; ++c)
+        bounds_.extend(inst.to_world.point(Vec3(c & 1 ? local.hi.x : local.lo.x, c & 2 ? local.hi.y : local.lo.y,
+                                                c & 4 ? local.hi.z : local.lo.z)));
+    }
   }
   for (const Sphere& s : spheres) {
     bounds_.extend(s.center - Vec3(s.radius));
     bounds_.extend(s.center + Vec3(s.radius));
   }
-  accel_.build(meshes, spheres);
+  accel_.build(meshes, spheres, groups, instances);
   lights_.build(*this, punctual);
   // Record each emitter's light index on its geometry, in the order LightSet::build enumerates them.
   uint32_t next = 0;
   for (Mesh& mesh : meshes) {
-    if (!materials[mesh.material]->emissive()) continue;
+    if (mesh.prototype || !materials[mesh.material]->emissive()) continue;
     mesh.first_light = next;
     next += static_cast<uint32_t>(mesh.triangle_count());
   }
@@ -35,6 +46,15 @@ void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
 }
 
 size_t Scene::triangle_count() const {
+  size_t n = 0;
+  for (const Mesh& m : meshes)
+    if (!m.prototype) n += m.triangle_count();
+  for (const Instance& inst : instances)
+    for (uint32_t m : groups[inst.group].meshes) n += meshes[m].triangle_count();
+  return n;
+}
+
+size_t Scene::unique_triangle_count() const {
   size_t n = 0;
   for (const Mesh& m : meshes) n += m.triangle_count();
   return n;
@@ -61,19 +81,27 @@ bool Scene::intersect(const Ray& ray, SurfaceInteraction* si) const {
     si->light = si->material->emissive() ? s.light : kNoLight;
   } else {
     const Mesh& mesh = meshes[hit.object];
+    const Instance* inst = hit.instance == kNoInstance ? nullptr : &instances[hit.instance];
     const uint32_t* idx = &mesh.indices[3 * hit.prim_id];
     float b1 = hit.u, b2 = hit.v, b0 = 1 - b1 - b2;
-    const Vec3& p0 = mesh.positions[idx[0]];
-    const Vec3& p1 = mesh.positions[idx[1]];
-    const Vec3& p2 = mesh.positions[idx[2]];
+    Vec3 p0 = mesh.positions[idx[0]];
+    Vec3 p1 = mesh.positions[idx[1]];
+    Vec3 p2 = mesh.positions[idx[2]];
+    if (inst) {
+      p0 = inst->to_world.point(p0);
+      p1 = inst->to_world.point(p1);
+      p2 = inst->to_world.point(p2);
+    }
     Vec3 e1 = p1 - p0, e2 = p2 - p0;
     Vec3 ng = cross(e1, e2);
     float ng_len = length(ng);
     ng = ng_len > 0 ? ng / ng_len : Vec3(0, 0, 1);
+    if (inst && inst->mirrored) ng = -ng;  // glTF: a mirroring transform makes the clockwise face the front
     sp.ng = ng;
     Vec3 ns = ng;
     if (!mesh.normals.empty()) {
       Vec3 n = mesh.normals[idx[0]] * b0 + mesh.normals[idx[1]] * b1 + mesh.normals[idx[2]] * b2;
+      if (inst) n = inst->normal_to_world.vector(n);
       float len2 = length_squared(n);
       if (len2 > 0 && std::isfinite(len2)) {
         ns = n / std::sqrt(len2);
@@ -92,6 +120,7 @@ bool Scene::intersect(const Ray& ray, SurfaceInteraction* si) const {
     Vec3 tangent;
     if (!mesh.tangents.empty()) {
       tangent = mesh.tangents[idx[0]] * b0 + mesh.tangents[idx[1]] * b1 + mesh.tangents[idx[2]] * b2;
+      if (inst) tangent = inst->to_world.vector(tangent);
     } else {
       Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
       float det = d1.x * d2.y - d1.y * d2.x;

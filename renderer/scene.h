@@ -24,7 +24,21 @@ struct Mesh {
   std::vector<float> tangent_signs;  // per vertex bitangent sign, optional
   uint32_t material = 0;
   uint32_t first_light = 0;  // index of its first triangle's light when the material emits
+  bool prototype = false;    // object-space geometry of a MeshGroup, traced only through its instances
   size_t triangle_count() const { return indices.size() / 3; }
+};
+
+// Meshes that several instances share (Embree instancing): traced once per instance through a transform.
+// Emissive meshes are never instanced (lights are sampled in world space).
+struct MeshGroup {
+  std::vector<uint32_t> meshes;  // indices into Scene::meshes, each marked `prototype`
+};
+
+struct Instance {
+  uint32_t group = 0;
+  Transform to_world;
+  Transform normal_to_world;  // inverse transpose of to_world's linear part
+  bool mirrored = false;      // negative determinant: the front face is the clockwise one
 };
 
 struct Sphere {
@@ -60,6 +74,8 @@ class Scene {
   std::vector<std::string> material_names;
   std::vector<Mesh> meshes;
   std::vector<Sphere> spheres;
+  std::vector<MeshGroup> groups;
+  std::vector<Instance> instances;
   CameraDesc camera;
   Environment environment;
   std::vector<std::string> warnings;  // things the user should fix or know were ignored
@@ -73,7 +89,8 @@ class Scene {
   bool occluded(const Ray& ray) const { return accel_.occluded(ray); }
   const LightSet& lights() const { return lights_; }
   const Bounds& bounds() const { return bounds_; }
-  size_t triangle_count() const;
+  size_t triangle_count() const;         // triangles traced, instances counted each time
+  size_t unique_triangle_count() const;  // triangles stored
   double build_seconds() const { return build_seconds_; }
 
  private:
