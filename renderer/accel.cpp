@@ -4,9 +4,11 @@
 #include <pmmintrin.h>
 #include <xmmintrin.h>
 
+#include <cstring>
 #include <stdexcept>
 #include <string>
 
+#include "renderer/sampler.h"
 #include "renderer/scene.h"
 
 namespace tessera {
@@ -40,9 +42,56 @@ struct GeometryRef {
   bool is_instance = false;
 };
 
+// Coverage test for masked and blended materials, run by Embree for every candidate hit (camera, bounce and
+// shadow rays alike), so cut-outs neither show nor cast shadows.
+struct AlphaUserData {
+  const Mesh* mesh;
+  const Material* material;
+};
+
+void alpha_filter(const RTCFilterFunctionNArguments* args) {
+  const auto* data = static_cast<const AlphaUserData*>(args->geometryUserPtr);
+  const Mesh& mesh = *data->mesh;
+  for (unsigned i = 0; i < args->N; ++i) {
+    if (args->valid[i] == 0) continue;
+    const uint32_t prim = RTCHitN_primID(args->hit, args->N, i);
+    const float b1 = RTCHitN_u(args->hit, args->N, i), b2 = RTCHitN_v(args->hit, args->N, i), b0 = 1 - b1 - b2;
+    const uint32_t* idx = &mesh.indices[3 * prim];
+    ShadingPoint sp;
+    if (!mesh.uvs.empty()) sp.uv = mesh.uvs[idx[0]] * b0 + mesh.uvs[idx[1]] * b1 + mesh.uvs[idx[2]] * b2;
+    sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
+    const float alpha = data->material->coverage(sp);
+    bool keep;
+    if (data->material->alpha_mode == Material::AlphaMode::kMask) {
+      keep = alpha >= data->material->alpha_cutoff;
+    } else {
+      // Blend: keep the hit with probability alpha, decided by a hash of the ray and the hit, so the decision is
+      // deterministic (the same ray always sees the same surface) yet uncorrelated between rays.
+      const float key[8] = {RTCRayN_org_x(args->ray, args->N, i), RTCRayN_org_y(args->ray, args->N, i),
+                            RTCRayN_org_z(args->ray, args->N, i), RTCRayN_dir_x(args->ray, args->N, i),
+                            RTCRayN_dir_y(args->ray, args->N, i), RTCRayN_dir_z(args->ray, args->N, i), b1, b2};
+      uint64_t h = prim;
+      for (float f : key) {
+        uint32_t bits;
+        std::memcpy(&bits, &f, 4);
+        h = mix64(h ^ bits);
+      }
+      keep = static_cast<float>(h >> 40) * 0x1p-24f < alpha;
+    }
+    if (!keep) args->valid[i] = 0;
+  }
+}
+
 // Attaches a triangle geometry reading `mesh`'s arrays in place; returns its geometry id.
-uint32_t attach_mesh(RTCDevice device, RTCScene scene, const Mesh& mesh) {
+uint32_t attach_mesh(RTCDevice device, RTCScene scene, const Mesh& mesh, const Material* material,
+                     std::vector<std::unique_ptr<AlphaUserData>>& alpha_data) {
   RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  if (material && material->alpha_mode != Material::AlphaMode::kOpaque) {
+    alpha_data.push_back(std::make_unique<AlphaUserData>(AlphaUserData{&mesh, material}));
+    rtcSetGeometryUserData(geom, alpha_data.back().get());
+    rtcSetGeometryIntersectFilterFunction(geom, &alpha_filter);
+    rtcSetGeometryOccludedFilterFunction(geom, &alpha_filter);
+  }
   // Shared buffers: Embree reads our arrays in place. Vertex buffers need 4 bytes readable past the last vertex
   // (Embree loads 16 bytes at a time), which Scene::finalize guarantees by reserving capacity.
   rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh.positions.data(), 0,
@@ -68,6 +117,7 @@ struct Accel::Impl {
   std::vector<RTCScene> group_scenes;
   std::vector<std::vector<GeometryRef>> group_refs;  // by geometry id within each group scene
   std::vector<uint32_t> instance_group;              // by instance index
+  std::vector<std::unique_ptr<AlphaUserData>> alpha_data;  // filter-function user data, alive with the scenes
   void release() {
     if (scene) rtcReleaseScene(scene);
     for (RTCScene g : group_scenes) rtcReleaseScene(g);
@@ -76,6 +126,7 @@ struct Accel::Impl {
     group_refs.clear();
     refs.clear();
     instance_group.clear();
+    alpha_data.clear();
   }
   ~Impl() { release(); }
 };
@@ -84,7 +135,8 @@ Accel::Accel() : impl_(std::make_unique<Impl>()) {}
 Accel::~Accel() = default;
 
 void Accel::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& spheres,
-                  const std::vector<MeshGroup>& groups, const std::vector<Instance>& instances) {
+                  const std::vector<MeshGroup>& groups, const std::vector<Instance>& instances,
+                  const std::vector<const Material*>& materials) {
   RTCDevice device = shared_device();
   impl_->release();
   impl_->scene = rtcNewScene(device);
@@ -94,7 +146,7 @@ void Accel::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& sp
 
   for (uint32_t m = 0; m < meshes.size(); ++m) {
     if (meshes[m].indices.empty() || meshes[m].prototype) continue;
-    set_ref(impl_->refs, attach_mesh(device, impl_->scene, meshes[m]), {false, m});
+    set_ref(impl_->refs, attach_mesh(device, impl_->scene, meshes[m], materials[meshes[m].material], impl_->alpha_data), {false, m});
     check(device, "triangle geometry");
   }
   for (uint32_t s = 0; s < spheres.size(); ++s) {
@@ -118,7 +170,8 @@ void Accel::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& sp
     rtcSetSceneFlags(gs, RTC_SCENE_FLAG_ROBUST);
     std::vector<GeometryRef> refs;
     for (uint32_t m : group.meshes)
-      if (!meshes[m].indices.empty()) set_ref(refs, attach_mesh(device, gs, meshes[m]), {false, m});
+      if (!meshes[m].indices.empty())
+        set_ref(refs, attach_mesh(device, gs, meshes[m], materials[meshes[m].material], impl_->alpha_data), {false, m});
     rtcCommitScene(gs);
     check(device, "instanced scene build");
     impl_->group_scenes.push_back(gs);

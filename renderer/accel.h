@@ -12,6 +12,7 @@ namespace tessera {
 struct Mesh;
 struct Sphere;
 struct MeshGroup;
+class Material;
 struct Instance;
 inline constexpr uint32_t kNoInstance = ~0u;
 
@@ -33,8 +34,9 @@ class Accel {
   Accel(const Accel&) = delete;
   Accel& operator=(const Accel&) = delete;
 
+  // `materials` by material index: masked and blended ones get a coverage filter.
   void build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& spheres, const std::vector<MeshGroup>& groups,
-             const std::vector<Instance>& instances);
+             const std::vector<Instance>& instances, const std::vector<const Material*>& materials);
   bool intersect(const Ray& ray, RayHit* hit) const;
   bool occluded(const Ray& ray) const;
 

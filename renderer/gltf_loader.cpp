@@ -489,7 +489,15 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       params = lambert;
     }
     material_index[i] = static_cast<uint32_t>(scene.materials.size());
-    scene.materials.push_back(registry.create(params, pointer + "/materials/" + std::to_string(i), MaterialContext{}));
+    std::unique_ptr<Material> material = registry.create(params, pointer + "/materials/" + std::to_string(i), MaterialContext{});
+    // Coverage (spec 3.9.4): baseColorFactor alpha; MASK against alphaCutoff, BLEND stochastically.
+    if (m.alphaMode == "MASK" || m.alphaMode == "BLEND") {
+      material->alpha_mode = m.alphaMode == "MASK" ? Material::AlphaMode::kMask : Material::AlphaMode::kBlend;
+      material->alpha_cutoff = static_cast<float>(m.alphaCutoff);
+      if (m.pbrMetallicRoughness.baseColorFactor.size() == 4)
+        material->alpha.value = static_cast<float>(clamp(m.pbrMetallicRoughness.baseColorFactor[3], 0.0, 1.0));
+    }
+    scene.materials.push_back(std::move(material));
     scene.material_names.push_back(m.name.empty() ? "gltf:" + std::to_string(i) : m.name);
   }
   // The glTF default material (spec 3.9.6): white, fully rough dielectric... metallic 1 by the spec's defaults.

@@ -32,6 +32,14 @@ class Material {
 
   RgbParam emission;               // radiance, W/(m^2 sr) per channel
   bool emission_one_sided = false; // emit only to the side the geometric normal points to
+
+  // Coverage (glTF alphaMode): opaque; masked where coverage < cutoff; or blended, where a ray passes through with
+  // probability 1 - coverage (stochastic transparency, unbiased for a path tracer).
+  enum class AlphaMode { kOpaque, kMask, kBlend };
+  AlphaMode alpha_mode = AlphaMode::kOpaque;
+  float alpha_cutoff = 0.5f;
+  FloatParam alpha{1.0f, nullptr};  // coverage in [0, 1]
+  float coverage(const ShadingPoint& sp) const { return alpha.eval(sp); }
 };
 
 // Where texture files named by a material may come from.

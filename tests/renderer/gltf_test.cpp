@@ -420,3 +420,60 @@ TEST(Gltf, RepeatedMeshesAreInstancedAndRenderLikeCopies) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// A black quad in front of an emissive backdrop of radiance 1: what the camera sees through it is its transparency.
+double seen_through(const std::string& mode, double alpha, double cutoff = 0.5) {
+  GltfBuilder b;
+  json front = {{"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, alpha}}, {"metallicFactor", 0}}},
+                {"alphaMode", mode}, {"alphaCutoff", cutoff}};
+  int mf = b.material(front);
+  int mb = b.material({{"emissiveFactor", {1, 1, 1}}});
+  int quad, backdrop;
+  square(b, 0, 0, 1, mf, &quad);
+  square(b, 0, 0, 5, mb, &backdrop);
+  b.node({{"mesh", quad}}, true);
+  b.node({{"mesh", backdrop}, {"translation", {0, 0, -1}}}, true);
+  std::string name = "alpha_" + mode + "_" + std::to_string(static_cast<int>(alpha * 100));
+  b.write(fixture_dir(), name);
+  json job = {{"kind", "scene"},
+              {"scene", {{"gltf", name + ".gltf"},
+                         {"camera", {{"from", {0, 0, 3}}, {"to", {0, 0, 0}}, {"fov_deg", 10}}},
+                         {"environment", {{"color", 0}}}}},
+              {"render", {{"width", 8}, {"height", 8}, {"spp", 256}, {"max_depth", 1}}}};
+  return mean_green(render_job(job));
+}
+
+TEST(Gltf, AlphaMaskCutsOutAndBlendIsStochasticCoverage) {
+  EXPECT_NEAR(seen_through("MASK", 0.3), 1.0, 1e-4);    // below the cutoff: not there
+  EXPECT_NEAR(seen_through("MASK", 0.8), 0.0, 1e-4);    // above: opaque
+  EXPECT_NEAR(seen_through("MASK", 0.3, 0.2), 0.0, 1e-4);  // the cutoff is the material's
+  EXPECT_NEAR(seen_through("BLEND", 0.25), 0.75, 0.02); // a quarter of the rays stop
+  EXPECT_NEAR(seen_through("OPAQUE", 0.1), 0.0, 1e-4);  // alpha ignored when opaque
+}
+
+TEST(Gltf, MaskedOutSurfacesCastNoShadow) {
+  for (double alpha : {0.3, 0.8}) {
+    GltfBuilder b;
+    b.node({{"mesh", floor_mesh(b)}}, true);
+    int mq = b.material({{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, alpha}}}}, {"alphaMode", "MASK"}});
+    int quad;
+    square(b, 0, 0, 1, mq, &quad);
+    // Horizontal, half way between the light and the floor.
+    b.node({{"mesh", quad}, {"translation", {0, 1, 0}}, {"rotation", {-std::sqrt(0.5), 0, 0, std::sqrt(0.5)}}}, true);
+    b.doc["extensionsUsed"] = {"KHR_lights_punctual"};
+    b.doc["extensions"] = {{"KHR_lights_punctual", {{"lights", {{{"type", "point"}, {"intensity", 10}}}}}}};
+    b.node({{"translation", {0, 2, 0}}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}}, true);
+    b.write(fixture_dir(), "shadow");
+    json job = lit_floor_job("shadow.gltf");
+    job["scene"]["camera"] = {{"from", {0.001, 0.5, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}};
+    double lit = mean_green(render_job(job));
+    if (alpha < 0.5) EXPECT_NEAR(lit, 0.5 / M_PI * 10 / 4, 0.01);  // unshadowed
+    else EXPECT_LT(lit, 1e-6);
+  }
+}
+
+}  // namespace
+}  // namespace tessera
