@@ -87,6 +87,8 @@ class Scene {
 
   bool intersect(const Ray& ray, SurfaceInteraction* si) const;
   bool occluded(const Ray& ray) const { return accel_.occluded(ray); }
+  // The bare ray queries, without shading (for measuring what Embree alone costs).
+  const Accel& accel() const { return accel_; }
   const LightSet& lights() const { return lights_; }
   const Bounds& bounds() const { return bounds_; }
   size_t triangle_count() const;         // triangles traced, instances counted each time

@@ -86,7 +86,7 @@ StopReason RenderSession::run(const std::function<void(const RenderProgress&, co
   if (auto r = budget_met()) return *r;
   // Passes start at one sample and grow geometrically, so the first preview comes fast and later passes amortise
   // the per-pass work (previews, checkpoints); a pass is kept near two seconds so previews stay fresh.
-  uint32_t pass_samples = std::max<uint32_t>(1, std::min<uint32_t>(progress_.samples_done, 1));
+  uint32_t pass_samples = 1;
   for (;;) {
     if (cancel_.load()) return StopReason::kCancelled;
     if (stop_.load()) return StopReason::kStopped;
@@ -123,9 +123,11 @@ StopReason RenderSession::run(const std::function<void(const RenderProgress&, co
     progress_.nonfinite_samples = nonfinite;
     if (on_pass) on_pass(progress_, film_);
     if (auto r = budget_met()) return *r;
-    // Next pass: double, but aim at about two seconds.
+    // Next pass: double, but aim at about two seconds, and do not run far past a time limit.
     const double per_pass_sample_s = pass_s / std::max<uint32_t>(count, 1);
-    uint32_t by_time = per_pass_sample_s > 0 ? static_cast<uint32_t>(std::max(1.0, 2.0 / per_pass_sample_s)) : 64;
+    double target_s = 2.0;
+    if (settings_.time_limit_s > 0) target_s = std::min(target_s, settings_.time_limit_s - progress_.elapsed_s);
+    uint32_t by_time = per_pass_sample_s > 0 ? static_cast<uint32_t>(std::max(1.0, target_s / per_pass_sample_s)) : 64;
     pass_samples = std::max<uint32_t>(1, std::min({count * 2, by_time, 256u}));
   }
 }

@@ -1,0 +1,363 @@
+// tessera-bench: renders fixed scenes at fixed settings and prints the figures a render service is chosen by:
+// load and BVH time, time to the first preview, samples and rays per second (by kind), memory per triangle,
+// the ray rate of Embree alone on the same kinds of rays, thread scaling, and RMSE against a high-spp reference
+// after fixed time budgets with efficiency = 1 / (MSE x seconds).
+//
+//   tessera-bench [--quick] [--scene NAME] [--threads N] [--json FILE]
+//
+// Run it from the repository root (it reads proto/examples/ and ../shared/scenes/).
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "renderer/job.h"
+#include "renderer/sampling.h"
+#include "renderer/scene.h"
+#include "renderer/session.h"
+
+namespace {
+
+using namespace tessera;
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+size_t current_rss_bytes() {
+  std::ifstream statm("/proc/self/statm");
+  size_t pages = 0, resident = 0;
+  statm >> pages >> resident;
+  return resident * static_cast<size_t>(sysconf(_SC_PAGESIZE));
+}
+
+size_t peak_rss_bytes() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return static_cast<size_t>(ru.ru_maxrss) * 1024;
+}
+
+struct BenchScene {
+  std::string name;
+  std::string description;
+  std::function<std::shared_ptr<Scene>()> make;
+  RenderSettings settings;
+};
+
+RenderSettings base_settings(int w, int h, int depth) {
+  RenderSettings s;
+  s.width = w;
+  s.height = h;
+  s.spp = 16;
+  s.seed = 1;
+  s.integrator.max_depth = depth;
+  return s;
+}
+
+std::shared_ptr<Scene> load_job_file(const std::string& path, const json& scene_override = nullptr) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot open " + path + " (run from the repository root)");
+  json job = json::parse(in);
+  if (!scene_override.is_null()) job["scene"] = scene_override;
+  JobLoadOptions opts;
+  opts.scene.asset_root = std::filesystem::path(path).parent_path();
+  return load_job(job, opts).scene;
+}
+
+std::shared_ptr<Scene> gltf_scene(const std::string& file) {
+  if (!std::filesystem::exists(file)) throw std::runtime_error(file + " not found");
+  json job = {{"kind", "scene"}, {"scene", {{"gltf", std::filesystem::path(file).filename().string()}}}};
+  JobLoadOptions opts;
+  opts.scene.asset_root = std::filesystem::path(file).parent_path();
+  return load_job(job, opts).scene;
+}
+
+// A tessellated sphere of `rings` x `segments` quads as a mesh with smooth normals.
+Mesh sphere_mesh(Vec3 c, float r, int rings, int segments, uint32_t material) {
+  Mesh m;
+  m.material = material;
+  for (int i = 0; i <= rings; ++i) {
+    float theta = kPi * i / rings;
+    for (int j = 0; j <= segments; ++j) {
+      float phi = 2 * kPi * j / segments;
+      Vec3 n(std::sin(theta) * std::cos(phi), std::cos(theta), std::sin(theta) * std::sin(phi));
+      m.positions.push_back(c + n * r);
+      m.normals.push_back(n);
+    }
+  }
+  for (int i = 0; i < rings; ++i)
+    for (int j = 0; j < segments; ++j) {
+      uint32_t a = i * (segments + 1) + j, b = a + segments + 1;
+      m.indices.insert(m.indices.end(), {a, b, a + 1, a + 1, b, b + 1});
+    }
+  return m;
+}
+
+// At least a million triangles: a 4 x 4 grid of finely tessellated spheres on a floor under a rectangular light.
+std::shared_ptr<Scene> million_scene() {
+  auto scene = std::make_shared<Scene>();
+  const MaterialRegistry& reg = MaterialRegistry::builtin();
+  scene->materials.push_back(reg.create({{"type", "lambert"}, {"albedo", {0.7, 0.6, 0.5}}}, "/", {}));
+  scene->materials.push_back(reg.create({{"type", "emission"}, {"radiance", {20, 20, 20}}}, "/", {}));
+  scene->material_names = {"diffuse", "light"};
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) scene->meshes.push_back(sphere_mesh(Vec3(i * 2.5f - 3.75f, 1, j * 2.5f - 3.75f), 1, 128, 256, 0));
+  Mesh floor;
+  floor.positions = {Vec3(-20, 0, -20), Vec3(20, 0, -20), Vec3(20, 0, 20), Vec3(-20, 0, 20)};
+  floor.indices = {0, 2, 1, 0, 3, 2};
+  scene->meshes.push_back(floor);
+  Mesh light;
+  light.material = 1;
+  light.positions = {Vec3(-2, 8, -2), Vec3(2, 8, -2), Vec3(2, 8, 2), Vec3(-2, 8, 2)};
+  light.indices = {0, 1, 2, 0, 2, 3};
+  scene->meshes.push_back(light);
+  scene->camera.from = Vec3(0, 7, 11);
+  scene->camera.to = Vec3(0, 0.5f, 0);
+  scene->camera.fov_deg = 45;
+  scene->environment.color = Rgb(0.05f);
+  scene->finalize();
+  return scene;
+}
+
+// Glossy objects under a sky with a sun: environment importance sampling and glossy BSDFs.
+std::shared_ptr<Scene> glossy_env_scene() {
+  const int w = 512, h = 256;
+  std::vector<float> rgb(static_cast<size_t>(w) * h * 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      float v = (y + 0.5f) / h;
+      Rgb sky = v < 0.5f ? Rgb(0.3f, 0.5f, 0.9f) * (1.2f - v) : Rgb(0.25f, 0.22f, 0.2f);
+      float dx = (x - 0.7f * w) / w, dy = (y - 0.2f * h) / h;
+      if (dx * dx + dy * dy < 0.0001f) sky = Rgb(2000, 1800, 1500);
+      float* p = &rgb[(static_cast<size_t>(y) * w + x) * 3];
+      p[0] = sky.x;
+      p[1] = sky.y;
+      p[2] = sky.z;
+    }
+  const MaterialRegistry& reg = MaterialRegistry::builtin();
+  auto glossy = [&](json params, json fallback) { return reg.has(params["type"]) ? params : fallback; };
+  json scene_doc = {
+      {"materials",
+       {{"gold", glossy({{"type", "conductor"}, {"metal", "gold"}, {"roughness", 0.2}}, {{"type", "lambert"}, {"albedo", {0.8, 0.6, 0.2}}})},
+        {"plastic", glossy({{"type", "plastic"}, {"albedo", {0.1, 0.3, 0.8}}, {"roughness", 0.1}}, {{"type", "lambert"}, {"albedo", {0.1, 0.3, 0.8}}})},
+        {"rough", glossy({{"type", "cook_torrance"}, {"distribution", "ggx"}, {"roughness", 0.4}}, {{"type", "lambert"}, {"albedo", 0.7}})},
+        {"floor", {{"type", "lambert"}, {"albedo", 0.5}}}}},
+      {"objects", json::array({{{"shape", "sphere"}, {"center", {-2.2, 1, 0}}, {"radius", 1}, {"material", "gold"}},
+                               {{"shape", "sphere"}, {"center", {0, 1, 0}}, {"radius", 1}, {"material", "plastic"}},
+                               {{"shape", "sphere"}, {"center", {2.2, 1, 0}}, {"radius", 1}, {"material", "rough"}},
+                               {{"shape", "rectangle"}, {"corner", {-10, 0, 10}}, {"edge1", {20, 0, 0}},
+                                {"edge2", {0, 0, -20}}, {"material", "floor"}}})},
+      {"camera", {{"from", {0, 2.5, 7}}, {"to", {0, 0.8, 0}}, {"fov_deg", 40}}},
+  };
+  SceneLoadOptions opts;
+  opts.build = false;
+  auto scene = load_scene(scene_doc, "/scene", opts);
+  scene->environment.map = std::make_shared<EnvironmentMap>(w, h, std::move(rgb));
+  scene->environment.color = Rgb(1);
+  scene->finalize();
+  return scene;
+}
+
+struct RayBatch {
+  std::vector<Ray> camera, bounce, shadow;
+};
+
+// Rays of the three kinds the path tracer casts, made the same way, for tracing with Embree alone.
+RayBatch collect_rays(const Scene& scene, const RenderSettings& s) {
+  RayBatch batch;
+  Camera camera(scene.camera, s.width, s.height);
+  for (int y = 0; y < s.height; ++y)
+    for (int x = 0; x < s.width; ++x) {
+      PixelSampler sampler(s.seed, static_cast<uint32_t>(y * s.width + x), 0);
+      Vec2 jitter = sampler.get2d();
+      Ray ray = camera.generate_ray(Vec2(x + jitter.x, y + jitter.y), sampler.get2d());
+      batch.camera.push_back(ray);
+      SurfaceInteraction si;
+      if (!scene.intersect(ray, &si)) continue;
+      // An incoherent bounce: cosine-distributed about the normal, on the viewer's side.
+      Vec3 n = dot(si.sp.ng, ray.dir) < 0 ? si.sp.ng : -si.sp.ng;
+      Vec3 d = Frame::from_normal(n).to_world(sample_cosine_hemisphere(sampler.get2d()));
+      Ray bounce;
+      bounce.origin = offset_ray_origin(si.sp.p, si.sp.ng, d);
+      bounce.dir = d;
+      batch.bounce.push_back(bounce);
+      LightSample ls;
+      float u_sel = sampler.get1d();
+      if (scene.lights().sample(scene, si.sp.p, u_sel, sampler.get2d(), &ls)) {
+        Ray shadow;
+        shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, ls.wi);
+        shadow.dir = ls.wi;
+        shadow.tmax = std::isinf(ls.dist) ? kInfinity : ls.dist * 0.999f;
+        batch.shadow.push_back(shadow);
+      }
+    }
+  return batch;
+}
+
+// Rays per second of Embree alone over `rays`, on the pool.
+double raw_rate(const Scene& scene, const std::vector<Ray>& rays, bool occlusion, ThreadPool& pool) {
+  if (rays.empty()) return 0;
+  const size_t chunk = 4096, chunks = (rays.size() + chunk - 1) / chunk;
+  std::vector<uint64_t> hits(pool.size(), 0);
+  auto start = Clock::now();
+  int repeats = 0;
+  do {
+    pool.parallel_for(chunks, [&](size_t c, int worker) {
+      uint64_t h = 0;
+      for (size_t i = c * chunk; i < std::min(rays.size(), (c + 1) * chunk); ++i) {
+        if (occlusion) {
+          h += scene.accel().occluded(rays[i]);
+        } else {
+          RayHit hit;
+          h += scene.accel().intersect(rays[i], &hit);
+        }
+      }
+      hits[worker] += h;
+    });
+    ++repeats;
+  } while (seconds_since(start) < 0.5);
+  return static_cast<double>(rays.size()) * repeats / seconds_since(start);
+}
+
+std::vector<float> render_image(std::shared_ptr<const Scene> scene, RenderSettings s, ThreadPool& pool,
+                                RenderProgress* progress = nullptr, double* first_preview_s = nullptr) {
+  RenderSession session(scene, s, pool);
+  auto start = Clock::now();
+  bool first = true;
+  session.run([&](const RenderProgress&, const Film&) {
+    if (first && first_preview_s) *first_preview_s = seconds_since(start);
+    first = false;
+  });
+  if (progress) *progress = session.progress();
+  return session.film().resolve();
+}
+
+double rmse(const std::vector<float>& a, const std::vector<float>& b) {
+  double s = 0;
+  for (size_t i = 0; i < a.size(); ++i) s += (a[i] - b[i]) * (a[i] - b[i]);
+  return std::sqrt(s / a.size());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  bool quick = false;
+  std::string only, json_path;
+  int threads = 0;
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i];
+    if (a == "--quick") quick = true;
+    else if (a == "--scene" && i + 1 < argc) only = argv[++i];
+    else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
+    else if (a == "--json" && i + 1 < argc) json_path = argv[++i];
+    else {
+      std::fprintf(stderr, "usage: tessera-bench [--quick] [--scene cornell|helmet|million|glossy_env] [--threads N] [--json FILE]\n");
+      return 2;
+    }
+  }
+  enable_flush_to_zero();
+  std::vector<BenchScene> scenes = {
+      {"cornell", "Cornell box, 512x512, Lambert, one area light", [] { return load_job_file("proto/examples/cornell.json"); },
+       base_settings(512, 512, 8)},
+      {"helmet", "DamagedHelmet.glb (textured glTF), 512x512, white environment",
+       [] { return gltf_scene("../shared/scenes/damagedhelmet/DamagedHelmet.glb"); }, base_settings(512, 512, 8)},
+      {"million", "16 spheres x 65,536 triangles + floor, area light, 512x512", million_scene, base_settings(512, 512, 6)},
+      {"glossy_env", "glossy spheres under an HDR sky with a sun, 512x512", glossy_env_scene, base_settings(512, 512, 8)},
+  };
+  const std::vector<double> budgets = quick ? std::vector<double>{0.25, 1, 4} : std::vector<double>{1, 4, 16};
+  ThreadPool pool(threads);
+  ThreadPool single(1);
+  json report = json::array();
+  std::printf("tessera-bench: %d threads%s\n", pool.size(), quick ? " (quick)" : "");
+  for (BenchScene& bs : scenes) {
+    if (!only.empty() && bs.name != only) continue;
+    json r = {{"scene", bs.name}};
+    std::printf("\n== %s: %s\n", bs.name.c_str(), bs.description.c_str());
+    size_t rss_before = current_rss_bytes();
+    auto t0 = Clock::now();
+    std::shared_ptr<Scene> scene;
+    try {
+      scene = bs.make();
+    } catch (const std::exception& e) {
+      std::printf("   skipped: %s\n", e.what());
+      continue;
+    }
+    double load_s = seconds_since(t0);
+    size_t rss_after = current_rss_bytes();
+    size_t tris = scene->unique_triangle_count();
+    r["load_s"] = load_s;
+    r["bvh_s"] = scene->build_seconds();
+    r["triangles"] = tris;
+    r["bytes_per_triangle"] = tris ? double(rss_after - rss_before) / tris : 0.0;
+    std::printf("   load %.3f s (BVH and lights %.3f s), %zu triangles, %.0f bytes/triangle (resident growth)\n", load_s,
+                scene->build_seconds(), tris, tris ? double(rss_after - rss_before) / tris : 0.0);
+
+    // Throughput at all threads and at one.
+    RenderProgress p;
+    double first_preview = 0;
+    render_image(scene, bs.settings, pool, &p, &first_preview);
+    RenderProgress p1;
+    RenderSettings s1 = bs.settings;
+    s1.spp = std::max<uint32_t>(2, bs.settings.spp / 4);
+    render_image(scene, s1, single, &p1);
+    double efficiency = p1.samples_per_s > 0 ? p.samples_per_s / (p1.samples_per_s * pool.size()) : 0;
+    double ray_rate = p.rays.total() / p.elapsed_s;
+    std::printf("   first preview %.3f s; %.3g samples/s; %.3g rays/s (camera %.3g, bounce %.3g, shadow %.3g)\n",
+                first_preview, p.samples_per_s, ray_rate, p.rays.camera / p.elapsed_s, p.rays.bounce / p.elapsed_s,
+                p.rays.shadow / p.elapsed_s);
+    std::printf("   1 thread %.3g samples/s; %d threads %.3g samples/s: parallel efficiency %.2f\n", p1.samples_per_s,
+                pool.size(), p.samples_per_s, efficiency);
+    r["first_preview_s"] = first_preview;
+    r["samples_per_s"] = p.samples_per_s;
+    r["rays_per_s"] = ray_rate;
+    r["rays"] = {{"camera", p.rays.camera}, {"bounce", p.rays.bounce}, {"shadow", p.rays.shadow}};
+    r["samples_per_s_1_thread"] = p1.samples_per_s;
+    r["parallel_efficiency"] = efficiency;
+
+    // Embree alone on rays of the same kinds: the time the path tracer's ray mix would take with no shading.
+    RayBatch batch = collect_rays(*scene, bs.settings);
+    double rc = raw_rate(*scene, batch.camera, false, pool), rb = raw_rate(*scene, batch.bounce, false, pool),
+           rs = raw_rate(*scene, batch.shadow, true, pool);
+    double raw_time = (rc > 0 ? p.rays.camera / rc : 0) + (rb > 0 ? p.rays.bounce / rb : 0) + (rs > 0 ? p.rays.shadow / rs : 0);
+    double ratio = raw_time / p.elapsed_s;
+    std::printf("   Embree alone: camera %.3g, bounce %.3g, shadow %.3g rays/s; path tracer / Embree-alone rate %.2f\n", rc,
+                rb, rs, ratio);
+    r["embree_alone"] = {{"camera", rc}, {"bounce", rb}, {"shadow", rs}, {"ratio", ratio}};
+
+    // Convergence: RMSE against a high-spp reference after fixed time budgets, at a quarter of the resolution.
+    RenderSettings small = bs.settings;
+    small.width /= 4;
+    small.height /= 4;
+    RenderSettings ref = small;
+    ref.seed = 999;
+    ref.spp = quick ? 1024 : 8192;
+    auto tr = Clock::now();
+    std::vector<float> reference = render_image(scene, ref, pool);
+    std::printf("   reference: %dx%d, %u spp in %.1f s\n", ref.width, ref.height, ref.spp, seconds_since(tr));
+    json conv = json::array();
+    for (double budget : budgets) {
+      RenderSettings b = small;
+      b.spp = 1u << 16;
+      b.time_limit_s = budget;
+      RenderProgress bp;
+      std::vector<float> img = render_image(scene, b, pool, &bp);
+      double e = rmse(img, reference);
+      double eff = 1.0 / (e * e * bp.elapsed_s);
+      std::printf("   budget %5.2f s: %5u spp in %.2f s, RMSE %.5f, efficiency 1/(MSE*s) %.4g\n", budget, bp.samples_done,
+                  bp.elapsed_s, e, eff);
+      conv.push_back({{"budget_s", budget}, {"spp", bp.samples_done}, {"seconds", bp.elapsed_s}, {"rmse", e}, {"efficiency", eff}});
+    }
+    r["convergence"] = conv;
+    r["peak_rss_bytes"] = peak_rss_bytes();
+    report.push_back(r);
+  }
+  std::printf("\npeak resident memory %.1f MiB\n", peak_rss_bytes() / 1048576.0);
+  if (!json_path.empty()) std::ofstream(json_path) << report.dump(2) << "\n";
+  return 0;
+}
