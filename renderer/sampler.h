@@ -19,14 +19,77 @@ constexpr uint64_t mix64(uint64_t x) {
   return x;
 }
 
+// Which sequence a PixelSampler draws from.
+enum class SamplerKind {
+  kIndependent,  // hashed uniform numbers: every dimension independent
+  kSobol,        // Owen-scrambled, index-shuffled 2D Sobol per dimension pair (Burley 2020)
+};
+
+namespace sobol_detail {
+
+inline uint32_t reverse_bits(uint32_t x) {
+  x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
+  x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
+  return (x >> 16) | (x << 16);
+}
+
+// Laine-Karras style hash in which each bit depends only on the bits below it: applied to bit-reversed values it
+// is a nested uniform (Owen) scramble (Burley, "Practical Hash-based Owen Scrambling", JCGT 2020, listing 1,
+// with the improved constants of its later revision).
+inline uint32_t laine_karras_permutation(uint32_t x, uint32_t seed) {
+  x ^= x * 0x3d20adeau;
+  x += seed;
+  x *= (seed >> 16) | 1u;
+  x ^= x * 0x05526c56u;
+  x ^= x * 0x53a22864u;
+  return x;
+}
+
+inline uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed) {
+  return reverse_bits(laine_karras_permutation(reverse_bits(x), seed));
+}
+
+// The first two dimensions of the Sobol sequence, as 32-bit fractions.
+inline void sobol_2d(uint32_t index, uint32_t* x, uint32_t* y) {
+  *x = reverse_bits(index);  // dimension 0: van der Corput
+  uint32_t v = 1u << 31, r = 0;
+  for (; index; index >>= 1, v ^= v >> 1)
+    if (index & 1) r ^= v;  // dimension 1: generator matrix of the polynomial x + 1
+  *y = r;
+}
+
+}  // namespace sobol_detail
+
 class PixelSampler {
  public:
-  PixelSampler(uint64_t seed, uint32_t pixel_index, uint64_t sample_index)
-      : key_(mix64(mix64(seed ^ 0x9e3779b97f4a7c15ULL) + pixel_index) ^ mix64(sample_index + 0x632be59bd9b4e019ULL)) {}
+  PixelSampler(uint64_t seed, uint32_t pixel_index, uint64_t sample_index,
+               SamplerKind kind = SamplerKind::kIndependent)
+      : key_(mix64(mix64(seed ^ 0x9e3779b97f4a7c15ULL) + pixel_index) ^ mix64(sample_index + 0x632be59bd9b4e019ULL)),
+        pixel_key_(mix64(mix64(seed ^ 0x5851f42d4c957f2dULL) + pixel_index)),
+        sample_index_(sample_index),
+        kind_(kind) {}
 
   // Next uniform number in [0, 1).
-  float get1d() { return to_unit(mix64(key_ + 0x9e3779b97f4a7c15ULL * ++dimension_)); }
+  float get1d() {
+    if (kind_ == SamplerKind::kSobol) return get2d().x;
+    return to_unit(mix64(key_ + 0x9e3779b97f4a7c15ULL * ++dimension_));
+  }
+  // Next pair of uniform numbers in [0, 1)^2, stratified jointly with the Sobol sampler.
   Vec2 get2d() {
+    if (kind_ == SamplerKind::kSobol) {
+      // Each dimension pair of each pixel gets its own shuffle of the sample order and its own scramble, so pairs
+      // are decorrelated from each other and pixels from their neighbours.
+      const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * ++dimension_);
+      const uint32_t index = sobol_detail::nested_uniform_scramble(static_cast<uint32_t>(sample_index_),
+                                                                   static_cast<uint32_t>(h));
+      uint32_t x, y;
+      sobol_detail::sobol_2d(index, &x, &y);
+      x = sobol_detail::nested_uniform_scramble(x, static_cast<uint32_t>(h >> 32));
+      y = sobol_detail::nested_uniform_scramble(y, static_cast<uint32_t>(mix64(h) >> 32));
+      return {static_cast<float>(x >> 8) * 0x1p-24f, static_cast<float>(y >> 8) * 0x1p-24f};
+    }
     float a = get1d();
     return {a, get1d()};
   }
@@ -38,6 +101,9 @@ class PixelSampler {
     return static_cast<float>(bits >> 40) * 0x1p-24f;
   }
   uint64_t key_;
+  uint64_t pixel_key_;
+  uint64_t sample_index_;
+  SamplerKind kind_;
   uint32_t dimension_ = 0;
 };
 

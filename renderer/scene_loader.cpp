@@ -350,6 +350,11 @@ RenderSettings parse_render_settings(const json& render, const std::string& poin
     if (!it->is_string() || !parse_estimator(it->get<std::string>(), &s.integrator.estimator))
       throw SceneError(at(pointer, "estimator"), "must be \"mis\", \"area\" or \"hemisphere\"");
   }
+  if (auto it = render.find("sampler"); it != render.end()) {
+    if (*it == "sobol") s.sampler = SamplerKind::kSobol;
+    else if (*it == "independent") s.sampler = SamplerKind::kIndependent;
+    else throw SceneError(at(pointer, "sampler"), "must be \"sobol\" or \"independent\"");
+  }
   s.time_limit_s = number_key(render, "time_limit_s", pointer, 0, 0, 7 * 24 * 3600.0);
   s.noise_target = number_key(render, "noise_target", pointer, 0, 0, 1);
   s.display.exposure_ev = number_key(render, "exposure_ev", pointer, 0, -20, 20);

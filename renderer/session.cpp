@@ -53,7 +53,7 @@ void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, 
     for (int x = x0; x < x1; ++x) {
       const uint32_t pixel = static_cast<uint32_t>(y) * static_cast<uint32_t>(settings_.width) + static_cast<uint32_t>(x);
       for (uint32_t s = first_sample; s < first_sample + sample_count; ++s) {
-        PixelSampler sampler(settings_.seed, pixel, s);
+        PixelSampler sampler(settings_.seed, pixel, s, settings_.sampler);
         Vec2 jitter = sampler.get2d();
         Vec2 lens = sampler.get2d();
         Ray ray = camera_.generate_ray(Vec2(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y), lens);

@@ -13,6 +13,7 @@
 #include "renderer/film.h"
 #include "renderer/image_io.h"
 #include "renderer/integrator.h"
+#include "renderer/sampler.h"
 #include "renderer/thread_pool.h"
 
 namespace tessera {
@@ -24,6 +25,7 @@ struct RenderSettings {
   int height = 512;
   uint32_t spp = 64;            // samples per pixel budget
   uint64_t seed = 0;
+  SamplerKind sampler = SamplerKind::kSobol;
   IntegratorSettings integrator;
   double time_limit_s = 0;      // stop after the pass that crosses this; 0: none
   double noise_target = 0;      // stop when Film::relative_error() falls below; 0: none

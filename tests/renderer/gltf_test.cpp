@@ -16,9 +16,17 @@ using nlohmann::json;
 using test::GltfBuilder;
 
 std::filesystem::path fixture_dir() {
-  auto dir = std::filesystem::temp_directory_path() / ("tessera-gltf-" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  return dir;
+  // One folder per test process, removed when the process ends.
+  static const struct Folder {
+    std::filesystem::path path =
+        std::filesystem::temp_directory_path() / ("tessera-gltf-" + std::to_string(::getpid()));
+    ~Folder() {
+      std::error_code ec;
+      std::filesystem::remove_all(path, ec);
+    }
+  } folder;
+  std::filesystem::create_directories(folder.path);
+  return folder.path;
 }
 
 struct Rendered {

@@ -8,9 +8,17 @@ namespace tessera {
 namespace {
 
 std::filesystem::path temp_file(const std::string& name) {
-  auto dir = std::filesystem::temp_directory_path() / ("tessera-image-io-" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  return dir / name;
+  // One folder per test process, removed when the process ends.
+  static const struct Folder {
+    std::filesystem::path path =
+        std::filesystem::temp_directory_path() / ("tessera-image-io-" + std::to_string(::getpid()));
+    ~Folder() {
+      std::error_code ec;
+      std::filesystem::remove_all(path, ec);
+    }
+  } folder;
+  std::filesystem::create_directories(folder.path);
+  return folder.path / name;
 }
 
 std::vector<float> gradient(int w, int h) {

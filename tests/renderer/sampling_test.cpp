@@ -158,3 +158,56 @@ TEST(PixelSampler, IsDeterministicAndUniform) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Owen scrambling and index shuffling keep Sobol's (0,2)-sequence property: the first 2^k samples of any pixel's
+// dimension pair put exactly one point in every elementary interval of area 2^-k.
+TEST(SobolSampler, FirstPowerOfTwoSamplesFormA02Net) {
+  for (uint32_t pixel : {0u, 17u, 123456u}) {
+    for (int pair = 0; pair < 4; ++pair) {
+      for (int k = 1; k <= 8; ++k) {
+        const uint32_t n = 1u << k;
+        std::vector<Vec2> pts;
+        for (uint32_t s = 0; s < n; ++s) {
+          PixelSampler ps(9, pixel, s, SamplerKind::kSobol);
+          Vec2 p;
+          for (int d = 0; d <= pair; ++d) p = ps.get2d();
+          pts.push_back(p);
+        }
+        for (int a = 0; a <= k; ++a) {
+          const int cols = 1 << a, rows = 1 << (k - a);
+          std::vector<int> cells(n, 0);
+          for (Vec2 p : pts) cells[int(p.y * rows) * cols + int(p.x * cols)]++;
+          for (int c : cells) ASSERT_EQ(c, 1) << "pixel " << pixel << " pair " << pair << " k " << k << " a " << a;
+        }
+      }
+    }
+  }
+}
+
+TEST(SobolSampler, IsUniformAcrossPixelsAndDecorrelatedBetweenPairs) {
+  const int bins = 16;
+  std::vector<double> counts(bins * bins, 0);
+  int n = 0;
+  double corr = 0;
+  for (uint32_t px = 0; px < 4000; ++px) {
+    for (uint64_t s = 0; s < 16; ++s) {
+      PixelSampler ps(3, px, s, SamplerKind::kSobol);
+      Vec2 a = ps.get2d();
+      Vec2 b = ps.get2d();
+      ASSERT_LT(a.x, 1.0f);
+      ASSERT_LT(b.y, 1.0f);
+      // The joint distribution of one coordinate of pair 0 and one of pair 1 must be uniform on the square.
+      counts[int(a.x * bins) * bins + int(b.x * bins)] += 1;
+      corr += (a.x - 0.5) * (b.x - 0.5);
+      ++n;
+    }
+  }
+  EXPECT_GT(test::chi_square_p_value(counts, std::vector<double>(bins * bins, double(n) / (bins * bins))), 0.001);
+  EXPECT_NEAR(corr / n * 12, 0.0, 0.02);  // correlation coefficient
+}
+
+}  // namespace
+}  // namespace tessera
