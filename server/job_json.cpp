@@ -1,0 +1,61 @@
+#include "server/job_json.h"
+
+#include "server/time_format.h"
+
+namespace tessera::server {
+
+using nlohmann::json;
+
+namespace {
+json time_or_null(const std::optional<int64_t>& ms) {
+  return ms ? json(rfc3339_ms(*ms)) : json(nullptr);
+}
+json text_or_null(const std::string& s) {
+  return s.empty() ? json(nullptr) : json(s);
+}
+}  // namespace
+
+json job_status_json(const JobRecord& job, const std::optional<JobProgress>& live) {
+  const JobProgress& p = (live && job.state == JobState::kRunning) ? *live : job.progress;
+  double fraction = p.samples_total > 0 ? static_cast<double>(p.samples_done) / p.samples_total : 0.0;
+  // A render ended by its time limit or noise target is complete with fewer samples than its budget.
+  if (job.state == JobState::kSucceeded) fraction = 1.0;
+  const std::string self = "/v1/jobs/" + job.id;
+  json links = {{"self", self}};
+  if (!is_terminal(job.state)) links["cancel"] = self + "/cancel";
+  if (job.state == JobState::kRunning || p.passes > 0) links["preview"] = self + "/preview.png";
+  json outputs = json::parse(job.outputs, nullptr, false);
+  if (!outputs.is_array()) outputs = json::array();
+  if (job.state == JobState::kSucceeded) {
+    for (const json& o : outputs) {
+      if (o == "png") links["result_png"] = self + "/result.png";
+      if (o == "exr") links["result_exr"] = self + "/result.exr";
+    }
+  }
+  json render = json::parse(job.settings, nullptr, false);
+  if (!render.is_object()) render = json::object();
+  return {
+      {"id", job.id},
+      {"kind", job.kind},
+      {"state", job_state_name(job.state)},
+      {"priority", job.priority},
+      {"created_at", rfc3339_ms(job.created_at_ms)},
+      {"started_at", time_or_null(job.started_at_ms)},
+      {"finished_at", time_or_null(job.finished_at_ms)},
+      {"progress",
+       {{"passes", p.passes},
+        {"samples_done", p.samples_done},
+        {"samples_total", p.samples_total},
+        {"fraction", fraction},
+        {"elapsed_s", p.elapsed_s},
+        {"eta_s", p.eta_s ? json(*p.eta_s) : json(nullptr)},
+        {"samples_per_s", p.samples_per_s}}},
+      {"stop_reason", text_or_null(job.stop_reason)},
+      {"error", text_or_null(job.error)},
+      {"outputs", outputs},
+      {"render", render},
+      {"links", links},
+  };
+}
+
+}  // namespace tessera::server

@@ -1,0 +1,371 @@
+#include "server/json_schema.h"
+
+#include <algorithm>
+#include <cmath>
+#include <regex>
+#include <vector>
+
+namespace tessera::server {
+
+using nlohmann::json;
+
+namespace {
+
+// Guards against reference cycles in a (trusted, but possibly wrong) schema.
+constexpr int kMaxSchemaDepth = 200;
+
+std::string child(const std::string& pointer, const std::string& key) {
+  std::string out = pointer + "/";
+  for (char c : key) {
+    if (c == '~')
+      out += "~0";
+    else if (c == '/')
+      out += "~1";
+    else
+      out += c;
+  }
+  return out;
+}
+std::string child(const std::string& pointer, size_t index) {
+  return pointer + "/" + std::to_string(index);
+}
+
+size_t pointer_depth(const std::string& pointer) {
+  size_t n = 0;
+  for (char c : pointer) n += c == '/';
+  return n;
+}
+
+// JSON Schema counts string length in code points, not bytes.
+size_t code_points(const std::string& s) {
+  size_t n = 0;
+  for (unsigned char c : s) n += (c & 0xC0) != 0x80;
+  return n;
+}
+
+bool is_integer(const json& v) {
+  if (v.is_number_integer()) return true;
+  if (!v.is_number_float()) return false;
+  double d = v.get<double>();
+  return std::isfinite(d) && d == std::floor(d);
+}
+
+bool has_type(const json& v, const std::string& type) {
+  if (type == "object") return v.is_object();
+  if (type == "array") return v.is_array();
+  if (type == "string") return v.is_string();
+  if (type == "boolean") return v.is_boolean();
+  if (type == "null") return v.is_null();
+  if (type == "number") return v.is_number();
+  if (type == "integer") return is_integer(v);
+  return false;
+}
+
+std::string article_type(const std::string& type) {
+  if (type == "object") return "an object";
+  if (type == "array") return "an array";
+  if (type == "string") return "a string";
+  if (type == "boolean") return "true or false";
+  if (type == "null") return "null";
+  if (type == "number") return "a number";
+  if (type == "integer") return "an integer";
+  return type;
+}
+
+std::string number_text(double d) {
+  return json(d).dump();
+}
+
+class Validator {
+ public:
+  Validator(const SchemaSet& set, int max_depth) : set_(set), max_depth_(max_depth) {}
+
+  std::optional<SchemaError> check(const json& schema, const std::string& doc, const json& v, const std::string& at,
+                                   int schema_depth) {
+    if (schema_depth > kMaxSchemaDepth) return SchemaError{at, "schema nesting too deep (a $ref cycle?)", "$ref"};
+    if (pointer_depth(at) > static_cast<size_t>(max_depth_))
+      return SchemaError{at, "nested too deeply (limit " + std::to_string(max_depth_) + ")", "depth"};
+    if (schema.is_boolean()) {
+      if (schema.get<bool>()) return std::nullopt;
+      return SchemaError{at, "is not allowed here", "false"};
+    }
+    if (!schema.is_object()) return std::nullopt;
+
+    if (auto it = schema.find("$ref"); it != schema.end() && it->is_string()) {
+      std::string target_doc;
+      const json* target = set_.resolve(doc, it->get<std::string>(), &target_doc);
+      if (!target) return SchemaError{at, "schema error: cannot resolve " + it->get<std::string>(), "$ref"};
+      if (auto e = check(*target, target_doc, v, at, schema_depth + 1)) return e;
+    }
+    if (auto e = check_type(schema, v, at)) return e;
+    if (auto it = schema.find("const"); it != schema.end() && v != *it)
+      return SchemaError{at, "must be " + it->dump(), "const"};
+    if (auto it = schema.find("enum"); it != schema.end() && it->is_array()) {
+      bool found = false;
+      for (const json& option : *it) found = found || option == v;
+      if (!found) return SchemaError{at, "must be one of " + enum_text(*it), "enum"};
+    }
+    if (v.is_number()) {
+      if (auto e = check_number(schema, v.get<double>(), at)) return e;
+    }
+    if (v.is_string()) {
+      if (auto e = check_string(schema, v.get<std::string>(), at)) return e;
+    }
+    if (v.is_object()) {
+      if (auto e = check_object(schema, doc, v, at, schema_depth)) return e;
+    }
+    if (v.is_array()) {
+      if (auto e = check_array(schema, doc, v, at, schema_depth)) return e;
+    }
+    return check_combinators(schema, doc, v, at, schema_depth);
+  }
+
+ private:
+  static std::string enum_text(const json& options) {
+    std::string out;
+    for (size_t i = 0; i < options.size(); ++i) {
+      if (i > 0) out += i + 1 == options.size() ? " or " : ", ";
+      out += options[i].dump();
+    }
+    return out;
+  }
+
+  std::optional<SchemaError> check_type(const json& schema, const json& v, const std::string& at) {
+    auto it = schema.find("type");
+    if (it == schema.end()) return std::nullopt;
+    std::vector<std::string> types;
+    if (it->is_string())
+      types.push_back(it->get<std::string>());
+    else if (it->is_array())
+      for (const json& t : *it)
+        if (t.is_string()) types.push_back(t.get<std::string>());
+    std::string expected;
+    for (size_t i = 0; i < types.size(); ++i) {
+      if (has_type(v, types[i])) return std::nullopt;
+      if (i > 0) expected += " or ";
+      expected += article_type(types[i]);
+    }
+    return SchemaError{at, "must be " + expected, "type"};
+  }
+
+  std::optional<SchemaError> check_number(const json& schema, double d, const std::string& at) {
+    auto bound = [&](const char* key) -> std::optional<double> {
+      auto it = schema.find(key);
+      if (it == schema.end() || !it->is_number()) return std::nullopt;
+      return it->get<double>();
+    };
+    if (auto b = bound("minimum"); b && !(d >= *b))
+      return SchemaError{at, "must be at least " + number_text(*b), "minimum"};
+    if (auto b = bound("maximum"); b && !(d <= *b))
+      return SchemaError{at, "must be at most " + number_text(*b), "maximum"};
+    if (auto b = bound("exclusiveMinimum"); b && !(d > *b))
+      return SchemaError{at, "must be greater than " + number_text(*b), "exclusiveMinimum"};
+    if (auto b = bound("exclusiveMaximum"); b && !(d < *b))
+      return SchemaError{at, "must be less than " + number_text(*b), "exclusiveMaximum"};
+    return std::nullopt;
+  }
+
+  std::optional<SchemaError> check_string(const json& schema, const std::string& s, const std::string& at) {
+    const size_t n = code_points(s);
+    if (auto it = schema.find("minLength"); it != schema.end() && it->is_number() && n < it->get<double>())
+      return SchemaError{at, "must have at least " + it->dump() + " characters", "minLength"};
+    if (auto it = schema.find("maxLength"); it != schema.end() && it->is_number() && n > it->get<double>())
+      return SchemaError{at, "must have at most " + it->dump() + " characters", "maxLength"};
+    if (auto it = schema.find("pattern"); it != schema.end() && it->is_string()) {
+      // ECMAScript syntax, as the JSON Schema specification asks; unanchored like every validator.
+      const std::regex re(it->get<std::string>(), std::regex::ECMAScript);
+      if (!std::regex_search(s, re)) return SchemaError{at, "must match " + it->get<std::string>(), "pattern"};
+    }
+    return std::nullopt;
+  }
+
+  std::optional<SchemaError> check_object(const json& schema, const std::string& doc, const json& v,
+                                          const std::string& at, int schema_depth) {
+    if (auto it = schema.find("required"); it != schema.end() && it->is_array()) {
+      for (const json& key : *it) {
+        if (key.is_string() && !v.contains(key.get<std::string>()))
+          return SchemaError{child(at, key.get<std::string>()), "\"" + key.get<std::string>() + "\" is required",
+                             "required"};
+      }
+    }
+    const json* properties = nullptr;
+    if (auto it = schema.find("properties"); it != schema.end() && it->is_object()) properties = &*it;
+    const json* additional = nullptr;
+    if (auto it = schema.find("additionalProperties"); it != schema.end()) additional = &*it;
+    const json* names = nullptr;
+    if (auto it = schema.find("propertyNames"); it != schema.end()) names = &*it;
+    for (const auto& [key, value] : v.items()) {
+      const std::string p = child(at, key);
+      if (names) {
+        if (auto e = check(*names, doc, json(key), p, schema_depth + 1)) {
+          e->message = "property name \"" + key + "\" " + e->message;
+          e->pointer = p;
+          return e;
+        }
+      }
+      if (properties) {
+        if (auto pit = properties->find(key); pit != properties->end()) {
+          if (auto e = check(*pit, doc, value, p, schema_depth + 1)) return e;
+          continue;
+        }
+      }
+      if (additional) {
+        if (additional->is_boolean() && !additional->get<bool>())
+          return SchemaError{p, "unknown property \"" + key + "\"", "additionalProperties"};
+        if (auto e = check(*additional, doc, value, p, schema_depth + 1)) return e;
+      }
+    }
+    return std::nullopt;
+  }
+
+  std::optional<SchemaError> check_array(const json& schema, const std::string& doc, const json& v,
+                                         const std::string& at, int schema_depth) {
+    if (auto it = schema.find("minItems"); it != schema.end() && it->is_number() && v.size() < it->get<double>())
+      return SchemaError{at, "must have at least " + it->dump() + " items", "minItems"};
+    if (auto it = schema.find("maxItems"); it != schema.end() && it->is_number() && v.size() > it->get<double>())
+      return SchemaError{at, "must have at most " + it->dump() + " items", "maxItems"};
+    if (auto it = schema.find("items"); it != schema.end()) {
+      for (size_t i = 0; i < v.size(); ++i)
+        if (auto e = check(*it, doc, v[i], child(at, i), schema_depth + 1)) return e;
+    }
+    return std::nullopt;
+  }
+
+  // Of the errors of failed alternatives, the one that says most: the deepest in the instance (the branch that got
+  // furthest), preferring a branch whose type matched. When every branch failed on its type at the same place,
+  // one message lists what would have been accepted.
+  static SchemaError most_specific(const std::vector<SchemaError>& errors) {
+    const SchemaError* best = &errors.front();
+    bool all_type = true;
+    for (const SchemaError& e : errors) {
+      all_type = all_type && e.keyword == "type" && e.pointer == errors.front().pointer;
+      const size_t d = pointer_depth(e.pointer), bd = pointer_depth(best->pointer);
+      if (d > bd || (d == bd && best->keyword == "type" && e.keyword != "type")) best = &e;
+    }
+    if (all_type && errors.size() > 1) {
+      std::vector<std::string> expected;
+      for (const SchemaError& e : errors) {
+        std::string m = e.message.substr(e.message.rfind("must be ", 0) == 0 ? 8 : 0);
+        if (std::find(expected.begin(), expected.end(), m) == expected.end()) expected.push_back(m);
+      }
+      std::string msg = "must be ";
+      for (size_t i = 0; i < expected.size(); ++i) msg += (i > 0 ? " or " : "") + expected[i];
+      return SchemaError{errors.front().pointer, msg, "type"};
+    }
+    return *best;
+  }
+
+  std::optional<SchemaError> check_combinators(const json& schema, const std::string& doc, const json& v,
+                                               const std::string& at, int schema_depth) {
+    if (auto it = schema.find("allOf"); it != schema.end() && it->is_array()) {
+      for (const json& sub : *it)
+        if (auto e = check(sub, doc, v, at, schema_depth + 1)) return e;
+    }
+    if (auto it = schema.find("anyOf"); it != schema.end() && it->is_array() && !it->empty()) {
+      std::vector<SchemaError> errors;
+      for (const json& sub : *it) {
+        auto e = check(sub, doc, v, at, schema_depth + 1);
+        if (!e) {
+          errors.clear();
+          break;
+        }
+        errors.push_back(*e);
+      }
+      if (!errors.empty()) return most_specific(errors);
+    }
+    if (auto it = schema.find("oneOf"); it != schema.end() && it->is_array() && !it->empty()) {
+      std::vector<SchemaError> errors;
+      int passed = 0;
+      for (const json& sub : *it) {
+        if (auto e = check(sub, doc, v, at, schema_depth + 1))
+          errors.push_back(*e);
+        else
+          ++passed;
+      }
+      if (passed == 0) return most_specific(errors);
+      if (passed > 1) return SchemaError{at, "matches more than one alternative", "oneOf"};
+    }
+    if (auto it = schema.find("if"); it != schema.end()) {
+      const bool matched = !check(*it, doc, v, at, schema_depth + 1);
+      const char* branch = matched ? "then" : "else";
+      if (auto b = schema.find(branch); b != schema.end())
+        if (auto e = check(*b, doc, v, at, schema_depth + 1)) return e;
+    }
+    return std::nullopt;
+  }
+
+  const SchemaSet& set_;
+  int max_depth_;
+};
+
+}  // namespace
+
+void SchemaSet::add(const std::string& name, json schema) {
+  documents_[name] = std::move(schema);
+}
+
+const json* SchemaSet::document(const std::string& name) const {
+  auto it = documents_.find(name);
+  return it == documents_.end() ? nullptr : &it->second;
+}
+
+const json* SchemaSet::resolve(const std::string& base, const std::string& ref, std::string* target_doc) const {
+  const size_t hash = ref.find('#');
+  std::string location = ref.substr(0, hash);
+  const std::string fragment = hash == std::string::npos ? "" : ref.substr(hash + 1);
+  // Documents are known by file name; a relative or absolute URI resolves to its last path segment.
+  if (size_t slash = location.rfind('/'); slash != std::string::npos) location = location.substr(slash + 1);
+  *target_doc = location.empty() ? base : location;
+  const json* doc = document(*target_doc);
+  if (!doc) return nullptr;
+  if (fragment.empty()) return doc;
+  if (fragment[0] != '/') return nullptr;  // plain-name anchors are not used by the contract
+  try {
+    const json::json_pointer ptr(fragment);
+    if (!doc->contains(ptr)) return nullptr;
+    return &doc->at(ptr);
+  } catch (const json::exception&) {
+    return nullptr;
+  }
+}
+
+std::optional<SchemaError> SchemaSet::validate(const json& instance, const std::string& name, int max_depth) const {
+  const json* schema = document(name);
+  if (!schema) return SchemaError{"", "no schema named " + name, "$ref"};
+  Validator validator(*this, max_depth);
+  return validator.check(*schema, name, instance, "", 0);
+}
+
+size_t json_nesting_depth(std::string_view text) {
+  size_t depth = 0, deepest = 0;
+  bool in_string = false, escaped = false;
+  for (char c : text) {
+    if (in_string) {
+      if (escaped)
+        escaped = false;
+      else if (c == '\\')
+        escaped = true;
+      else if (c == '"')
+        in_string = false;
+      continue;
+    }
+    switch (c) {
+      case '"':
+        in_string = true;
+        break;
+      case '[':
+      case '{':
+        deepest = std::max(deepest, ++depth);
+        break;
+      case ']':
+      case '}':
+        if (depth > 0) --depth;
+        break;
+      default:
+        break;
+    }
+  }
+  return deepest;
+}
+
+}  // namespace tessera::server

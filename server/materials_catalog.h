@@ -1,0 +1,16 @@
+// The material models a job may use, read from the contract itself (material.schema.json): its allOf holds one
+// if/then per model, `type` const -> a $defs entry. Served at GET /v1/materials, so clients build their editors from
+// the same source the validator uses, and a new model appears there the day its schema entry is added.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include "server/json_schema.h"
+
+namespace tessera::server {
+
+// {"materials": [{"type", "title", "description", "parameters": [{"name", "description", "default", "minimum",
+// "maximum", "schema"}]}]}; the parameter schemas have their $refs resolved.
+nlohmann::json describe_materials(const SchemaSet& schemas);
+
+}  // namespace tessera::server

@@ -1,0 +1,44 @@
+// The job store of one daemon: SQLite in WAL mode in the data directory. One connection behind a mutex; prepared
+// statements; a schema version table so later versions can migrate.
+#pragma once
+
+#include <filesystem>
+#include <mutex>
+
+#include "server/job_store.h"
+
+struct sqlite3;
+struct sqlite3_stmt;
+
+namespace tessera::server {
+
+class SqliteJobStore final : public JobStore {
+ public:
+  // Opens (creating if needed) the database file. Throws std::runtime_error on failure.
+  explicit SqliteJobStore(const std::filesystem::path& file);
+  ~SqliteJobStore() override;
+  SqliteJobStore(const SqliteJobStore&) = delete;
+  SqliteJobStore& operator=(const SqliteJobStore&) = delete;
+
+  void create(const JobRecord& job) override;
+  std::optional<JobRecord> claim_next(int64_t now_ms) override;
+  void update_progress(const std::string& id, const JobProgress& progress) override;
+  bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
+                  const std::string& error) override;
+  std::optional<JobRecord> get(const std::string& id, bool with_document) override;
+  std::vector<JobRecord> list(const JobFilter& filter) override;
+  bool remove(const std::string& id) override;
+  int requeue_running() override;
+
+  static constexpr int kSchemaVersion = 1;
+
+ private:
+  class Statement;
+  void exec(const char* sql);
+  void migrate();
+
+  std::mutex mutex_;
+  sqlite3* db_ = nullptr;
+};
+
+}  // namespace tessera::server

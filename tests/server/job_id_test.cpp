@@ -1,0 +1,78 @@
+#include <gtest/gtest.h>
+
+#include <set>
+
+#include "server/job_files.h"
+#include "server/job_id.h"
+#include "server/job_state.h"
+#include "tests/server/test_util.h"
+
+namespace tessera::server {
+namespace {
+
+TEST(JobId, NewIdsAreValidAndDistinct) {
+  std::set<std::string> seen;
+  for (int i = 0; i < 1000; ++i) {
+    std::string id = new_job_id();
+    EXPECT_TRUE(is_valid_job_id(id)) << id;
+    EXPECT_TRUE(seen.insert(id).second);
+  }
+}
+
+TEST(JobId, RejectsEverythingElse) {
+  for (const char* bad :
+       {"", "..", "../../etc/passwd", "0123456789abcdef0123456789abcde", "0123456789abcdef0123456789abcdef0",
+        "0123456789ABCDEF0123456789ABCDEF", "0123456789abcdef/123456789abcdef",
+        "0123456789abcdef\0"
+        "123456789abcde",
+        "%2e%2e%2f456789abcdef0123456789ab", "0123456789abcdef 123456789abcdef"})
+    EXPECT_FALSE(is_valid_job_id(bad)) << bad;
+  EXPECT_FALSE(
+      is_valid_job_id(std::string_view("0123456789abcdef\0"
+                                       "23456789abcdef0",
+                                       32)));
+}
+
+TEST(JobFiles, PathsStayInsideTheDataDirectory) {
+  test::TempDir dir;
+  JobFiles files(dir.path());
+  const std::string id = new_job_id();
+  EXPECT_EQ(files.path(id, JobFile::kResultPng), dir.path() / "jobs" / id / "result.png");
+  EXPECT_THROW(files.dir("../../etc"), std::invalid_argument);
+  EXPECT_THROW(files.path("/etc/passwd", JobFile::kResultExr), std::invalid_argument);
+}
+
+TEST(JobFiles, WritesAtomicallyAndRemoves) {
+  test::TempDir dir;
+  JobFiles files(dir.path());
+  const std::string id = new_job_id();
+  files.write(id, JobFile::kPreviewPng, "first");
+  files.write(id, JobFile::kPreviewPng, "second");
+  EXPECT_EQ(files.read(id, JobFile::kPreviewPng), "second");
+  // No temporary file is left behind.
+  int entries = 0;
+  for (const auto& e : std::filesystem::directory_iterator(files.dir(id))) entries += e.is_regular_file();
+  EXPECT_EQ(entries, 1);
+  EXPECT_THROW(files.write_with(id, JobFile::kResultExr, [](const std::string&) { throw std::runtime_error("x"); }),
+               std::runtime_error);
+  EXPECT_FALSE(files.read(id, JobFile::kResultExr));
+  files.remove(id);
+  EXPECT_FALSE(std::filesystem::exists(files.dir(id)));
+}
+
+TEST(JobState, Transitions) {
+  EXPECT_TRUE(can_transition(JobState::kQueued, JobState::kRunning));
+  EXPECT_TRUE(can_transition(JobState::kQueued, JobState::kCancelled));
+  EXPECT_FALSE(can_transition(JobState::kQueued, JobState::kSucceeded));
+  EXPECT_TRUE(can_transition(JobState::kRunning, JobState::kQueued));
+  EXPECT_TRUE(can_transition(JobState::kRunning, JobState::kFailed));
+  for (JobState t : {JobState::kSucceeded, JobState::kFailed, JobState::kCancelled})
+    for (JobState to :
+         {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed, JobState::kCancelled})
+      EXPECT_FALSE(can_transition(t, to));
+  EXPECT_EQ(parse_job_state("running"), JobState::kRunning);
+  EXPECT_FALSE(parse_job_state("paused"));
+}
+
+}  // namespace
+}  // namespace tessera::server
