@@ -1,17 +1,25 @@
 #include "renderer/film.h"
 
 #include <cmath>
+#include <stdexcept>
 
 namespace tessera {
 
 Film::Film(int width, int height)
-    : width_(width), height_(height), sum_(3 * pixel_count(), 0.0f), sum_lum2_(pixel_count(), 0.0f) {}
+    : width_(width), height_(height), sum_(3 * pixel_count(), 0), sum_lum2_(pixel_count(), 0.0f) {}
 
 std::vector<float> Film::resolve() const {
   std::vector<float> out(sum_.size());
-  float inv = samples_ > 0 ? 1.0f / static_cast<float>(samples_) : 0.0f;
-  for (size_t i = 0; i < sum_.size(); ++i) out[i] = sum_[i] * inv;
+  double inv = samples_ > 0 ? 1.0 / (kFixedScale * samples_) : 0.0;
+  for (size_t i = 0; i < sum_.size(); ++i) out[i] = static_cast<float>(static_cast<double>(sum_[i]) * inv);
   return out;
+}
+
+void Film::merge(const Film& other) {
+  if (other.width_ != width_ || other.height_ != height_) throw std::invalid_argument("films of different sizes");
+  for (size_t i = 0; i < sum_.size(); ++i) sum_[i] += other.sum_[i];
+  for (size_t i = 0; i < sum_lum2_.size(); ++i) sum_lum2_[i] += other.sum_lum2_[i];
+  samples_ += other.samples_;
 }
 
 double Film::relative_error() const {
@@ -20,7 +28,8 @@ double Film::relative_error() const {
   double var_sum = 0, lum_sum = 0;
   size_t count = 0;
   for (size_t i = 0; i < pixel_count(); ++i) {
-    double mean = (0.2126 * sum_[3 * i] + 0.7152 * sum_[3 * i + 1] + 0.0722 * sum_[3 * i + 2]) / n;
+    double mean = (0.2126 * static_cast<double>(sum_[3 * i]) + 0.7152 * static_cast<double>(sum_[3 * i + 1]) +
+                   0.0722 * static_cast<double>(sum_[3 * i + 2])) / (kFixedScale * n);
     double var = (sum_lum2_[i] / n - mean * mean) * n / (n - 1);  // unbiased sample variance
     if (var < 0) var = 0;
     var_sum += var / n;  // variance of the pixel mean

@@ -1,5 +1,10 @@
 // The film: per-pixel sums of linear radiance samples (the measurement equation's estimate for each pixel,
 // seed 004, with a box pixel filter), plus what the noise estimate needs.
+//
+// Radiance sums are kept in 128-bit fixed point (units of 2^-40). Integer addition is associative, so a pixel's sum
+// does not depend on the order its samples were added in: films of disjoint sample ranges merge into exactly the
+// image of one render of all samples, whatever the threads, tiles, passes or resumes. Samples are clamped to
+// [0, 2^80] (far beyond any physical radiance) so sums cannot overflow.
 #pragma once
 
 #include <cstdint>
@@ -8,6 +13,9 @@
 #include "renderer/math.h"
 
 namespace tessera {
+
+using FixedSum = __int128;
+inline constexpr double kFixedScale = 0x1p40;
 
 class Film {
  public:
@@ -23,35 +31,47 @@ class Film {
 
   void add_sample(int x, int y, const Rgb& radiance) {
     size_t i = index(x, y);
-    sum_[3 * i] += radiance.x;
-    sum_[3 * i + 1] += radiance.y;
-    sum_[3 * i + 2] += radiance.z;
+    sum_[3 * i] += to_fixed(radiance.x);
+    sum_[3 * i + 1] += to_fixed(radiance.y);
+    sum_[3 * i + 2] += to_fixed(radiance.z);
     float l = luminance(radiance);
     sum_lum2_[i] += l * l;
   }
   // Mean radiance of a pixel.
   Rgb pixel(int x, int y) const {
     size_t i = index(x, y);
-    float inv = samples_ > 0 ? 1.0f / static_cast<float>(samples_) : 0.0f;
-    return Rgb(sum_[3 * i], sum_[3 * i + 1], sum_[3 * i + 2]) * inv;
+    double inv = samples_ > 0 ? 1.0 / (kFixedScale * samples_) : 0.0;
+    return Rgb(static_cast<float>(static_cast<double>(sum_[3 * i]) * inv),
+               static_cast<float>(static_cast<double>(sum_[3 * i + 1]) * inv),
+               static_cast<float>(static_cast<double>(sum_[3 * i + 2]) * inv));
   }
+  // Adds the samples of `other` (same size, a disjoint sample range): exact for the radiance sums.
+  void merge(const Film& other);
   // Mean radiance of every pixel, RGB interleaved, row-major from the top-left.
   std::vector<float> resolve() const;
   // Estimated relative standard error of the image mean luminance: sqrt(mean pixel variance of the mean) divided by
   // the mean luminance (over pixels whose mean luminance is above a small floor).
   double relative_error() const;
 
-  // Raw state, for checkpoints.
-  const std::vector<float>& sums() const { return sum_; }
+  // Raw state, for checkpoints and partial films: 3 fixed-point sums per pixel (RGB), and per-pixel sums of squared
+  // luminance (float, only for the noise estimate).
+  const std::vector<FixedSum>& sums() const { return sum_; }
   const std::vector<float>& sums_lum2() const { return sum_lum2_; }
-  std::vector<float>& sums() { return sum_; }
+  std::vector<FixedSum>& sums() { return sum_; }
   std::vector<float>& sums_lum2() { return sum_lum2_; }
+
+  static FixedSum to_fixed(float v) {
+    double d = static_cast<double>(v);
+    if (!(d > 0)) return 0;
+    if (d > 0x1p80) d = 0x1p80;
+    return static_cast<FixedSum>(d * kFixedScale);
+  }
 
  private:
   size_t index(int x, int y) const { return static_cast<size_t>(y) * static_cast<size_t>(width_) + static_cast<size_t>(x); }
   int width_ = 0, height_ = 0;
   uint32_t samples_ = 0;
-  std::vector<float> sum_;
+  std::vector<FixedSum> sum_;
   std::vector<float> sum_lum2_;
 };
 

@@ -26,8 +26,19 @@ RenderSession::RenderSession(std::shared_ptr<const Scene> scene, const RenderSet
       pool_(pool),
       camera_(scene_->camera, settings.width, settings.height),
       film_(settings.width, settings.height) {
-  tiles_x_ = (settings.width + settings.tile_size - 1) / settings.tile_size;
-  tiles_y_ = (settings.height + settings.tile_size - 1) / settings.tile_size;
+  if (settings_.region.width <= 0 || settings_.region.height <= 0) {
+    settings_.region = {0, 0, settings.width, settings.height};
+  } else {
+    // Clip the crop window to the image.
+    RenderSettings::Region& r = settings_.region;
+    int x1 = std::min(r.x + r.width, settings.width), y1 = std::min(r.y + r.height, settings.height);
+    r.x = std::clamp(r.x, 0, settings.width);
+    r.y = std::clamp(r.y, 0, settings.height);
+    r.width = std::max(0, x1 - r.x);
+    r.height = std::max(0, y1 - r.y);
+  }
+  tiles_x_ = (settings_.region.width + settings.tile_size - 1) / settings.tile_size;
+  tiles_y_ = (settings_.region.height + settings.tile_size - 1) / settings.tile_size;
   for (int i = 0; i < pool.size(); ++i) arenas_.push_back(std::make_unique<ScratchArena>());
   counters_.resize(pool.size());
   nonfinite_.resize(pool.size());
@@ -43,9 +54,10 @@ void RenderSession::restore(Film film, uint32_t passes, double elapsed_s) {
 
 void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, uint32_t sample_count) {
   const int tx = static_cast<int>(tile % tiles_x_), ty = static_cast<int>(tile / tiles_x_);
-  const int x0 = tx * settings_.tile_size, y0 = ty * settings_.tile_size;
-  const int x1 = std::min(x0 + settings_.tile_size, settings_.width);
-  const int y1 = std::min(y0 + settings_.tile_size, settings_.height);
+  const RenderSettings::Region& region = settings_.region;
+  const int x0 = region.x + tx * settings_.tile_size, y0 = region.y + ty * settings_.tile_size;
+  const int x1 = std::min(x0 + settings_.tile_size, region.x + region.width);
+  const int y1 = std::min(y0 + settings_.tile_size, region.y + region.height);
   ScratchArena& arena = *arenas_[worker];
   RayCounters& counters = counters_[worker];
   const Scene& scene = *scene_;
@@ -74,7 +86,7 @@ StopReason RenderSession::run(const std::function<void(const RenderProgress&, co
   const double elapsed_before = progress_.elapsed_s;
   const uint32_t samples_before = progress_.samples_done;
   const size_t tile_count = static_cast<size_t>(tiles_x_) * static_cast<size_t>(tiles_y_);
-  const double pixels = static_cast<double>(settings_.width) * settings_.height;
+  const double pixels = static_cast<double>(settings_.region.width) * settings_.region.height;
   auto budget_met = [&]() -> std::optional<StopReason> {
     if (progress_.samples_done >= settings_.spp) return StopReason::kSamples;
     if (settings_.time_limit_s > 0 && progress_.elapsed_s >= settings_.time_limit_s) return StopReason::kTimeLimit;
@@ -95,7 +107,7 @@ StopReason RenderSession::run(const std::function<void(const RenderProgress&, co
     const auto pass_start = clock::now();
     pool_.parallel_for(tile_count, [&](size_t tile, int worker) {
       if (cancel_.load(std::memory_order_relaxed)) return;
-      render_tile(tile, worker, first, count);
+      render_tile(tile, worker, settings_.first_sample + first, count);
     });
     if (cancel_.load()) return StopReason::kCancelled;
     const double pass_s = std::chrono::duration<double>(clock::now() - pass_start).count();

@@ -24,6 +24,11 @@ struct RenderSettings {
   int width = 512;
   int height = 512;
   uint32_t spp = 64;            // samples per pixel budget
+  uint32_t first_sample = 0;    // render sample indices [first_sample, first_sample + spp): a range of a larger job
+  // Crop window in pixels (render only these; the film keeps the full size). Empty (w or h 0): the whole image.
+  struct Region {
+    int x = 0, y = 0, width = 0, height = 0;
+  } region;
   uint64_t seed = 0;
   SamplerKind sampler = SamplerKind::kSobol;
   IntegratorSettings integrator;
