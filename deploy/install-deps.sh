@@ -1,8 +1,16 @@
 #!/usr/bin/env bash
 # Installs what tessera needs to build, run and test on Debian 12, idempotently: nothing is installed twice and a
-# machine that has everything is left alone. Usage: deploy/install-deps.sh [build|test]
+# machine that has everything is left alone. Usage: deploy/install-deps.sh [build|test|deploy]
+#   build   the toolchain and libraries to build tessera
+#   test    build + what the test suite needs, the deployment tests' tools included (below)
+#   deploy  the tools of deploy/: podman (with runc) and debootstrap to build and run the container image without a
+#           registry (deploy/podman/), systemd's systemd-analyze for the unit, dpkg-dev for `cpack -G DEB`
 set -euo pipefail
 mode=${1:-build}
+case "$mode" in
+  build|test|deploy) ;;
+  *) echo "usage: deploy/install-deps.sh [build|test|deploy]" >&2; exit 2 ;;
+esac
 cd "$(dirname "$0")/.."
 
 SUDO=""
@@ -14,7 +22,11 @@ packages=(
   libsqlite3-dev libtbb-dev libssl-dev libstb-dev
 )
 if [ "$mode" = "test" ]; then
-  packages+=(libgtest-dev libgmock-dev libbenchmark-dev nodejs npm)
+  packages+=(libgtest-dev libgmock-dev libbenchmark-dev nodejs npm chromium prometheus)
+fi
+if [ "$mode" = "test" ] || [ "$mode" = "deploy" ]; then
+  packages+=(podman runc debootstrap uidmap slirp4netns fuse-overlayfs netavark aardvark-dns iptables
+             systemd dpkg-dev python3-yaml)
 fi
 
 missing=()
@@ -35,5 +47,12 @@ if [ "$mode" = "test" ] && [ -f tests/js/package.json ]; then
   if [ ! -d tests/js/node_modules ] || [ tests/js/package-lock.json -nt tests/js/node_modules/.stamp ]; then
     echo "install-deps: npm packages for tests/js"
     (cd tests/js && npm ci --no-audit --no-fund --loglevel=error && touch node_modules/.stamp)
+  fi
+fi
+# The deployment tests' validators (Kubernetes and Compose schemas) live in tests/deploy.
+if [ "$mode" = "test" ] && [ -f tests/deploy/package-lock.json ]; then
+  if [ ! -d tests/deploy/node_modules ] || [ tests/deploy/package-lock.json -nt tests/deploy/node_modules/.stamp ]; then
+    echo "install-deps: npm packages for tests/deploy"
+    (cd tests/deploy && npm ci --no-audit --no-fund --loglevel=error && touch node_modules/.stamp)
   fi
 fi

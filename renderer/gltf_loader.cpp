@@ -290,8 +290,13 @@ bool load_image(tinygltf::Image* image, const int index, std::string* err, std::
   OIIO::Filesystem::IOMemReader reader(const_cast<unsigned char*>(bytes), static_cast<size_t>(size));
   std::string name = "image.png";
   if (size >= 2 && bytes[0] == 0xFF && bytes[1] == 0xD8) name = "image.jpg";
-  // No config spec: with one, OpenImageIO 2.4 ignores the proxy and looks for a file of that name.
-  auto in = OIIO::ImageInput::open(name, nullptr, &reader);
+  // The proxy goes in the config (OpenImageIO 2.4 ignores the proxy argument when a config is given), with
+  // unassociated alpha: glTF colours are not premultiplied, and OpenImageIO would premultiply PNG alpha on read.
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  void* proxy = &reader;
+  config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
+  auto in = OIIO::ImageInput::open(name, &config);
   if (!in) {
     if (err) *err += "image " + std::to_string(index) + " cannot be decoded: " + OIIO::geterror() + "\n";
     return false;
@@ -363,41 +368,106 @@ json container_json(const std::vector<unsigned char>& bytes, bool* binary, const
   return j;
 }
 
-// gltf_pbr parameters for one glTF material (spec 3.9 and appendix B; the KHR_materials_* extensions).
-json material_params(const tinygltf::Material& m, std::vector<std::string>* warnings) {
-  const auto& pbr = m.pbrMetallicRoughness;
+// A glTF textureInfo as a tessera texture parameter: {"texture": "#image<i>", uv set, sampler wrap modes,
+// KHR_texture_transform, channel, colour space, factor}. Null when the reference is unusable.
+json texture_param(const json& doc, const json& info, int channel, bool srgb, const json& factor,
+                   std::vector<std::string>* warnings) {
+  if (!info.is_object() || !info.contains("index") || !info["index"].is_number_integer()) return nullptr;
+  const int index = info["index"].get<int>();
+  const json& textures = doc.contains("textures") ? doc["textures"] : json::array();
+  if (index < 0 || index >= static_cast<int>(textures.size())) return nullptr;
+  const json& tex = textures[index];
+  int source = tex.value("source", -1);
+  if (tex.contains("extensions") && !tex.contains("source")) {
+    if (warnings) warnings->push_back("texture " + std::to_string(index) + " uses only an extension image source");
+    return nullptr;
+  }
+  if (source < 0) return nullptr;
+  json p = {{"texture", "#image" + std::to_string(source)}, {"factor", factor}, {"colorspace", srgb ? "srgb" : "linear"}};
+  if (channel >= 0) p["channel"] = channel;
+  int uv = info.value("texCoord", 0);
+  auto wrap_name = [](int mode) {
+    switch (mode) {
+      case 33071: return "clamp";
+      case 33648: return "mirror";
+      default: return "repeat";
+    }
+  };
+  if (tex.contains("sampler") && tex["sampler"].is_number_integer() && doc.contains("samplers")) {
+    int si = tex["sampler"].get<int>();
+    if (si >= 0 && si < static_cast<int>(doc["samplers"].size())) {
+      const json& sampler = doc["samplers"][si];
+      p["wrap"] = wrap_name(sampler.value("wrapS", 10497));
+      p["wrap_t"] = wrap_name(sampler.value("wrapT", 10497));
+    }
+  }
+  if (info.contains("extensions") && info["extensions"].contains("KHR_texture_transform")) {
+    const json& t = info["extensions"]["KHR_texture_transform"];
+    if (t.contains("offset")) p["offset"] = t["offset"];
+    if (t.contains("scale")) p["scale"] = t["scale"];
+    if (t.contains("rotation")) p["rotation"] = t["rotation"];
+    if (t.contains("texCoord")) uv = t.value("texCoord", uv);
+  }
+  if (uv < 0 || uv > 1) {
+    if (warnings) warnings->push_back("TEXCOORD_" + std::to_string(uv) + " is not supported; using TEXCOORD_0");
+    uv = 0;
+  }
+  p["uv"] = uv;
+  return p;
+}
+
+json number_or(const json& obj, const char* key, double fallback) {
+  auto it = obj.find(key);
+  return it != obj.end() && it->is_number() ? *it : json(fallback);
+}
+json rgb_or(const json& obj, const char* key, const json& fallback) {
+  auto it = obj.find(key);
+  return it != obj.end() && it->is_array() && it->size() >= 3 ? json{(*it)[0], (*it)[1], (*it)[2]} : fallback;
+}
+
+// gltf_pbr parameters for glTF material `m` (spec 3.9, appendix B; the KHR_materials_* extensions), textures included.
+json material_params(const json& doc, const json& m, std::vector<std::string>* warnings) {
   json p = {{"type", "gltf_pbr"}};
-  if (pbr.baseColorFactor.size() == 4)
-    p["base_color"] = {pbr.baseColorFactor[0], pbr.baseColorFactor[1], pbr.baseColorFactor[2]};
-  p["metallic"] = pbr.metallicFactor;
-  p["roughness"] = pbr.roughnessFactor;
-  json ext = parse_extensions(m.extensions_json_string);
+  const json pbr = m.value("pbrMetallicRoughness", json::object());
+  const json ext = m.value("extensions", json::object());
+  // A parameter that is a constant, or the texture scaled by that constant.
+  auto set = [&](const char* key, const json& factor, const json& info, int channel, bool srgb) {
+    json tex = texture_param(doc, info, channel, srgb, factor, warnings);
+    p[key] = tex.is_null() ? factor : tex;
+  };
+  set("base_color", rgb_or(pbr, "baseColorFactor", {1, 1, 1}), pbr.value("baseColorTexture", json()), -1, true);
+  const json mr = pbr.value("metallicRoughnessTexture", json());
+  set("metallic", number_or(pbr, "metallicFactor", 1.0), mr, 2, false);
+  set("roughness", number_or(pbr, "roughnessFactor", 1.0), mr, 1, false);
   double strength = 1;
   if (ext.contains("KHR_materials_emissive_strength"))
-    strength = ext["KHR_materials_emissive_strength"].value("emissiveStrength", 1.0);
-  if (m.emissiveFactor.size() == 3 && (m.emissiveFactor[0] > 0 || m.emissiveFactor[1] > 0 || m.emissiveFactor[2] > 0)) {
-    p["emission"] = {m.emissiveFactor[0] * strength, m.emissiveFactor[1] * strength, m.emissiveFactor[2] * strength};
-    p["one_sided"] = !m.doubleSided;
+    strength = number_or(ext["KHR_materials_emissive_strength"], "emissiveStrength", 1.0).get<double>();
+  json emissive = rgb_or(m, "emissiveFactor", {0, 0, 0});
+  if (emissive[0].get<double>() > 0 || emissive[1].get<double>() > 0 || emissive[2].get<double>() > 0) {
+    for (auto& c : emissive) c = c.get<double>() * strength;
+    set("emission", emissive, m.value("emissiveTexture", json()), -1, true);
+    p["one_sided"] = !m.value("doubleSided", false);
   }
-  if (ext.contains("KHR_materials_ior")) p["ior"] = ext["KHR_materials_ior"].value("ior", 1.5);
-  if (ext.contains("KHR_materials_transmission"))
-    p["transmission"] = ext["KHR_materials_transmission"].value("transmissionFactor", 0.0);
+  if (ext.contains("KHR_materials_ior")) p["ior"] = number_or(ext["KHR_materials_ior"], "ior", 1.5);
+  if (ext.contains("KHR_materials_transmission")) {
+    const json& t = ext["KHR_materials_transmission"];
+    set("transmission", number_or(t, "transmissionFactor", 0.0), t.value("transmissionTexture", json()), 0, false);
+  }
   if (ext.contains("KHR_materials_specular")) {
-    const json& s = ext["KHR_materials_specular"];
-    p["specular"] = s.value("specularFactor", 1.0);
-    if (s.contains("specularColorFactor")) p["specular_color"] = s["specularColorFactor"];
+    const json& t = ext["KHR_materials_specular"];
+    set("specular", number_or(t, "specularFactor", 1.0), t.value("specularTexture", json()), 3, false);
+    set("specular_color", rgb_or(t, "specularColorFactor", {1, 1, 1}), t.value("specularColorTexture", json()), -1, true);
   }
   if (ext.contains("KHR_materials_clearcoat")) {
-    const json& c = ext["KHR_materials_clearcoat"];
-    p["clearcoat"] = c.value("clearcoatFactor", 0.0);
-    p["clearcoat_roughness"] = c.value("clearcoatRoughnessFactor", 0.0);
+    const json& t = ext["KHR_materials_clearcoat"];
+    set("clearcoat", number_or(t, "clearcoatFactor", 0.0), t.value("clearcoatTexture", json()), 0, false);
+    set("clearcoat_roughness", number_or(t, "clearcoatRoughnessFactor", 0.0), t.value("clearcoatRoughnessTexture", json()), 1, false);
   }
   if (ext.contains("KHR_materials_sheen")) {
-    const json& s = ext["KHR_materials_sheen"];
-    if (s.contains("sheenColorFactor")) p["sheen_color"] = s["sheenColorFactor"];
-    p["sheen_roughness"] = s.value("sheenRoughnessFactor", 0.0);
+    const json& t = ext["KHR_materials_sheen"];
+    set("sheen_color", rgb_or(t, "sheenColorFactor", {0, 0, 0}), t.value("sheenColorTexture", json()), -1, true);
+    set("sheen_roughness", number_or(t, "sheenRoughnessFactor", 0.0), t.value("sheenRoughnessTexture", json()), 3, false);
   }
-  (void)warnings;
   return p;
 }
 
@@ -471,8 +541,23 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     throw SceneError(pointer, "the glTF asset is invalid: " + (err.empty() ? std::string("tinygltf failed") : err));
   }
 
+  // Images, decoded once, shared by every texture that uses them (as "#image<i>").
+  MaterialContext mctx;
+  for (size_t i = 0; i < model.images.size(); ++i) {
+    const tinygltf::Image& img = model.images[i];
+    if (img.width <= 0 || img.height <= 0 || img.component != 4 || img.image.empty()) continue;
+    auto pixels = std::make_shared<ImagePixels>();
+    pixels->width = img.width;
+    pixels->height = img.height;
+    pixels->channels = 4;
+    pixels->data = img.image;
+    mctx.images["image" + std::to_string(i)] = std::move(pixels);
+  }
+
   // Materials: glTF materials by index, replaced by the job's materials of the same name.
   const MaterialRegistry& registry = MaterialRegistry::builtin();
+  const json no_materials = json::array();
+  const json& gltf_materials = doc.contains("materials") && doc["materials"].is_array() ? doc["materials"] : no_materials;
   std::vector<uint32_t> material_index(model.materials.size());
   for (size_t i = 0; i < model.materials.size(); ++i) {
     const tinygltf::Material& m = model.materials[i];
@@ -480,7 +565,8 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       material_index[i] = it->second;
       continue;
     }
-    json params = material_params(m, &result.warnings);
+    const json& mj = i < gltf_materials.size() && gltf_materials[i].is_object() ? gltf_materials[i] : json::object();
+    json params = material_params(doc, mj, &result.warnings);
     if (!registry.has("gltf_pbr")) {
       // Without the metallic-roughness model, keep colour and emission on a diffuse surface.
       json lambert = {{"type", "lambert"}, {"albedo", params.value("base_color", json{0.8, 0.8, 0.8})}};
@@ -489,13 +575,40 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       params = lambert;
     }
     material_index[i] = static_cast<uint32_t>(scene.materials.size());
-    std::unique_ptr<Material> material = registry.create(params, pointer + "/materials/" + std::to_string(i), MaterialContext{});
-    // Coverage (spec 3.9.4): baseColorFactor alpha; MASK against alphaCutoff, BLEND stochastically.
+    const std::string mp = pointer + "/materials/" + std::to_string(i);
+    std::unique_ptr<Material> material = registry.create(params, mp, mctx);
+    // Coverage (spec 3.9.4): base colour alpha (factor times texture alpha); MASK against alphaCutoff, BLEND
+    // stochastically.
     if (m.alphaMode == "MASK" || m.alphaMode == "BLEND") {
       material->alpha_mode = m.alphaMode == "MASK" ? Material::AlphaMode::kMask : Material::AlphaMode::kBlend;
       material->alpha_cutoff = static_cast<float>(m.alphaCutoff);
-      if (m.pbrMetallicRoughness.baseColorFactor.size() == 4)
-        material->alpha.value = static_cast<float>(clamp(m.pbrMetallicRoughness.baseColorFactor[3], 0.0, 1.0));
+      const json pbr = mj.value("pbrMetallicRoughness", json::object());
+      double a = pbr.contains("baseColorFactor") && pbr["baseColorFactor"].size() == 4 ? pbr["baseColorFactor"][3].get<double>() : 1.0;
+      json tex = texture_param(doc, pbr.value("baseColorTexture", json()), 3, false, std::clamp(a, 0.0, 1.0), nullptr);
+      json holder = {{"alpha", tex.is_null() ? json(std::clamp(a, 0.0, 1.0)) : tex}};
+      material->alpha = params::float_param(holder, "alpha", mp, 1.0f, 0.0f, 1.0f, mctx);
+    }
+    // Normal map (spec 3.9.3): tangent-space, linear, scaled in x and y.
+    if (mj.contains("normalTexture")) {
+      json tex = texture_param(doc, mj["normalTexture"], -1, false, json{1, 1, 1}, &result.warnings);
+      if (!tex.is_null()) {
+        json holder = {{"normal", tex}};
+        material->normal_map = params::rgb_param(holder, "normal", mp, Rgb(1), 0.0f, 1.0f, mctx).texture;
+        material->normal_scale = static_cast<float>(mj["normalTexture"].value("scale", 1.0));
+      }
+    }
+    // KHR_materials_volume: absorption through the object (thickness is a rasteriser's stand-in; a path tracer
+    // measures the real distance travelled inside the geometry).
+    json ext = parse_extensions(m.extensions_json_string);
+    if (ext.contains("KHR_materials_volume")) {
+      const json& v = ext["KHR_materials_volume"];
+      double distance = v.value("attenuationDistance", 0.0);
+      json color = v.value("attenuationColor", json{1, 1, 1});
+      if (distance > 0 && color.is_array() && color.size() == 3)
+        for (int c = 0; c < 3; ++c) {
+          double col = color[c].is_number() ? std::clamp(color[c].get<double>(), 1e-6, 1.0) : 1.0;
+          material->volume_sigma_a[c] = static_cast<float>(-std::log(col) / distance);
+        }
     }
     scene.materials.push_back(std::move(material));
     scene.material_names.push_back(m.name.empty() ? "gltf:" + std::to_string(i) : m.name);

@@ -36,6 +36,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
   float prev_pdf = 0;
   Vec3 prev_p;
   float eta_scale = 1;  // product of eta^2 across refractions, kept out of Russian roulette
+  Rgb sigma_a(0);       // absorption of the medium the path is travelling through (zero: vacuum)
   ++counters.camera;
 
   for (int depth = 0;; ++depth) {
@@ -52,6 +53,11 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
         }
       }
       break;
+    }
+    if (!is_black(sigma_a)) {
+      // Beer-Lambert attenuation over the segment inside an absorbing object.
+      const float d = si.t * length(ray.dir);
+      throughput *= Rgb(std::exp(-sigma_a.x * d), std::exp(-sigma_a.y * d), std::exp(-sigma_a.z * d));
     }
     const Vec3 wo_world = -ray.dir;
     if (si.material->emissive()) {
@@ -120,7 +126,11 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
     if ((dot(wi_world, si.sp.ng) * dot(wo_world, si.sp.ng) > 0) == transmit) break;
     throughput *= bs->f * (std::abs(bs->wi.z) / bs->pdf);
     if (!is_finite(throughput)) break;
-    if (transmit) eta_scale *= sqr(bs->eta);
+    if (transmit) {
+      eta_scale *= sqr(bs->eta);
+      // Refracting in through the front side enters the object's medium; through the back side leaves it.
+      sigma_a = si.sp.front_face ? si.material->volume_sigma_a : Rgb(0);
+    }
     prev_delta = is_delta(bs->flags);
     prev_pdf = bs->pdf;
     prev_p = si.sp.p;

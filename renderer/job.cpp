@@ -1,5 +1,7 @@
 #include "renderer/job.h"
 
+#include <cctype>
+
 #include "renderer/scene_error.h"
 
 namespace tessera {
@@ -45,7 +47,22 @@ RenderJob load_job(const json& job, const JobLoadOptions& options) {
   out.settings = load_job_settings(job, options);
   read_outputs(job, &out);
   if (kind_of(job) == "material") {
-    out.scene = load_scene(material_stage_scene(job), "/material", options.scene);
+    // The stage scene names the subjects "subject" (one material) or "subject0".."subject15" (a row); errors found
+    // in it are reported at the job's own fields: /material/... or /materials/<i>/...
+    try {
+      out.scene = load_scene(material_stage_scene(job), "", options.scene);
+    } catch (const SceneError& e) {
+      const std::string& p = e.pointer();
+      const std::string row = "/materials/subject";
+      std::string mapped = p;
+      if (p.rfind(row, 0) == 0) {
+        size_t digits = row.size();
+        while (digits < p.size() && std::isdigit(static_cast<unsigned char>(p[digits]))) ++digits;
+        mapped = digits > row.size() ? "/materials/" + p.substr(row.size(), digits - row.size()) + p.substr(digits)
+                                     : "/material" + p.substr(row.size());
+      }
+      throw SceneError(mapped, e.what());
+    }
   } else {
     auto it = job.find("scene");
     if (it == job.end()) throw SceneError("/scene", "a scene job needs a \"scene\"");
@@ -55,22 +72,74 @@ RenderJob load_job(const json& job, const JobLoadOptions& options) {
 }
 
 json material_stage_scene(const json& job) {
-  // The built-in stage: the material on a sphere over a checker floor, under a soft environment and one key light.
-  // (The materials work replaces this with the full stage; kept minimal here.)
-  auto it = job.find("material");
-  if (it == job.end()) throw SceneError("/material", "a material job needs a \"material\"");
+  // The built-in preview stage: each material on a sphere (curvature shows every angle of incidence at once; the
+  // sphere's tangent runs along its parallels, so anisotropic highlights stretch visibly) standing on a checker
+  // floor that shows through transmissive materials and in reflective ones, under a soft sky-coloured environment
+  // and one large key light up front on the left. {"material": m} renders one sphere, {"materials": [m, ...]} a row
+  // of them, left to right; the camera frames the row for the job's aspect ratio. Everything is fixed: the stage
+  // is deterministic.
+  std::vector<json> subjects;
+  auto one = job.find("material");
+  auto many = job.find("materials");
+  if (one != job.end() && many != job.end())
+    throw SceneError("/materials", "a material job has either \"material\" or \"materials\", not both");
+  if (one != job.end()) {
+    subjects.push_back(*one);
+  } else if (many != job.end()) {
+    if (!many->is_array() || many->empty() || many->size() > 16)
+      throw SceneError("/materials", "must be an array of 1 to 16 materials");
+    for (const json& m : *many) subjects.push_back(m);
+  } else {
+    throw SceneError("/material", "a material job needs a \"material\" (or \"materials\" for a row)");
+  }
+
+  const int n = static_cast<int>(subjects.size());
+  const double spacing = 2.5;                    // sphere centres, radius 1
+  const double row_half = 0.5 * (n - 1) * spacing;  // half the distance between the outer centres
   json scene;
-  scene["materials"] = {{"subject", *it},
-                        {"floor", {{"type", "lambert"}, {"albedo", {0.5, 0.5, 0.5}}}},
-                        {"key", {{"type", "emission"}, {"radiance", {20, 20, 20}}}}};
-  scene["objects"] = json::array({
-      {{"shape", "sphere"}, {"center", {0, 1, 0}}, {"radius", 1}, {"material", "subject"}},
-      {{"shape", "rectangle"}, {"corner", {-10, 0, 10}}, {"edge1", {20, 0, 0}}, {"edge2", {0, 0, -20}},
-       {"material", "floor"}},
-      {{"shape", "sphere"}, {"center", {4, 6, 4}}, {"radius", 0.6}, {"material", "key"}},
-  });
-  scene["camera"] = {{"from", {0, 2, 6}}, {"to", {0, 0.9, 0}}, {"fov_deg", 35}};
-  scene["environment"] = {{"color", {0.3, 0.35, 0.4}}};
+  json materials = json::object();
+  json objects = json::array();
+  for (int i = 0; i < n; ++i) {
+    const std::string name = n == 1 ? "subject" : "subject" + std::to_string(i);
+    materials[name] = subjects[i];
+    objects.push_back({{"shape", "sphere"}, {"center", {-row_half + i * spacing, 1, 0}}, {"radius", 1}, {"material", name}});
+  }
+  // Floor: 1-unit checker squares around the row.
+  const double floor_half = std::max(12.0, row_half + 12.0);
+  const double squares = 2 * floor_half;
+  materials["stage_floor"] = {{"type", "lambert"},
+                              {"albedo", {{"checker", {{"a", {0.62, 0.62, 0.6}}, {"b", {0.18, 0.18, 0.19}},
+                                                       {"scale", squares}}}}}};
+  objects.push_back({{"shape", "rectangle"},
+                     {"corner", {-floor_half, 0, floor_half}},
+                     {"edge1", {2 * floor_half, 0, 0}},
+                     {"edge2", {0, 0, -2 * floor_half}},
+                     {"material", "stage_floor"}});
+  // Key light: a bright sphere up front on the left, big enough for soft shadows and a visible highlight shape.
+  materials["stage_key"] = {{"type", "emission"}, {"radiance", {14, 13.5, 12.5}}};
+  objects.push_back({{"shape", "sphere"},
+                     {"center", {-row_half - 4.0, 6.5, 5.0}},
+                     {"radius", 1.2},
+                     {"material", "stage_key"}});
+  scene["materials"] = materials;
+  scene["objects"] = objects;
+  scene["environment"] = {{"color", {0.42, 0.46, 0.52}}};
+
+  // Camera: slightly above the spheres' centres, looking a little down; far enough back that the row (with a
+  // margin) fits the horizontal and vertical field of view at the job's aspect ratio.
+  double width = 512, height = 512;
+  if (auto r = job.find("render"); r != job.end() && r->is_object()) {
+    if (r->contains("width") && (*r)["width"].is_number()) width = std::max(1.0, (*r)["width"].get<double>());
+    if (r->contains("height") && (*r)["height"].is_number()) height = std::max(1.0, (*r)["height"].get<double>());
+  }
+  const double aspect = width / height;
+  const double fov_deg = 30;
+  const double tan_half_v = std::tan(fov_deg * kPi / 360.0);
+  const double tan_half_h = tan_half_v * aspect;
+  const double need_h = (row_half + 1.35) / tan_half_h;  // horizontal extent with a margin
+  const double need_v = 1.5 / tan_half_v;                 // the sphere's height with floor around it
+  const double dist = std::max(need_h, need_v);
+  scene["camera"] = {{"from", {0, 1.0 + 0.32 * dist, dist}}, {"to", {0, 0.85, 0}}, {"fov_deg", fov_deg}};
   return scene;
 }
 

@@ -40,11 +40,22 @@ class Material {
   float alpha_cutoff = 0.5f;
   FloatParam alpha{1.0f, nullptr};  // coverage in [0, 1]
   float coverage(const ShadingPoint& sp) const { return alpha.eval(sp); }
+
+  // Absorption of the medium this surface encloses (Beer-Lambert, per metre of path inside): light refracted in
+  // through the front side is attenuated by exp(-sigma_a d) until it leaves (glTF KHR_materials_volume).
+  Rgb volume_sigma_a{0, 0, 0};
+
+  // Tangent-space normal map (glTF normalTexture: linear RGB, x and y scaled by normal_scale), applied to the
+  // shading frame at every hit.
+  std::shared_ptr<const Texture> normal_map;
+  float normal_scale = 1;
 };
 
 // Where texture files named by a material may come from.
 struct MaterialContext {
   std::filesystem::path asset_root;  // empty: no file textures allowed
+  // Images in memory that texture parameters may name as "#<key>" (a glTF asset's images, "#image3").
+  std::map<std::string, std::shared_ptr<const ImagePixels>> images;
 };
 
 // Makes a material from its JSON object; throws SceneError naming the field (`pointer` is the object's pointer).

@@ -1,4 +1,6 @@
 #include <cmath>
+#include <filesystem>
+#include <initializer_list>
 
 #include "renderer/material.h"
 #include "renderer/scene_error.h"
@@ -36,6 +38,21 @@ std::unique_ptr<Material> MaterialRegistry::create(const nlohmann::json& params,
     material->emission = params::rgb_param(params, "emission", pointer, Rgb(0), 0.0f, 1e9f, ctx);
   }
   material->emission_one_sided = params::boolean(params, "one_sided", pointer, material->emission_one_sided);
+  // Common keys of every model: a tangent-space normal map, and absorption inside a closed transmissive object
+  // given as the colour white light takes after "attenuation_distance" metres (as glTF's KHR_materials_volume).
+  if (auto it = params.find("normal_map"); it != params.end()) {
+    if (!it->is_object()) throw SceneError(pointer + "/normal_map", "must be a texture object");
+    nlohmann::json map = *it;
+    if (!map.contains("colorspace")) map["colorspace"] = "linear";
+    nlohmann::json holder = {{"normal_map", map}};
+    material->normal_map = params::rgb_param(holder, "normal_map", pointer, Rgb(1), 0.0f, 1.0f, ctx).texture;
+  }
+  material->normal_scale = params::number(params, "normal_scale", pointer, 1.0f, 0.0f, 10.0f);
+  if (params.contains("attenuation_distance") || params.contains("attenuation_color")) {
+    const float distance = params::number(params, "attenuation_distance", pointer, 1.0f, 1e-6f, 1e9f);
+    const Rgb color = params::rgb(params, "attenuation_color", pointer, Rgb(1), 1e-6f, 1.0f);
+    for (int c = 0; c < 3; ++c) material->volume_sigma_a[c] = -std::log(color[c]) / distance;
+  }
   return material;
 }
 
@@ -76,16 +93,154 @@ Rgb rgb(const nlohmann::json& obj, const std::string& key, const std::string& po
   return c;
 }
 
+namespace {
+
+// Resolves a texture file named by a material inside the asset folder: relative paths only, no "..", and the
+// resolved file (symlinks followed) must stay inside the folder.
+std::filesystem::path resolve_asset(const std::string& name, const std::string& at, const MaterialContext& ctx) {
+  namespace fs = std::filesystem;
+  if (ctx.asset_root.empty()) throw SceneError(at, "file textures are not available here (no asset folder)");
+  if (name.empty()) throw SceneError(at, "must name an image file");
+  fs::path rel(name);
+  if (rel.is_absolute() || rel.has_root_name() || rel.has_root_directory())
+    throw SceneError(at, "must be a path relative to the scene's folder");
+  for (const fs::path& part : rel) {
+    if (part == "..") throw SceneError(at, "must not contain \"..\"");
+  }
+  std::error_code ec;
+  fs::path root = fs::canonical(ctx.asset_root, ec);
+  if (ec) throw SceneError(at, "the asset folder cannot be read");
+  fs::path full = fs::canonical(root / rel, ec);
+  if (ec || !fs::is_regular_file(full, ec)) throw SceneError(at, "no image file \"" + name + "\" in the scene's folder");
+  auto r = root.begin();
+  auto f = full.begin();
+  for (; r != root.end(); ++r, ++f) {
+    if (f == full.end() || *r != *f) throw SceneError(at, "resolves outside the scene's folder");
+  }
+  return full;
+}
+
+void check_keys(const nlohmann::json& obj, const std::string& at, std::initializer_list<const char*> allowed) {
+  for (const auto& [key, _] : obj.items()) {
+    bool ok = false;
+    for (const char* a : allowed) ok = ok || key == a;
+    if (!ok) throw SceneError(at + "/" + json_pointer_token(key), "unknown key \"" + key + "\"");
+  }
+}
+
+// A texture object: {"texture": "file.png", "wrap": ..., "scale": [su, sv], ...} or {"checker": {"a", "b",
+// "scale"}}. `factor` receives the constant the texture is multiplied with.
+std::shared_ptr<const Texture> parse_texture(const nlohmann::json& v, const std::string& at, bool colour,
+                                             float min_value, float max_value, const MaterialContext& ctx,
+                                             Rgb* factor) {
+  *factor = Rgb(1);
+  if (v.contains("checker")) {
+    check_keys(v, at, {"checker"});
+    const nlohmann::json& c = v["checker"];
+    const std::string cp = at + "/checker";
+    if (!c.is_object()) throw SceneError(cp, "must be an object with \"a\", \"b\" and \"scale\"");
+    check_keys(c, cp, {"a", "b", "scale", "uv"});
+    Rgb a = rgb(c, "a", cp, Rgb(std::min(max_value, std::max(min_value, 0.8f))), min_value, max_value);
+    Rgb b = rgb(c, "b", cp, Rgb(std::min(max_value, std::max(min_value, 0.2f))), min_value, max_value);
+    if (!colour && (a.x != a.y || a.x != a.z)) throw SceneError(cp + "/a", "must be a number for this parameter");
+    if (!colour && (b.x != b.y || b.x != b.z)) throw SceneError(cp + "/b", "must be a number for this parameter");
+    float scale = number(c, "scale", cp, 8, 1e-6f, 1e6f);
+    int uv_set = static_cast<int>(number(c, "uv", cp, 0, 0, 1));
+    return make_checker_texture(a, b, scale, uv_set);
+  }
+  auto file_it = v.find("texture");
+  if (file_it == v.end())
+    throw SceneError(at, "a texture object needs \"texture\" (an image file) or \"checker\"");
+  check_keys(v, at, {"texture", "wrap", "wrap_t", "scale", "offset", "rotation", "channel", "colorspace", "uv", "factor"});
+  const std::string fp = at + "/texture";
+  if (!file_it->is_string()) throw SceneError(fp, "must be the relative path of an image file");
+  // "#key" names an image held in memory (a glTF asset's embedded images); anything else is a file.
+  const std::string name = file_it->get<std::string>();
+  std::shared_ptr<const ImagePixels> embedded;
+  std::filesystem::path file;
+  if (!name.empty() && name[0] == '#') {
+    auto img = ctx.images.find(name.substr(1));
+    if (img == ctx.images.end()) throw SceneError(fp, "no embedded image \"" + name + "\"");
+    embedded = img->second;
+  } else {
+    file = resolve_asset(name, fp, ctx);
+  }
+  TextureMapping mapping;
+  auto wrap_mode = [&](const char* key) {
+    std::string wrap = string(v, key, at, "repeat");
+    if (wrap == "repeat") return WrapMode::kRepeat;
+    if (wrap == "clamp") return WrapMode::kClamp;
+    if (wrap == "mirror") return WrapMode::kMirror;
+    throw SceneError(at + "/" + key, "must be \"repeat\", \"clamp\" or \"mirror\"");
+  };
+  mapping.wrap = wrap_mode("wrap");
+  if (v.contains("wrap_t")) mapping.wrap_t = wrap_mode("wrap_t");
+  mapping.rotation = number(v, "rotation", at, 0, -1000, 1000);
+  auto read_vec2 = [&](const char* key, Vec2 fallback) {
+    auto it = v.find(key);
+    if (it == v.end()) return fallback;
+    const std::string kp = at + "/" + key;
+    auto num = [&](const nlohmann::json& n, const std::string& np) {
+      if (!n.is_number() || !std::isfinite(n.get<double>()) || std::abs(n.get<double>()) > 1e6)
+        throw SceneError(np, "must be a finite number");
+      return static_cast<float>(n.get<double>());
+    };
+    if (it->is_number()) {
+      float s = num(*it, kp);
+      return Vec2(s, s);
+    }
+    if (!it->is_array() || it->size() != 2) throw SceneError(kp, "must be a number or an array of 2 numbers");
+    return Vec2(num((*it)[0], kp + "/0"), num((*it)[1], kp + "/1"));
+  };
+  mapping.scale = read_vec2("scale", Vec2(1, 1));
+  mapping.offset = read_vec2("offset", Vec2(0, 0));
+  mapping.uv_set = static_cast<int>(number(v, "uv", at, 0, 0, 1));
+  int channel = -1;
+  if (v.contains("channel")) {
+    const nlohmann::json& c = v["channel"];
+    if (!c.is_number_integer() || c.get<int64_t>() < 0 || c.get<int64_t>() > 3)
+      throw SceneError(at + "/channel", "must be 0, 1, 2 or 3");
+    channel = static_cast<int>(c.get<int64_t>());
+  } else if (!colour) {
+    channel = 0;
+  }
+  std::string cs = string(v, "colorspace", at, colour ? "srgb" : "linear");
+  if (cs != "srgb" && cs != "linear") throw SceneError(at + "/colorspace", "must be \"srgb\" or \"linear\"");
+  *factor = rgb(v, "factor", at, Rgb(1), min_value, max_value);
+  if (!colour && (factor->x != factor->y || factor->x != factor->z))
+    throw SceneError(at + "/factor", "must be a number for this parameter");
+  try {
+    if (embedded) return make_image_texture(embedded, cs == "srgb", channel, mapping);
+    return make_image_texture(file, cs == "srgb", channel, mapping);
+  } catch (const std::runtime_error& e) {
+    throw SceneError(fp, e.what());
+  }
+}
+
+}  // namespace
+
 RgbParam rgb_param(const nlohmann::json& obj, const std::string& key, const std::string& pointer, Rgb fallback,
-                   float min_value, float max_value, const MaterialContext& /*ctx*/) {
+                   float min_value, float max_value, const MaterialContext& ctx) {
   RgbParam p;
+  auto it = obj.find(key);
+  if (it != obj.end() && it->is_object()) {
+    p.texture = parse_texture(*it, pointer + "/" + json_pointer_token(key), true, min_value, max_value, ctx, &p.value);
+    return p;
+  }
   p.value = rgb(obj, key, pointer, fallback, min_value, max_value);
   return p;
 }
 
 FloatParam float_param(const nlohmann::json& obj, const std::string& key, const std::string& pointer, float fallback,
-                       float min_value, float max_value, const MaterialContext& /*ctx*/) {
+                       float min_value, float max_value, const MaterialContext& ctx) {
   FloatParam p;
+  auto it = obj.find(key);
+  if (it != obj.end() && it->is_object()) {
+    Rgb factor;
+    p.texture = parse_texture(*it, pointer + "/" + json_pointer_token(key), false, min_value, max_value, ctx, &factor);
+    p.value = factor.x;
+    return p;
+  }
   p.value = number(obj, key, pointer, fallback, min_value, max_value);
   return p;
 }

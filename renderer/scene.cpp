@@ -118,15 +118,23 @@ bool Scene::intersect(const Ray& ray, SurfaceInteraction* si) const {
     }
     sp.uv = uv0 * b0 + uv1 * b1 + uv2 * b2;
     sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
-    // Tangent: from the mesh when given, else along dp/du.
+    // Tangent: from the mesh when given, else along dp/du (with the handedness of dp/dv).
     Vec3 tangent;
     if (!mesh.tangents.empty()) {
       tangent = mesh.tangents[idx[0]] * b0 + mesh.tangents[idx[1]] * b1 + mesh.tangents[idx[2]] * b2;
       if (inst) tangent = inst->to_world.vector(tangent);
+      sp.tangent_sign = mesh.tangent_signs.empty() || mesh.tangent_signs[idx[0]] >= 0 ? 1.0f : -1.0f;
     } else {
       Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
       float det = d1.x * d2.y - d1.y * d2.x;
-      tangent = std::abs(det) > 1e-12f ? (e1 * d2.y - e2 * d1.y) / det : e1;
+      if (std::abs(det) > 1e-12f) {
+        tangent = (e1 * d2.y - e2 * d1.y) / det;
+        Vec3 bitangent = (e2 * d1.x - e1 * d2.x) / det;
+        sp.tangent_sign = dot(cross(ns, tangent), bitangent) < 0 ? -1.0f : 1.0f;
+      } else {
+        tangent = e1;
+        sp.tangent_sign = 1;
+      }
     }
     sp.frame = Frame::from_normal_tangent(ns, tangent);
     sp.vertex_color = mesh.colors.empty()
@@ -136,7 +144,23 @@ bool Scene::intersect(const Ray& ray, SurfaceInteraction* si) const {
     si->light = si->material->emissive() ? mesh.first_light + hit.prim_id : kNoLight;
   }
   sp.front_face = dot(ray.dir, sp.ng) < 0;
+  if (si->material->normal_map) apply_normal_map(*si->material, &sp);
   return true;
+}
+
+void apply_normal_map(const Material& material, ShadingPoint* sp) {
+  // glTF 3.9.3: the texel maps [0,1] to [-1,1]; x and y are scaled; the result is in the tangent frame
+  // (tangent, bitangent = sign * n x t, normal).
+  Rgb t = material.normal_map->eval(*sp);
+  Vec3 local((2 * t.x - 1) * material.normal_scale, (2 * t.y - 1) * material.normal_scale, 2 * t.z - 1);
+  const Frame& f = sp->frame;
+  Vec3 n = f.s * local.x + f.t * (local.y * sp->tangent_sign) + f.n * local.z;
+  float len2 = length_squared(n);
+  if (!(len2 > 1e-12f) || !std::isfinite(len2)) return;
+  n = n / std::sqrt(len2);
+  // A perturbed normal must stay on the surface's side, or shading would see light from behind.
+  if (dot(n, sp->ng) <= 1e-3f) return;
+  sp->frame = Frame::from_normal_tangent(n, f.s);
 }
 
 Vec3 offset_ray_origin(const Vec3& p, const Vec3& ng, const Vec3& dir) {

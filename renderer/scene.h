@@ -102,6 +102,9 @@ class Scene {
   double build_seconds_ = 0;
 };
 
+// Bends the shading frame of `sp` by the material's normal map.
+void apply_normal_map(const Material& material, ShadingPoint* sp);
+
 // Offsets a ray origin off the surface at `p` along the geometric normal towards `dir`, against self-intersection.
 Vec3 offset_ray_origin(const Vec3& p, const Vec3& ng, const Vec3& dir);
 

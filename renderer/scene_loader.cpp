@@ -171,7 +171,8 @@ CameraDesc framing_camera(const Bounds& b) {
 std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, const SceneLoadOptions& options) {
   if (!doc.is_object()) throw SceneError(pointer, "the scene must be an object");
   auto scene = std::make_shared<Scene>();
-  MaterialContext mctx{options.asset_root};
+  MaterialContext mctx;
+  mctx.asset_root = options.asset_root;
 
   // Materials by name.
   std::map<std::string, uint32_t> names;

@@ -1,7 +1,11 @@
 // Material parameters: a constant, or a texture evaluated at the shading point.
 #pragma once
 
+#include <filesystem>
+#include <cstdint>
 #include <memory>
+#include <optional>
+#include <vector>
 
 #include "renderer/math.h"
 
@@ -9,12 +13,13 @@ namespace tessera {
 
 // What a material sees of the surface it shades.
 struct ShadingPoint {
-  Vec3 p;                // world position
-  Vec3 ng;               // geometric normal, world, as modelled (not flipped towards the viewer)
-  Frame frame;           // shading frame, world; frame.n on the same side as ng
-  Vec2 uv;               // first texture coordinate set
-  Vec2 uv1;              // second set (glTF TEXCOORD_1), equal to uv where absent
+  Vec3 p;       // world position
+  Vec3 ng;      // geometric normal, world, as modelled (not flipped towards the viewer)
+  Frame frame;  // shading frame, world; frame.n on the same side as ng
+  Vec2 uv;      // first texture coordinate set
+  Vec2 uv1;     // second set (glTF TEXCOORD_1), equal to uv where absent
   Rgb vertex_color{1, 1, 1};
+  float tangent_sign = 1;  // handedness of the tangent frame: bitangent = tangent_sign * cross(n, tangent)
   bool front_face = true;  // the ray arrived on the side ng points to
 };
 
@@ -38,5 +43,37 @@ struct FloatParam {
   std::shared_ptr<const Texture> texture;  // when set, value multiplies the texture's first channel
   float eval(const ShadingPoint& sp) const { return texture ? value * texture->eval(sp).x : value; }
 };
+
+// How an image texture is addressed: uv scaled and offset, wrapped per axis.
+enum class WrapMode : uint8_t { kRepeat, kClamp, kMirror };
+struct TextureMapping {
+  Vec2 scale{1, 1};
+  Vec2 offset{0, 0};
+  float rotation = 0;  // radians, applied between scale and offset (KHR_texture_transform)
+  WrapMode wrap = WrapMode::kRepeat;    // horizontal (and vertical unless wrap_t is set)
+  std::optional<WrapMode> wrap_t;       // vertical, when it differs
+  int uv_set = 0;  // 0: ShadingPoint::uv, 1: ShadingPoint::uv1
+};
+
+// 8-bit pixels already in memory (row 0 at the top), e.g. images embedded in a glTF asset.
+struct ImagePixels {
+  int width = 0, height = 0, channels = 0;
+  std::vector<uint8_t> data;
+};
+
+// An image file read through OpenImageIO, bilinearly filtered. `channel` < 0 returns RGB (grey images repeat their
+// channel, alpha is ignored); 0..3 returns that channel in all three components (for scalar parameters, e.g. the
+// G and B channels of a glTF metallic-roughness map). `srgb` decodes 8/16-bit sRGB-encoded values to linear;
+// float formats (EXR, HDR) are always read as linear. Each (file, srgb) pair is read once per process and shared
+// (a texture cache); throws std::runtime_error when the file cannot be read as an image.
+std::shared_ptr<const Texture> make_image_texture(const std::filesystem::path& file, bool srgb, int channel,
+                                                  const TextureMapping& mapping);
+// A texture over pixels in memory; `srgb` decodes the colour channels (never alpha). Throws on bad dimensions.
+std::shared_ptr<const Texture> make_image_texture(const std::shared_ptr<const ImagePixels>& pixels, bool srgb,
+                                                  int channel, const TextureMapping& mapping);
+// A checkerboard in uv: `a` where floor(u s) + floor(v s) is even, `b` where odd.
+std::shared_ptr<const Texture> make_checker_texture(const Rgb& a, const Rgb& b, float squares_per_unit, int uv_set = 0);
+// Number of distinct images read so far (for tests of the cache).
+size_t texture_cache_loads();
 
 }  // namespace tessera

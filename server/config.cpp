@@ -1,7 +1,12 @@
 #include "server/config.h"
 
 #include <charconv>
+#include <cmath>
+#include <fstream>
+#include <sstream>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 namespace tessera::server {
 
@@ -24,6 +29,25 @@ std::function<std::string(Config&, const std::string&)> integer(T Config::*field
     if (ec != std::errc() || end != v.data() + v.size() || n < lo || n > hi)
       return "must be an integer from " + std::to_string(lo) + " to " + std::to_string(hi);
     c.*field = static_cast<T>(n);
+    return "";
+  };
+}
+
+std::function<std::string(Config&, const std::string&)> real(double Config::*field, double lo, double hi) {
+  return [=](Config& c, const std::string& v) -> std::string {
+    double x = 0;
+    auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), x);
+    if (ec != std::errc() || end != v.data() + v.size() || !std::isfinite(x) || x < lo || x > hi)
+      return "must be a number from " + std::to_string(lo) + " to " + std::to_string(hi);
+    c.*field = x;
+    return "";
+  };
+}
+
+std::function<std::string(Config&, const std::string&)> text(std::string Config::*field) {
+  return [=](Config& c, const std::string& v) -> std::string {
+    if (v.empty()) return "must not be empty";
+    c.*field = v;
     return "";
   };
 }
@@ -59,6 +83,37 @@ const std::vector<Option>& options() {
        [](Config& c, const std::string& v) -> std::string {
          return parse_log_level(v, &c.log_level) ? "" : "must be debug, info, warn or error";
        }},
+      {"--config", "TESSERA_CONFIG", "FILE", "JSON file with the same keys as these flags (without --)",
+       text(&Config::config_file)},
+      {"--tokens", "TESSERA_TOKENS", "FILE",
+       "bearer tokens: JSON array of {token, name, role: user|admin}; re-read on SIGHUP (default: no auth)",
+       text(&Config::tokens_file)},
+      {"--max-user-priority", "TESSERA_MAX_USER_PRIORITY", "N", "highest priority a user may set; above: admin (100)",
+       integer(&Config::max_user_priority, -100, 100)},
+      {"--cors-origin", "TESSERA_CORS_ORIGIN", "ORIGINS",
+       "origins allowed cross-origin, comma-separated, repeatable (default none)",
+       [](Config& c, const std::string& v) -> std::string {
+         std::stringstream ss(v);
+         std::string o;
+         while (std::getline(ss, o, ',')) {
+           if (o.empty()) continue;
+           if (o != "*" && o.rfind("http://", 0) != 0 && o.rfind("https://", 0) != 0)
+             return "must be origins like https://host:port, not \"" + o + "\"";
+           c.cors_origins.push_back(o);
+         }
+         return "";
+       }},
+      {"--max-queued-per-user", "TESSERA_MAX_QUEUED_PER_USER", "N",
+       "queued jobs one owner may have; more is 429 (default 0: no limit)",
+       integer(&Config::max_queued_per_user, 0, 1 << 30)},
+      {"--max-work", "TESSERA_MAX_WORK", "N", "largest width*height*spp*max_depth of a job, 422 above (0: no limit)",
+       real(&Config::max_work, 0, 1e30)},
+      {"--grace-s", "TESSERA_GRACE_S", "S", "SIGTERM: seconds for running jobs to checkpoint and stop (default 20)",
+       real(&Config::grace_s, 0, 3600)},
+      {"--http-threads", "TESSERA_HTTP_THREADS", "N",
+       "HTTP worker threads; each SSE watcher holds one (default 256)", integer(&Config::http_threads, 4, 4096)},
+      {"--keepalive-s", "TESSERA_KEEPALIVE_S", "S", "seconds between SSE keep-alive comments (default 15)",
+       integer(&Config::keepalive_s, 1, 3600)},
   };
   return list;
 }
@@ -69,7 +124,8 @@ std::string config_usage() {
   std::string out =
       "usage: tesserad [options]\n\n"
       "The tessera render daemon: accepts render jobs over HTTP, renders them, serves the results.\n\n"
-      "options (each also read from the environment variable shown; a flag wins):\n";
+      "options (each also read from the environment variable shown, and from the --config file under the flag's\n"
+      "name without the dashes; a flag wins over the environment, which wins over the file):\n";
   for (const Option& o : options()) {
     std::string left = std::string("  ") + o.flag + " " + o.value_name;
     left.resize(std::max<size_t>(left.size() + 1, 26), ' ');
@@ -79,17 +135,84 @@ std::string config_usage() {
   return out;
 }
 
+namespace {
+
+const Option* find_option(const std::string& flag) {
+  for (const Option& o : options())
+    if (flag == o.flag) return &o;
+  return nullptr;
+}
+
+// Applies the JSON config file: an object whose keys are the long flags without "--" ("data-dir", or "data_dir").
+std::string apply_config_file(Config& config, const std::string& file) {
+  std::ifstream in(file);
+  if (!in) return "cannot read the config file " + file;
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  nlohmann::json doc = nlohmann::json::parse(ss.str(), nullptr, false);
+  if (!doc.is_object()) return file + ": expected a JSON object of settings";
+  for (const auto& [key, value] : doc.items()) {
+    std::string flag = "--" + key;
+    for (char& c : flag)
+      if (c == '_') c = '-';
+    const Option* o = find_option(flag);
+    if (!o || flag == "--config") return file + ": unknown key \"" + key + "\"";
+    std::vector<std::string> values;
+    if (value.is_array() && flag == "--cors-origin") {
+      for (const auto& v : value) {
+        if (!v.is_string()) return file + ": \"" + key + "\" must be an array of strings";
+        values.push_back(v.get<std::string>());
+      }
+    } else if (value.is_string()) {
+      values.push_back(value.get<std::string>());
+    } else if (value.is_number_integer()) {
+      values.push_back(std::to_string(value.get<long long>()));
+    } else if (value.is_number()) {
+      values.push_back(value.dump());
+    } else {
+      return file + ": \"" + key + "\" must be a string or a number";
+    }
+    for (const std::string& v : values)
+      if (std::string e = o->apply(config, v); !e.empty()) return file + ": \"" + key + "\" " + e;
+  }
+  return "";
+}
+
+}  // namespace
+
 ConfigResult parse_config(int argc, const char* const* argv, const GetEnv& getenv) {
   ConfigResult result;
   Config config;
+  // The config file named by the flag (or else the environment) is read first: everything else overrides it.
+  std::string config_file;
+  if (const char* v = getenv("TESSERA_CONFIG"); v != nullptr) config_file = v;
+  for (int i = 1; i < argc; ++i) {
+    std::string arg = argv[i];
+    if (arg == "--config" && i + 1 < argc) config_file = argv[i + 1];
+    if (arg.rfind("--config=", 0) == 0) config_file = arg.substr(9);
+  }
+  if (!config_file.empty()) {
+    if (std::string e = apply_config_file(config, config_file); !e.empty()) {
+      result.error = e;
+      return result;
+    }
+    config.config_file = config_file;
+  }
+  // Lists (--cors-origin) given at a higher level replace the lower level's, not add to them.
+  bool cors_from_env = false;
   for (const Option& o : options()) {
     if (const char* v = getenv(o.env); v != nullptr) {
+      if (std::string(o.flag) == "--cors-origin" && !cors_from_env) {
+        config.cors_origins.clear();
+        cors_from_env = true;
+      }
       if (std::string e = o.apply(config, v); !e.empty()) {
         result.error = std::string(o.env) + " " + e;
         return result;
       }
     }
   }
+  bool cors_from_flags = false;
   for (int i = 1; i < argc; ++i) {
     std::string arg = argv[i];
     if (arg == "-h" || arg == "--help") {
@@ -103,9 +226,7 @@ ConfigResult parse_config(int argc, const char* const* argv, const GetEnv& geten
       arg = arg.substr(0, eq);
       has_value = true;
     }
-    const Option* option = nullptr;
-    for (const Option& o : options())
-      if (arg == o.flag) option = &o;
+    const Option* option = find_option(arg);
     if (!option) {
       result.error = "unknown option " + arg;
       return result;
@@ -116,6 +237,10 @@ ConfigResult parse_config(int argc, const char* const* argv, const GetEnv& geten
         return result;
       }
       value = argv[++i];
+    }
+    if (arg == "--cors-origin" && !cors_from_flags) {
+      config.cors_origins.clear();
+      cors_from_flags = true;
     }
     if (std::string e = option->apply(config, value); !e.empty()) {
       result.error = arg + " " + e;

@@ -1,4 +1,6 @@
-// tesserad's configuration: every setting is a flag and an environment variable (the flag wins).
+// tesserad's configuration: every setting is a flag, an environment variable and a key of the JSON config file
+// (--config FILE, keys as the long flags without the dashes). Precedence: flags > environment > config file >
+// defaults.
 #pragma once
 
 #include <cstddef>
@@ -6,6 +8,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "server/log.h"
 
@@ -22,6 +25,15 @@ struct Config {
   int max_height = 8192;
   uint32_t max_spp = 65536;
   LogLevel log_level = LogLevel::kInfo;
+  std::string config_file;              // where the values below may also come from
+  std::string tokens_file;              // bearer tokens; empty: no authentication
+  int max_user_priority = 100;          // above it, admin only (403)
+  std::vector<std::string> cors_origins;
+  int max_queued_per_user = 0;          // 0: no limit; above it 429
+  double max_work = 0;                  // width x height x spp x max_depth; 0: no limit; above it 422
+  double grace_s = 20;                  // SIGTERM: running jobs end their pass and checkpoint within this
+  int http_threads = 256;               // cpp-httplib's pool: every SSE watcher and keep-alive connection holds one
+  int keepalive_s = 15;                 // SSE heartbeat period
 };
 
 struct ConfigResult {

@@ -1,13 +1,16 @@
 #include "server/http_api.h"
 
 #include <httplib.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <charconv>
 #include <fstream>
 #include <functional>
 #include <regex>
+#include <set>
 
+#include "renderer/scene_error.h"
 #include "server/contract.h"
 #include "server/job_id.h"
 #include "server/job_json.h"
@@ -34,6 +37,18 @@ struct Route {
 };
 
 constexpr const char* kJobId = "([^/]+)";  // checked by is_valid_job_id() before any use
+constexpr const char* kWebFile = "/([A-Za-z0-9_-][A-Za-z0-9._-]{0,127}\\.(?:js|mjs|css|html|svg|png|ico|json|map|webmanifest))";
+
+std::string web_media_type(const std::string& name) {
+  static const std::map<std::string, std::string> types = {
+      {"js", "text/javascript; charset=utf-8"}, {"mjs", "text/javascript; charset=utf-8"},
+      {"css", "text/css; charset=utf-8"},       {"html", "text/html; charset=utf-8"},
+      {"svg", "image/svg+xml"},                 {"png", "image/png"},
+      {"ico", "image/x-icon"},                  {"json", "application/json"},
+      {"map", "application/json"},              {"webmanifest", "application/manifest+json"}};
+  auto it = types.find(name.substr(name.rfind('.') + 1));
+  return it == types.end() ? "application/octet-stream" : it->second;
+}
 
 void send_json(Response& res, int status, const json& body) {
   res.status = status;
@@ -53,10 +68,47 @@ void job_not_found(Response& res) {
   send_problem(res, 404, "no such job");
 }
 
+// The identity of a file's current version: a preview renamed over gets a new one.
+std::optional<std::string> file_etag(const std::filesystem::path& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return std::nullopt;
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "\"%llx-%llx-%llx\"", static_cast<unsigned long long>(st.st_ino),
+                static_cast<unsigned long long>(st.st_size),
+                static_cast<unsigned long long>(st.st_mtim.tv_sec) * 1000000000ull +
+                    static_cast<unsigned long long>(st.st_mtim.tv_nsec));
+  return std::string(buf);
+}
+
+bool etag_matches(const std::string& if_none_match, const std::string& etag) {
+  if (if_none_match.empty()) return false;
+  if (if_none_match == "*") return true;
+  std::string list = if_none_match;
+  size_t at = 0;
+  while (at < list.size()) {
+    size_t comma = list.find(',', at);
+    std::string t = list.substr(at, comma == std::string::npos ? std::string::npos : comma - at);
+    t.erase(0, t.find_first_not_of(" \t"));
+    t.erase(t.find_last_not_of(" \t") + 1);
+    if (t.rfind("W/", 0) == 0) t = t.substr(2);
+    if (t == etag) return true;
+    if (comma == std::string::npos) break;
+    at = comma + 1;
+  }
+  return false;
+}
+
 // Streams a file from an open handle: a file renamed over meanwhile (a fresher preview) does not mix into it.
-bool send_file(Response& res, const std::filesystem::path& path, const std::string& media_type) {
+// With an ETag; a matching If-None-Match is answered 304.
+bool send_file(const Request& req, Response& res, const std::filesystem::path& path, const std::string& media_type) {
+  const auto etag = file_etag(path);
   auto in = std::make_shared<std::ifstream>(path, std::ios::binary);
-  if (!*in) return false;
+  if (!*in || !etag) return false;
+  res.set_header("ETag", *etag);
+  if (etag_matches(req.get_header_value("If-None-Match"), *etag)) {
+    res.status = 304;
+    return true;
+  }
   in->seekg(0, std::ios::end);
   const auto size = static_cast<size_t>(in->tellg());
   in->seekg(0);
@@ -72,7 +124,23 @@ bool send_file(Response& res, const std::filesystem::path& path, const std::stri
   return true;
 }
 
-// The job named by the first path capture, or an answered 404 (an id of the wrong shape is simply unknown).
+bool is_event_stream_path(const std::string& path) {
+  return path == "/v1/events" || (path.size() > 7 && path.compare(path.size() - 7, 7, "/events") == 0);
+}
+
+Caller caller_of(ApiContext& ctx, const Request& req) {
+  // EventSource cannot send headers: event streams also take ?access_token=.
+  const std::string query_token =
+      is_event_stream_path(req.path) && req.has_param("access_token") ? req.get_param_value("access_token") : "";
+  return ctx.auth.identify(req.get_header_value("Authorization"), query_token);
+}
+
+bool may_see(const Caller& caller, const JobRecord& job) {
+  return caller.admin || job.owner == caller.name;
+}
+
+// The job named by the first path capture and visible to the caller, or an answered 404 (an id of the wrong shape,
+// or another user's job, is simply unknown).
 std::optional<JobRecord> find_job(ApiContext& ctx, const Request& req, Response& res) {
   const std::string id = req.matches[1];
   if (!is_valid_job_id(id)) {
@@ -80,22 +148,144 @@ std::optional<JobRecord> find_job(ApiContext& ctx, const Request& req, Response&
     return std::nullopt;
   }
   std::optional<JobRecord> job = ctx.store.get(id);
-  if (!job) job_not_found(res);
+  if (!job || !may_see(caller_of(ctx, req), *job)) {
+    job_not_found(res);
+    return std::nullopt;
+  }
   return job;
 }
 
 json status_of(ApiContext& ctx, const JobRecord& job) {
-  return job_status_json(job, ctx.scheduler.live_progress(job.id));
+  std::optional<int> position;
+  if (job.state == JobState::kQueued) position = ctx.store.queue_position(job.id);
+  return job_status_json(job, ctx.scheduler.live_progress(job.id), position);
+}
+
+// Retry-After while a job has not ended: how long a poller should wait (the event stream needs no polling).
+void set_retry_after(Response& res, const JobRecord& job) {
+  if (job.state == JobState::kQueued) res.set_header("Retry-After", "2");
+  if (job.state == JobState::kRunning) res.set_header("Retry-After", "1");
+}
+
+void publish_state(ApiContext& ctx, const std::string& id) {
+  auto job = ctx.store.get(id);
+  if (!job) return;
+  ctx.events.publish(id, job->owner, "state", status_of(ctx, *job).dump(), is_terminal(job->state));
+}
+
+// ---- jobs ----------------------------------------------------------------------------------------------------
+
+struct Submission {
+  nlohmann::json document;
+  std::string request_hash;  // what an Idempotency-Key is compared by
+};
+
+bool valid_idempotency_key(const std::string& k) {
+  return !k.empty() && k.size() <= 255 &&
+         std::all_of(k.begin(), k.end(), [](unsigned char c) { return c > 32 && c < 127; });
+}
+
+// A multipart submission: the part "job" plus files. Files the job names (scene.gltf, scene.environment.map) are
+// stored as assets first and the names replaced by the asset ids.
+std::variant<Submission, Problem> multipart_submission(ApiContext& ctx, const Request& req, const Caller& caller) {
+  if (!req.has_file("job"))
+    return Problem{422, "a multipart job needs a part named \"job\" holding the job document (JSON)", std::nullopt};
+  const std::string job_text = req.get_file_value("job").content;
+  if (json_nesting_depth(job_text) > static_cast<size_t>(ctx.limits.max_depth))
+    return Problem{422, "the document is nested deeper than " + std::to_string(ctx.limits.max_depth) + " levels", ""};
+  json doc = json::parse(job_text, nullptr, false);
+  if (doc.is_discarded()) return Problem{400, "the part \"job\" is not valid JSON", ""};
+  std::vector<UploadFile> files;
+  for (const auto& [name, part] : req.files) {
+    if (name == "job") continue;
+    if (part.filename.empty()) return Problem{422, "the part \"" + name + "\" is not a file", std::nullopt};
+    files.push_back({part.filename, part.content});
+  }
+  std::string manifest = job_text + "\n";
+  {
+    std::vector<std::string> lines;
+    for (const UploadFile& f : files) lines.push_back(f.name + "\t" + sha256_hex(f.bytes));
+    std::sort(lines.begin(), lines.end());
+    for (const std::string& l : lines) manifest += l + "\n";
+  }
+  if (!files.empty() && doc.is_object() && doc.contains("scene") && doc["scene"].is_object()) {
+    json& scene = doc["scene"];
+    // The map the job names becomes an environment asset of its own; the rest is the glTF asset.
+    if (scene.contains("environment") && scene["environment"].is_object() &&
+        scene["environment"].contains("map") && scene["environment"]["map"].is_string()) {
+      const std::string map = scene["environment"]["map"];
+      auto it = std::find_if(files.begin(), files.end(), [&](const UploadFile& f) { return f.name == map; });
+      if (it != files.end()) {
+        std::vector<UploadFile> one{*it};
+        files.erase(it);
+        auto stored = ctx.assets.store(std::move(one), caller.name);
+        if (auto* p = std::get_if<Problem>(&stored)) return *p;
+        scene["environment"]["map"] = std::get<StoredAsset>(stored).info.id;
+      }
+    }
+    if (!files.empty()) {
+      const bool named = scene.contains("gltf") && scene["gltf"].is_string() &&
+                         std::any_of(files.begin(), files.end(),
+                                     [&](const UploadFile& f) { return f.name == scene["gltf"].get<std::string>(); });
+      auto stored = ctx.assets.store(std::move(files), caller.name);
+      if (auto* p = std::get_if<Problem>(&stored)) return *p;
+      const AssetInfo& info = std::get<StoredAsset>(stored).info;
+      if (named && info.kind == "gltf") scene["gltf"] = info.id;
+    }
+  } else if (!files.empty()) {
+    return Problem{422, "uploaded files need a scene job that names them", "/scene"};
+  }
+  return Submission{std::move(doc), sha256_hex(manifest)};
 }
 
 void post_job(ApiContext& ctx, const Request& req, Response& res) {
-  auto checked = check_submission(req.get_header_value("Content-Type"), req.body, ctx.limits);
+  const Caller caller = caller_of(ctx, req);
+  const std::string key = req.get_header_value("Idempotency-Key");
+  if (req.has_header("Idempotency-Key") && !valid_idempotency_key(key))
+    return send_problem(res, 400, "Idempotency-Key must be 1 to 255 visible ASCII characters");
+
+  std::variant<AcceptedJob, Problem> checked;
+  std::string request_hash;
+  if (media_type(req.get_header_value("Content-Type")) == "multipart/form-data") {
+    auto sub = multipart_submission(ctx, req, caller);
+    if (auto* p = std::get_if<Problem>(&sub)) return send_problem(res, *p);
+    request_hash = std::get<Submission>(sub).request_hash;
+    checked = check_job_document(std::move(std::get<Submission>(sub).document), ctx.limits);
+  } else {
+    checked = check_submission(req.get_header_value("Content-Type"), req.body, ctx.limits);
+    request_hash = sha256_hex(req.body);
+  }
   if (auto* problem = std::get_if<Problem>(&checked)) {
     log(LogLevel::kDebug, "job refused", {{"status", problem->status}, {"detail", problem->detail}});
     return send_problem(res, *problem);
   }
   if (!ctx.scheduler.accepting()) return send_problem(res, 503, "the daemon is shutting down");
+
+  auto answer_existing = [&](const JobRecord& existing) {
+    if (existing.request_hash != request_hash)
+      return send_problem(res, 422, "this Idempotency-Key was used with another request body");
+    res.set_header("Location", "/v1/jobs/" + existing.id);
+    set_retry_after(res, existing);
+    send_json(res, 200, status_of(ctx, existing));
+  };
+  if (!key.empty())
+    if (auto existing = ctx.store.find_by_idempotency_key(caller.name, key)) return answer_existing(*existing);
+
   AcceptedJob& accepted = std::get<AcceptedJob>(checked);
+  if (accepted.priority > ctx.max_user_priority && !caller.admin)
+    return send_problem(res, Problem{403,
+                                     "priority " + std::to_string(accepted.priority) + " is above " +
+                                         std::to_string(ctx.max_user_priority) + ", which needs an admin token",
+                                     "/priority"});
+  if (ctx.max_queued_per_user > 0) {
+    const auto counts = ctx.store.count_by_state(caller.name);
+    if (counts.at(JobState::kQueued) >= ctx.max_queued_per_user) {
+      res.set_header("Retry-After", "30");
+      return send_problem(res, 429,
+                          "you have " + std::to_string(counts.at(JobState::kQueued)) +
+                              " jobs queued, the most this server allows (--max-queued-per-user); retry later");
+    }
+  }
   JobRecord job;
   job.id = new_job_id();
   job.kind = accepted.kind;
@@ -105,21 +295,47 @@ void post_job(ApiContext& ctx, const Request& req, Response& res) {
   job.settings = accepted.settings.dump();
   job.outputs = accepted.outputs.dump();
   job.progress.samples_total = accepted.spp;
-  ctx.store.create(job);
+  job.owner = caller.name;
+  job.warnings = json(accepted.warnings).dump();
+  job.idempotency_key = key;
+  job.request_hash = request_hash;
+  try {
+    ctx.store.create(job);
+  } catch (const std::exception&) {
+    // The same key raced in from another connection: that request's job is this one's.
+    if (!key.empty())
+      if (auto existing = ctx.store.find_by_idempotency_key(caller.name, key)) return answer_existing(*existing);
+    throw;
+  }
   ctx.scheduler.wake();
   log(LogLevel::kInfo, "job queued",
-      {{"job", job.id}, {"kind", job.kind}, {"priority", job.priority}, {"render", accepted.settings}});
+      {{"job", job.id}, {"kind", job.kind}, {"priority", job.priority}, {"owner", job.owner},
+       {"render", accepted.settings}});
+  publish_state(ctx, job.id);
   res.set_header("Location", "/v1/jobs/" + job.id);
-  send_json(res, 202, job_status_json(job));
+  res.set_header("Retry-After", "1");
+  auto stored = ctx.store.get(job.id);
+  send_json(res, 202, status_of(ctx, stored ? *stored : job));
 }
 
 void list_jobs(ApiContext& ctx, const Request& req, Response& res) {
+  const Caller caller = caller_of(ctx, req);
   JobFilter filter;
   if (req.has_param("state")) {
-    const std::string s = req.get_param_value("state");
-    filter.state = parse_job_state(s);
-    if (!filter.state)
-      return send_problem(res, 400, "state must be queued, running, succeeded, failed or cancelled, not \"" + s + "\"");
+    const std::string all = req.get_param_value("state");
+    size_t at = 0;
+    while (at <= all.size()) {
+      size_t comma = all.find(',', at);
+      const std::string s = all.substr(at, comma == std::string::npos ? std::string::npos : comma - at);
+      auto state = parse_job_state(s);
+      if (!state)
+        return send_problem(res, 400,
+                            "state must be a comma-separated list of queued, running, paused, succeeded, failed, "
+                            "cancelled; not \"" + s.substr(0, 64) + "\"");
+      filter.states.push_back(*state);
+      if (comma == std::string::npos) break;
+      at = comma + 1;
+    }
   }
   if (req.has_param("limit")) {
     const std::string s = req.get_param_value("limit");
@@ -129,16 +345,39 @@ void list_jobs(ApiContext& ctx, const Request& req, Response& res) {
       return send_problem(res, 400, "limit must be an integer from 1 to 1000");
     filter.limit = n;
   }
-  json jobs = json::array();
-  for (const JobRecord& job : ctx.store.list(filter)) jobs.push_back(status_of(ctx, job));
-  send_json(res, 200, {{"jobs", jobs}});
+  if (req.has_param("cursor")) {
+    // Opaque to clients: "s" and the hex submission number of the last job of the previous page.
+    const std::string c = req.get_param_value("cursor");
+    int64_t seq = 0;
+    bool ok = c.size() >= 2 && c.size() <= 17 && c[0] == 's';
+    if (ok) {
+      auto [end, ec] = std::from_chars(c.data() + 1, c.data() + c.size(), seq, 16);
+      ok = ec == std::errc() && end == c.data() + c.size() && seq > 0;
+    }
+    if (!ok) return send_problem(res, 400, "cursor is not one this server gave out (next_cursor of a listing)");
+    filter.before_seq = seq;
+  }
+  if (!caller.admin) filter.owner = caller.name;
+  const int limit = filter.limit;
+  filter.limit = limit + 1;  // one more tells whether another page exists
+  std::vector<JobRecord> jobs = ctx.store.list(filter);
+  json next = nullptr;
+  if (static_cast<int>(jobs.size()) > limit) {
+    jobs.resize(static_cast<size_t>(limit));
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "s%llx", static_cast<unsigned long long>(jobs.back().seq));
+    next = buf;
+  }
+  json out = json::array();
+  for (const JobRecord& job : jobs) out.push_back(status_of(ctx, job));
+  send_json(res, 200, {{"jobs", out}, {"next_cursor", next}});
 }
 
 void get_preview(ApiContext& ctx, const Request& req, Response& res) {
   auto job = find_job(ctx, req, res);
   if (!job) return;
-  res.set_header("Cache-Control", "no-store");
-  if (send_file(res, ctx.files.path(job->id, JobFile::kPreviewPng), "image/png")) return;
+  res.set_header("Cache-Control", "no-cache");
+  if (send_file(req, res, ctx.files.path(job->id, JobFile::kPreviewPng), "image/png")) return;
   if (!is_terminal(job->state))
     return send_problem(
         res, 409,
@@ -156,54 +395,267 @@ void get_result(ApiContext& ctx, JobFile file, const Request& req, Response& res
   const json outputs = json::parse(job->outputs, nullptr, false);
   if (!outputs.is_array() || std::find(outputs.begin(), outputs.end(), format) == outputs.end())
     return send_problem(res, 404, "the job did not ask for a " + format + " output");
-  if (!send_file(res, ctx.files.path(job->id, file), job_file_media_type(file)))
+  if (!send_file(req, res, ctx.files.path(job->id, file), job_file_media_type(file)))
     send_problem(res, 404, std::string("the job's ") + job_file_name(file) + " is missing from the data directory");
 }
 
-void cancel_job(ApiContext& ctx, const Request& req, Response& res) {
+using Action = Scheduler::Outcome (Scheduler::*)(const std::string&);
+
+void job_action(ApiContext& ctx, const Request& req, Response& res, Action action, const char* verb,
+                const char* allowed_from) {
   auto job = find_job(ctx, req, res);
   if (!job) return;
-  switch (ctx.scheduler.cancel(job->id)) {
-    case Scheduler::CancelResult::kCancelled:
-    case Scheduler::CancelResult::kCancelling: {
+  switch ((ctx.scheduler.*action)(job->id)) {
+    case Scheduler::Outcome::kDone:
+    case Scheduler::Outcome::kInProgress: {
       auto now = ctx.store.get(job->id);
       if (!now) return job_not_found(res);
-      // 202 while the render winds down (within one tile's time), 200 once the job is cancelled.
-      return send_json(res, now->state == JobState::kCancelled ? 200 : 202, status_of(ctx, *now));
+      // 202 while a running render winds down (within one pass), 200 once the state has changed.
+      const bool changed = now->state != JobState::kRunning;
+      set_retry_after(res, *now);
+      return send_json(res, changed ? 200 : 202, status_of(ctx, *now));
     }
-    case Scheduler::CancelResult::kAlreadyFinished: {
+    case Scheduler::Outcome::kConflict: {
       auto now = ctx.store.get(job->id);
-      return send_problem(
-          res, 409, std::string("the job has already ended: it is ") + job_state_name(now ? now->state : job->state));
+      return send_problem(res, 409,
+                          std::string("cannot ") + verb + " a job that is " +
+                              job_state_name(now ? now->state : job->state) + "; only a job that is " + allowed_from);
     }
-    case Scheduler::CancelResult::kUnknown:
+    case Scheduler::Outcome::kUnknown:
       return job_not_found(res);
   }
 }
 
+void patch_job(ApiContext& ctx, const Request& req, Response& res) {
+  auto job = find_job(ctx, req, res);
+  if (!job) return;
+  const std::string type = media_type(req.get_header_value("Content-Type"));
+  if (type != "application/json" && type != "application/merge-patch+json")
+    return send_problem(res, 415, "a job is patched with application/json or application/merge-patch+json");
+  json body = json::parse(req.body, nullptr, false);
+  if (body.is_discarded()) return send_problem(res, Problem{400, "the body is not valid JSON", ""});
+  if (!body.is_object()) return send_problem(res, Problem{422, "must be an object like {\"priority\": 10}", ""});
+  for (const auto& [k, v] : body.items())
+    if (k != "priority")
+      return send_problem(res, Problem{422, "only \"priority\" can be changed", "/" + json_pointer_token(k)});
+  if (!body.contains("priority")) return send_problem(res, Problem{422, "\"priority\" is required", "/priority"});
+  const json& p = body["priority"];
+  if (!p.is_number_integer() || p.get<int64_t>() < -100 || p.get<int64_t>() > 100)
+    return send_problem(res, Problem{422, "must be an integer from -100 to 100", "/priority"});
+  const int priority = p.get<int>();
+  const Caller caller = caller_of(ctx, req);
+  if (priority > ctx.max_user_priority && !caller.admin)
+    return send_problem(res, Problem{403,
+                                     "priority " + std::to_string(priority) + " is above " +
+                                         std::to_string(ctx.max_user_priority) + ", which needs an admin token",
+                                     "/priority"});
+  if (!ctx.store.set_priority(job->id, priority))
+    return send_problem(res, 409,
+                        std::string("the job has ended (") + job_state_name(job->state) + "); its priority is final");
+  log(LogLevel::kInfo, "job priority changed", {{"job", job->id}, {"priority", priority}});
+  publish_state(ctx, job->id);
+  auto now = ctx.store.get(job->id);
+  if (!now) return job_not_found(res);
+  send_json(res, 200, status_of(ctx, *now));
+}
+
+// ---- Server-Sent Events --------------------------------------------------------------------------------------
+
+std::string sse_event(uint64_t id, const std::string& type, const std::string& data) {
+  return "id: " + std::to_string(id) + "\nevent: " + type + "\ndata: " + data + "\n\n";
+}
+
+std::optional<uint64_t> last_event_id(const Request& req) {
+  std::string v = req.get_header_value("Last-Event-ID");
+  if (v.empty() && req.has_param("last_event_id")) v = req.get_param_value("last_event_id");
+  uint64_t n = 0;
+  auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), n);
+  if (v.empty() || ec != std::errc() || end != v.data() + v.size()) return std::nullopt;
+  return n;
+}
+
+struct StreamState {
+  uint64_t after = 0;
+  bool started = false;
+  std::optional<uint64_t> resume_from;
+};
+
+void stream_events(ApiContext& ctx, const Request& req, Response& res, const std::optional<JobRecord>& job) {
+  const Caller caller = caller_of(ctx, req);
+  const std::string job_id = job ? job->id : "";
+  auto state = std::make_shared<StreamState>();
+  state->resume_from = last_event_id(req);
+  res.status = 200;
+  res.set_header("Cache-Control", "no-cache");
+  res.set_header("X-Accel-Buffering", "no");  // proxies (nginx) must not buffer the stream
+  ApiContext* c = &ctx;
+  res.set_chunked_content_provider(
+      "text/event-stream", [c, state, job_id, caller](size_t, httplib::DataSink& sink) {
+        // The current state of the job as an event whose id is the stream's newest: a reconnect with it as
+        // Last-Event-ID continues right after.
+        auto snapshot = [&]() -> bool {
+          auto now = c->store.get(job_id);
+          if (!now) {
+            sink.done();
+            return true;
+          }
+          state->after = c->events.last_seq(job_id);
+          const std::string event = sse_event(state->after, "state", status_of(*c, *now).dump());
+          if (!sink.write(event.data(), event.size())) return false;
+          if (is_terminal(now->state)) sink.done();
+          return true;
+        };
+        auto write = [&](const std::string& s) { return sink.write(s.data(), s.size()); };
+        if (!state->started) {
+          state->started = true;
+          if (!write(": connected\n\n")) return false;
+          if (!state->resume_from) {
+            if (job_id.empty()) {
+              state->after = c->events.last_seq("");
+              return true;
+            }
+            return snapshot();
+          }
+          state->after = *state->resume_from;
+          EventRead r = c->events.wait(job_id, state->after, 0);
+          if (!job_id.empty() && (r.gap || (r.events.empty() && r.last_seq < state->after))) return snapshot();
+        }
+        EventRead r = c->events.wait(job_id, state->after, c->keepalive_s * 1000);
+        if (r.closed) {
+          sink.done();
+          return true;
+        }
+        if (r.events.empty()) {
+          if (!job_id.empty() && !c->store.get(job_id)) {  // deleted meanwhile
+            sink.done();
+            return true;
+          }
+          return write(": keep-alive\n\n");
+        }
+        for (const JobEvent& e : r.events) {
+          state->after = e.seq;
+          if (!caller.admin && e.owner != caller.name) continue;
+          if (!write(sse_event(e.seq, e.type, e.data))) return false;
+          if (!job_id.empty() && e.terminal) {
+            sink.done();
+            return true;
+          }
+        }
+        return true;
+      });
+}
+
+// ---- assets --------------------------------------------------------------------------------------------------
+
+void post_asset(ApiContext& ctx, const Request& req, Response& res) {
+  const Caller caller = caller_of(ctx, req);
+  const std::string type = media_type(req.get_header_value("Content-Type"));
+  std::vector<UploadFile> files;
+  if (type == "multipart/form-data") {
+    for (const auto& [name, part] : req.files) {
+      if (part.filename.empty()) return send_problem(res, 422, "the part \"" + name + "\" is not a file");
+      files.push_back({part.filename, part.content});
+    }
+  } else {
+    static const std::map<std::string, std::pair<std::string, std::vector<std::string>>> kTypes = {
+        {"model/gltf-binary", {"asset.glb", {".glb"}}},
+        {"model/gltf+json", {"asset.gltf", {".gltf"}}},
+        {"image/vnd.radiance", {"map.hdr", {".hdr"}}},
+        {"image/x-exr", {"map.exr", {".exr"}}},
+        {"image/aces", {"map.exr", {".exr"}}},
+        {"application/octet-stream", {"", {".glb", ".gltf", ".hdr", ".exr"}}},
+    };
+    auto it = kTypes.find(type);
+    if (it == kTypes.end())
+      return send_problem(res, 415,
+                          "an asset is model/gltf-binary, model/gltf+json, image/vnd.radiance, image/x-exr or "
+                          "multipart/form-data, not \"" + req.get_header_value("Content-Type").substr(0, 100) + "\"");
+    std::string name = req.has_param("name") ? req.get_param_value("name") : it->second.first;
+    if (name.empty()) return send_problem(res, 422, "an application/octet-stream upload needs ?name=file.ext");
+    std::string ext = std::filesystem::path(name).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
+    const auto& allowed = it->second.second;
+    if (std::find(allowed.begin(), allowed.end(), ext) == allowed.end())
+      return send_problem(res, 422, "the name \"" + name.substr(0, 128) + "\" does not fit the content type " + type);
+    files.push_back({name, req.body});
+  }
+  auto stored = ctx.assets.store(std::move(files), caller.name);
+  if (auto* p = std::get_if<Problem>(&stored)) {
+    log(LogLevel::kInfo, "asset refused", {{"status", p->status}, {"detail", p->detail}});
+    return send_problem(res, *p);
+  }
+  const StoredAsset& s = std::get<StoredAsset>(stored);
+  if (s.created)
+    log(LogLevel::kInfo, "asset stored", {{"asset", s.info.id}, {"kind", s.info.kind}, {"bytes", s.info.bytes}});
+  res.set_header("Location", "/v1/assets/" + s.info.id);
+  send_json(res, s.created ? 201 : 200, s.info.to_json());
+}
+
+// ---- routes --------------------------------------------------------------------------------------------------
+
 std::vector<Route> routes(ApiContext* ctx) {
   const std::string job = std::string("/v1/jobs/") + kJobId;
+  const std::string asset = "/v1/assets/([^/]+)";
+  auto action = [ctx](Action a, const char* verb, const char* from) {
+    return [=](const Request& q, Response& r) { job_action(*ctx, q, r, a, verb, from); };
+  };
   return {
       {"POST", "/v1/jobs", "/v1/jobs", [ctx](const Request& q, Response& r) { post_job(*ctx, q, r); }},
       {"GET", "/v1/jobs", "/v1/jobs", [ctx](const Request& q, Response& r) { list_jobs(*ctx, q, r); }},
       {"GET", "/v1/jobs/{id}", job,
        [ctx](const Request& q, Response& r) {
-         if (auto j = find_job(*ctx, q, r)) send_json(r, 200, status_of(*ctx, *j));
+         if (auto j = find_job(*ctx, q, r)) {
+           set_retry_after(r, *j);
+           send_json(r, 200, status_of(*ctx, *j));
+         }
        }},
+      {"PATCH", "/v1/jobs/{id}", job, [ctx](const Request& q, Response& r) { patch_job(*ctx, q, r); }},
       {"DELETE", "/v1/jobs/{id}", job,
        [ctx](const Request& q, Response& r) {
-         const std::string id = q.matches[1];
-         if (!is_valid_job_id(id) || !ctx->scheduler.remove(id)) return job_not_found(r);
+         auto j = find_job(*ctx, q, r);
+         if (!j) return;
+         if (!ctx->scheduler.remove(j->id)) return job_not_found(r);
+         ctx->events.forget(j->id);
          r.status = 204;
        }},
       {"POST", "/v1/jobs/{id}/cancel", job + "/cancel",
-       [ctx](const Request& q, Response& r) { cancel_job(*ctx, q, r); }},
+       action(&Scheduler::cancel, "cancel", "queued, running or paused can be cancelled")},
+      {"POST", "/v1/jobs/{id}/pause", job + "/pause",
+       action(&Scheduler::pause, "pause", "queued or running can be paused")},
+      {"POST", "/v1/jobs/{id}/resume", job + "/resume",
+       action(&Scheduler::resume, "resume", "paused can be resumed")},
+      {"POST", "/v1/jobs/{id}/requeue", job + "/requeue",
+       action(&Scheduler::requeue, "requeue", "failed or cancelled can be requeued")},
+      {"GET", "/v1/jobs/{id}/events", job + "/events",
+       [ctx](const Request& q, Response& r) {
+         if (auto j = find_job(*ctx, q, r)) stream_events(*ctx, q, r, j);
+       }},
       {"GET", "/v1/jobs/{id}/preview.png", job + "/preview\\.png",
        [ctx](const Request& q, Response& r) { get_preview(*ctx, q, r); }},
       {"GET", "/v1/jobs/{id}/result.png", job + "/result\\.png",
        [ctx](const Request& q, Response& r) { get_result(*ctx, JobFile::kResultPng, q, r); }},
       {"GET", "/v1/jobs/{id}/result.exr", job + "/result\\.exr",
        [ctx](const Request& q, Response& r) { get_result(*ctx, JobFile::kResultExr, q, r); }},
+      {"GET", "/v1/events", "/v1/events",
+       [ctx](const Request& q, Response& r) { stream_events(*ctx, q, r, std::nullopt); }},
+      {"POST", "/v1/assets", "/v1/assets", [ctx](const Request& q, Response& r) { post_asset(*ctx, q, r); }},
+      {"GET", "/v1/assets/{id}", asset,
+       [ctx](const Request& q, Response& r) {
+         auto info = ctx->assets.get(q.matches[1]);
+         if (!info) return send_problem(r, 404, "no such asset");
+         send_json(r, 200, info->to_json());
+       }},
+      {"DELETE", "/v1/assets/{id}", asset,
+       [ctx](const Request& q, Response& r) {
+         auto info = ctx->assets.get(q.matches[1]);
+         if (!info) return send_problem(r, 404, "no such asset");
+         const Caller caller = caller_of(*ctx, q);
+         if (!caller.admin && info->owner != caller.name)
+           return send_problem(r, 403, "only the uploader or an admin may delete an asset");
+         if (!ctx->assets.remove(info->id)) return send_problem(r, 404, "no such asset");
+         log(LogLevel::kInfo, "asset deleted", {{"asset", info->id}});
+         r.status = 204;
+       }},
       {"GET", "/v1/materials", "/v1/materials",
        [](const Request&, Response& r) {
          static const json catalog = describe_materials(contract_schemas());
@@ -214,15 +666,21 @@ std::vector<Route> routes(ApiContext* ctx) {
          // Looked up among the compiled-in files only: a name is never a filesystem path.
          const std::string name = q.matches[1];
          auto text = name.find('/') == std::string::npos ? contract_file("schemas/" + name) : std::nullopt;
-         if (!text) return send_problem(r, 404, "no schema named \"" + name + "\"");
+         if (!text) return send_problem(r, 404, "no schema named \"" + name.substr(0, 128) + "\"");
          r.set_content(std::string(*text), "application/schema+json");
        }},
       {"GET", "/v1/openapi.json", "/v1/openapi.json",
        [](const Request&, Response& r) { r.set_content(std::string(openapi_json()), "application/json"); }},
-      {"GET", "/livez", "/livez",
-       [](const Request&, Response& r) {
-         send_json(r, 200, {{"status", "ok"}});
+      {"GET", "/metrics", "/metrics",
+       [ctx](const Request&, Response& r) {
+         Metrics::Gauges g;
+         g.jobs = ctx->store.count_by_state();
+         g.render_threads = ctx->pool ? ctx->pool->size() : 0;
+         g.render_threads_busy = ctx->pool ? ctx->pool->busy() : 0;
+         g.event_watchers = ctx->events.watchers();
+         r.set_content(ctx->metrics.render(g), "text/plain; version=0.0.4; charset=utf-8");
        }},
+      {"GET", "/livez", "/livez", [](const Request&, Response& r) { send_json(r, 200, {{"status", "ok"}}); }},
       {"GET", "/readyz", "/readyz",
        [ctx](const Request&, Response& r) {
          if (ctx->scheduler.accepting()) return send_json(r, 200, {{"status", "ready"}});
@@ -234,33 +692,76 @@ std::vector<Route> routes(ApiContext* ctx) {
          if (!page) return send_problem(r, 404, "no web client in this build");
          r.set_content(std::string(*page), "text/html; charset=utf-8");
        }},
+      {"GET", "/{file}", kWebFile,
+       [](const Request& q, Response& r) {
+         // The web client's other files (scripts, styles), compiled in: a name is never a filesystem path.
+         const std::string name = q.matches[1];
+         auto file = web_file(name);
+         if (!file) return send_problem(r, 404, "no web client file named \"" + name + "\"");
+         r.set_content(std::string(*file), web_media_type(name));
+       }},
   };
+}
+
+struct CompiledRoute {
+  std::string method, openapi_path;
+  std::regex pattern;
+};
+
+const std::vector<CompiledRoute>& compiled_routes() {
+  static const std::vector<CompiledRoute> list = [] {
+    std::vector<CompiledRoute> out;
+    for (const Route& r : routes(nullptr)) out.push_back({r.method, r.openapi_path, std::regex(r.pattern)});
+    return out;
+  }();
+  return list;
+}
+
+// The route pattern a request matched (for metrics labels: never the path itself).
+std::string route_label(const Request& req) {
+  std::string other;
+  for (const CompiledRoute& r : compiled_routes()) {
+    if (!std::regex_match(req.path, r.pattern)) continue;
+    if (r.method == req.method) return r.openapi_path;
+    other = r.openapi_path;
+  }
+  return other.empty() ? "unmatched" : other;
+}
+
+// Paths anyone may fetch, tokens or not: health, metrics, the web client.
+bool is_public(const Request& req) {
+  if (req.path == "/livez" || req.path == "/readyz" || req.path == "/metrics") return true;
+  static const std::regex web(kWebFile);
+  return req.method == "GET" && (req.path == "/" || std::regex_match(req.path, web));
 }
 
 // cpp-httplib answers some errors itself (no route: 404; body over the limit: 413; unreadable request: 400) with
 // an empty body; they become problem+json here. A route that exists for another method is 405 with Allow.
 httplib::Server::HandlerResponse on_error(const Request& req, Response& res) {
-  if (!res.body.empty() || res.content_length_ > 0) return httplib::Server::HandlerResponse::Unhandled;
+  if (!res.body.empty() || res.content_length_ > 0 || res.status == 304)
+    return httplib::Server::HandlerResponse::Unhandled;
   if (res.status == 404) {
     std::string allow;
-    for (const Route& r : routes(nullptr)) {
-      if (r.method != req.method && std::regex_match(req.path, std::regex(r.pattern))) {
+    for (const CompiledRoute& r : compiled_routes()) {
+      if (r.method != req.method && std::regex_match(req.path, r.pattern)) {
         if (allow.find(r.method) != std::string::npos) continue;
         allow += (allow.empty() ? "" : ", ") + r.method;
       }
     }
     if (!allow.empty()) {
       res.set_header("Allow", allow);
-      send_problem(res, 405, req.method + " is not allowed on " + req.path + "; allowed: " + allow);
+      send_problem(res, 405, req.method + " is not allowed on " + req.path.substr(0, 200) + "; allowed: " + allow);
     } else {
-      send_problem(res, 404, "no route for " + req.method + " " + req.path);
+      send_problem(res, 404, "no route for " + req.method.substr(0, 16) + " " + req.path.substr(0, 200));
     }
   } else if (res.status == 413) {
     send_problem(res, 413, "the request body exceeds the configured limit (--max-body-bytes)");
   } else if (res.status == 414) {
     send_problem(res, 414, "the request URI is too long");
-  } else {
+  } else if (res.status >= 400) {
     send_problem(res, res.status, "the request could not be handled");
+  } else {
+    return httplib::Server::HandlerResponse::Unhandled;
   }
   return httplib::Server::HandlerResponse::Handled;
 }
@@ -273,6 +774,22 @@ std::vector<RouteInfo> api_routes() {
   return out;
 }
 
+std::function<std::filesystem::path(const std::string&, const std::string&)> asset_resolver(const AssetStore& assets) {
+  return [&assets](const std::string& ref, const std::string& pointer) -> std::filesystem::path {
+    const bool map = pointer.size() >= 4 && pointer.compare(pointer.size() - 4, 4, "/map") == 0;
+    const std::string kind = map ? "environment" : "gltf";
+    if (!is_asset_id(ref))
+      throw SceneError(pointer, "must be an asset id (64 hex digits) from POST /v1/assets");
+    auto path = assets.main_file(ref, kind);
+    if (!path) {
+      auto info = assets.get(ref);
+      throw SceneError(pointer, info ? "asset " + ref + " is a " + info->kind + " asset, not a " + kind + " asset"
+                                     : "no asset " + ref + " (upload it with POST /v1/assets)");
+    }
+    return *path;
+  };
+}
+
 void install_api(httplib::Server& server, ApiContext& ctx) {
   auto posts = std::make_shared<std::vector<std::pair<std::regex, Handler>>>();
   for (Route& r : routes(&ctx)) {
@@ -280,13 +797,66 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
       server.Get(r.pattern, r.handler);
     else if (r.method == "POST")
       server.Post(r.pattern, r.handler);
+    else if (r.method == "PATCH")
+      server.Patch(r.pattern, r.handler);
     else if (r.method == "DELETE")
       server.Delete(r.pattern, r.handler);
     if (r.method == "POST") posts->emplace_back(std::regex(r.pattern), r.handler);
   }
-  // A request with neither Content-Length nor Transfer-Encoding has an empty body (RFC 9112, 6.3), but
-  // cpp-httplib 0.11 answers such a POST (`curl -X POST .../cancel`) with 400. Those are routed here instead.
-  server.set_pre_routing_handler([posts](const Request& req, Response& res) {
+
+  SchedulerHooks hooks;
+  ApiContext* c = &ctx;
+  hooks.state_changed = [c](const std::string& id) { publish_state(*c, id); };
+  hooks.progress = [c](const std::string& id, const JobProgress& p) {
+    auto job = c->store.get(id);
+    if (!job) return;
+    json status = job_status_json(*job, p);
+    c->events.publish(id, job->owner, "progress", json{{"id", id}, {"progress", status["progress"]}}.dump());
+  };
+  hooks.preview = [c](const std::string& id, uint32_t pass) {
+    auto job = c->store.get(id);
+    if (!job) return;
+    c->events.publish(id, job->owner, "preview",
+                      json{{"id", id},
+                           {"pass", pass},
+                           {"url", "/v1/jobs/" + id + "/preview.png?pass=" + std::to_string(pass)}}
+                          .dump());
+  };
+  hooks.samples_rendered = [c](uint64_t n) { c->metrics.add_samples(n); };
+  hooks.job_ended = [c](double s) { c->metrics.observe_job_duration(s); };
+  ctx.scheduler.set_hooks(std::move(hooks));
+
+  server.set_pre_routing_handler([posts, c](const Request& req, Response& res) {
+    // CORS: only for the configured origins.
+    const std::string origin = req.get_header_value("Origin");
+    const bool cors_ok =
+        !origin.empty() && std::any_of(c->cors_origins.begin(), c->cors_origins.end(),
+                                       [&](const std::string& o) { return o == origin || o == "*"; });
+    if (cors_ok) {
+      res.set_header("Access-Control-Allow-Origin", origin);
+      res.set_header("Vary", "Origin");
+      res.set_header("Access-Control-Expose-Headers", "Location, ETag, Retry-After, Allow");
+    }
+    if (req.method == "OPTIONS") {
+      if (!cors_ok) {
+        send_problem(res, 403, "cross-origin requests from \"" + origin.substr(0, 200) +
+                                   "\" are not allowed (--cors-origin)");
+        return httplib::Server::HandlerResponse::Handled;
+      }
+      res.set_header("Access-Control-Allow-Methods", "GET, POST, PATCH, DELETE, OPTIONS");
+      res.set_header("Access-Control-Allow-Headers",
+                     "Authorization, Content-Type, Idempotency-Key, If-None-Match, Last-Event-ID");
+      res.set_header("Access-Control-Max-Age", "600");
+      res.status = 204;
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    if (c->auth.enabled() && !is_public(req) && !caller_of(*c, req).authenticated) {
+      res.set_header("WWW-Authenticate", "Bearer realm=\"tessera\"");
+      send_problem(res, 401, "a valid bearer token is required (Authorization: Bearer <token>)");
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    // A request with neither Content-Length nor Transfer-Encoding has an empty body (RFC 9112, 6.3), but
+    // cpp-httplib 0.11 answers such a POST (`curl -X POST .../cancel`) with 400. Those are routed here instead.
     if (req.method != "POST" || req.has_header("Content-Length") || req.has_header("Transfer-Encoding"))
       return httplib::Server::HandlerResponse::Unhandled;
     for (const auto& [pattern, handler] : *posts) {
@@ -312,8 +882,12 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
     res.headers.clear();
     send_problem(res, 500, "internal error; the daemon's log has the details");
   });
-  server.set_logger([](const Request& req, const Response& res) {
-    log(LogLevel::kDebug, "request", {{"method", req.method}, {"path", req.path}, {"status", res.status}});
+  server.set_logger([c](const Request& req, const Response& res) {
+    const std::string route = route_label(req);
+    c->metrics.count_request(route, res.status);
+    // The path, never the query: an access_token may be in it.
+    log(LogLevel::kDebug, "request",
+        {{"method", req.method}, {"path", req.path}, {"route", route}, {"status", res.status}});
   });
 }
 

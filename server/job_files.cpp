@@ -38,11 +38,14 @@ const char* job_file_name(JobFile f) {
       return "result.png";
     case JobFile::kResultExr:
       return "result.exr";
+    case JobFile::kCheckpoint:
+      return "checkpoint.bin";
   }
   return "preview.png";
 }
 
 const char* job_file_media_type(JobFile f) {
+  if (f == JobFile::kCheckpoint) return "application/octet-stream";
   return f == JobFile::kResultExr ? "image/x-exr" : "image/png";
 }
 
@@ -99,6 +102,15 @@ std::optional<std::string> JobFiles::read(const std::string& id, JobFile f) cons
 void JobFiles::remove(const std::string& id) const {
   std::error_code ignored;
   fs::remove_all(dir(id), ignored);
+}
+
+}  // namespace tessera::server
+
+namespace tessera::server {
+
+void JobFiles::remove(const std::string& id, JobFile f) const {
+  std::error_code ignored;
+  fs::remove(path(id, f), ignored);
 }
 
 }  // namespace tessera::server

@@ -1,4 +1,4 @@
-// The files of jobs under the data directory: <data>/jobs/<id>/{preview.png,result.png,result.exr}. Paths are only
+// The files of jobs under the data directory: <data>/jobs/<id>/{preview.png,result.png,result.exr,checkpoint.bin}. Paths are only
 // ever built from validated job ids and fixed names, so nothing a client sends can reach outside the directory.
 // Every file is written beside its final name and renamed over it, so a reader (or a crash) never sees half a file.
 #pragma once
@@ -12,7 +12,7 @@
 
 namespace tessera::server {
 
-enum class JobFile { kPreviewPng, kResultPng, kResultExr };
+enum class JobFile { kPreviewPng, kResultPng, kResultExr, kCheckpoint };
 const char* job_file_name(JobFile f);
 const char* job_file_media_type(JobFile f);
 
@@ -33,6 +33,7 @@ class JobFiles {
   // The file's bytes, or nothing when it does not exist.
   std::optional<std::string> read(const std::string& id, JobFile f) const;
   void remove(const std::string& id) const;
+  void remove(const std::string& id, JobFile f) const;
 
  private:
   std::filesystem::path root_;

@@ -15,14 +15,18 @@ json text_or_null(const std::string& s) {
 }
 }  // namespace
 
-json job_status_json(const JobRecord& job, const std::optional<JobProgress>& live) {
+json job_status_json(const JobRecord& job, const std::optional<JobProgress>& live, std::optional<int> queue_position) {
   const JobProgress& p = (live && job.state == JobState::kRunning) ? *live : job.progress;
   double fraction = p.samples_total > 0 ? static_cast<double>(p.samples_done) / p.samples_total : 0.0;
   // A render ended by its time limit or noise target is complete with fewer samples than its budget.
   if (job.state == JobState::kSucceeded) fraction = 1.0;
   const std::string self = "/v1/jobs/" + job.id;
   json links = {{"self", self}};
+  links["events"] = self + "/events";
   if (!is_terminal(job.state)) links["cancel"] = self + "/cancel";
+  if (job.state == JobState::kQueued || job.state == JobState::kRunning) links["pause"] = self + "/pause";
+  if (job.state == JobState::kPaused) links["resume"] = self + "/resume";
+  if (job.state == JobState::kFailed || job.state == JobState::kCancelled) links["requeue"] = self + "/requeue";
   if (job.state == JobState::kRunning || p.passes > 0) links["preview"] = self + "/preview.png";
   json outputs = json::parse(job.outputs, nullptr, false);
   if (!outputs.is_array()) outputs = json::array();
@@ -34,11 +38,20 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
   }
   json render = json::parse(job.settings, nullptr, false);
   if (!render.is_object()) render = json::object();
+  json warnings = json::parse(job.warnings.empty() ? "[]" : job.warnings, nullptr, false);
+  if (!warnings.is_array()) warnings = json::array();
+  // "stopped" is how a render ends when the daemon stops or the job is paused; such a job is not finished and shows
+  // no stop reason.
+  const std::string stop_reason = job.stop_reason == "stopped" ? "" : job.stop_reason;
   return {
       {"id", job.id},
       {"kind", job.kind},
       {"state", job_state_name(job.state)},
       {"priority", job.priority},
+      {"queue_position",
+       job.state == JobState::kQueued && queue_position ? json(*queue_position) : json(nullptr)},
+      {"owner", text_or_null(job.owner)},
+      {"warnings", warnings},
       {"created_at", rfc3339_ms(job.created_at_ms)},
       {"started_at", time_or_null(job.started_at_ms)},
       {"finished_at", time_or_null(job.finished_at_ms)},
@@ -50,7 +63,7 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
         {"elapsed_s", p.elapsed_s},
         {"eta_s", p.eta_s ? json(*p.eta_s) : json(nullptr)},
         {"samples_per_s", p.samples_per_s}}},
-      {"stop_reason", text_or_null(job.stop_reason)},
+      {"stop_reason", text_or_null(stop_reason)},
       {"error", text_or_null(job.error)},
       {"outputs", outputs},
       {"render", render},

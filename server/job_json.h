@@ -9,7 +9,9 @@
 
 namespace tessera::server {
 
-// `live` (from the scheduler) replaces the stored progress of a running job when given.
-nlohmann::json job_status_json(const JobRecord& job, const std::optional<JobProgress>& live = std::nullopt);
+// `live` (from the scheduler) replaces the stored progress of a running job when given; `queue_position` is shown
+// while the job is queued.
+nlohmann::json job_status_json(const JobRecord& job, const std::optional<JobProgress>& live = std::nullopt,
+                               std::optional<int> queue_position = std::nullopt);
 
 }  // namespace tessera::server

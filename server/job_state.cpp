@@ -8,6 +8,8 @@ const char* job_state_name(JobState s) {
       return "queued";
     case JobState::kRunning:
       return "running";
+    case JobState::kPaused:
+      return "paused";
     case JobState::kSucceeded:
       return "succeeded";
     case JobState::kFailed:
@@ -19,8 +21,7 @@ const char* job_state_name(JobState s) {
 }
 
 std::optional<JobState> parse_job_state(std::string_view name) {
-  for (JobState s :
-       {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed, JobState::kCancelled})
+  for (JobState s : kAllJobStates)
     if (name == job_state_name(s)) return s;
   return std::nullopt;
 }
@@ -32,13 +33,19 @@ bool is_terminal(JobState s) {
 bool can_transition(JobState from, JobState to) {
   switch (from) {
     case JobState::kQueued:
-      return to == JobState::kRunning || to == JobState::kCancelled;
+      return to == JobState::kRunning || to == JobState::kPaused || to == JobState::kCancelled;
     case JobState::kRunning:
-      return to == JobState::kQueued || to == JobState::kSucceeded || to == JobState::kFailed ||
-             to == JobState::kCancelled;
-    default:
-      return false;  // terminal
+      return to == JobState::kQueued || to == JobState::kPaused || to == JobState::kSucceeded ||
+             to == JobState::kFailed || to == JobState::kCancelled;
+    case JobState::kPaused:
+      return to == JobState::kQueued || to == JobState::kCancelled;
+    case JobState::kFailed:
+    case JobState::kCancelled:
+      return to == JobState::kQueued;
+    case JobState::kSucceeded:
+      return false;
   }
+  return false;
 }
 
 }  // namespace tessera::server

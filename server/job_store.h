@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -22,6 +23,7 @@ struct JobProgress {
 };
 
 struct JobRecord {
+  int64_t seq = 0;  // submission order, set by the store; the cursor of paginated lists
   std::string id;
   std::string kind;  // "scene" | "material"
   JobState state = JobState::kQueued;
@@ -35,10 +37,17 @@ struct JobRecord {
   JobProgress progress;
   std::string stop_reason;  // empty until the render ends
   std::string error;        // empty unless failed
+  std::string owner;        // the token name of who submitted it; empty without tokens
+  std::string warnings;     // JSON array of strings (unsupported optional glTF extensions, ...)
+  std::string idempotency_key;  // the client's Idempotency-Key, empty if none
+  std::string request_hash;     // sha256 of the request the key came with
 };
 
 struct JobFilter {
   std::optional<JobState> state;
+  std::vector<JobState> states;        // any of these (with `state`, its union)
+  std::optional<std::string> owner;    // only this owner's jobs
+  std::optional<int64_t> before_seq;   // only jobs submitted before this one (cursor)
   int limit = 100;
 };
 
@@ -52,12 +61,22 @@ class JobStore {
   virtual std::optional<JobRecord> claim_next(int64_t now_ms) = 0;
   // Records the progress of a running job.
   virtual void update_progress(const std::string& id, const JobProgress& progress) = 0;
-  // Moves a job to `to` if can_transition() allows it from its current state; false otherwise (or unknown id).
-  // A terminal state stamps finished_at; back to queued clears the run's progress.
+  // Moves a job to `to` if can_transition() allows it from its current state (and that state is `only_from`, when
+  // given); false otherwise (or unknown id). A terminal state stamps finished_at; back to queued clears the run's
+  // progress, its end and its error.
   virtual bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason = "",
-                          const std::string& error = "") = 0;
+                          const std::string& error = "", std::optional<JobState> only_from = std::nullopt) = 0;
+  // Changes the priority of a job that has not ended; false for an unknown or ended job.
+  virtual bool set_priority(const std::string& id, int priority) = 0;
+  virtual void set_warnings(const std::string& id, const std::string& warnings_json) = 0;
+  // 1-based place of a queued job in the claim order; nothing when it is not queued.
+  virtual std::optional<int> queue_position(const std::string& id) = 0;
+  // The job created with this owner and Idempotency-Key, if any.
+  virtual std::optional<JobRecord> find_by_idempotency_key(const std::string& owner, const std::string& key) = 0;
+  // Jobs per state; with `owner`, only theirs.
+  virtual std::map<JobState, int> count_by_state(const std::optional<std::string>& owner = std::nullopt) = 0;
   virtual std::optional<JobRecord> get(const std::string& id, bool with_document = false) = 0;
-  // Newest first.
+  // Newest first (by seq).
   virtual std::vector<JobRecord> list(const JobFilter& filter) = 0;
   virtual bool remove(const std::string& id) = 0;
   // Puts jobs left running by a previous process back in the queue; returns how many.

@@ -7,13 +7,18 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <memory>
 #include <thread>
 
 #include "renderer/thread_pool.h"
+#include "server/assets.h"
+#include "server/auth.h"
 #include "server/config.h"
+#include "server/events.h"
 #include "server/http_api.h"
 #include "server/job_files.h"
 #include "server/log.h"
+#include "server/metrics.h"
 #include "server/scheduler.h"
 #include "server/sqlite_job_store.h"
 
@@ -22,31 +27,51 @@ namespace {
 using namespace tessera::server;
 
 int run(const Config& config) {
-  // SIGINT and SIGTERM are taken by one thread with sigwait(); every thread created from here on inherits the mask,
-  // so no render or HTTP thread is interrupted by them.
-  sigset_t stop_signals;
-  sigemptyset(&stop_signals);
-  sigaddset(&stop_signals, SIGINT);
-  sigaddset(&stop_signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+  // SIGINT, SIGTERM and SIGHUP are taken by one thread with sigwait(); every thread created from here on inherits
+  // the mask, so no render or HTTP thread is interrupted by them.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGHUP);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   signal(SIGPIPE, SIG_IGN);  // a client that hangs up mid-download is not a reason to die
+
+  std::unique_ptr<Auth> auth;
+  try {
+    auth = config.tokens_file.empty() ? std::make_unique<Auth>() : std::make_unique<Auth>(config.tokens_file);
+  } catch (const std::exception& e) {
+    log(LogLevel::kError, "cannot read the tokens", {{"error", e.what()}});
+    return 2;
+  }
 
   const std::filesystem::path data_dir(config.data_dir);
   std::filesystem::create_directories(data_dir);
   SqliteJobStore store(data_dir / "jobs.db");
   JobFiles files(data_dir);
+  AssetStore assets(data_dir);
   tessera::ThreadPool pool(config.threads);
+  EventHub events;
+  Metrics metrics;
 
   SchedulerOptions scheduler_options;
   scheduler_options.max_jobs = config.max_jobs;
   scheduler_options.limits.max_width = config.max_width;
   scheduler_options.limits.max_height = config.max_height;
   scheduler_options.limits.max_spp = config.max_spp;
+  scheduler_options.resolve_asset = asset_resolver(assets);
   Scheduler scheduler(store, files, pool, scheduler_options);
 
-  ApiContext ctx{store, files, scheduler, {}, config.max_body_bytes};
-  ctx.limits.render = scheduler_options.limits;
+  SubmissionLimits limits;
+  limits.render = scheduler_options.limits;
+  limits.max_work = config.max_work;
+  limits.resolve_asset = scheduler_options.resolve_asset;
+  ApiContext ctx{store,  files, scheduler, assets, events, *auth, metrics, &pool, limits, config.max_body_bytes,
+                 config.max_user_priority, config.max_queued_per_user, config.cors_origins, config.keepalive_s};
   httplib::Server http;
+  // Every open event stream and keep-alive connection holds one of these threads.
+  const int http_threads = config.http_threads;
+  http.new_task_queue = [http_threads] { return new httplib::ThreadPool(static_cast<size_t>(http_threads)); };
   install_api(http, ctx);
 
   int port = config.port;
@@ -64,14 +89,28 @@ int run(const Config& config) {
 
   std::atomic<bool> listening_done{false};
   std::thread signal_thread([&] {
-    int sig = 0;
-    sigwait(&stop_signals, &sig);
-    if (listening_done.load()) return;  // woken by main at exit
-    log(LogLevel::kInfo, "stopping", {{"signal", sig == SIGINT ? "SIGINT" : "SIGTERM"}});
-    // stop() is a no-op until the listen loop runs; repeat until it has taken effect.
-    while (!listening_done.load()) {
-      http.stop();
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    for (;;) {
+      int sig = 0;
+      sigwait(&signals, &sig);
+      if (listening_done.load()) return;  // woken by main at exit
+      if (sig == SIGHUP) {
+        const std::string error = auth->reload();
+        if (error.empty())
+          log(LogLevel::kInfo, "tokens re-read", {{"enabled", auth->enabled()}});
+        else
+          log(LogLevel::kError, "cannot re-read the tokens; keeping the previous ones", {{"error", error}});
+        continue;
+      }
+      log(LogLevel::kInfo, "stopping: no new jobs; running ones end their pass and checkpoint",
+          {{"signal", sig == SIGINT ? "SIGINT" : "SIGTERM"}, {"grace_s", config.grace_s}});
+      scheduler.begin_drain();
+      events.close();
+      // stop() is a no-op until the listen loop runs; repeat until it has taken effect.
+      while (!listening_done.load()) {
+        http.stop();
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      }
+      return;
     }
   });
 
@@ -83,15 +122,22 @@ int run(const Config& config) {
        {"port", port},
        {"data_dir", std::filesystem::absolute(data_dir).string()},
        {"threads", pool.size()},
-       {"max_jobs", config.max_jobs}});
+       {"max_jobs", config.max_jobs},
+       {"http_threads", config.http_threads},
+       {"tokens", auth->enabled()},
+       {"config", config.config_file}});
 
+  const auto started_stop = std::chrono::steady_clock::now();
   const bool clean = http.listen_after_bind();
+  (void)started_stop;
   listening_done.store(true);
   pthread_kill(signal_thread.native_handle(), SIGTERM);  // releases sigwait if no signal came
   signal_thread.join();
 
-  // Running renders are cancelled and their jobs go back to the queue for the next start.
-  scheduler.shutdown();
+  // Running renders end their pass (and checkpoint) within the grace time, else are cancelled; their jobs go back
+  // to the queue and resume from the checkpoints on the next start.
+  scheduler.shutdown(config.grace_s);
+  events.close();
   log(LogLevel::kInfo, "stopped");
   return clean ? 0 : 1;
 }

@@ -4,8 +4,10 @@
 
 #include "renderer/image_io.h"
 #include "renderer/job.h"
+#include "renderer/scene.h"
 #include "renderer/scene_error.h"
 #include "renderer/session.h"
+#include "server/checkpoint.h"
 #include "server/log.h"
 #include "server/time_format.h"
 
@@ -19,6 +21,7 @@ class Scheduler::RenderSlot {
   std::string id;
   RenderSession* session = nullptr;  // set while the render runs
   bool cancel_requested = false;     // by a client: the job ends cancelled
+  bool pause_requested = false;      // by a client: the job ends its pass and is paused
   bool delete_requested = false;     // by a client: the job is gone, its files go when the render stops
   std::optional<JobProgress> progress;
   bool done = false;
@@ -41,10 +44,19 @@ JobProgress to_job_progress(const RenderProgress& p) {
 }  // namespace
 
 Scheduler::Scheduler(JobStore& store, const JobFiles& files, ThreadPool& pool, SchedulerOptions options)
-    : store_(store), files_(files), pool_(pool), options_(options) {}
+    : store_(store), files_(files), pool_(pool), options_(std::move(options)) {}
 
 Scheduler::~Scheduler() {
   shutdown();
+}
+
+void Scheduler::set_hooks(SchedulerHooks hooks) {
+  std::lock_guard lock(mutex_);
+  hooks_ = std::move(hooks);
+}
+
+void Scheduler::notify_state(const std::string& id) {
+  if (hooks_.state_changed) hooks_.state_changed(id);
 }
 
 void Scheduler::start() {
@@ -52,7 +64,8 @@ void Scheduler::start() {
   if (started_) return;
   started_ = true;
   if (int n = store_.requeue_running(); n > 0)
-    log(LogLevel::kInfo, "requeued jobs left running by a previous process", {{"count", n}});
+    log(LogLevel::kInfo, "requeued jobs left running by a previous process; they resume from their checkpoints",
+        {{"count", n}});
   dispatcher_ = std::thread([this] { dispatch_loop(); });
 }
 
@@ -65,11 +78,38 @@ bool Scheduler::accepting() const {
   return started_ && !stopping_;
 }
 
-void Scheduler::shutdown() {
+int Scheduler::running_count() const {
+  std::lock_guard lock(mutex_);
+  return static_cast<int>(running_.size());
+}
+
+void Scheduler::begin_drain() {
   {
     std::lock_guard lock(mutex_);
-    if (!started_ || stopping_) return;
+    if (!started_) return;
     stopping_ = true;
+    for (auto& [id, slot] : running_)
+      if (slot->session) slot->session->stop();
+  }
+  cv_.notify_all();
+}
+
+void Scheduler::shutdown(double grace_s) {
+  {
+    std::lock_guard lock(mutex_);
+    if (!started_ || !dispatcher_.joinable()) return;
+  }
+  begin_drain();
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(grace_s);
+  {
+    std::unique_lock lock(mutex_);
+    while (!running_.empty() && std::chrono::steady_clock::now() < deadline) {
+      bool all_done = true;
+      for (auto& [id, slot] : running_) all_done = all_done && slot->done;
+      if (all_done) break;
+      cv_.wait_for(lock, std::chrono::milliseconds(20));
+    }
+    // Out of time: abandon the passes under way; the last checkpoints stay.
     for (auto& [id, slot] : running_)
       if (slot->session) slot->session->cancel();
   }
@@ -112,65 +152,105 @@ void Scheduler::dispatch_loop() {
     }
     cv_.wait_for(lock, options_.poll_interval);
   }
-  // Shutting down: every render has been told to cancel; wait for them to put their jobs back.
+  // Shutting down: every render has been told to stop; wait for them to put their jobs back.
   while (!running_.empty()) {
-    cv_.wait_for(lock, std::chrono::milliseconds(50));
+    cv_.wait_for(lock, std::chrono::milliseconds(20));
     reap_finished_locked(lock);
   }
 }
 
 void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record) {
   const std::string& id = record.id;
-  log(LogLevel::kInfo, "job started", {{"job", id}});
+  notify_state(id);
   auto detach = [&] {
     std::lock_guard lock(mutex_);
     slot->session = nullptr;
   };
+  double render_s = 0;
+  bool ended = false;  // reached a terminal state
   try {
     const json doc = json::parse(record.document);
     JobLoadOptions options;
     options.limits = options_.limits;
+    options.scene.resolve_asset = options_.resolve_asset;
     const RenderJob job = load_job(doc, options);
+    if (!job.scene->warnings.empty()) store_.set_warnings(id, json(job.scene->warnings).dump());
     RenderSession session(job.scene, job.settings, pool_);
+    const uint64_t settings_hash = fnv1a64(record.settings);
+    if (auto bytes = files_.read(id, JobFile::kCheckpoint)) {
+      if (auto cp = decode_checkpoint(*bytes, job.settings.width, job.settings.height, settings_hash)) {
+        log(LogLevel::kInfo, "job resumed from its checkpoint",
+            {{"job", id}, {"samples_done", cp->film.samples()}, {"passes", cp->passes}});
+        session.restore(std::move(cp->film), cp->passes, cp->elapsed_s);
+      } else {
+        log(LogLevel::kWarn, "checkpoint unusable; the render starts over", {{"job", id}});
+      }
+    }
+    log(LogLevel::kInfo, "job started", {{"job", id}, {"samples_done", session.progress().samples_done}});
     {
       std::lock_guard lock(mutex_);
       slot->session = &session;
-      if (slot->cancel_requested || slot->delete_requested || stopping_) session.cancel();
+      if (slot->cancel_requested || slot->delete_requested) session.cancel();
+      if (slot->pause_requested || stopping_) session.stop();
     }
+    uint32_t samples_before = session.progress().samples_done;
+    const uint64_t pixels = static_cast<uint64_t>(job.settings.width) * static_cast<uint64_t>(job.settings.height);
     const StopReason reason = session.run([&](const RenderProgress& p, const Film& film) {
       const JobProgress jp = to_job_progress(p);
-      {
-        std::lock_guard lock(mutex_);
-        slot->progress = jp;
-      }
+      if (hooks_.samples_rendered) hooks_.samples_rendered(pixels * (p.samples_done - samples_before));
+      samples_before = p.samples_done;
       try {
-        store_.update_progress(id, jp);
+        // Files first, then the news: once the progress says N samples, a crash resumes from N and the preview of
+        // that pass can be fetched.
+        files_.write(id, JobFile::kCheckpoint, encode_checkpoint(film, p.pass, p.elapsed_s, settings_hash));
         files_.write(id, JobFile::kPreviewPng, [&] {
           std::vector<uint8_t> png = encode_png(film.resolve(), film.width(), film.height(), job.settings.display);
           return std::string(png.begin(), png.end());
         }());
+        {
+          std::lock_guard lock(mutex_);
+          slot->progress = jp;
+        }
+        store_.update_progress(id, jp);
+        if (hooks_.progress) hooks_.progress(id, jp);
+        if (hooks_.preview) hooks_.preview(id, p.pass);
       } catch (const std::exception& e) {
-        // A missed preview or progress row is not worth the render.
+        {
+          std::lock_guard lock(mutex_);
+          slot->progress = jp;
+        }
+        // A missed checkpoint or preview is not worth the render.
         log(LogLevel::kWarn, "cannot publish progress", {{"job", id}, {"error", e.what()}});
       }
     });
     detach();
+    render_s = session.progress().elapsed_s;
 
-    bool cancelled_by_client, deleted, stopping;
+    bool cancelled_by_client, paused, deleted, stopping;
     {
       std::lock_guard lock(mutex_);
       cancelled_by_client = slot->cancel_requested;
+      paused = slot->pause_requested;
       deleted = slot->delete_requested;
       stopping = stopping_;
     }
+    const bool interrupted = reason == StopReason::kStopped || reason == StopReason::kCancelled;
     if (deleted) {
       log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
-    } else if (reason == StopReason::kCancelled && stopping && !cancelled_by_client) {
-      store_.transition(id, JobState::kQueued, now_ms());
-      log(LogLevel::kInfo, "job put back in the queue for the next start", {{"job", id}});
-    } else if (reason == StopReason::kCancelled) {
-      store_.transition(id, JobState::kCancelled, now_ms(), stop_reason_name(reason));
+    } else if (interrupted && cancelled_by_client) {
+      store_.transition(id, JobState::kCancelled, now_ms(), "cancelled");
+      files_.remove(id, JobFile::kCheckpoint);
+      ended = true;
       log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+    } else if (interrupted && paused) {
+      store_.transition(id, JobState::kPaused, now_ms());
+      log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", session.progress().samples_done}});
+    } else if (interrupted) {
+      // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
+      (void)stopping;
+      store_.transition(id, JobState::kQueued, now_ms());
+      log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
+          {{"job", id}, {"samples_done", session.progress().samples_done}});
     } else {
       const Film& film = session.film();
       const std::vector<float> rgb = film.resolve();
@@ -187,6 +267,8 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       final_progress.eta_s = 0;
       store_.update_progress(id, final_progress);
       store_.transition(id, JobState::kSucceeded, now_ms(), stop_reason_name(reason));
+      files_.remove(id, JobFile::kCheckpoint);
+      ended = true;
       log(LogLevel::kInfo, "job succeeded",
           {{"job", id},
            {"elapsed_s", final_progress.elapsed_s},
@@ -200,6 +282,8 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       message = se->pointer() + ": " + message;
     try {
       store_.transition(id, JobState::kFailed, now_ms(), "", message);
+      files_.remove(id, JobFile::kCheckpoint);
+      ended = true;
     } catch (const std::exception& e2) {
       log(LogLevel::kError, "cannot record a failed job", {{"job", id}, {"error", e2.what()}});
     }
@@ -209,6 +293,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     log(LogLevel::kError, "job failed with an unknown exception", {{"job", id}});
     try {
       store_.transition(id, JobState::kFailed, now_ms(), "", "unknown error");
+      ended = true;
     } catch (...) {
     }
   }
@@ -217,7 +302,12 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     std::lock_guard lock(mutex_);
     deleted = slot->delete_requested;
   }
-  if (deleted) files_.remove(id);
+  if (deleted) {
+    files_.remove(id);
+  } else {
+    if (ended && hooks_.job_ended) hooks_.job_ended(render_s);
+    notify_state(id);
+  }
   {
     std::lock_guard lock(mutex_);
     slot->done = true;
@@ -232,19 +322,62 @@ std::optional<JobProgress> Scheduler::live_progress(const std::string& id) const
   return it->second->progress;
 }
 
-Scheduler::CancelResult Scheduler::cancel(const std::string& id) {
-  std::lock_guard lock(mutex_);
-  if (auto it = running_.find(id); it != running_.end()) {
-    it->second->cancel_requested = true;
-    if (it->second->session) it->second->session->cancel();
-    return CancelResult::kCancelling;
+Scheduler::Outcome Scheduler::cancel(const std::string& id) {
+  {
+    std::lock_guard lock(mutex_);
+    if (auto it = running_.find(id); it != running_.end() && !it->second->done) {
+      it->second->cancel_requested = true;
+      if (it->second->session) it->second->session->cancel();
+      return Outcome::kInProgress;
+    }
+    // Not rendering here, and claims happen under this lock: a queued job stays queued until we are done.
+    if (!store_.transition(id, JobState::kCancelled, now_ms(), "cancelled"))
+      return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
   }
-  // Not rendering here, and claims happen under this lock: a queued job stays queued until we are done.
-  if (store_.transition(id, JobState::kCancelled, now_ms(), "cancelled")) {
-    log(LogLevel::kInfo, "queued job cancelled", {{"job", id}});
-    return CancelResult::kCancelled;
+  files_.remove(id, JobFile::kCheckpoint);
+  log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+  notify_state(id);
+  return Outcome::kDone;
+}
+
+Scheduler::Outcome Scheduler::pause(const std::string& id) {
+  {
+    std::lock_guard lock(mutex_);
+    if (auto it = running_.find(id); it != running_.end() && !it->second->done) {
+      if (it->second->cancel_requested || it->second->delete_requested) return Outcome::kConflict;
+      it->second->pause_requested = true;
+      if (it->second->session) it->second->session->stop();
+      return Outcome::kInProgress;
+    }
+    if (!store_.transition(id, JobState::kPaused, now_ms(), "", "", JobState::kQueued))
+      return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
   }
-  return store_.get(id) ? CancelResult::kAlreadyFinished : CancelResult::kUnknown;
+  log(LogLevel::kInfo, "job paused", {{"job", id}});
+  notify_state(id);
+  return Outcome::kDone;
+}
+
+Scheduler::Outcome Scheduler::resume(const std::string& id) {
+  if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", JobState::kPaused))
+    return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
+  log(LogLevel::kInfo, "job resumed", {{"job", id}});
+  notify_state(id);
+  wake();
+  return Outcome::kDone;
+}
+
+Scheduler::Outcome Scheduler::requeue(const std::string& id) {
+  auto job = store_.get(id);
+  if (!job) return Outcome::kUnknown;
+  if (job->state != JobState::kFailed && job->state != JobState::kCancelled) return Outcome::kConflict;
+  // From scratch: nothing of the last run survives.
+  for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng, JobFile::kResultPng, JobFile::kResultExr})
+    files_.remove(id, f);
+  if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", job->state)) return Outcome::kConflict;
+  log(LogLevel::kInfo, "job requeued", {{"job", id}});
+  notify_state(id);
+  wake();
+  return Outcome::kDone;
 }
 
 bool Scheduler::remove(const std::string& id) {

@@ -1,11 +1,14 @@
 // Runs jobs: claims queued jobs from the store up to `max_jobs` at once and renders each on its own thread, every
-// render sharing the process's one ThreadPool. After each pass a render publishes its progress (in memory for
-// status requests, and to the store) and a preview PNG; at the end it writes the outputs the job asked for. A job
+// render sharing the process's one ThreadPool. After each pass a render writes its checkpoint (the film, atomically),
+// publishes its progress (in memory for status requests, and to the store) and a preview PNG; at the end it writes
+// the outputs the job asked for. A job claimed with a checkpoint (the daemon stopped or died mid-render, or it was
+// paused) resumes from it; sampling being deterministic, its image is the one an uninterrupted render gives. A job
 // that throws fails alone; the daemon stays up.
 #pragma once
 
 #include <chrono>
 #include <condition_variable>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -23,8 +26,19 @@ namespace tessera::server {
 struct SchedulerOptions {
   int max_jobs = 1;
   RenderLimits limits;
+  // Maps an asset reference of a job ("gltf", "environment.map") to its file (SceneLoadOptions::resolve_asset).
+  std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
   // How often the queue is looked at without being woken (jobs another process may have added).
   std::chrono::milliseconds poll_interval{1000};
+};
+
+// What the scheduler tells the rest of the daemon (events, metrics). Called on render threads; must not block long.
+struct SchedulerHooks {
+  std::function<void(const std::string& id)> state_changed;
+  std::function<void(const std::string& id, const JobProgress& progress)> progress;
+  std::function<void(const std::string& id, uint32_t pass)> preview;
+  std::function<void(uint64_t pixel_samples)> samples_rendered;
+  std::function<void(double render_s)> job_ended;
 };
 
 class Scheduler {
@@ -34,19 +48,32 @@ class Scheduler {
   Scheduler(const Scheduler&) = delete;
   Scheduler& operator=(const Scheduler&) = delete;
 
-  // Puts jobs a previous process left running back in the queue, then starts claiming.
+  void set_hooks(SchedulerHooks hooks);
+  // Puts jobs a previous process left running back in the queue (they resume from their checkpoints), then starts
+  // claiming.
   void start();
   // A job was queued: look at the queue now.
   void wake();
-  // Stops claiming, cancels the running renders and puts their jobs back in the queue, and waits for the threads.
-  void shutdown();
+  // Stops claiming and asks every render to end its pass (which checkpoints); returns at once.
+  void begin_drain();
+  // Stops claiming, lets running renders end their pass for up to `grace_s` seconds, then cancels the rest; their
+  // jobs go back to the queue with their checkpoints. Waits for the threads.
+  void shutdown(double grace_s = 0);
   bool accepting() const;
 
   // The progress of a job rendering here, fresher than the store's.
   std::optional<JobProgress> live_progress(const std::string& id) const;
+  int running_count() const;
 
-  enum class CancelResult { kCancelled, kCancelling, kAlreadyFinished, kUnknown };
-  CancelResult cancel(const std::string& id);
+  enum class Outcome { kDone, kInProgress, kConflict, kUnknown };
+  // queued, paused or running -> cancelled (a running render winds down within one tile's time: kInProgress).
+  Outcome cancel(const std::string& id);
+  // queued or running -> paused (a running render ends its pass and keeps its checkpoint: kInProgress).
+  Outcome pause(const std::string& id);
+  // paused -> queued.
+  Outcome resume(const std::string& id);
+  // failed or cancelled -> queued, from scratch (its checkpoint, preview and outputs are deleted).
+  Outcome requeue(const std::string& id);
   // Deletes a job and its files (cancelling its render first); false for an unknown id.
   bool remove(const std::string& id);
 
@@ -55,11 +82,13 @@ class Scheduler {
   void dispatch_loop();
   void run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record);
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
+  void notify_state(const std::string& id);
 
   JobStore& store_;
   const JobFiles& files_;
   ThreadPool& pool_;
   SchedulerOptions options_;
+  SchedulerHooks hooks_;
 
   mutable std::mutex mutex_;
   std::condition_variable cv_;

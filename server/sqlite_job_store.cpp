@@ -10,7 +10,49 @@ namespace {
 
 constexpr const char* kColumns =
     "id, kind, state, priority, created_at, started_at, finished_at, settings, outputs, passes, samples_done, "
-    "samples_total, elapsed_s, eta_s, samples_per_s, stop_reason, error";
+    "samples_total, elapsed_s, eta_s, samples_per_s, stop_reason, error, seq, owner, warnings, idempotency_key, "
+    "request_hash";
+constexpr int kDocumentColumn = 22;
+
+// The SQL list of the states `to` may be reached from, as the one state machine decides.
+std::string states_allowed_into(JobState to, std::optional<JobState> only_from) {
+  std::string out;
+  for (JobState s : kAllJobStates) {
+    if (!can_transition(s, to) || (only_from && s != *only_from)) continue;
+    if (!out.empty()) out += ",";
+    out += std::string("'") + job_state_name(s) + "'";
+  }
+  return out;
+}
+
+// The jobs table as of schema version 2 (paused state, owner, warnings, idempotency keys).
+constexpr const char* kJobsTableV2 = R"sql(
+  CREATE TABLE jobs (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT,  -- submission order: first come, first served
+    id TEXT NOT NULL UNIQUE,
+    kind TEXT NOT NULL,
+    state TEXT NOT NULL CHECK (state IN ('queued','running','paused','succeeded','failed','cancelled')),
+    priority INTEGER NOT NULL DEFAULT 0,
+    created_at INTEGER NOT NULL,
+    started_at INTEGER,
+    finished_at INTEGER,
+    document TEXT NOT NULL,
+    settings TEXT NOT NULL,
+    outputs TEXT NOT NULL,
+    passes INTEGER NOT NULL DEFAULT 0,
+    samples_done INTEGER NOT NULL DEFAULT 0,
+    samples_total INTEGER NOT NULL DEFAULT 0,
+    elapsed_s REAL NOT NULL DEFAULT 0,
+    eta_s REAL,
+    samples_per_s REAL NOT NULL DEFAULT 0,
+    stop_reason TEXT,
+    error TEXT,
+    owner TEXT NOT NULL DEFAULT '',
+    warnings TEXT NOT NULL DEFAULT '[]',
+    idempotency_key TEXT,
+    request_hash TEXT
+  );
+)sql";
 
 [[noreturn]] void fail(sqlite3* db, const std::string& what) {
   throw std::runtime_error("job store: " + what + ": " + (db ? sqlite3_errmsg(db) : "out of memory"));
@@ -74,7 +116,12 @@ class SqliteJobStore::Statement {
     r.progress.samples_per_s = real(14);
     r.stop_reason = text(15);
     r.error = text(16);
-    if (with_document) r.document = text(17);
+    r.seq = int64(17);
+    r.owner = text(18);
+    r.warnings = text(19);
+    r.idempotency_key = text(20);
+    r.request_hash = text(21);
+    if (with_document) r.document = text(kDocumentColumn);
     return r;
   }
 
@@ -136,31 +183,24 @@ void SqliteJobStore::migrate() {
                                ", newer than this daemon's " + std::to_string(kSchemaVersion));
     }
     if (version < 1) {
-      exec(R"sql(
-        CREATE TABLE jobs (
-          seq INTEGER PRIMARY KEY AUTOINCREMENT,  -- submission order: first come, first served
-          id TEXT NOT NULL UNIQUE,
-          kind TEXT NOT NULL,
-          state TEXT NOT NULL CHECK (state IN ('queued','running','succeeded','failed','cancelled')),
-          priority INTEGER NOT NULL DEFAULT 0,
-          created_at INTEGER NOT NULL,
-          started_at INTEGER,
-          finished_at INTEGER,
-          document TEXT NOT NULL,
-          settings TEXT NOT NULL,
-          outputs TEXT NOT NULL,
-          passes INTEGER NOT NULL DEFAULT 0,
-          samples_done INTEGER NOT NULL DEFAULT 0,
-          samples_total INTEGER NOT NULL DEFAULT 0,
-          elapsed_s REAL NOT NULL DEFAULT 0,
-          eta_s REAL,
-          samples_per_s REAL NOT NULL DEFAULT 0,
-          stop_reason TEXT,
-          error TEXT
-        );
-        CREATE INDEX jobs_queue ON jobs (state, priority DESC, seq);
-        INSERT INTO schema_version (version) VALUES (1);
-      )sql");
+      exec(kJobsTableV2);
+    } else if (version < 2) {
+      // Version 1 lacked the paused state (a CHECK constraint: the table is rebuilt) and the columns of issue 5.
+      exec("ALTER TABLE jobs RENAME TO jobs_v1");
+      exec("DROP INDEX IF EXISTS jobs_queue");
+      exec(kJobsTableV2);
+      exec(
+          "INSERT INTO jobs (seq, id, kind, state, priority, created_at, started_at, finished_at, document, settings, "
+          "outputs, passes, samples_done, samples_total, elapsed_s, eta_s, samples_per_s, stop_reason, error) "
+          "SELECT seq, id, kind, state, priority, created_at, started_at, finished_at, document, settings, outputs, "
+          "passes, samples_done, samples_total, elapsed_s, eta_s, samples_per_s, stop_reason, error FROM jobs_v1");
+      exec("DROP TABLE jobs_v1");
+    }
+    if (version < 2) {
+      exec("CREATE INDEX jobs_queue ON jobs (state, priority DESC, seq)");
+      exec("CREATE INDEX jobs_owner ON jobs (owner, seq)");
+      exec("CREATE UNIQUE INDEX jobs_idempotency ON jobs (owner, idempotency_key) WHERE idempotency_key IS NOT NULL");
+      exec("INSERT INTO schema_version (version) VALUES (2)");
     }
     exec("COMMIT");
   } catch (...) {
@@ -172,8 +212,9 @@ void SqliteJobStore::migrate() {
 void SqliteJobStore::create(const JobRecord& job) {
   std::lock_guard lock(mutex_);
   Statement s(db_,
-              "INSERT INTO jobs (id, kind, state, priority, created_at, document, settings, outputs, samples_total) "
-              "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)");
+              "INSERT INTO jobs (id, kind, state, priority, created_at, document, settings, outputs, samples_total, "
+              "owner, warnings, idempotency_key, request_hash) "
+              "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)");
   s.bind(1, job.id);
   s.bind(2, job.kind);
   s.bind(3, std::string(job_state_name(JobState::kQueued)));
@@ -183,6 +224,10 @@ void SqliteJobStore::create(const JobRecord& job) {
   s.bind(7, job.settings);
   s.bind(8, job.outputs);
   s.bind(9, static_cast<int64_t>(job.progress.samples_total));
+  s.bind(10, job.owner);
+  s.bind(11, job.warnings.empty() ? std::string("[]") : job.warnings);
+  s.bind_text_or_null(12, job.idempotency_key);
+  s.bind_text_or_null(13, job.request_hash);
   s.step();
 }
 
@@ -218,25 +263,20 @@ void SqliteJobStore::update_progress(const std::string& id, const JobProgress& p
 }
 
 bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
-                                const std::string& error) {
+                                const std::string& error, std::optional<JobState> only_from) {
   std::lock_guard lock(mutex_);
-  // The states this move is allowed from, as decided by the one state machine.
-  std::string from_states;
-  for (JobState s :
-       {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed, JobState::kCancelled}) {
-    if (!can_transition(s, to)) continue;
-    if (!from_states.empty()) from_states += ",";
-    from_states += std::string("'") + job_state_name(s) + "'";
-  }
+  const std::string from_states = states_allowed_into(to, only_from);
   if (from_states.empty()) return false;
   std::string sql;
   if (to == JobState::kQueued) {
     sql =
-        "UPDATE jobs SET state = 'queued', started_at = NULL, passes = 0, samples_done = 0, elapsed_s = 0, "
-        "eta_s = NULL, samples_per_s = 0 WHERE id = ?1 AND state IN (" +
+        "UPDATE jobs SET state = 'queued', started_at = NULL, finished_at = NULL, stop_reason = NULL, error = NULL, "
+        "passes = 0, samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0 WHERE id = ?1 AND state IN (" +
         from_states + ")";
   } else if (to == JobState::kRunning) {
     sql = "UPDATE jobs SET state = 'running', started_at = ?2 WHERE id = ?1 AND state IN (" + from_states + ")";
+  } else if (to == JobState::kPaused) {
+    sql = "UPDATE jobs SET state = 'paused', eta_s = NULL WHERE id = ?1 AND state IN (" + from_states + ")";
   } else {
     sql =
         "UPDATE jobs SET state = ?3, finished_at = ?2, stop_reason = ?4, error = ?5, "
@@ -245,7 +285,7 @@ bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_
   }
   Statement s(db_, sql);
   s.bind(1, id);
-  if (to != JobState::kQueued) s.bind(2, now_ms);
+  if (to == JobState::kRunning || is_terminal(to)) s.bind(2, now_ms);
   if (is_terminal(to)) {
     s.bind(3, std::string(job_state_name(to)));
     s.bind_text_or_null(4, stop_reason);
@@ -253,6 +293,56 @@ bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_
   }
   s.step();
   return sqlite3_changes(db_) > 0;
+}
+
+bool SqliteJobStore::set_priority(const std::string& id, int priority) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_,
+              "UPDATE jobs SET priority = ?2 WHERE id = ?1 AND state IN ('queued','running','paused')");
+  s.bind(1, id);
+  s.bind(2, static_cast<int64_t>(priority));
+  s.step();
+  return sqlite3_changes(db_) > 0;
+}
+
+void SqliteJobStore::set_warnings(const std::string& id, const std::string& warnings_json) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, "UPDATE jobs SET warnings = ?2 WHERE id = ?1");
+  s.bind(1, id);
+  s.bind(2, warnings_json);
+  s.step();
+}
+
+std::optional<int> SqliteJobStore::queue_position(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_,
+              "SELECT 1 + (SELECT COUNT(*) FROM jobs o WHERE o.state = 'queued' AND "
+              "(o.priority > j.priority OR (o.priority = j.priority AND o.seq < j.seq))) "
+              "FROM jobs j WHERE j.id = ?1 AND j.state = 'queued'");
+  s.bind(1, id);
+  if (!s.step()) return std::nullopt;
+  return static_cast<int>(s.int64(0));
+}
+
+std::optional<JobRecord> SqliteJobStore::find_by_idempotency_key(const std::string& owner, const std::string& key) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, std::string("SELECT ") + kColumns + " FROM jobs WHERE owner = ?1 AND idempotency_key = ?2");
+  s.bind(1, owner);
+  s.bind(2, key);
+  if (!s.step()) return std::nullopt;
+  return s.record(false);
+}
+
+std::map<JobState, int> SqliteJobStore::count_by_state(const std::optional<std::string>& owner) {
+  std::lock_guard lock(mutex_);
+  Statement s(db_, std::string("SELECT state, COUNT(*) FROM jobs") + (owner ? " WHERE owner = ?1" : "") +
+                       " GROUP BY state");
+  if (owner) s.bind(1, *owner);
+  std::map<JobState, int> out;
+  for (JobState st : kAllJobStates) out[st] = 0;
+  while (s.step())
+    if (auto st = parse_job_state(s.text(0))) out[*st] = static_cast<int>(s.int64(1));
+  return out;
 }
 
 std::optional<JobRecord> SqliteJobStore::get(const std::string& id, bool with_document) {
@@ -266,10 +356,21 @@ std::optional<JobRecord> SqliteJobStore::get(const std::string& id, bool with_do
 
 std::vector<JobRecord> SqliteJobStore::list(const JobFilter& filter) {
   std::lock_guard lock(mutex_);
-  Statement s(db_, std::string("SELECT ") + kColumns + " FROM jobs" + (filter.state ? " WHERE state = ?1" : "") +
-                       " ORDER BY seq DESC LIMIT ?2");
-  if (filter.state) s.bind(1, std::string(job_state_name(*filter.state)));
-  s.bind(2, static_cast<int64_t>(filter.limit));
+  std::vector<JobState> states = filter.states;
+  if (filter.state) states.push_back(*filter.state);
+  std::string where;
+  auto add = [&](const std::string& cond) { where += (where.empty() ? " WHERE " : " AND ") + cond; };
+  if (!states.empty()) {
+    std::string in;
+    for (JobState st : states) in += (in.empty() ? "'" : ",'") + std::string(job_state_name(st)) + "'";
+    add("state IN (" + in + ")");  // names from the enum, never client text
+  }
+  if (filter.owner) add("owner = ?2");
+  if (filter.before_seq) add("seq < ?3");
+  Statement s(db_, std::string("SELECT ") + kColumns + " FROM jobs" + where + " ORDER BY seq DESC LIMIT ?1");
+  s.bind(1, static_cast<int64_t>(filter.limit));
+  if (filter.owner) s.bind(2, *filter.owner);
+  if (filter.before_seq) s.bind(3, *filter.before_seq);
   std::vector<JobRecord> out;
   while (s.step()) out.push_back(s.record(false));
   return out;

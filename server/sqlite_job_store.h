@@ -24,13 +24,18 @@ class SqliteJobStore final : public JobStore {
   std::optional<JobRecord> claim_next(int64_t now_ms) override;
   void update_progress(const std::string& id, const JobProgress& progress) override;
   bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
-                  const std::string& error) override;
+                  const std::string& error, std::optional<JobState> only_from = std::nullopt) override;
+  bool set_priority(const std::string& id, int priority) override;
+  void set_warnings(const std::string& id, const std::string& warnings_json) override;
+  std::optional<int> queue_position(const std::string& id) override;
+  std::optional<JobRecord> find_by_idempotency_key(const std::string& owner, const std::string& key) override;
+  std::map<JobState, int> count_by_state(const std::optional<std::string>& owner) override;
   std::optional<JobRecord> get(const std::string& id, bool with_document) override;
   std::vector<JobRecord> list(const JobFilter& filter) override;
   bool remove(const std::string& id) override;
   int requeue_running() override;
 
-  static constexpr int kSchemaVersion = 1;
+  static constexpr int kSchemaVersion = 2;
 
  private:
   class Statement;

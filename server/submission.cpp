@@ -4,14 +4,13 @@
 #include <cctype>
 
 #include "renderer/job.h"
+#include "renderer/scene.h"
 #include "renderer/scene_error.h"
 #include "server/contract.h"
 
 namespace tessera::server {
 
 using nlohmann::json;
-
-namespace {
 
 std::string media_type(std::string_view content_type) {
   std::string_view t = content_type.substr(0, content_type.find(';'));
@@ -22,8 +21,6 @@ std::string media_type(std::string_view content_type) {
   return out;
 }
 
-}  // namespace
-
 json render_settings_json(const RenderSettings& s) {
   return {{"width", s.width},
           {"height", s.height},
@@ -31,6 +28,7 @@ json render_settings_json(const RenderSettings& s) {
           {"max_depth", s.integrator.max_depth},
           {"estimator", estimator_name(s.integrator.estimator)},
           {"seed", s.seed},
+          {"sampler", s.sampler == SamplerKind::kSobol ? "sobol" : "independent"},
           {"time_limit_s", s.time_limit_s},
           {"noise_target", s.noise_target},
           {"exposure_ev", s.display.exposure_ev},
@@ -48,17 +46,24 @@ std::variant<AcceptedJob, Problem> check_submission(std::string_view content_typ
   if (json_nesting_depth(body) > static_cast<size_t>(limits.max_depth))
     return Problem{422, "the document is nested deeper than " + std::to_string(limits.max_depth) + " levels", ""};
 
-  AcceptedJob job;
+  json document;
   try {
-    job.document = json::parse(body);
+    document = json::parse(body);
   } catch (const json::parse_error& e) {
     return Problem{400, std::string("the body is not valid JSON: ") + e.what(), ""};
   }
+  return check_job_document(std::move(document), limits);
+}
+
+std::variant<AcceptedJob, Problem> check_job_document(json document, const SubmissionLimits& limits) {
+  AcceptedJob job;
+  job.document = std::move(document);
   if (auto error = contract_schemas().validate(job.document, "job.schema.json", limits.max_depth))
     return Problem{422, error->message, error->pointer};
 
   JobLoadOptions options;
-  options.scene.build = false;  // names and indices are checked; no BVH is built at submission
+  options.scene.build = false;  // names, indices and assets are checked; no BVH is built at submission
+  options.scene.resolve_asset = limits.resolve_asset;
   options.limits = limits.render;
   RenderJob render_job;
   try {
@@ -66,6 +71,15 @@ std::variant<AcceptedJob, Problem> check_submission(std::string_view content_typ
   } catch (const SceneError& e) {
     return Problem{422, e.what(), e.pointer()};
   }
+  const RenderSettings& s = render_job.settings;
+  const double work = static_cast<double>(s.width) * s.height * s.spp * std::max(1, s.integrator.max_depth);
+  if (limits.max_work > 0 && work > limits.max_work)
+    return Problem{422,
+                   "width x height x spp x max_depth is " + std::to_string(static_cast<long long>(work)) +
+                       ", above this server's limit of " + std::to_string(static_cast<long long>(limits.max_work)) +
+                       " (--max-work); lower the resolution, spp or max_depth",
+                   "/render"};
+  if (render_job.scene) job.warnings = render_job.scene->warnings;
   job.kind = job.document.value("kind", "scene");
   job.priority = job.document.value("priority", 0);
   job.settings = render_settings_json(render_job.settings);

@@ -3,7 +3,10 @@
 // exist, indices in range, the configured size limits). Every refusal is a Problem naming the field.
 #pragma once
 
+#include <filesystem>
+#include <functional>
 #include <string>
+#include <vector>
 #include <string_view>
 #include <variant>
 
@@ -17,6 +20,9 @@ namespace tessera::server {
 struct SubmissionLimits {
   int max_depth = 64;  // nesting of arrays and objects
   RenderLimits render;
+  double max_work = 0;  // width x height x spp x max_depth; 0: no limit
+  // Maps asset references (scene.gltf, scene.environment.map) to files; unset: none allowed.
+  std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
 };
 
 struct AcceptedJob {
@@ -26,10 +32,15 @@ struct AcceptedJob {
   nlohmann::json settings;  // the render settings, defaults filled in
   nlohmann::json outputs;   // ["png", "exr"]
   uint32_t spp = 0;
+  std::vector<std::string> warnings;  // from loading the scene (an optional glTF extension ignored, ...)
 };
 
 std::variant<AcceptedJob, Problem> check_submission(std::string_view content_type, std::string_view body,
                                                     const SubmissionLimits& limits);
+// The same for a document already parsed (a multipart submission's job part).
+std::variant<AcceptedJob, Problem> check_job_document(nlohmann::json document, const SubmissionLimits& limits);
+// "application/json; charset=utf-8" -> "application/json".
+std::string media_type(std::string_view content_type);
 
 // The render settings as the job status shows them.
 nlohmann::json render_settings_json(const RenderSettings& s);

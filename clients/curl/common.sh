@@ -1,6 +1,9 @@
 # Shared by the tessera curl scripts (sourced, not run). Needs curl and python3.
 TESSERA_URL=${TESSERA_URL:-http://127.0.0.1:8080}
 TESSERA_URL=${TESSERA_URL%/}
+# TESSERA_TOKEN, when set, goes along as "Authorization: Bearer" (daemons started with --tokens need it).
+TESSERA_AUTH=()
+if [[ -n ${TESSERA_TOKEN:-} ]]; then TESSERA_AUTH=(-H "Authorization: Bearer $TESSERA_TOKEN"); fi
 
 # json_field FIELD: prints a field (a dotted path) of the JSON document on stdin.
 json_field() {
@@ -20,7 +23,7 @@ request() {
   shift 2
   local body_file status
   body_file=$(mktemp)
-  if ! status=$(curl -sS -o "$body_file" -w '%{http_code}' -X "$method" "$@" "$TESSERA_URL$path"); then
+  if ! status=$(curl -sS -o "$body_file" -w '%{http_code}' -X "$method" ${TESSERA_AUTH[@]+"${TESSERA_AUTH[@]}"} "$@" "$TESSERA_URL$path"); then
     rm -f "$body_file"
     echo "error: cannot reach $TESSERA_URL" >&2
     exit 1

@@ -22,6 +22,7 @@ class Daemon {
   Daemon& operator=(const Daemon&) = delete;
 
   int port() const { return port_; }
+  pid_t pid() const { return pid_; }
   std::unique_ptr<httplib::Client> client() const;
   // Sends `signal` and waits; returns the exit status (or 128 + signal when killed).
   int stop(int signal);

@@ -77,6 +77,28 @@ class GltfBuilder {
     doc["meshes"].push_back({{"primitives", nlohmann::json::array({prim})}});
     return static_cast<int>(doc["meshes"].size()) - 1;
   }
+  // Embeds PNG bytes as a data: URI image with a texture on it; returns the texture index.
+  int texture_png(const std::vector<unsigned char>& png, const nlohmann::json& sampler = nullptr) {
+    if (!doc.contains("images")) doc["images"] = nlohmann::json::array();
+    if (!doc.contains("textures")) doc["textures"] = nlohmann::json::array();
+    doc["images"].push_back({{"uri", "data:image/png;base64," + base64(png)}});
+    nlohmann::json tex = {{"source", doc["images"].size() - 1}};
+    if (!sampler.is_null()) {
+      if (!doc.contains("samplers")) doc["samplers"] = nlohmann::json::array();
+      doc["samplers"].push_back(sampler);
+      tex["sampler"] = doc["samplers"].size() - 1;
+    }
+    doc["textures"].push_back(tex);
+    return static_cast<int>(doc["textures"].size()) - 1;
+  }
+  // A mesh with texture coordinates (and optional normals).
+  int textured_mesh(const std::vector<float>& positions, const std::vector<float>& uvs, const std::vector<uint16_t>& idx,
+                    int material) {
+    nlohmann::json attrs = {{"POSITION", floats(positions, "VEC3", 3)}, {"TEXCOORD_0", floats(uvs, "VEC2", 2)}};
+    nlohmann::json prim = {{"attributes", attrs}, {"indices", indices16(idx)}, {"material", material}};
+    doc["meshes"].push_back({{"primitives", nlohmann::json::array({prim})}});
+    return static_cast<int>(doc["meshes"].size()) - 1;
+  }
   int node(const nlohmann::json& n, bool root) {
     doc["nodes"].push_back(n);
     int i = static_cast<int>(doc["nodes"].size()) - 1;

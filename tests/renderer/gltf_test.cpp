@@ -2,6 +2,9 @@
 // arrive; malformed and hostile files must be refused with a SceneError, never a crash.
 #include <gtest/gtest.h>
 
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
+
 #include <cmath>
 
 #include "renderer/gltf_loader.h"
@@ -17,12 +20,14 @@ using test::GltfBuilder;
 
 std::filesystem::path fixture_dir() {
   // One folder per test process, removed when the process ends.
+  // TESSERA_GLTF_FIXTURES keeps them in a given folder (for the Khronos validator test, tests/gltf).
   static const struct Folder {
-    std::filesystem::path path =
-        std::filesystem::temp_directory_path() / ("tessera-gltf-" + std::to_string(::getpid()));
+    const char* keep = std::getenv("TESSERA_GLTF_FIXTURES");
+    std::filesystem::path path = keep ? std::filesystem::path(keep)
+                                      : std::filesystem::temp_directory_path() / ("tessera-gltf-" + std::to_string(::getpid()));
     ~Folder() {
       std::error_code ec;
-      std::filesystem::remove_all(path, ec);
+      if (!keep) std::filesystem::remove_all(path, ec);
     }
   } folder;
   std::filesystem::create_directories(folder.path);
@@ -481,6 +486,144 @@ TEST(Gltf, MaskedOutSurfacesCastNoShadow) {
     if (alpha < 0.5) EXPECT_NEAR(lit, 0.5 / M_PI * 10 / 4, 0.01);  // unshadowed
     else EXPECT_LT(lit, 1e-6);
   }
+}
+
+}  // namespace
+}  // namespace tessera
+
+
+namespace tessera {
+namespace {
+
+// A w x h PNG of 8-bit RGBA pixels, encoded by OpenImageIO.
+std::vector<unsigned char> png_rgba(int w, int h, const std::vector<unsigned char>& rgba) {
+  std::vector<unsigned char> out;
+  OIIO::Filesystem::IOVecOutput proxy(out);
+  auto o = OIIO::ImageOutput::create("t.png");
+  o->set_ioproxy(&proxy);
+  OIIO::ImageSpec spec(w, h, 4, OIIO::TypeDesc::UINT8);
+  o->open("t.png", spec);
+  o->write_image(OIIO::TypeDesc::UINT8, rgba.data());
+  o->close();
+  return out;
+}
+
+// An 8x8 texture of four 4x4 blocks: red, green / blue, white (row 0 at the top); alpha 0 in the white block.
+// Blocks, not single texels, so that bilinear filtering at the quadrant centres sees one colour.
+std::vector<unsigned char> quad_texture() {
+  const unsigned char colours[4][4] = {{255, 0, 0, 255}, {0, 255, 0, 255}, {0, 0, 255, 255}, {255, 255, 255, 0}};
+  std::vector<unsigned char> rgba;
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) rgba.insert(rgba.end(), colours[(y / 4) * 2 + x / 4], colours[(y / 4) * 2 + x / 4] + 4);
+  return png_rgba(8, 8, rgba);
+}
+
+// A square facing +z with uv (0,0) at its top-left corner, seen straight on by an orthographic camera.
+json textured_job(GltfBuilder& b, const json& material, const std::string& name) {
+  int m = b.material(material);
+  int mesh = b.textured_mesh({-1, 1, 0, 1, 1, 0, 1, -1, 0, -1, -1, 0}, {0, 0, 1, 0, 1, 1, 0, 1}, {0, 3, 2, 0, 2, 1}, m);
+  b.node({{"mesh", mesh}}, true);
+  b.write(fixture_dir(), name);
+  return {{"kind", "scene"},
+          {"scene", {{"gltf", name + ".gltf"},
+                     {"camera", {{"type", "orthographic"}, {"from", {0, 0, 5}}, {"to", {0, 0, 0}}, {"height", 2}}},
+                     {"environment", {{"color", {0.25, 0.25, 0.25}}}}}},
+          {"render", {{"width", 32}, {"height", 32}, {"spp", 4}, {"max_depth", 0}}}};
+}
+
+TEST(GltfTextures, TexelColoursAppearWhereTheirUvsAre) {
+  GltfBuilder b;
+  int tex = b.texture_png(quad_texture(), {{"wrapS", 33071}, {"wrapT", 33071}, {"magFilter", 9728}});
+  json mat = {{"emissiveFactor", {1, 1, 1}}, {"emissiveTexture", {{"index", tex}}},
+              {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}}}};
+  Rendered img = render_job(textured_job(b, mat, "texels"));
+  // Quadrant centres: top-left red, top-right green, bottom-left blue, bottom-right white.
+  Rgb tl = img.at(8, 8), tr = img.at(24, 8), bl = img.at(8, 24), br = img.at(24, 24);
+  EXPECT_NEAR(tl.x, 1, 1e-3); EXPECT_NEAR(tl.y, 0, 1e-3); EXPECT_NEAR(tl.z, 0, 1e-3);
+  EXPECT_NEAR(tr.x, 0, 1e-3); EXPECT_NEAR(tr.y, 1, 1e-3); EXPECT_NEAR(tr.z, 0, 1e-3);
+  EXPECT_NEAR(bl.x, 0, 1e-3); EXPECT_NEAR(bl.y, 0, 1e-3); EXPECT_NEAR(bl.z, 1, 1e-3);
+  EXPECT_NEAR(br.x, 1, 1e-3); EXPECT_NEAR(br.y, 1, 1e-3); EXPECT_NEAR(br.z, 1, 1e-3);
+}
+
+TEST(GltfTextures, TextureTransformOffsetsTheLookup) {
+  GltfBuilder b;
+  b.doc["extensionsUsed"] = {"KHR_texture_transform"};
+  int tex = b.texture_png(quad_texture(), {{"wrapS", 10497}, {"wrapT", 10497}});
+  json mat = {{"emissiveFactor", {1, 1, 1}},
+              {"emissiveTexture", {{"index", tex}, {"extensions", {{"KHR_texture_transform", {{"offset", {0.5, 0}}}}}}}},
+              {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}}}};
+  Rendered img = render_job(textured_job(b, mat, "offset"));
+  // Shifted by half the texture horizontally (wrapping): the top-left quadrant now shows the green texel.
+  EXPECT_NEAR(img.at(8, 8).y, 1, 1e-3);
+  EXPECT_NEAR(img.at(8, 8).x, 0, 1e-3);
+  EXPECT_NEAR(img.at(24, 24).z, 1, 1e-3);  // bottom-right shows blue
+  EXPECT_NEAR(img.at(24, 24).x, 0, 1e-3);
+}
+
+TEST(GltfTextures, BaseColourAlphaCutsOutUnderMask) {
+  GltfBuilder b;
+  int tex = b.texture_png(quad_texture(), {{"wrapS", 33071}, {"wrapT", 33071}});
+  json mat = {{"emissiveFactor", {1, 1, 1}}, {"emissiveTexture", {{"index", tex}}}, {"alphaMode", "MASK"},
+              {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}, {"baseColorTexture", {{"index", tex}}}}}};
+  Rendered img = render_job(textured_job(b, mat, "cutout"));
+  EXPECT_NEAR(img.at(8, 8).x, 1, 1e-3);     // red texel: opaque
+  EXPECT_NEAR(img.at(24, 24).x, 0.25, 1e-3);  // white texel has alpha 0: the environment shows through
+  EXPECT_NEAR(img.at(24, 24).z, 0.25, 1e-3);
+}
+
+std::vector<unsigned char> tilted_normal_png(double theta) {
+  unsigned char nx = static_cast<unsigned char>(std::lround((0.5 + 0.5 * std::sin(theta)) * 255));
+  unsigned char nz = static_cast<unsigned char>(std::lround((0.5 + 0.5 * std::cos(theta)) * 255));
+  return png_rgba(1, 1, {nx, 128, nz, 255});
+}
+
+TEST(Textures, NormalMapTiltsTheShadingNormal) {
+  // A constant normal map tilting the normal 60 degrees towards +u on a Lambert floor lit straight from above:
+  // the reflected radiance falls to cos 60 = one half (the geometric normal is unchanged).
+  auto png = tilted_normal_png(M_PI / 3);
+  std::ofstream(fixture_dir() / "tilt.png", std::ios::binary).write(reinterpret_cast<const char*>(png.data()), png.size());
+  double radiance[2];
+  for (int with_map = 0; with_map < 2; ++with_map) {
+    json floor = {{"type", "lambert"}, {"albedo", 0.5}};
+    if (with_map) floor["normal_map"] = {{"texture", "tilt.png"}};
+    json job = {{"kind", "scene"},
+                {"scene", {{"materials", {{"floor", floor}}},
+                           {"objects", {{{"shape", "rectangle"}, {"corner", {-10, 0, 10}}, {"edge1", {20, 0, 0}},
+                                         {"edge2", {0, 0, -20}}, {"material", "floor"}}}},
+                           {"lights", {{{"type", "directional"}, {"direction", {0, -1, 0}}, {"irradiance", 3}}}},
+                           {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}}}},
+                {"render", {{"width", 8}, {"height", 8}, {"spp", 4}, {"max_depth", 1}}}};
+    radiance[with_map] = mean_green(render_job(job));
+  }
+  EXPECT_NEAR(radiance[0], 0.5 / M_PI * 3, 0.01);
+  // 8-bit quantisation of the map moves the cosine by well under 1%.
+  EXPECT_NEAR(radiance[1] / radiance[0], 0.5, 0.01);
+}
+
+TEST(GltfTextures, NormalTextureIsApplied) {
+  double radiance[2];
+  for (int with_map = 0; with_map < 2; ++with_map) {
+    GltfBuilder b;
+    int tex = b.texture_png(tilted_normal_png(M_PI / 3));
+    json mat = {{"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.5, 0.5, 1}}, {"metallicFactor", 0}, {"roughnessFactor", 1}}}};
+    if (with_map) mat["normalTexture"] = {{"index", tex}, {"scale", 1}};
+    int m = b.material(mat);
+    int mesh = b.textured_mesh({-10, 0, -10, 10, 0, -10, 10, 0, 10, -10, 0, 10}, {0, 0, 1, 0, 1, 1, 0, 1}, {0, 2, 1, 0, 3, 2}, m);
+    b.node({{"mesh", mesh}}, true);
+    b.doc["extensionsUsed"] = {"KHR_lights_punctual"};
+    b.doc["extensions"] = {{"KHR_lights_punctual", {{"lights", {{{"type", "directional"}, {"intensity", 3}}}}}}};
+    b.node({{"rotation", {-std::sqrt(0.5), 0, 0, std::sqrt(0.5)}}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}}, true);
+    b.write(fixture_dir(), "normaltex");
+    json job = {{"kind", "scene"},
+                {"scene", {{"gltf", "normaltex.gltf"},
+                           {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}},
+                           {"environment", {{"color", 0}}}}},
+                {"render", {{"width", 8}, {"height", 8}, {"spp", 16}, {"max_depth", 1}}}};
+    radiance[with_map] = mean_green(render_job(job));
+  }
+  // A rough dielectric is not Lambertian, but tilting its normal 60 degrees away from the light darkens it a lot.
+  EXPECT_GT(radiance[0], 0);
+  EXPECT_LT(radiance[1] / radiance[0], 0.7);
 }
 
 }  // namespace

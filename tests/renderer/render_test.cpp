@@ -372,3 +372,41 @@ TEST(Sampler, SobolIsNotWorseThanIndependentAtEqualSpp) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+TEST(MaterialJob, RendersTheStageAndNamesBadFieldsInTheJob) {
+  JobLoadOptions opts;
+  json job = {{"kind", "material"},
+              {"material", {{"type", "lambert"}, {"albedo", {0.8, 0.2, 0.2}}}},
+              {"render", {{"width", 48}, {"height", 32}, {"spp", 4}}}};
+  RenderJob rj = load_job(job, opts);
+  ThreadPool pool(2);
+  RenderSession session(rj.scene, rj.settings, pool);
+  session.run();
+  double sum = 0;
+  for (float v : session.film().resolve()) sum += v;
+  EXPECT_GT(sum, 0);
+
+  auto pointer_of = [&](const json& doc) {
+    try {
+      load_job(doc, opts);
+    } catch (const SceneError& e) {
+      return e.pointer();
+    }
+    return std::string("(accepted)");
+  };
+  json bad = job;
+  bad["material"]["albedo"] = {0.5, 7, 0.5};
+  EXPECT_EQ(pointer_of(bad), "/material/albedo/1");
+  json row = {{"kind", "material"},
+              {"materials", {{{"type", "lambert"}}, {{"type", "lambert"}, {"albedo", -1}}}},
+              {"render", {{"width", 64}, {"height", 32}, {"spp", 1}}}};
+  EXPECT_EQ(pointer_of(row), "/materials/1/albedo");
+  row["materials"][1] = {{"type", "no_such_model"}};
+  EXPECT_EQ(pointer_of(row), "/materials/1/type");
+}
+
+}  // namespace
+}  // namespace tessera

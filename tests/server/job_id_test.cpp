@@ -63,15 +63,20 @@ TEST(JobFiles, WritesAtomicallyAndRemoves) {
 TEST(JobState, Transitions) {
   EXPECT_TRUE(can_transition(JobState::kQueued, JobState::kRunning));
   EXPECT_TRUE(can_transition(JobState::kQueued, JobState::kCancelled));
+  EXPECT_TRUE(can_transition(JobState::kQueued, JobState::kPaused));
   EXPECT_FALSE(can_transition(JobState::kQueued, JobState::kSucceeded));
   EXPECT_TRUE(can_transition(JobState::kRunning, JobState::kQueued));
+  EXPECT_TRUE(can_transition(JobState::kRunning, JobState::kPaused));
   EXPECT_TRUE(can_transition(JobState::kRunning, JobState::kFailed));
-  for (JobState t : {JobState::kSucceeded, JobState::kFailed, JobState::kCancelled})
-    for (JobState to :
-         {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed, JobState::kCancelled})
-      EXPECT_FALSE(can_transition(t, to));
-  EXPECT_EQ(parse_job_state("running"), JobState::kRunning);
-  EXPECT_FALSE(parse_job_state("paused"));
+  EXPECT_TRUE(can_transition(JobState::kPaused, JobState::kQueued));
+  EXPECT_TRUE(can_transition(JobState::kPaused, JobState::kCancelled));
+  EXPECT_FALSE(can_transition(JobState::kPaused, JobState::kRunning));  // resumed jobs wait their turn
+  // Requeue: failed and cancelled jobs may go back to the queue; succeeded is final.
+  for (JobState t : {JobState::kFailed, JobState::kCancelled})
+    for (JobState to : kAllJobStates) EXPECT_EQ(can_transition(t, to), to == JobState::kQueued);
+  for (JobState to : kAllJobStates) EXPECT_FALSE(can_transition(JobState::kSucceeded, to));
+  for (JobState s : kAllJobStates) EXPECT_EQ(parse_job_state(job_state_name(s)), s);
+  EXPECT_FALSE(parse_job_state("done"));
 }
 
 }  // namespace

@@ -1,0 +1,160 @@
+// The HTTP API as the web client uses it: JSON in and out, problem+json errors turned into ApiError, the bearer
+// token (kept in sessionStorage) on every request, and a connection state the page shows.
+
+const TOKEN_KEY = "tessera.token";
+
+export class ApiError extends Error {
+  // status: the HTTP status (0 when the server could not be reached); problem: the problem+json body, if any.
+  constructor(status, problem, fallback) {
+    const title = problem?.title || fallback || (status ? `HTTP ${status}` : "Network error");
+    const detail = problem?.detail || "";
+    super(detail ? `${title}: ${detail}` : title);
+    this.status = status;
+    this.title = title;
+    this.detail = detail;
+    this.pointer = problem?.pointer ?? null;
+    this.problem = problem || null;
+  }
+}
+
+export function getToken() {
+  try {
+    return sessionStorage.getItem(TOKEN_KEY) || "";
+  } catch {
+    return "";
+  }
+}
+
+export function setToken(token) {
+  try {
+    if (token) sessionStorage.setItem(TOKEN_KEY, token);
+    else sessionStorage.removeItem(TOKEN_KEY);
+  } catch {
+    // storage disabled: the token lives until the page is closed
+  }
+}
+
+// Listeners of connection changes: state is "online", "offline", "unauthorized" or "error".
+const listeners = new Set();
+let connection = "connecting";
+export function onConnection(fn) {
+  listeners.add(fn);
+  fn(connection);
+  return () => listeners.delete(fn);
+}
+function setConnection(state) {
+  if (state === connection) return;
+  connection = state;
+  for (const fn of listeners) fn(state);
+}
+
+function headers(extra) {
+  const h = new Headers(extra || {});
+  const token = getToken();
+  if (token) h.set("Authorization", `Bearer ${token}`);
+  return h;
+}
+
+async function problemOf(res) {
+  const type = res.headers.get("Content-Type") || "";
+  try {
+    if (type.includes("json")) return await res.json();
+    const text = await res.text();
+    return text ? { detail: text.slice(0, 300) } : null;
+  } catch {
+    return null;
+  }
+}
+
+// Sends a request; returns the Response of a 2xx answer, throws ApiError otherwise.
+export async function request(method, path, { body, json, headers: extra, signal } = {}) {
+  const h = headers(extra);
+  let payload = body;
+  if (json !== undefined) {
+    h.set("Content-Type", "application/json");
+    payload = JSON.stringify(json);
+  }
+  let res;
+  try {
+    res = await fetch(path, { method, headers: h, body: payload, signal, cache: "no-store" });
+  } catch (e) {
+    if (e.name === "AbortError") throw e;
+    setConnection("offline");
+    throw new ApiError(0, null, "Cannot reach the server");
+  }
+  if (res.status === 401) {
+    setConnection("unauthorized");
+  } else if (res.status >= 500) {
+    setConnection("error");
+  } else {
+    setConnection("online");
+  }
+  if (!res.ok) throw new ApiError(res.status, await problemOf(res));
+  return res;
+}
+
+export async function getJson(path, opts) {
+  const res = await request("GET", path, opts);
+  return res.json();
+}
+
+export async function sendJson(method, path, json) {
+  const res = await request(method, path, json === undefined ? {} : { json });
+  if (res.status === 204) return null;
+  const type = res.headers.get("Content-Type") || "";
+  return type.includes("json") ? res.json() : null;
+}
+
+export async function getBlob(path, opts) {
+  const res = await request("GET", path, opts);
+  return res.blob();
+}
+
+// The job endpoints.
+export const api = {
+  listJobs: (limit = 200) => getJson(`/v1/jobs?limit=${limit}`),
+  getJob: (id) => getJson(`/v1/jobs/${encodeURIComponent(id)}`),
+  submitJson: (doc) => sendJson("POST", "/v1/jobs", doc),
+  // multipart/form-data: a part "job" (the JSON) plus the files; the browser sets the boundary.
+  submitMultipart: async (doc, files) => {
+    const form = new FormData();
+    form.append("job", new Blob([JSON.stringify(doc)], { type: "application/json" }), "job.json");
+    for (const f of files) form.append("file", f, f.name);
+    const res = await request("POST", "/v1/jobs", { body: form });
+    return res.json();
+  },
+  action: (id, action) => sendJson("POST", `/v1/jobs/${encodeURIComponent(id)}/${action}`),
+  setPriority: (id, priority) =>
+    sendJson("PATCH", `/v1/jobs/${encodeURIComponent(id)}`, { priority }),
+  remove: (id) => sendJson("DELETE", `/v1/jobs/${encodeURIComponent(id)}`),
+  materials: () => getJson("/v1/materials"),
+  eventsUrl: (id) => {
+    const token = getToken();
+    const q = token ? `?access_token=${encodeURIComponent(token)}` : "";
+    return `/v1/jobs/${encodeURIComponent(id)}/events${q}`;
+  },
+};
+
+// Which actions a job's state allows (the daemon's state machine; its "links" say the same when present).
+export const TERMINAL = new Set(["succeeded", "failed", "cancelled"]);
+export function allowed(job, action) {
+  const s = job.state;
+  switch (action) {
+    case "cancel":
+      return s === "queued" || s === "running" || s === "paused";
+    case "pause":
+      return s === "queued" || s === "running";
+    case "resume":
+      return s === "paused";
+    case "requeue":
+      return s === "failed" || s === "cancelled";
+    case "priority":
+      return s === "queued" || s === "paused";
+    case "delete":
+      return true;
+    case "result":
+      return s === "succeeded";
+    default:
+      return false;
+  }
+}

@@ -1,0 +1,831 @@
+// The web client's page: the submit form, the queue, the job view. State lives in the daemon; this page polls the
+// job list and follows the selected job over Server-Sent Events (polling when the events endpoint is missing).
+import { api, allowed, ApiError, getBlob, getToken, onConnection, setToken, TERMINAL } from "./api.js";
+import { EXAMPLES } from "./examples.js";
+import { materialForm } from "./materials.js";
+
+const $ = (sel) => document.querySelector(sel);
+const STATES = ["queued", "running", "paused", "succeeded", "failed", "cancelled"];
+const QUEUE_POLL_MS = 1500;
+const JOB_POLL_MS = 1000;
+
+// ---------------------------------------------------------------------------------------------------------------
+// Small helpers
+
+function fmtSeconds(s) {
+  if (s === null || s === undefined || !Number.isFinite(s)) return "–";
+  if (s < 1) return `${(s * 1000).toFixed(0)} ms`;
+  if (s < 60) return `${s.toFixed(1)} s`;
+  const m = Math.floor(s / 60);
+  if (m < 60) return `${m} min ${Math.round(s - 60 * m)} s`;
+  return `${Math.floor(m / 60)} h ${m % 60} min`;
+}
+function fmtRate(x) {
+  if (!x) return "–";
+  const units = [
+    [1e9, "G"],
+    [1e6, "M"],
+    [1e3, "k"],
+  ];
+  for (const [k, u] of units) if (x >= k) return `${(x / k).toFixed(2)} ${u}`;
+  return x.toFixed(0);
+}
+function fmtTime(iso) {
+  if (!iso) return "–";
+  const d = new Date(iso);
+  const today = new Date();
+  const time = d.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit", second: "2-digit" });
+  return d.toDateString() === today.toDateString() ? time : `${d.toLocaleDateString()} ${time}`;
+}
+const shortId = (id) => id.slice(0, 8);
+
+function progressText(job) {
+  const p = job.progress || {};
+  const parts = [`${p.samples_done ?? 0}/${p.samples_total ?? 0} spp`];
+  if (job.state === "running" && p.eta_s !== null && p.eta_s !== undefined) parts.push(`ETA ${fmtSeconds(p.eta_s)}`);
+  if (job.state === "queued" && job.queue_position) parts.push(`#${job.queue_position} in queue`);
+  if (job.stop_reason && job.stop_reason !== "samples") parts.push(`stopped by ${job.stop_reason.replace("_", " ")}`);
+  return parts.join(" · ");
+}
+
+function setProgress(bar, job) {
+  const f = Math.max(0, Math.min(1, job.progress?.fraction ?? 0));
+  bar.style.setProperty("--fraction", f);
+  bar.dataset.state = job.state;
+  bar.setAttribute("aria-valuenow", String(Math.round(f * 100)));
+  bar.setAttribute("aria-valuetext", `${Math.round(f * 100)} percent, ${progressText(job)}`);
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Errors: problem+json title and detail, as dismissible toasts.
+
+function showError(err, context) {
+  if (err?.name === "AbortError") return;
+  const toasts = $("#toasts");
+  const toast = document.createElement("div");
+  toast.className = "toast";
+  toast.setAttribute("role", "alert");
+  const title = document.createElement("strong");
+  const detail = document.createElement("span");
+  if (err instanceof ApiError) {
+    title.textContent = (context ? `${context}: ` : "") + err.title + (err.status ? ` (${err.status})` : "");
+    detail.textContent = err.detail + (err.pointer ? ` — at ${err.pointer}` : "");
+    if (err.status === 401) showTokenForm(true);
+  } else {
+    title.textContent = context || "Error";
+    detail.textContent = err?.message || String(err);
+  }
+  const close = document.createElement("button");
+  close.type = "button";
+  close.className = "ghost";
+  close.textContent = "Dismiss";
+  close.addEventListener("click", () => toast.remove());
+  toast.append(title, detail, close);
+  toasts.append(toast);
+  while (toasts.children.length > 4) toasts.firstElementChild.remove();
+  setTimeout(() => toast.remove(), 12000);
+}
+
+function showNotice(text) {
+  const toast = document.createElement("div");
+  toast.className = "toast notice";
+  toast.setAttribute("role", "status");
+  toast.textContent = text;
+  $("#toasts").append(toast);
+  setTimeout(() => toast.remove(), 4000);
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Connection indicator and token
+
+const CONNECTION_LABELS = {
+  connecting: "Connecting…",
+  online: "Connected",
+  offline: "Offline — retrying",
+  unauthorized: "Token needed",
+  error: "Server error",
+};
+onConnection((state) => {
+  const c = $("#connection");
+  c.dataset.state = state;
+  c.querySelector(".label").textContent = CONNECTION_LABELS[state] || state;
+  if (state === "unauthorized") showTokenForm(true);
+});
+
+function showTokenForm(focus) {
+  const form = $("#token-form");
+  const wasHidden = form.hidden;
+  form.hidden = false;
+  if (focus && wasHidden) $("#token").focus();
+}
+$("#token-form").addEventListener("submit", (e) => {
+  e.preventDefault();
+  setToken($("#token").value.trim());
+  showNotice(getToken() ? "Token saved for this browser session." : "Token cleared.");
+  refreshQueue();
+  loadMaterials();
+  if (selectedId) watcher.start(selectedId);
+});
+$("#token-forget").addEventListener("click", () => {
+  setToken("");
+  $("#token").value = "";
+  showNotice("Token forgotten.");
+});
+if (getToken()) {
+  $("#token").value = getToken();
+  showTokenForm(false);
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Submit form
+
+const tabs = [...document.querySelectorAll('[role="tab"]')];
+let source = "example";
+function selectTab(tab, focus) {
+  for (const t of tabs) {
+    const on = t === tab;
+    t.setAttribute("aria-selected", String(on));
+    t.tabIndex = on ? 0 : -1;
+    document.getElementById(t.getAttribute("aria-controls")).hidden = !on;
+  }
+  source = tab.id.replace("tab-", "");
+  $("#render-settings").disabled = source === "json";
+  if (focus) tab.focus();
+  if (source === "json" && !$("#json-doc").value.trim()) {
+    $("#json-doc").value = JSON.stringify(buildFromExample(), null, 2);
+  }
+}
+for (const t of tabs) {
+  t.addEventListener("click", () => selectTab(t, false));
+  t.addEventListener("keydown", (e) => {
+    const i = tabs.indexOf(t);
+    let next = null;
+    if (e.key === "ArrowRight") next = tabs[(i + 1) % tabs.length];
+    else if (e.key === "ArrowLeft") next = tabs[(i - 1 + tabs.length) % tabs.length];
+    else if (e.key === "Home") next = tabs[0];
+    else if (e.key === "End") next = tabs[tabs.length - 1];
+    if (next) {
+      e.preventDefault();
+      selectTab(next, true);
+    }
+  });
+}
+
+const exampleSelect = $("#example");
+for (const ex of EXAMPLES) {
+  const o = document.createElement("option");
+  o.value = ex.id;
+  o.textContent = ex.title;
+  exampleSelect.append(o);
+}
+function fillRenderFields(render = {}) {
+  if (render.width) $("#width").value = render.width;
+  if (render.height) $("#height").value = render.height;
+  if (render.spp) $("#spp").value = render.spp;
+  $("#time-limit").value = render.time_limit_s ?? "";
+  if (render.estimator) $("#estimator").value = render.estimator;
+}
+exampleSelect.addEventListener("change", () => fillRenderFields(currentExample().job.render));
+const currentExample = () => EXAMPLES.find((e) => e.id === exampleSelect.value) || EXAMPLES[0];
+fillRenderFields(currentExample().job.render);
+
+function renderSettings(base = {}) {
+  const render = { ...base };
+  const int = (sel) => {
+    const input = $(sel);
+    const v = Number(input.value);
+    if (!Number.isInteger(v)) throw new Error(`${input.labels[0].textContent} must be a whole number`);
+    return v;
+  };
+  render.width = int("#width");
+  render.height = int("#height");
+  render.spp = int("#spp");
+  const limit = $("#time-limit").value.trim();
+  if (limit) render.time_limit_s = Number(limit);
+  else delete render.time_limit_s;
+  render.estimator = $("#estimator").value;
+  return render;
+}
+function withCommon(doc) {
+  doc.render = renderSettings(doc.render);
+  const priority = Number($("#priority").value || 0);
+  if (priority) doc.priority = priority;
+  else delete doc.priority;
+  return doc;
+}
+const buildFromExample = () => structuredClone(currentExample().job);
+
+// Material models, from the daemon.
+let materialModels = [];
+let currentMaterialForm = null;
+async function loadMaterials() {
+  try {
+    const catalog = await api.materials();
+    materialModels = catalog.materials || [];
+  } catch (e) {
+    if (!(e instanceof ApiError && e.status === 401)) showError(e, "Loading the material models");
+    return;
+  }
+  const select = $("#material-type");
+  const previous = select.value;
+  select.replaceChildren();
+  for (const m of materialModels) {
+    const o = document.createElement("option");
+    o.value = m.type;
+    o.textContent = m.title && m.title !== m.type ? `${m.title} (${m.type})` : m.type;
+    select.append(o);
+  }
+  if (previous && materialModels.some((m) => m.type === previous)) select.value = previous;
+  buildMaterialForm();
+}
+function buildMaterialForm() {
+  const model = materialModels.find((m) => m.type === $("#material-type").value);
+  $("#material-desc").textContent = model?.description || "";
+  currentMaterialForm = model ? materialForm(model) : null;
+  $("#material-params").replaceChildren(...(currentMaterialForm ? [currentMaterialForm.element] : []));
+}
+$("#material-type").addEventListener("change", buildMaterialForm);
+
+// Uploads
+function uploadFiles() {
+  return [...$("#upload").files];
+}
+$("#upload").addEventListener("change", () => {
+  const list = $("#upload-list");
+  list.replaceChildren();
+  for (const f of uploadFiles()) {
+    const li = document.createElement("li");
+    li.textContent = `${f.name} — ${(f.size / 1024).toFixed(1)} KiB`;
+    list.append(li);
+  }
+});
+
+$("#submit-form").addEventListener("submit", async (e) => {
+  e.preventDefault();
+  const button = $("#submit-button");
+  let doc;
+  let files = null;
+  try {
+    if (source === "example") {
+      doc = withCommon(buildFromExample());
+    } else if (source === "material") {
+      if (!currentMaterialForm) throw new Error("No material model is loaded yet");
+      doc = withCommon({ kind: "material", material: currentMaterialForm.value(), outputs: ["png", "exr"] });
+    } else if (source === "upload") {
+      files = uploadFiles();
+      const main = files.find((f) => /\.glb$/i.test(f.name)) || files.find((f) => /\.gltf$/i.test(f.name));
+      if (!main) throw new Error("Choose a .glb file, or a .gltf file with its buffers and images");
+      doc = withCommon({ kind: "scene", scene: { gltf: main.name }, outputs: ["png", "exr"] });
+    } else {
+      try {
+        doc = JSON.parse($("#json-doc").value);
+      } catch (err) {
+        throw new Error(`The job document is not valid JSON: ${err.message}`);
+      }
+    }
+  } catch (err) {
+    showError(err, "Cannot submit");
+    return;
+  }
+  button.disabled = true;
+  try {
+    const job = files ? await api.submitMultipart(doc, files) : await api.submitJson(doc);
+    showNotice(`Job ${shortId(job.id)} queued.`);
+    await refreshQueue();
+    select(job.id);
+  } catch (err) {
+    showError(err, "Submit refused");
+  } finally {
+    button.disabled = false;
+  }
+});
+
+// ---------------------------------------------------------------------------------------------------------------
+// Queue
+
+let jobs = [];
+let filter = "all";
+const rows = new Map(); // id -> { tr, cells }
+let selectedId = null;
+
+function buildFilters() {
+  const group = $("#filters");
+  for (const s of ["all", ...STATES]) {
+    const b = document.createElement("button");
+    b.type = "button";
+    b.className = "chip";
+    b.dataset.filter = s;
+    b.setAttribute("aria-pressed", String(s === filter));
+    b.innerHTML = `<span class="chip-label"></span> <span class="count"></span>`;
+    b.querySelector(".chip-label").textContent = s;
+    b.addEventListener("click", () => {
+      filter = s;
+      for (const c of group.children) c.setAttribute("aria-pressed", String(c.dataset.filter === s));
+      renderQueue();
+    });
+    group.append(b);
+  }
+}
+buildFilters();
+
+function button(label, action, extraClass) {
+  const b = document.createElement("button");
+  b.type = "button";
+  b.textContent = label;
+  b.dataset.action = action;
+  if (extraClass) b.className = extraClass;
+  return b;
+}
+
+function makeRow(job) {
+  const tr = document.createElement("tr");
+  tr.dataset.id = job.id;
+  const idCell = document.createElement("td");
+  const link = document.createElement("button");
+  link.type = "button";
+  link.className = "link mono";
+  link.textContent = shortId(job.id);
+  link.title = job.id;
+  link.setAttribute("aria-label", `Show job ${shortId(job.id)}`);
+  link.addEventListener("click", () => select(job.id));
+  const kind = document.createElement("span");
+  kind.className = "kind";
+  idCell.append(link, kind);
+
+  const stateCell = document.createElement("td");
+  const badge = document.createElement("span");
+  badge.className = "badge";
+  stateCell.append(badge);
+
+  const prioCell = document.createElement("td");
+  const prio = document.createElement("input");
+  prio.type = "number";
+  prio.min = -100;
+  prio.max = 100;
+  prio.step = 1;
+  prio.className = "prio";
+  prio.setAttribute("aria-label", `Priority of job ${shortId(job.id)}`);
+  prio.addEventListener("change", () => changePriority(job.id, prio));
+  prioCell.append(prio);
+
+  const progCell = document.createElement("td");
+  progCell.className = "col-progress";
+  const bar = document.createElement("div");
+  bar.className = "progress";
+  bar.setAttribute("role", "progressbar");
+  bar.setAttribute("aria-valuemin", "0");
+  bar.setAttribute("aria-valuemax", "100");
+  bar.setAttribute("aria-label", `Progress of job ${shortId(job.id)}`);
+  bar.innerHTML = '<span class="bar"></span>';
+  const progText = document.createElement("small");
+  progText.className = "muted";
+  progCell.append(bar, progText);
+
+  const createdCell = document.createElement("td");
+  createdCell.className = "muted nowrap";
+
+  const actCell = document.createElement("td");
+  actCell.className = "actions";
+  const cancel = button("Cancel", "cancel");
+  const requeue = button("Requeue", "requeue");
+  const del = button("Delete", "delete", "danger");
+  for (const b of [cancel, requeue, del]) {
+    b.setAttribute("aria-label", `${b.textContent} job ${shortId(job.id)}`);
+    b.addEventListener("click", () => runAction(job.id, b.dataset.action));
+  }
+  actCell.append(cancel, requeue, del);
+
+  tr.append(idCell, stateCell, prioCell, progCell, createdCell, actCell);
+  tr.addEventListener("click", (e) => {
+    if (e.target.closest("button, input")) return;
+    select(job.id);
+  });
+  return { tr, kind, badge, prio, bar, progText, createdCell, buttons: { cancel, requeue, delete: del } };
+}
+
+function updateRow(r, job) {
+  r.kind.textContent = job.kind;
+  r.badge.textContent = job.state;
+  r.badge.dataset.state = job.state;
+  if (document.activeElement !== r.prio) r.prio.value = job.priority ?? 0;
+  r.prio.disabled = !allowed(job, "priority");
+  setProgress(r.bar, job);
+  r.progText.textContent = progressText(job);
+  r.createdCell.textContent = fmtTime(job.created_at);
+  for (const [action, b] of Object.entries(r.buttons)) b.disabled = !allowed(job, action);
+  r.tr.classList.toggle("selected", job.id === selectedId);
+  r.tr.setAttribute("aria-selected", String(job.id === selectedId));
+}
+
+function renderQueue() {
+  const body = $("#jobs");
+  const counts = Object.fromEntries(STATES.map((s) => [s, 0]));
+  for (const j of jobs) counts[j.state] = (counts[j.state] || 0) + 1;
+  for (const chip of $("#filters").children) {
+    const s = chip.dataset.filter;
+    chip.querySelector(".count").textContent = s === "all" ? jobs.length : counts[s] || 0;
+  }
+  const shown = jobs.filter((j) => filter === "all" || j.state === filter);
+  const seen = new Set();
+  let previous = null;
+  for (const job of shown) {
+    seen.add(job.id);
+    let r = rows.get(job.id);
+    if (!r) {
+      r = makeRow(job);
+      rows.set(job.id, r);
+    }
+    updateRow(r, job);
+    const expectedPosition = previous ? previous.nextSibling : body.firstChild;
+    if (r.tr !== expectedPosition) body.insertBefore(r.tr, expectedPosition);
+    previous = r.tr;
+  }
+  for (const [id, r] of rows) {
+    if (!seen.has(id)) {
+      r.tr.remove();
+      if (!jobs.some((j) => j.id === id)) rows.delete(id);
+    }
+  }
+  $("#queue-empty").hidden = shown.length > 0;
+  $("#queue-empty").textContent = jobs.length ? `No ${filter} jobs.` : "No jobs yet. Submit one on the left.";
+}
+
+let queueTimer = null;
+let queueBusy = false;
+async function refreshQueue() {
+  if (queueBusy) return;
+  queueBusy = true;
+  try {
+    const list = await api.listJobs();
+    jobs = list.jobs || [];
+    renderQueue();
+    const sel = jobs.find((j) => j.id === selectedId);
+    if (sel && !watcher.live) showJob(sel);
+  } catch (e) {
+    // The connection indicator shows it; a toast per failed poll would drown the page.
+  } finally {
+    queueBusy = false;
+  }
+}
+function scheduleQueue() {
+  clearTimeout(queueTimer);
+  queueTimer = setTimeout(async () => {
+    await refreshQueue();
+    scheduleQueue();
+  }, QUEUE_POLL_MS);
+}
+
+async function changePriority(id, input) {
+  const value = Number(input.value);
+  if (!Number.isInteger(value) || value < -100 || value > 100) {
+    showError(new Error("Priority must be a whole number from -100 to 100"), "Priority");
+    return;
+  }
+  try {
+    await api.setPriority(id, value);
+    showNotice(`Job ${shortId(id)}: priority ${value}.`);
+  } catch (e) {
+    showError(e, "Priority change refused");
+  }
+  input.blur();
+  refreshQueue();
+}
+
+function confirmDelete(id) {
+  const dialog = $("#confirm");
+  $("#confirm-text").textContent = `Job ${shortId(id)} and its images will be deleted. This cannot be undone.`;
+  return new Promise((resolve) => {
+    dialog.addEventListener("close", () => resolve(dialog.returnValue === "yes"), { once: true });
+    dialog.returnValue = "no";
+    dialog.showModal();
+  });
+}
+
+async function runAction(id, action) {
+  try {
+    if (action === "delete") {
+      if (!(await confirmDelete(id))) return;
+      await api.remove(id);
+      showNotice(`Job ${shortId(id)} deleted.`);
+      if (id === selectedId) select(null);
+    } else {
+      const job = await api.action(id, action);
+      showNotice(`Job ${shortId(id)}: ${job?.state ?? action}.`);
+      if (job && id === selectedId) showJob(job);
+    }
+  } catch (e) {
+    showError(e, `${action[0].toUpperCase()}${action.slice(1)} refused`);
+  }
+  refreshQueue();
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Job view
+
+let currentJob = null;
+
+// Follows one job: SSE when the daemon has /events, else GET /v1/jobs/{id} every second. Calls showJob() with
+// every status and loadPreview() whenever a newer preview exists.
+class JobWatcher {
+  constructor() {
+    this.id = null;
+    this.es = null;
+    this.timer = null;
+    this.live = false;
+    this.lastPass = -1;
+    this.errors = 0;
+  }
+  stop() {
+    this.es?.close();
+    this.es = null;
+    clearTimeout(this.timer);
+    this.timer = null;
+    this.live = false;
+    this.id = null;
+    setLiveMode(null);
+  }
+  start(id) {
+    this.stop();
+    this.id = id;
+    this.lastPass = -1;
+    this.errors = 0;
+    if (typeof EventSource === "undefined") return this.poll();
+    let es;
+    try {
+      es = new EventSource(api.eventsUrl(id));
+    } catch {
+      return this.poll();
+    }
+    this.es = es;
+    setLiveMode("connecting");
+    es.addEventListener("open", () => {
+      this.live = true;
+      this.errors = 0;
+      setLiveMode("sse");
+    });
+    es.addEventListener("state", (e) => {
+      const job = JSON.parse(e.data);
+      if (job.id !== this.id) return;
+      showJob(job);
+      this.previewIfNewer(job.progress?.passes ?? 0, job);
+      if (TERMINAL.has(job.state)) {
+        // The stream ends after the terminal state; do not let EventSource reconnect.
+        es.close();
+        this.live = false;
+        setLiveMode("done");
+      }
+    });
+    es.addEventListener("progress", (e) => {
+      const d = JSON.parse(e.data);
+      if (d.id !== this.id || !currentJob) return;
+      showJob({ ...currentJob, progress: d.progress });
+    });
+    es.addEventListener("preview", (e) => {
+      const d = JSON.parse(e.data);
+      if (d.id !== this.id) return;
+      if (d.pass > this.lastPass) {
+        this.lastPass = d.pass;
+        loadPreview(this.id, d.url);
+      }
+    });
+    es.addEventListener("error", () => {
+      if (this.es !== es) return;
+      // CLOSED: the endpoint answered with an error (404 before the daemon has events, 401, ...): poll instead.
+      // CONNECTING: EventSource retries by itself; after a few failures in a row, poll.
+      this.errors += 1;
+      if (es.readyState === EventSource.CLOSED || this.errors >= 3 || !this.live) {
+        es.close();
+        this.es = null;
+        this.live = false;
+        if (this.id === id) this.poll();
+      } else {
+        setLiveMode("reconnecting");
+      }
+    });
+  }
+  previewIfNewer(passes, job) {
+    if (passes > 0 && passes !== this.lastPass && (job.links?.preview || passes > 0)) {
+      this.lastPass = passes;
+      loadPreview(job.id, `/v1/jobs/${encodeURIComponent(job.id)}/preview.png?pass=${passes}`);
+    }
+  }
+  poll() {
+    setLiveMode("polling");
+    const id = this.id;
+    const tick = async () => {
+      if (this.id !== id) return;
+      let job = null;
+      try {
+        job = await api.getJob(id);
+      } catch (e) {
+        if (e instanceof ApiError && e.status === 404) {
+          showError(e, `Job ${shortId(id)}`);
+          select(null);
+          return;
+        }
+      }
+      if (this.id !== id) return;
+      if (job) {
+        showJob(job);
+        this.previewIfNewer(job.progress?.passes ?? 0, job);
+        if (TERMINAL.has(job.state)) {
+          setLiveMode("done");
+          return;
+        }
+      }
+      this.timer = setTimeout(tick, JOB_POLL_MS);
+    };
+    tick();
+  }
+}
+const watcher = new JobWatcher();
+
+function setLiveMode(mode) {
+  const el = $("#live-mode");
+  const labels = {
+    connecting: "connecting…",
+    sse: "live (events)",
+    reconnecting: "reconnecting…",
+    polling: "live (polling)",
+    done: "finished",
+  };
+  el.hidden = !mode;
+  el.dataset.mode = mode || "";
+  el.textContent = labels[mode] || "";
+}
+
+let previewUrl = null;
+let previewSeq = 0;
+async function loadPreview(id, url) {
+  const seq = ++previewSeq;
+  try {
+    const blob = await getBlob(url);
+    if (seq !== previewSeq || id !== selectedId) return;
+    const objectUrl = URL.createObjectURL(blob);
+    const img = $("#preview");
+    const old = previewUrl;
+    previewUrl = objectUrl;
+    img.src = objectUrl;
+    img.dataset.pass = String(watcher.lastPass);
+    img.decode?.().catch(() => {});
+    $("#preview-placeholder").hidden = true;
+    $("#preview-open").disabled = false;
+    const full = $("#fullsize-image");
+    if ($("#fullsize").open) full.src = objectUrl;
+    if (old) setTimeout(() => URL.revokeObjectURL(old), 5000);
+  } catch (e) {
+    // 409 before the first pass, 404 when the job ended before one: nothing to show yet.
+    if (!(e instanceof ApiError && (e.status === 409 || e.status === 404))) showError(e, "Preview");
+  }
+}
+
+function select(id) {
+  if (id === selectedId) return;
+  selectedId = id;
+  previewSeq++;
+  if (previewUrl) URL.revokeObjectURL(previewUrl);
+  previewUrl = null;
+  const img = $("#preview");
+  img.removeAttribute("src");
+  delete img.dataset.pass;
+  $("#preview-placeholder").hidden = false;
+  $("#preview-open").disabled = true;
+  currentJob = null;
+  for (const [rid, r] of rows) {
+    r.tr.classList.toggle("selected", rid === id);
+    r.tr.setAttribute("aria-selected", String(rid === id));
+  }
+  $("#job-empty").hidden = Boolean(id);
+  $("#job-body").hidden = !id;
+  $("#job-state").hidden = !id;
+  if (!id) {
+    watcher.stop();
+    $("#job-title").textContent = "Job";
+    return;
+  }
+  $("#job-title").textContent = `Job ${shortId(id)}`;
+  const known = jobs.find((j) => j.id === id);
+  if (known) showJob(known);
+  watcher.start(id);
+}
+
+function stat(dl, name, value) {
+  const dt = document.createElement("dt");
+  dt.textContent = name;
+  const dd = document.createElement("dd");
+  dd.textContent = value;
+  dl.append(dt, dd);
+}
+
+function showJob(job) {
+  if (job.id !== selectedId) return;
+  currentJob = job;
+  const badge = $("#job-state");
+  badge.textContent = job.state;
+  badge.dataset.state = job.state;
+  $("#job-title").textContent = `Job ${shortId(job.id)}`;
+  $("#job-title").title = job.id;
+  setProgress($("#job-progress"), job);
+  for (const b of document.querySelectorAll("#job-body [data-action]")) {
+    b.disabled = !allowed(job, b.dataset.action);
+    b.onclick = () => runAction(job.id, b.dataset.action);
+  }
+  const outputs = job.outputs || ["png", "exr"];
+  $("#download-png").disabled = !(allowed(job, "result") && outputs.includes("png"));
+  $("#download-exr").disabled = !(allowed(job, "result") && outputs.includes("exr"));
+
+  const p = job.progress || {};
+  const r = job.render || {};
+  if (r.width && r.height) {
+    // The preview frame takes the image's shape; small renders are enlarged with visible pixels.
+    $("#preview-open").style.aspectRatio = `${r.width} / ${r.height}`;
+    $("#preview").classList.toggle("pixelated", Math.max(r.width, r.height) < 400);
+  }
+  const dl = $("#job-stats");
+  dl.replaceChildren();
+  stat(dl, "Id", job.id);
+  stat(dl, "Kind", job.kind);
+  if (r.width) stat(dl, "Resolution", `${r.width} × ${r.height}`);
+  stat(dl, "Samples", `${p.samples_done ?? 0} / ${p.samples_total ?? 0} per pixel`);
+  stat(dl, "Passes", String(p.passes ?? 0));
+  stat(dl, "Elapsed", fmtSeconds(p.elapsed_s));
+  if (job.state === "running") stat(dl, "ETA", fmtSeconds(p.eta_s));
+  stat(dl, "Samples/s", fmtRate(p.samples_per_s));
+  if (r.estimator) stat(dl, "Estimator", r.estimator);
+  if (r.max_depth !== undefined) stat(dl, "Max depth", String(r.max_depth));
+  if (r.seed !== undefined) stat(dl, "Seed", String(r.seed));
+  if (r.time_limit_s) stat(dl, "Time limit", fmtSeconds(r.time_limit_s));
+  stat(dl, "Priority", String(job.priority ?? 0));
+  if (job.queue_position) stat(dl, "Queue position", String(job.queue_position));
+  if (job.owner) stat(dl, "Owner", job.owner);
+  stat(dl, "Created", fmtTime(job.created_at));
+  if (job.started_at) stat(dl, "Started", fmtTime(job.started_at));
+  if (job.finished_at) stat(dl, "Finished", fmtTime(job.finished_at));
+  if (job.stop_reason) stat(dl, "Stopped by", job.stop_reason.replace("_", " "));
+  if (job.error) stat(dl, "Error", job.error);
+  for (const w of job.warnings || []) stat(dl, "Warning", w);
+  $("#preview-caption").textContent = p.passes
+    ? `Pass ${p.passes} · ${p.samples_done} spp${TERMINAL.has(job.state) ? " · final" : ""}`
+    : job.state === "queued"
+      ? "Waiting in the queue"
+      : "";
+
+  // Keep the queue row in step without waiting for the next poll.
+  const i = jobs.findIndex((j) => j.id === job.id);
+  if (i >= 0) {
+    jobs[i] = { ...jobs[i], ...job };
+    const row = rows.get(job.id);
+    if (row) updateRow(row, jobs[i]);
+  }
+}
+
+async function download(ext) {
+  if (!currentJob) return;
+  const id = currentJob.id;
+  const b = $(`#download-${ext}`);
+  b.disabled = true;
+  try {
+    const blob = await getBlob(`/v1/jobs/${encodeURIComponent(id)}/result.${ext}`);
+    const url = URL.createObjectURL(blob);
+    const a = document.createElement("a");
+    a.href = url;
+    a.download = `tessera-${shortId(id)}.${ext}`;
+    document.body.append(a);
+    a.click();
+    a.remove();
+    setTimeout(() => URL.revokeObjectURL(url), 10000);
+  } catch (e) {
+    showError(e, `Download ${ext.toUpperCase()}`);
+  } finally {
+    if (currentJob?.id === id) b.disabled = !allowed(currentJob, "result");
+  }
+}
+$("#download-png").addEventListener("click", () => download("png"));
+$("#download-exr").addEventListener("click", () => download("exr"));
+
+// Full-size view
+const fullsize = $("#fullsize");
+$("#preview-open").addEventListener("click", () => {
+  if (!previewUrl) return;
+  $("#fullsize-image").src = previewUrl;
+  $("#fullsize-title").textContent = currentJob ? `Job ${shortId(currentJob.id)} — full size` : "Full size";
+  fullsize.showModal();
+});
+$("#fullsize-close").addEventListener("click", () => fullsize.close());
+fullsize.addEventListener("click", (e) => {
+  if (e.target === fullsize) fullsize.close();
+});
+$("#fullsize-zoom").addEventListener("click", (e) => {
+  const on = e.currentTarget.getAttribute("aria-pressed") !== "true";
+  e.currentTarget.setAttribute("aria-pressed", String(on));
+  fullsize.classList.toggle("actual", on);
+});
+
+// ---------------------------------------------------------------------------------------------------------------
+// Start
+
+document.addEventListener("visibilitychange", () => {
+  if (!document.hidden) refreshQueue();
+});
+loadMaterials();
+refreshQueue().then(scheduleQueue);

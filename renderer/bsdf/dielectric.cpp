@@ -1,0 +1,194 @@
+// Dielectric interfaces (glass, water): smooth and rough reflection + refraction, and thin panes.
+//
+// Smooth (seed 003, "BSDF: BTDF + BRDF"): f_r = F / |cos| delta(reflect), f_t = (1 - F) / |cos| delta(refract),
+// F the exact unpolarised Fresnel reflectance (fresnel.h) with total internal reflection past the critical angle,
+// directions by the law of reflection and Snell's law (seed 000, 2.5.3). Radiance crossing the interface changes
+// by the square of the ratio of indices (seed 000, 2.5.3 "Reciprocity for transparent surfaces": the ray density
+// changes by (eta_2/eta_1)^2), so the radiance BTDF carries 1/eta'^2 with eta' = eta_(wi side) / eta_(wo side),
+// and BsdfSample::eta = eta' lets the integrator take that factor out of Russian roulette.
+//
+// Rough (Walter et al. 2007, "Microfacet Models for Refraction through Rough Surfaces"): reflection by eq. 20 and
+// transmission by eq. 21, with Walter's i = wi, o = wo and eta_i, eta_o the indices on their sides,
+//   f_t = |wi.m| |wo.m| / (|wi.n| |wo.n|) * eta_o^2 (1 - F) G D / (eta_i (wi.m) + eta_o (wo.m))^2,
+// which is the radiance form (the 1/eta'^2 above); m is the generalised half vector ~ eta_i wi + eta_o wo
+// (eq. 16). Sampling draws a visible normal of wo (microfacet.h), chooses reflection or refraction by F(wo.m), and
+// converts by the Jacobians 1/(4 |wo.m|) (eq. 14) and eta_i^2 |wi.m| / (eta_i wi.m + eta_o wo.m)^2 (eq. 17).
+//
+// Local frame: +z points outside; "ior" is eta_inside / eta_outside.
+#include "renderer/bsdf/common.h"
+#include "renderer/bsdf/fresnel.h"
+#include "renderer/scene_error.h"
+
+namespace tessera {
+namespace {
+
+class DielectricBsdf final : public Bsdf {
+ public:
+  DielectricBsdf(const MicrofacetDistribution& dist, float eta, const Rgb& reflectance, const Rgb& transmittance)
+      : dist_(dist), eta_(eta), kr_(reflectance), kt_(transmittance) {}
+
+  Rgb eval(const Vec3& wo, const Vec3& wi) const override {
+    if (smooth()) return Rgb(0);
+    Vec3 wm;
+    float etap;
+    if (!half_vector(wo, wi, &wm, &etap)) return Rgb(0);
+    const float cos_o = wo.z, cos_i = wi.z;
+    const float F = fresnel_dielectric(dot(wo, wm), eta_);
+    const float dg = dist_.d(wm) * dist_.g(wo, wi, wm);
+    if (cos_o * cos_i > 0) return kr_ * (dg * F / std::abs(4 * cos_i * cos_o));
+    const float denom = sqr(dot(wi, wm) + dot(wo, wm) / etap) * cos_i * cos_o;
+    const float ft = dg * (1 - F) * std::abs(dot(wi, wm) * dot(wo, wm) / denom) / sqr(etap);
+    return kt_ * ft;
+  }
+
+  std::optional<BsdfSample> sample(const Vec3& wo, float uc, Vec2 u) const override {
+    if (wo.z == 0) return std::nullopt;
+    const float etap_t = wo.z > 0 ? eta_ : 1 / eta_;
+    if (smooth()) {
+      const float R = fresnel_dielectric(wo.z, eta_);
+      const float pr = R * max_component(kr_), pt = (1 - R) * max_component(kt_);
+      if (pr + pt <= 0) return std::nullopt;
+      if (uc * (pr + pt) < pr) {
+        Vec3 wi = reflect_local(wo);
+        return BsdfSample{kr_ * (R / std::abs(wi.z)), wi, pr / (pr + pt), kBsdfReflection | kBsdfSpecular, 1.0f};
+      }
+      Vec3 wi;
+      if (!refract(wo, Vec3(0, 0, wo.z > 0 ? 1.0f : -1.0f), etap_t, &wi)) return std::nullopt;
+      Rgb f = kt_ * ((1 - R) / std::abs(wi.z) / sqr(etap_t));
+      return BsdfSample{f, wi, pt / (pr + pt), kBsdfTransmission | kBsdfSpecular, etap_t};
+    }
+    // Visible normal of wo (from below: of the flipped configuration), on the upper side.
+    Vec3 wm = dist_.sample_visible(wo.z > 0 ? wo : -wo, u, uc);
+    const float om = dot(wo, wm);
+    const float R = fresnel_dielectric(om, eta_);
+    const float pr = R * max_component(kr_), pt = (1 - R) * max_component(kt_);
+    if (pr + pt <= 0) return std::nullopt;
+    Vec3 wi;
+    uint32_t flags;
+    if (uc * (pr + pt) < pr) {
+      wi = wm * (2 * om) - wo;
+      if (wi.z * wo.z <= 0) return std::nullopt;
+      flags = kBsdfReflection | kBsdfGlossy;
+    } else {
+      if (!refract(wo, om > 0 ? wm : -wm, om > 0 ? eta_ : 1 / eta_, &wi)) return std::nullopt;
+      if (wi.z * wo.z >= 0 || wi.z == 0) return std::nullopt;
+      flags = kBsdfTransmission | kBsdfGlossy;
+    }
+    float pdf_value = pdf(wo, wi);
+    Rgb f = eval(wo, wi);
+    if (!(pdf_value > 0) || is_black(f)) return std::nullopt;
+    return BsdfSample{f, wi, pdf_value, flags, (flags & kBsdfTransmission) ? etap_t : 1.0f};
+  }
+
+  float pdf(const Vec3& wo, const Vec3& wi) const override {
+    if (smooth()) return 0;
+    Vec3 wm;
+    float etap;
+    if (!half_vector(wo, wi, &wm, &etap)) return 0;
+    const float R = fresnel_dielectric(dot(wo, wm), eta_);
+    const float pr = R * max_component(kr_), pt = (1 - R) * max_component(kt_);
+    if (pr + pt <= 0) return 0;
+    const float dvis = dist_.d_visible(wo, wm);
+    if (wo.z * wi.z > 0) return dvis / (4 * std::abs(dot(wo, wm))) * pr / (pr + pt);
+    const float dwm_dwi = std::abs(dot(wi, wm)) / sqr(dot(wi, wm) + dot(wo, wm) / etap);
+    return dvis * dwm_dwi * pt / (pr + pt);
+  }
+
+  uint32_t flags() const override {
+    return kBsdfReflection | kBsdfTransmission | (smooth() ? kBsdfSpecular : kBsdfGlossy);
+  }
+  Rgb albedo_hint() const override { return kt_; }
+
+ private:
+  bool smooth() const { return dist_.effectively_smooth(); }
+
+  // The generalised half vector of (wo, wi) on the upper side (Walter 2007, eq. 16), with eta' = eta_(wi side) /
+  // eta_(wo side) (1 for reflection); false for degenerate or back-facing configurations.
+  bool half_vector(const Vec3& wo, const Vec3& wi, Vec3* wm, float* etap) const {
+    const float cos_o = wo.z, cos_i = wi.z;
+    if (cos_o == 0 || cos_i == 0) return false;
+    const bool reflect = cos_o * cos_i > 0;
+    *etap = reflect ? 1.0f : (cos_o > 0 ? eta_ : 1 / eta_);
+    Vec3 m = wi * *etap + wo;
+    float len2 = length_squared(m);
+    if (!(len2 > 0)) return false;
+    m = m / std::sqrt(len2);
+    if (m.z < 0) m = -m;
+    // Microfacets seen from behind by either direction contribute nothing.
+    if (dot(m, wi) * cos_i <= 0 || dot(m, wo) * cos_o <= 0) return false;
+    *wm = m;
+    return true;
+  }
+
+  MicrofacetDistribution dist_;
+  float eta_;
+  Rgb kr_, kt_;
+};
+
+// A thin pane: two parallel smooth interfaces close together, light leaving in the direction it came (pbrt-v4,
+// ThinDielectricBxDF): R' = R + T^2 R / (1 - R^2) sums the inter-reflections (a geometric series), T' = 1 - R'.
+class ThinDielectricBsdf final : public Bsdf {
+ public:
+  ThinDielectricBsdf(float eta, const Rgb& kr, const Rgb& kt) : eta_(eta), kr_(kr), kt_(kt) {}
+  Rgb eval(const Vec3&, const Vec3&) const override { return Rgb(0); }
+  float pdf(const Vec3&, const Vec3&) const override { return 0; }
+  std::optional<BsdfSample> sample(const Vec3& wo, float uc, Vec2) const override {
+    if (wo.z == 0) return std::nullopt;
+    float R = fresnel_dielectric(std::abs(wo.z), eta_), T = 1 - R;
+    if (R < 1) {
+      R += T * T * R / (1 - R * R);
+      T = 1 - R;
+    }
+    const float pr = R * max_component(kr_), pt = T * max_component(kt_);
+    if (pr + pt <= 0) return std::nullopt;
+    if (uc * (pr + pt) < pr) {
+      Vec3 wi = reflect_local(wo);
+      return BsdfSample{kr_ * (R / std::abs(wi.z)), wi, pr / (pr + pt), kBsdfReflection | kBsdfSpecular, 1.0f};
+    }
+    Vec3 wi = -wo;
+    return BsdfSample{kt_ * (T / std::abs(wi.z)), wi, pt / (pr + pt), kBsdfTransmission | kBsdfSpecular, 1.0f};
+  }
+  uint32_t flags() const override { return kBsdfReflection | kBsdfTransmission | kBsdfSpecular; }
+  Rgb albedo_hint() const override { return kt_; }
+
+ private:
+  float eta_;
+  Rgb kr_, kt_;
+};
+
+class DielectricMaterial final : public Material {
+ public:
+  DielectricMaterial(bool thin, RoughnessParams rough, float ior, RgbParam kr, RgbParam kt)
+      : thin_(thin), rough_(std::move(rough)), ior_(ior), kr_(std::move(kr)), kt_(std::move(kt)) {}
+  const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
+    if (thin_) return arena.make<ThinDielectricBsdf>(ior_, kr_.eval(sp), kt_.eval(sp));
+    return arena.make<DielectricBsdf>(rough_.at(sp), ior_, kr_.eval(sp), kt_.eval(sp));
+  }
+
+ private:
+  bool thin_;
+  RoughnessParams rough_;
+  float ior_;
+  RgbParam kr_, kt_;
+};
+
+MaterialFactory dielectric_factory(bool thin) {
+  return [thin](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
+    RoughnessParams rough;
+    if (!thin) rough = read_roughness(j, ptr, ctx, 0.0f, false);
+    float ior = params::number(j, "ior", ptr, 1.5f, 1.0f, 4.0f);
+    if (ior == 1.0f) ior = 1.0001f;  // an index-matched interface: keep the formulas finite
+    RgbParam kr = params::rgb_param(j, "reflectance", ptr, Rgb(1), 0.0f, 1.0f, ctx);
+    RgbParam kt = params::rgb_param(j, "transmittance", ptr, Rgb(1), 0.0f, 1.0f, ctx);
+    return std::make_unique<DielectricMaterial>(thin, std::move(rough), ior, std::move(kr), std::move(kt));
+  };
+}
+
+}  // namespace
+
+void register_dielectric(MaterialRegistry& registry) {
+  registry.add("dielectric", dielectric_factory(false));
+  registry.add("thin_dielectric", dielectric_factory(true));
+}
+
+}  // namespace tessera

@@ -1,0 +1,77 @@
+#include "renderer/bsdf/fresnel.h"
+
+#include <complex>
+
+namespace tessera {
+
+void fresnel_dielectric_polarized(float cos_theta_i, float eta, float* r_s, float* r_p) {
+  // Light arriving from inside: swap the media.
+  if (cos_theta_i < 0) {
+    eta = 1 / eta;
+    cos_theta_i = -cos_theta_i;
+  }
+  cos_theta_i = std::min(cos_theta_i, 1.0f);
+  // Snell's law for the transmitted angle (seed 000, 2.5.3).
+  float sin2_theta_i = 1 - cos_theta_i * cos_theta_i;
+  float sin2_theta_t = sin2_theta_i / (eta * eta);
+  if (sin2_theta_t >= 1) {  // total internal reflection
+    *r_s = *r_p = 1;
+    return;
+  }
+  float cos_theta_t = safe_sqrt(1 - sin2_theta_t);
+  // Seed 003, "Fresnel Equation": R_s = |(n1 cos_i - n2 cos_t) / (n1 cos_i + n2 cos_t)|^2,
+  // R_p = |(n1 cos_t - n2 cos_i) / (n1 cos_t + n2 cos_i)|^2, with n1 = 1, n2 = eta.
+  float rs = (cos_theta_i - eta * cos_theta_t) / (cos_theta_i + eta * cos_theta_t);
+  float rp = (cos_theta_t - eta * cos_theta_i) / (cos_theta_t + eta * cos_theta_i);
+  *r_s = rs * rs;
+  *r_p = rp * rp;
+}
+
+float fresnel_dielectric(float cos_theta_i, float eta) {
+  float rs, rp;
+  fresnel_dielectric_polarized(cos_theta_i, eta, &rs, &rp);
+  return 0.5f * (rs + rp);
+}
+
+Rgb fresnel_conductor(float cos_theta_i, const Rgb& eta, const Rgb& k) {
+  using C = std::complex<float>;
+  cos_theta_i = clamp(std::abs(cos_theta_i), 0.0f, 1.0f);
+  Rgb out;
+  for (int c = 0; c < 3; ++c) {
+    C n(eta[c], k[c]);
+    // Snell's law with a complex index: sin^2 theta_t = sin^2 theta_i / n^2, cos theta_t = sqrt(1 - sin^2 theta_t).
+    float sin2_i = 1 - cos_theta_i * cos_theta_i;
+    C sin2_t = sin2_i / (n * n);
+    C cos_t = std::sqrt(C(1) - sin2_t);
+    C r_parl = (n * cos_theta_i - cos_t) / (n * cos_theta_i + cos_t);
+    C r_perp = (cos_theta_i - n * cos_t) / (cos_theta_i + n * cos_t);
+    out[c] = 0.5f * (std::norm(r_parl) + std::norm(r_perp));
+  }
+  return out;
+}
+
+bool refract(const Vec3& wi, const Vec3& n, float eta, Vec3* wt) {
+  // Seed 000, 2.5.3: T = -(eta_1/eta_2) Psi + N ((eta_1/eta_2)(N.Psi) - sqrt(1 - (eta_1/eta_2)^2 (1 - (N.Psi)^2))).
+  float cos_i = dot(n, wi);
+  float r = 1 / eta;
+  float sin2_t = r * r * std::max(0.0f, 1 - cos_i * cos_i);
+  if (sin2_t >= 1) return false;
+  float cos_t = std::sqrt(1 - sin2_t);
+  *wt = -wi * r + n * (r * cos_i - cos_t);
+  return true;
+}
+
+float fresnel_diffuse_reflectance(float eta) {
+  // 2 \int_0^1 F(mu) mu dmu by the composite Simpson rule; the integrand is smooth except at the critical angle,
+  // which a fine grid handles to well below 1e-4.
+  const int n = 2048;
+  double sum = 0;
+  for (int i = 0; i <= n; ++i) {
+    double mu = static_cast<double>(i) / n;
+    double w = (i == 0 || i == n) ? 1 : (i % 2 ? 4 : 2);
+    sum += w * fresnel_dielectric(static_cast<float>(mu), eta) * mu;
+  }
+  return static_cast<float>(2 * sum / (3.0 * n));
+}
+
+}  // namespace tessera

@@ -1,0 +1,391 @@
+// The glTF 2.0 metallic-roughness material (glTF 2.0 specification, appendix B "BRDF Implementation"), with the
+// extensions KHR_materials_ior, KHR_materials_specular, KHR_materials_transmission, KHR_materials_sheen and
+// KHR_materials_clearcoat:
+//
+//   alpha = roughness^2; D = GGX (Trowbridge-Reitz), V = G2 / (4 |N.L| |N.V|) with height-correlated Smith G2
+//   dielectric F_d = Schlick(f0_d, f90_d, V.H), f0_d = min(((ior-1)/(ior+1))^2 * specular_color, 1) * specular,
+//                    f90_d = specular                            (KHR_materials_ior / KHR_materials_specular;
+//                                                                  f0 = 0.04 for the default ior 1.5)
+//   metal F_m      = Schlick(base_color, 1, V.H)                  (appendix B, "conductor_fresnel")
+//   f = (1 - metallic) [ (1 - transmission) W base_color / pi                  (diffuse, "fresnel_mix")
+//                        + F_d D V
+//                        + transmission (1 - max(F_d)) base_color D V (mirrored) ]  (thin-walled specular BTDF)
+//     + metallic F_m D V
+//   sheen:  f min(1 - max(sheen_color) E_sh(mu_o), 1 - max(sheen_color) E_sh(mu_i)) + sheen_color D_sh V_sh,
+//           D_sh the "Charlie" distribution (2 + 1/a) sin(theta_h)^(1/a) / (2 pi), a = sheen_roughness^2
+//           (Estevez & Kulla 2017), V_sh = 1 / (4 (N.L + N.V - N.L N.V)) (Neubelt & Pettineo 2013), E_sh its
+//           tabulated albedo (KHR_materials_sheen, "albedo scaling"); the Charlie lobe's own albedo exceeds 1 at
+//           grazing angles, so tessera divides it by max(1, E_sh(mu_o), E_sh(mu_i)) and caps E_sh at 1 in the
+//           scaling: reciprocal, and the sum stays at most 1
+//   coated: f min(1 - clearcoat E_c(mu_o), 1 - clearcoat E_c(mu_i)) + clearcoat F_c(V.H) D_c V_c,
+//           F_c = Schlick(0.04, 1, V.H), alpha_c = clearcoat_roughness^2   (KHR_materials_clearcoat, "fresnel_coat")
+// Energy: the appendix's diffuse weight W = 1 - max(F_d(V.H)) gains energy at grazing angles (measured here: albedo
+// up to 1.34 for a white rough dielectric at 88 degrees), because the specular lobe's albedo E_s(mu) grows faster
+// than the average of F over the diffuse directions falls. tessera therefore couples the diffuse lobe to the
+// specular one by their albedos (Kelemen & Szirmay-Kalos 2001, eq. 8; Kulla & Conty 2017):
+//   W = (1 - E_s(mu_o)) (1 - E_s(mu_i)) / (1 - E_s_avg),
+// with E_s = f0 E_1(mu, alpha) + f90 E_2(mu, alpha) from a precomputed table of GGX + Schlick albedos (the "split
+// sum" of Karis 2013), so that a white base has albedo E_s(mu_o) + (1 - E_s(mu_o)) = 1 at every angle. The
+// clearcoat attenuates what is under it by the coat's albedo E_c the same way, with the min keeping it reciprocal
+// and bounded.
+// The transmission lobe is the thin-walled one of KHR_materials_transmission without KHR_materials_volume: the
+// reflection lobe mirrored through the surface (no refraction). The half vector of a transmitted pair is that of
+// its mirrored pair, so every term is symmetric in wo and wi (reciprocal), and with Fresnel weights <= 1 and
+// single-scattering microfacet lobes the albedo is at most 1 (energy is lost, not gained, at high roughness).
+// Roughness below 0.045 (alpha 0.002) is clamped there: the model has no delta lobes.
+#include "renderer/bsdf/common.h"
+#include "renderer/bsdf/fresnel.h"
+#include "renderer/sampling.h"
+#include "renderer/scene_error.h"
+
+namespace tessera {
+namespace {
+
+// Directional albedo of the GGX lobe with Schlick Fresnel split into its f0 and f90 parts,
+//   E(mu, alpha) = f0 E_1(mu, alpha) + f90 E_2(mu, alpha), E_1 = \int (1 - (1 - c)^5) D V cos, E_2 = \int (1 - c)^5
+//   ...,
+// tabulated over mu = cos(theta_o) and r = sqrt(alpha), with their cosine-weighted averages over mu.
+class SchlickAlbedoTable {
+ public:
+  static const SchlickAlbedoTable& get() {
+    static const SchlickAlbedoTable table;
+    return table;
+  }
+  // Returns E_1, E_2 at (mu, alpha).
+  void eval(float mu, float alpha, float* e1, float* e2) const {
+    float x = clamp(mu, 0.0f, 1.0f) * (kN - 1), y = clamp(std::sqrt(alpha), 0.0f, 1.0f) * (kN - 1);
+    int i = std::min(static_cast<int>(x), kN - 2), j = std::min(static_cast<int>(y), kN - 2);
+    float tx = x - i, ty = y - j;
+    auto lerp2 = [&](const float(&t)[kN][kN]) {
+      return (t[i][j] * (1 - tx) + t[i + 1][j] * tx) * (1 - ty) + (t[i][j + 1] * (1 - tx) + t[i + 1][j + 1] * tx) * ty;
+    };
+    *e1 = lerp2(e1_);
+    *e2 = lerp2(e2_);
+  }
+  void average(float alpha, float* a1, float* a2) const {
+    float y = clamp(std::sqrt(alpha), 0.0f, 1.0f) * (kN - 1);
+    int j = std::min(static_cast<int>(y), kN - 2);
+    float ty = y - j;
+    *a1 = avg1_[j] * (1 - ty) + avg1_[j + 1] * ty;
+    *a2 = avg2_[j] * (1 - ty) + avg2_[j + 1] * ty;
+  }
+
+ private:
+  static constexpr int kN = 32;
+  SchlickAlbedoTable() {
+    MicrofacetDistribution d;
+    d.type = MicrofacetType::kGgx;
+    const int n = 40;  // n x n stratified visible-normal samples per entry
+    for (int j = 0; j < kN; ++j) {
+      float r = static_cast<float>(j) / (kN - 1);
+      d.alpha_x = d.alpha_y = std::max(r * r, 1e-3f);
+      for (int i = 0; i < kN; ++i) {
+        float mu = std::max(static_cast<float>(i) / (kN - 1), 1e-3f);
+        Vec3 wo(std::sqrt(1 - mu * mu), 0, mu);
+        double s1 = 0, s2 = 0;
+        for (int a = 0; a < n; ++a)
+          for (int b = 0; b < n; ++b) {
+            Vec3 wi;
+            if (!microfacet_reflection_sample(d, wo, Vec2((a + 0.5f) / n, (b + 0.5f) / n), 0.5f, &wi)) continue;
+            float pdf = microfacet_reflection_pdf(d, wo, wi);
+            if (!(pdf > 0)) continue;
+            double w = microfacet_reflection_eval(d, wo, wi) * wi.z / pdf;
+            double c5 = std::pow(1.0 - std::min(1.0f, dot(wo, normalize(wo + wi))), 5.0);
+            s1 += w * (1 - c5);
+            s2 += w * c5;
+          }
+        e1_[i][j] = static_cast<float>(s1 / (n * n));
+        e2_[i][j] = static_cast<float>(s2 / (n * n));
+      }
+      // E_avg = 2 \int E(mu) mu dmu (trapezoidal rule over the table).
+      double a1 = 0, a2 = 0;
+      for (int i = 0; i + 1 < kN; ++i) {
+        double m0 = static_cast<double>(i) / (kN - 1), m1 = static_cast<double>(i + 1) / (kN - 1);
+        a1 += 0.5 * (e1_[i][j] * m0 + e1_[i + 1][j] * m1) * (m1 - m0);
+        a2 += 0.5 * (e2_[i][j] * m0 + e2_[i + 1][j] * m1) * (m1 - m0);
+      }
+      avg1_[j] = static_cast<float>(2 * a1);
+      avg2_[j] = static_cast<float>(2 * a2);
+    }
+  }
+  float e1_[kN][kN];
+  float e2_[kN][kN];
+  float avg1_[kN];
+  float avg2_[kN];
+};
+
+// The sheen lobe: Charlie distribution and Neubelt's visibility, and its directional albedo tabulated over
+// (mu, sqrt(a)) by stratified cosine-weighted quadrature.
+float charlie_d(float cos_h, float a) {
+  float sin2 = std::max(0.0f, 1 - cos_h * cos_h);
+  return (2 + 1 / a) * std::pow(sin2, 0.5f / a) * kInv2Pi;
+}
+float sheen_v(float cos_o, float cos_i) {
+  return 1 / (4 * (cos_i + cos_o - cos_i * cos_o));
+}
+float sheen_eval(const Vec3& wo, const Vec3& wi, float a) {
+  Vec3 h;
+  if (wo.z <= 0 || wi.z <= 0 || !reflection_half_vector(wo, wi, &h)) return 0;
+  return charlie_d(h.z, a) * sheen_v(wo.z, wi.z);
+}
+
+// E_sh(mu) = \int f_sh cos d(omega_i), tabulated over (sqrt(mu), sqrt(a)) (it changes fastest near grazing) by a
+// midpoint rule in (mu_i = t^2, phi), which resolves grazing directions too.
+class SheenAlbedoTable {
+ public:
+  static constexpr float kMinAlpha = 0.01f;
+  static const SheenAlbedoTable& get() {
+    static const SheenAlbedoTable table;
+    return table;
+  }
+  float eval(float mu, float a) const {
+    float x = std::sqrt(clamp(mu, 0.0f, 1.0f)) * (kN - 1), y = clamp(std::sqrt(a), 0.0f, 1.0f) * (kN - 1);
+    int i = std::min(static_cast<int>(x), kN - 2), j = std::min(static_cast<int>(y), kN - 2);
+    float tx = x - i, ty = y - j;
+    return (e_[i][j] * (1 - tx) + e_[i + 1][j] * tx) * (1 - ty) +
+           (e_[i][j + 1] * (1 - tx) + e_[i + 1][j + 1] * tx) * ty;
+  }
+
+ private:
+  static constexpr int kN = 32;
+  SheenAlbedoTable() {
+    const int nt = 96, nphi = 48;  // phi over [0, pi]: the lobe is symmetric about the plane of incidence
+    for (int j = 0; j < kN; ++j) {
+      float r = static_cast<float>(j) / (kN - 1);
+      float a = std::max(r * r, kMinAlpha);
+      for (int i = 0; i < kN; ++i) {
+        float s = static_cast<float>(i) / (kN - 1);
+        float mu = std::max(s * s, 1e-4f);
+        Vec3 wo(std::sqrt(1 - mu * mu), 0, mu);
+        double sum = 0;
+        for (int p = 0; p < nt; ++p) {
+          float t = (p + 0.5f) / nt, mi = t * t, dmi = 2 * t / nt;
+          float si = std::sqrt(std::max(0.0f, 1 - mi * mi));
+          for (int q = 0; q < nphi; ++q) {
+            float phi = (q + 0.5f) / nphi * kPi;
+            Vec3 wi(si * std::cos(phi), si * std::sin(phi), mi);
+            sum += sheen_eval(wo, wi, a) * mi * dmi * (kPi / nphi);
+          }
+        }
+        e_[i][j] = static_cast<float>(2 * sum);
+      }
+    }
+  }
+  float e_[kN][kN];
+};
+
+struct GltfLobes {
+  Rgb base_color{1, 1, 1};
+  float metallic = 1;
+  float alpha = 1;
+  Rgb f0_d{0.04f, 0.04f, 0.04f};
+  float f90_d = 1;
+  float transmission = 0;
+  float clearcoat = 0;
+  float alpha_c = 0.002f;
+  Rgb sheen_color{0, 0, 0};
+  float alpha_sheen = 0.01f;
+};
+
+class GltfPbrBsdf final : public Bsdf {
+ public:
+  explicit GltfPbrBsdf(const GltfLobes& l) : l_(l) {
+    dist_.type = MicrofacetType::kGgx;
+    dist_.alpha_x = dist_.alpha_y = l.alpha;
+    dist_c_.type = MicrofacetType::kGgx;
+    dist_c_.alpha_x = dist_c_.alpha_y = l.alpha_c;
+    float a1, a2;
+    SchlickAlbedoTable::get().average(l.alpha, &a1, &a2);
+    specular_average_ = std::min(max_component(l.f0_d * a1 + Rgb(l.f90_d * a2)), 0.999f);
+    sheen_max_ = max_component(l.sheen_color);
+  }
+
+  Rgb eval(const Vec3& wo_in, const Vec3& wi_in) const override {
+    Vec3 wo = wo_in, wi = wi_in;
+    if (wo.z == 0 || wi.z == 0) return Rgb(0);
+    if (wo.z < 0) {
+      wo.z = -wo.z;
+      wi.z = -wi.z;
+    }
+    const bool transmit = wi.z < 0;
+    if (transmit && l_.transmission <= 0) return Rgb(0);
+    const Vec3 wr(wi.x, wi.y, std::abs(wi.z));  // the mirrored pair for transmission
+    Vec3 h;
+    if (!reflection_half_vector(wo, wr, &h)) return Rgb(0);
+    const float vh = dot(wo, h);
+    const float dv = microfacet_reflection_eval(dist_, wo, wr);
+    const Rgb fd = fresnel_schlick(l_.f0_d, Rgb(l_.f90_d), vh);
+    const float fd_max = max_component(fd);
+    const float m = l_.metallic;
+    Rgb f;
+    if (transmit) {
+      f = l_.base_color * ((1 - m) * l_.transmission * (1 - fd_max) * dv);
+    } else {
+      const Rgb fm = fresnel_schlick(l_.base_color, Rgb(1), vh);
+      const float w = (1 - specular_albedo(wo.z)) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
+      f = l_.base_color * ((1 - m) * (1 - l_.transmission) * w * kInvPi) + fd * ((1 - m) * dv) + fm * (m * dv);
+    }
+    if (sheen_max_ > 0) {
+      const float eo = sheen_albedo(wo.z), ei = sheen_albedo(wr.z);
+      f = f * std::min(1 - sheen_max_ * std::min(eo, 1.0f), 1 - sheen_max_ * std::min(ei, 1.0f));
+      // The Charlie lobe's albedo exceeds 1 near grazing angles; dividing by max(1, E_sh(mu_o), E_sh(mu_i)) bounds
+      // it by 1 and stays symmetric.
+      if (!transmit) f += l_.sheen_color * (sheen_eval(wo, wr, l_.alpha_sheen) / std::max(1.0f, std::max(eo, ei)));
+    }
+    if (l_.clearcoat > 0) {
+      f = f * std::min(1 - l_.clearcoat * coat_albedo(wo.z), 1 - l_.clearcoat * coat_albedo(wr.z));
+      if (!transmit) {
+        const float fc = l_.clearcoat * fresnel_schlick(0.04f, vh);
+        f += Rgb(fc * microfacet_reflection_eval(dist_c_, wo, wr));
+      }
+    }
+    return f;
+  }
+
+  std::optional<BsdfSample> sample(const Vec3& wo_in, float uc, Vec2 u) const override {
+    if (wo_in.z == 0) return std::nullopt;
+    Vec3 wo = wo_in;
+    const bool flip = wo.z < 0;
+    if (flip) wo.z = -wo.z;
+    float p[5];
+    lobe_probabilities(wo, p);
+    Vec3 wi;
+    uint32_t flags;
+    if (uc < p[0] || uc >= p[0] + p[1] + p[2] + p[3]) {  // diffuse or sheen: cosine-weighted
+      wi = sample_cosine_hemisphere(u);
+      flags = kBsdfReflection | (uc < p[0] ? kBsdfDiffuse : kBsdfGlossy);
+    } else if (uc < p[0] + p[1]) {
+      if (!microfacet_reflection_sample(dist_, wo, u, 0.5f, &wi)) return std::nullopt;
+      flags = kBsdfReflection | kBsdfGlossy;
+    } else if (uc < p[0] + p[1] + p[2]) {
+      if (!microfacet_reflection_sample(dist_, wo, u, 0.5f, &wi)) return std::nullopt;
+      wi.z = -wi.z;
+      flags = kBsdfTransmission | kBsdfGlossy;
+    } else {
+      if (!microfacet_reflection_sample(dist_c_, wo, u, 0.5f, &wi)) return std::nullopt;
+      flags = kBsdfReflection | kBsdfGlossy;
+    }
+    if (flip) wi.z = -wi.z;
+    float pdf_value = pdf(wo_in, wi);
+    if (!(pdf_value > 0)) return std::nullopt;
+    Rgb f = eval(wo_in, wi);
+    return BsdfSample{f, wi, pdf_value, flags, 1.0f};
+  }
+
+  float pdf(const Vec3& wo_in, const Vec3& wi_in) const override {
+    Vec3 wo = wo_in, wi = wi_in;
+    if (wo.z == 0 || wi.z == 0) return 0;
+    if (wo.z < 0) {
+      wo.z = -wo.z;
+      wi.z = -wi.z;
+    }
+    float p[5];
+    lobe_probabilities(wo, p);
+    if (wi.z < 0) return p[2] * microfacet_reflection_pdf(dist_, wo, Vec3(wi.x, wi.y, -wi.z));
+    return (p[0] + p[4]) * cosine_hemisphere_pdf(wi.z) + p[1] * microfacet_reflection_pdf(dist_, wo, wi) +
+           p[3] * microfacet_reflection_pdf(dist_c_, wo, wi);
+  }
+
+  uint32_t flags() const override {
+    uint32_t f = kBsdfReflection | kBsdfDiffuse | kBsdfGlossy;
+    if (l_.transmission > 0 && l_.metallic < 1) f |= kBsdfTransmission;
+    return f;
+  }
+  Rgb albedo_hint() const override { return l_.base_color; }
+
+ private:
+  // Probabilities of the diffuse, specular, transmission, clearcoat and sheen lobes, from their weights at wo with
+  // the Fresnel terms taken at the normal (Schlick at N.V).
+  void lobe_probabilities(const Vec3& wo, float p[5]) const {
+    const float m = l_.metallic;
+    const Rgb fd = fresnel_schlick(l_.f0_d, Rgb(l_.f90_d), wo.z);
+    const float fd_max = max_component(fd);
+    const float base = luminance(l_.base_color);
+    const float fc = l_.clearcoat * fresnel_schlick(0.04f, wo.z);
+    p[0] = (1 - fc) * (1 - m) * (1 - l_.transmission) * (1 - fd_max) * base;
+    p[1] = (1 - fc) * ((1 - m) * luminance(fd) + m * luminance(fresnel_schlick(l_.base_color, Rgb(1), wo.z)));
+    p[2] = (1 - fc) * (1 - m) * l_.transmission * (1 - fd_max) * base;
+    p[3] = fc;
+    p[4] = 0;
+    if (sheen_max_ > 0) {
+      const float es = sheen_max_ * std::min(sheen_albedo(wo.z), 1.0f);
+      for (int i = 0; i < 3; ++i) p[i] *= 1 - es;
+      p[4] = (1 - fc) * es;
+    }
+    float sum = p[0] + p[1] + p[2] + p[3] + p[4];
+    if (!(sum > 0)) {
+      p[0] = 0;
+      p[1] = 1;
+      p[2] = p[3] = p[4] = 0;
+      return;
+    }
+    for (int i = 0; i < 5; ++i) p[i] /= sum;
+  }
+
+  // The dielectric specular lobe's albedo E_s(mu) (its largest channel) and the clearcoat's.
+  float specular_albedo(float mu) const {
+    float e1, e2;
+    SchlickAlbedoTable::get().eval(mu, l_.alpha, &e1, &e2);
+    return std::min(max_component(l_.f0_d * e1 + Rgb(l_.f90_d * e2)), 0.999f);
+  }
+  float sheen_albedo(float mu) const { return SheenAlbedoTable::get().eval(mu, l_.alpha_sheen); }
+  float coat_albedo(float mu) const {
+    float e1, e2;
+    SchlickAlbedoTable::get().eval(mu, l_.alpha_c, &e1, &e2);
+    return std::min(0.04f * e1 + e2, 1.0f);
+  }
+
+  GltfLobes l_;
+  MicrofacetDistribution dist_, dist_c_;
+  float specular_average_ = 0;
+  float sheen_max_ = 0;
+};
+
+class GltfPbrMaterial final : public Material {
+ public:
+  RgbParam base_color, specular_color, sheen_color;
+  FloatParam metallic, roughness, specular, transmission, clearcoat, clearcoat_roughness, sheen_roughness;
+  float f0_ior = 0.04f;
+
+  const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
+    GltfLobes l;
+    l.base_color = vmin(base_color.eval(sp) * sp.vertex_color, Rgb(1));
+    l.metallic = clamp(metallic.eval(sp), 0.0f, 1.0f);
+    float r = clamp(roughness.eval(sp), 0.045f, 1.0f);
+    l.alpha = r * r;
+    float spec = clamp(specular.eval(sp), 0.0f, 1.0f);
+    l.f0_d = vmin(Rgb(f0_ior) * specular_color.eval(sp), Rgb(1)) * spec;
+    l.f90_d = spec;
+    l.transmission = clamp(transmission.eval(sp), 0.0f, 1.0f);
+    l.clearcoat = clamp(clearcoat.eval(sp), 0.0f, 1.0f);
+    float rc = clamp(clearcoat_roughness.eval(sp), 0.045f, 1.0f);
+    l.alpha_c = rc * rc;
+    l.sheen_color = vmin(vmax(sheen_color.eval(sp), Rgb(0)), Rgb(1));
+    float rs = clamp(sheen_roughness.eval(sp), 0.0f, 1.0f);
+    l.alpha_sheen = std::max(rs * rs, SheenAlbedoTable::kMinAlpha);
+    return arena.make<GltfPbrBsdf>(l);
+  }
+};
+
+}  // namespace
+
+void register_gltf_pbr(MaterialRegistry& registry) {
+  registry.add("gltf_pbr", [](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
+    auto m = std::make_unique<GltfPbrMaterial>();
+    m->base_color = params::rgb_param(j, "base_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
+    m->metallic = params::float_param(j, "metallic", ptr, 1.0f, 0.0f, 1.0f, ctx);
+    m->roughness = params::float_param(j, "roughness", ptr, 1.0f, 0.0f, 1.0f, ctx);
+    float ior = params::number(j, "ior", ptr, 1.5f, 1.0f, 4.0f);
+    m->f0_ior = f0_from_ior(ior);
+    m->specular = params::float_param(j, "specular", ptr, 1.0f, 0.0f, 1.0f, ctx);
+    m->specular_color = params::rgb_param(j, "specular_color", ptr, Rgb(1), 0.0f, 1e3f, ctx);
+    m->transmission = params::float_param(j, "transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    m->clearcoat = params::float_param(j, "clearcoat", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    m->clearcoat_roughness = params::float_param(j, "clearcoat_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    m->sheen_color = params::rgb_param(j, "sheen_color", ptr, Rgb(0), 0.0f, 1.0f, ctx);
+    m->sheen_roughness = params::float_param(j, "sheen_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    return m;
+  });
+}
+
+}  // namespace tessera

@@ -1,0 +1,53 @@
+// `two_sided`: wraps a material so that both sides of the surface show its front (+z) side. Opaque reflectors are
+// already two-sided by the convention of bsdf.h; this matters for models whose back differs from their front (a
+// dielectric seen from inside, a thin transmissive layer, a material built for one-sided glTF geometry).
+#include "renderer/bsdf/common.h"
+
+namespace tessera {
+namespace {
+
+// Wraps a material so that both sides of the surface show its front (+z) side.
+class TwoSidedBsdf final : public Bsdf {
+ public:
+  explicit TwoSidedBsdf(const Bsdf* inner) : inner_(inner) {}
+  Rgb eval(const Vec3& wo, const Vec3& wi) const override {
+    return wo.z < 0 ? inner_->eval(flip(wo), flip(wi)) : inner_->eval(wo, wi);
+  }
+  float pdf(const Vec3& wo, const Vec3& wi) const override {
+    return wo.z < 0 ? inner_->pdf(flip(wo), flip(wi)) : inner_->pdf(wo, wi);
+  }
+  std::optional<BsdfSample> sample(const Vec3& wo, float uc, Vec2 u) const override {
+    if (wo.z >= 0) return inner_->sample(wo, uc, u);
+    std::optional<BsdfSample> s = inner_->sample(flip(wo), uc, u);
+    if (s) s->wi = flip(s->wi);
+    return s;
+  }
+  uint32_t flags() const override { return inner_->flags(); }
+  Rgb albedo_hint() const override { return inner_->albedo_hint(); }
+
+ private:
+  static Vec3 flip(const Vec3& w) { return {w.x, w.y, -w.z}; }
+  const Bsdf* inner_;
+};
+
+class TwoSidedMaterial final : public Material {
+ public:
+  explicit TwoSidedMaterial(std::unique_ptr<Material> inner) : inner_(std::move(inner)) {}
+  const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
+    const Bsdf* inner = inner_->bsdf(sp, arena);
+    return inner ? arena.make<TwoSidedBsdf>(inner) : nullptr;
+  }
+
+ private:
+  std::unique_ptr<Material> inner_;
+};
+
+}  // namespace
+
+void register_two_sided(MaterialRegistry& registry) {
+  registry.add("two_sided", [](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
+    return std::make_unique<TwoSidedMaterial>(create_nested_material(j, "material", ptr, ctx, {{"type", "lambert"}}));
+  });
+}
+
+}  // namespace tessera

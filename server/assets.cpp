@@ -1,0 +1,280 @@
+#include "server/assets.h"
+
+#include <openssl/evp.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cstring>
+#include <fstream>
+#include <regex>
+#include <set>
+#include <sstream>
+
+#include "renderer/gltf_loader.h"
+#include "renderer/scene_error.h"
+#include "renderer/scene_loader.h"
+
+namespace tessera::server {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+std::atomic<uint64_t> g_counter{0};
+constexpr const char* kMetaFile = ".asset.json";  // a leading dot: no upload can name it
+
+std::string lower_ext(const std::string& name) {
+  std::string e = fs::path(name).extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
+  return e;
+}
+
+Problem invalid(const std::string& detail) {
+  return Problem{422, detail, std::nullopt};
+}
+
+uint32_t u32(const std::string& b, size_t at) {
+  uint32_t v;
+  std::memcpy(&v, b.data() + at, 4);
+  return v;
+}
+
+// A .glb container (glTF 2.0 spec, 4.4): header, a JSON chunk, an optional BIN chunk, lengths that add up.
+// Returns the JSON chunk's text or a problem.
+std::variant<std::string, Problem> glb_json(const UploadFile& f) {
+  const std::string& b = f.bytes;
+  const std::string where = f.name + ": ";
+  if (b.size() < 20) return invalid(where + "truncated: a .glb has a 12-byte header and a JSON chunk");
+  if (std::memcmp(b.data(), "glTF", 4) != 0) return invalid(where + "not a binary glTF (wrong magic)");
+  if (u32(b, 4) != 2) return invalid(where + "binary glTF version " + std::to_string(u32(b, 4)) + ", expected 2");
+  if (u32(b, 8) != b.size())
+    return invalid(where + "the header declares " + std::to_string(u32(b, 8)) + " bytes but the file has " +
+                   std::to_string(b.size()) + " (truncated or padded)");
+  std::string json_text;
+  size_t at = 12;
+  for (int chunk = 0; at < b.size(); ++chunk) {
+    if (b.size() - at < 8) return invalid(where + "truncated chunk header at byte " + std::to_string(at));
+    const uint32_t length = u32(b, at), type = u32(b, at + 4);
+    if (length > b.size() - at - 8)
+      return invalid(where + "chunk " + std::to_string(chunk) + " declares " + std::to_string(length) +
+                     " bytes, beyond the end of the file");
+    if (chunk == 0) {
+      if (type != 0x4E4F534A) return invalid(where + "the first chunk is not JSON");
+      json_text.assign(b, at + 8, length);
+    }
+    at += 8 + length;
+  }
+  return json_text;
+}
+
+std::string read_file(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+void write_file(const fs::path& p, std::string_view bytes) {
+  std::ofstream out(p, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  out.close();
+  if (!out) throw std::runtime_error("cannot write " + p.string());
+}
+
+}  // namespace
+
+json AssetInfo::to_json() const {
+  return {{"id", id}, {"kind", kind}, {"files", files}, {"main", main}, {"bytes", bytes}};
+}
+
+bool is_plain_file_name(const std::string& name) {
+  static const std::regex re("^[A-Za-z0-9._-]{1,128}$");
+  return !name.empty() && name[0] != '.' && std::regex_match(name, re);
+}
+
+bool is_asset_id(const std::string& s) {
+  return s.size() == 64 &&
+         std::all_of(s.begin(), s.end(), [](char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); });
+}
+
+std::string sha256_hex(std::string_view bytes) {
+  unsigned char md[EVP_MAX_MD_SIZE];
+  unsigned int n = 0;
+  EVP_Digest(bytes.data(), bytes.size(), md, &n, EVP_sha256(), nullptr);
+  static const char* hex = "0123456789abcdef";
+  std::string out;
+  for (unsigned int i = 0; i < n; ++i) {
+    out += hex[md[i] >> 4];
+    out += hex[md[i] & 15];
+  }
+  return out;
+}
+
+AssetStore::AssetStore(const fs::path& data_dir) : root_(data_dir / "assets") {
+  fs::create_directories(root_);
+  // Temp dirs of uploads a crash interrupted.
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(root_, ec))
+    if (e.path().filename().string().rfind(".tmp-", 0) == 0) fs::remove_all(e.path(), ec);
+}
+
+std::variant<StoredAsset, Problem> AssetStore::store(std::vector<UploadFile> files, const std::string& owner) {
+  if (files.empty()) return Problem{400, "the upload holds no file", std::nullopt};
+  if (files.size() > 256) return invalid("an upload holds at most 256 files");
+  std::set<std::string> names;
+  for (const UploadFile& f : files) {
+    if (!is_plain_file_name(f.name))
+      return invalid("file name \"" + f.name.substr(0, 200) +
+                     "\" is not plain: 1 to 128 of A-Z a-z 0-9 . _ -, not starting with a dot");
+    if (!names.insert(f.name).second) return invalid("file name \"" + f.name + "\" appears twice");
+    if (f.bytes.empty()) return invalid(f.name + ": empty file");
+  }
+  std::sort(files.begin(), files.end(), [](const UploadFile& a, const UploadFile& b) { return a.name < b.name; });
+
+  // The main file decides the kind.
+  std::vector<const UploadFile*> scenes, maps;
+  for (const UploadFile& f : files) {
+    const std::string e = lower_ext(f.name);
+    if (e == ".glb" || e == ".gltf") scenes.push_back(&f);
+    if (e == ".hdr" || e == ".exr") maps.push_back(&f);
+  }
+  AssetInfo info;
+  info.owner = owner;
+  if (scenes.size() == 1) {
+    info.kind = "gltf";
+    info.main = scenes[0]->name;
+  } else if (scenes.empty() && maps.size() == 1 && files.size() == 1) {
+    info.kind = "environment";
+    info.main = maps[0]->name;
+  } else {
+    return invalid(
+        "an upload holds one .glb, or one .gltf with the files it references, or one .hdr or .exr environment map");
+  }
+  for (const UploadFile& f : files) {
+    info.files.push_back(f.name);
+    info.bytes += f.bytes.size();
+  }
+
+  // The glTF's own JSON: syntax and every URI.
+  if (info.kind == "gltf") {
+    const UploadFile& main = *scenes[0];
+    std::string text;
+    if (lower_ext(main.name) == ".glb") {
+      auto r = glb_json(main);
+      if (auto* p = std::get_if<Problem>(&r)) return *p;
+      text = std::get<std::string>(r);
+    } else {
+      text = main.bytes;
+    }
+    json doc = json::parse(text, nullptr, false);
+    if (doc.is_discarded() || !doc.is_object()) return invalid(main.name + ": the glTF JSON does not parse");
+    for (const char* list : {"buffers", "images"}) {
+      auto it = doc.find(list);
+      if (it == doc.end() || !it->is_array()) continue;
+      for (size_t i = 0; i < it->size(); ++i) {
+        const json& item = (*it)[i];
+        if (!item.is_object() || !item.contains("uri")) continue;
+        const std::string where = main.name + ": " + list + "[" + std::to_string(i) + "].uri ";
+        if (!item["uri"].is_string()) return invalid(where + "is not a string");
+        const std::string uri = item["uri"].get<std::string>();
+        const std::string shown = "\"" + uri.substr(0, 200) + "\"";
+        if (std::string why = gltf_uri_problem(uri); !why.empty()) return invalid(where + shown + " refused: " + why);
+        if (uri.rfind("data:", 0) == 0) continue;
+        if (!names.count(uri) || uri == main.name)
+          return invalid(where + shown + " names no file of this upload");
+      }
+    }
+  }
+
+  if (files.size() == 1) {
+    info.id = sha256_hex(files[0].bytes);
+  } else {
+    std::string manifest;
+    for (const UploadFile& f : files) manifest += f.name + "\t" + sha256_hex(f.bytes) + "\n";
+    info.id = sha256_hex(manifest);
+  }
+  if (auto existing = get(info.id)) return StoredAsset{*existing, false};
+
+  const fs::path temp =
+      root_ / (".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(g_counter.fetch_add(1)));
+  std::error_code ec;
+  try {
+    fs::create_directories(temp);
+    for (const UploadFile& f : files) write_file(temp / f.name, f.bytes);
+    // The asset as the renderer will load it: a malformed buffer or accessor is refused now, not at render time.
+    SceneLoadOptions options;
+    options.build = false;
+    options.resolve_asset = [&](const std::string&, const std::string&) { return temp / info.main; };
+    json scene;
+    if (info.kind == "gltf") {
+      scene = {{"gltf", "upload"}};
+    } else {
+      scene = {{"objects", json::array()},
+               {"camera", {{"from", {0, 0, 1}}, {"to", {0, 0, 0}}}},
+               {"environment", {{"map", "upload"}}}};
+    }
+    try {
+      load_scene(scene, "", options);
+    } catch (const SceneError& e) {
+      fs::remove_all(temp, ec);
+      // The loader names files by their temp path; the client knows them by name.
+      std::string what = e.what();
+      for (size_t at; (at = what.find(temp.string() + "/")) != std::string::npos;)
+        what.erase(at, temp.string().size() + 1);
+      return invalid(info.main + ": " + what);
+    }
+    json meta = info.to_json();
+    meta["owner"] = owner;
+    write_file(temp / kMetaFile, meta.dump());
+    fs::rename(temp, root_ / info.id, ec);
+    if (ec) {  // the same upload won a race, or the disk is full
+      fs::remove_all(temp, ec);
+      if (auto existing = get(info.id)) return StoredAsset{*existing, false};
+      return Problem{500, "cannot store the asset", std::nullopt};
+    }
+  } catch (const std::exception& e) {
+    fs::remove_all(temp, ec);
+    throw;
+  }
+  return StoredAsset{info, true};
+}
+
+std::optional<AssetInfo> AssetStore::get(const std::string& id) const {
+  if (!is_asset_id(id)) return std::nullopt;
+  const fs::path meta_path = root_ / id / kMetaFile;
+  std::error_code ec;
+  if (!fs::is_regular_file(meta_path, ec)) return std::nullopt;
+  json meta = json::parse(read_file(meta_path), nullptr, false);
+  if (!meta.is_object()) return std::nullopt;
+  AssetInfo info;
+  info.id = id;
+  info.kind = meta.value("kind", "");
+  info.main = meta.value("main", "");
+  info.bytes = meta.value("bytes", uint64_t{0});
+  info.owner = meta.value("owner", "");
+  if (meta.contains("files") && meta["files"].is_array())
+    for (const json& f : meta["files"])
+      if (f.is_string()) info.files.push_back(f.get<std::string>());
+  return info;
+}
+
+bool AssetStore::remove(const std::string& id) {
+  if (!get(id)) return false;
+  // Renamed away first, so a job never sees half an asset.
+  const fs::path doomed = root_ / (".tmp-del-" + std::to_string(g_counter.fetch_add(1)));
+  std::error_code ec;
+  fs::rename(root_ / id, doomed, ec);
+  if (ec) return false;
+  fs::remove_all(doomed, ec);
+  return true;
+}
+
+std::optional<fs::path> AssetStore::main_file(const std::string& id, const std::string& kind) const {
+  auto info = get(id);
+  if (!info || info->kind != kind || !is_plain_file_name(info->main)) return std::nullopt;
+  return root_ / id / info->main;
+}
+
+}  // namespace tessera::server

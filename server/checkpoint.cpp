@@ -1,0 +1,81 @@
+#include "server/checkpoint.h"
+
+#include <cstring>
+
+namespace tessera::server {
+
+namespace {
+
+constexpr char kMagic[8] = {'T', 'S', 'R', 'C', 'K', 'P', 'T', '1'};
+constexpr uint32_t kVersion = 2;  // 2: 128-bit fixed-point radiance sums
+constexpr size_t kHeaderBytes = 8 + 6 * 4 + 8 + 8;  // up to and including settings_hash
+constexpr size_t kPrefixBytes = kHeaderBytes + 8;   // then the checksum
+
+template <typename T>
+void put(std::string& out, T v) {
+  char b[sizeof(T)];
+  std::memcpy(b, &v, sizeof(T));
+  out.append(b, sizeof(T));
+}
+
+template <typename T>
+T get(std::string_view bytes, size_t offset) {
+  T v;
+  std::memcpy(&v, bytes.data() + offset, sizeof(T));
+  return v;
+}
+
+}  // namespace
+
+uint64_t fnv1a64(std::string_view bytes, uint64_t h) {
+  for (unsigned char c : bytes) {
+    h ^= c;
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+std::string encode_checkpoint(const Film& film, uint32_t passes, double elapsed_s, uint64_t settings_hash) {
+  const auto& sums = film.sums();
+  const auto& lum2 = film.sums_lum2();
+  const std::string_view a(reinterpret_cast<const char*>(sums.data()), sums.size() * sizeof(sums[0]));
+  const std::string_view b(reinterpret_cast<const char*>(lum2.data()), lum2.size() * sizeof(lum2[0]));
+  std::string out;
+  out.reserve(kPrefixBytes + a.size() + b.size());
+  out.append(kMagic, sizeof kMagic);
+  put<uint32_t>(out, kVersion);
+  put<uint32_t>(out, static_cast<uint32_t>(film.width()));
+  put<uint32_t>(out, static_cast<uint32_t>(film.height()));
+  put<uint32_t>(out, film.samples());
+  put<uint32_t>(out, passes);
+  put<uint32_t>(out, 0);
+  put<double>(out, elapsed_s);
+  put<uint64_t>(out, settings_hash);
+  put<uint64_t>(out, fnv1a64(b, fnv1a64(a)));
+  out.append(a);
+  out.append(b);
+  return out;
+}
+
+std::optional<Checkpoint> decode_checkpoint(std::string_view bytes, int width, int height, uint64_t settings_hash) {
+  if (bytes.size() < kPrefixBytes || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) return std::nullopt;
+  if (get<uint32_t>(bytes, 8) != kVersion) return std::nullopt;
+  const uint32_t w = get<uint32_t>(bytes, 12), h = get<uint32_t>(bytes, 16);
+  if (static_cast<int>(w) != width || static_cast<int>(h) != height) return std::nullopt;
+  if (get<uint64_t>(bytes, 40) != settings_hash) return std::nullopt;
+  const size_t pixels = static_cast<size_t>(w) * h;
+  constexpr size_t kSum = sizeof(FixedSum), kLum2 = sizeof(float);
+  if (bytes.size() != kPrefixBytes + pixels * (3 * kSum + kLum2)) return std::nullopt;
+  const std::string_view payload = bytes.substr(kPrefixBytes);
+  if (fnv1a64(payload) != get<uint64_t>(bytes, kHeaderBytes)) return std::nullopt;
+  Checkpoint c;
+  c.film = Film(width, height);
+  c.film.set_samples(get<uint32_t>(bytes, 20));
+  c.passes = get<uint32_t>(bytes, 24);
+  c.elapsed_s = get<double>(bytes, 32);
+  std::memcpy(c.film.sums().data(), payload.data(), pixels * 3 * kSum);
+  std::memcpy(c.film.sums_lum2().data(), payload.data() + pixels * 3 * kSum, pixels * kLum2);
+  return c;
+}
+
+}  // namespace tessera::server

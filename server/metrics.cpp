@@ -1,0 +1,80 @@
+#include "server/metrics.h"
+
+#include <charconv>
+#include <cstdio>
+#include <sstream>
+
+namespace tessera::server {
+
+namespace {
+
+std::string number(double v) {
+  char buf[64];
+  auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);  // the shortest text that reads back as v
+  return ec == std::errc() ? std::string(buf, end) : "0";
+}
+
+std::string label_value(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    if (c == '\\' || c == '"') out += '\\';
+    if (c == '\n') {
+      out += "\\n";
+      continue;
+    }
+    out += c;
+  }
+  return out;
+}
+
+}  // namespace
+
+void Metrics::count_request(const std::string& route, int status) {
+  std::lock_guard lock(mutex_);
+  ++requests_[{route, status}];
+}
+
+void Metrics::observe_job_duration(double seconds) {
+  std::lock_guard lock(mutex_);
+  for (size_t i = 0; i < kDurationBuckets.size(); ++i)
+    if (seconds <= kDurationBuckets[i]) ++duration_buckets_[i];
+  ++duration_count_;
+  duration_sum_ += seconds;
+}
+
+std::string Metrics::render(const Gauges& g) const {
+  std::ostringstream out;
+  out << "# HELP tessera_jobs Jobs in the store by state.\n# TYPE tessera_jobs gauge\n";
+  for (const auto& [state, n] : g.jobs) out << "tessera_jobs{state=\"" << job_state_name(state) << "\"} " << n << "\n";
+  auto queued = g.jobs.find(JobState::kQueued);
+  out << "# HELP tessera_queue_length Jobs waiting to be rendered.\n# TYPE tessera_queue_length gauge\n"
+      << "tessera_queue_length " << (queued == g.jobs.end() ? 0 : queued->second) << "\n";
+  out << "# HELP tessera_samples_rendered_total Pixel samples rendered by this process.\n"
+      << "# TYPE tessera_samples_rendered_total counter\n"
+      << "tessera_samples_rendered_total " << samples_.load(std::memory_order_relaxed) << "\n";
+  out << "# HELP tessera_render_threads Render threads of this process.\n# TYPE tessera_render_threads gauge\n"
+      << "tessera_render_threads " << g.render_threads << "\n";
+  out << "# HELP tessera_render_threads_busy Render threads working on a tile.\n"
+      << "# TYPE tessera_render_threads_busy gauge\n"
+      << "tessera_render_threads_busy " << g.render_threads_busy << "\n";
+  out << "# HELP tessera_event_watchers Server-Sent Events streams waiting for events.\n"
+      << "# TYPE tessera_event_watchers gauge\n"
+      << "tessera_event_watchers " << g.event_watchers << "\n";
+  std::lock_guard lock(mutex_);
+  out << "# HELP tessera_job_duration_seconds Render time of jobs that ended (succeeded, failed or cancelled).\n"
+      << "# TYPE tessera_job_duration_seconds histogram\n";
+  for (size_t i = 0; i < kDurationBuckets.size(); ++i)
+    out << "tessera_job_duration_seconds_bucket{le=\"" << number(kDurationBuckets[i]) << "\"} "
+        << duration_buckets_[i] << "\n";
+  out << "tessera_job_duration_seconds_bucket{le=\"+Inf\"} " << duration_count_ << "\n"
+      << "tessera_job_duration_seconds_sum " << number(duration_sum_) << "\n"
+      << "tessera_job_duration_seconds_count " << duration_count_ << "\n";
+  out << "# HELP tessera_http_requests_total HTTP requests answered, by route pattern and status code.\n"
+      << "# TYPE tessera_http_requests_total counter\n";
+  for (const auto& [key, n] : requests_)
+    out << "tessera_http_requests_total{route=\"" << label_value(key.first) << "\",code=\"" << key.second << "\"} "
+        << n << "\n";
+  return out.str();
+}
+
+}  // namespace tessera::server

@@ -1,0 +1,41 @@
+// The daemon's metrics in the Prometheus text format (0.0.4): counters and a histogram kept in memory, gauges read
+// when scraped. Labels are bounded sets (state, route pattern, status code); never a job id.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <map>
+#include <mutex>
+#include <string>
+
+#include "server/job_state.h"
+
+namespace tessera::server {
+
+class Metrics {
+ public:
+  void count_request(const std::string& route, int status);
+  void add_samples(uint64_t pixel_samples) { samples_.fetch_add(pixel_samples, std::memory_order_relaxed); }
+  void observe_job_duration(double seconds);
+
+  struct Gauges {
+    std::map<JobState, int> jobs;
+    int render_threads = 0;
+    int render_threads_busy = 0;
+    size_t event_watchers = 0;
+  };
+  std::string render(const Gauges& g) const;
+
+  static constexpr std::array<double, 12> kDurationBuckets = {0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60, 300, 1800, 7200};
+
+ private:
+  mutable std::mutex mutex_;
+  std::map<std::pair<std::string, int>, uint64_t> requests_;
+  std::array<uint64_t, kDurationBuckets.size()> duration_buckets_{};
+  uint64_t duration_count_ = 0;
+  double duration_sum_ = 0;
+  std::atomic<uint64_t> samples_{0};
+};
+
+}  // namespace tessera::server

@@ -1,0 +1,243 @@
+// The web client, end to end: the real tesserad on a free port with a temporary data directory, Debian's chromium
+// driven headless by playwright-core. Submits the Cornell example, watches the preview change, cancels and deletes
+// another job, downloads the PNG, and saves a screenshot. Any failed step fails the test.
+//
+// node --test tests/browser/web_client_test.mjs   with   TESSERAD=path/to/tesserad  ARTIFACTS=dir
+//   (CTest passes both; CHROMIUM overrides /usr/bin/chromium)
+import assert from "node:assert/strict";
+import { spawn } from "node:child_process";
+import { createHash } from "node:crypto";
+import fs from "node:fs";
+import os from "node:os";
+import path from "node:path";
+import { createRequire } from "node:module";
+import { after, before, test } from "node:test";
+import { fileURLToPath } from "node:url";
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const repo = path.resolve(here, "../..");
+// playwright-core lives in tests/js (npm ci there); it never downloads a browser.
+const require = createRequire(path.join(repo, "tests/js/package.json"));
+const { chromium } = require("playwright-core");
+
+const TESSERAD = process.env.TESSERAD || path.join(repo, "build/server/tesserad");
+const ARTIFACTS = process.env.ARTIFACTS || path.join(repo, "build/artifacts");
+const CHROMIUM = process.env.CHROMIUM || "/usr/bin/chromium";
+
+let daemon;
+let baseUrl;
+let context;
+let page;
+let tmp;
+const pageErrors = [];
+
+function startDaemon(dataDir) {
+  return new Promise((resolve, reject) => {
+    const child = spawn(
+      TESSERAD,
+      ["--port", "0", "--listen", "127.0.0.1", "--data-dir", dataDir, "--threads", "2", "--log-level", "warn"],
+      { stdio: ["ignore", "pipe", "pipe"] },
+    );
+    let out = "";
+    let err = "";
+    const timer = setTimeout(() => reject(new Error(`tesserad did not start: ${out}${err}`)), 20000);
+    child.stdout.on("data", (d) => {
+      out += d;
+      const m = out.match(/listening on (http:\/\/[^\s]+)/);
+      if (m) {
+        clearTimeout(timer);
+        resolve({ child, url: m[1].replace(/\/$/, "") });
+      }
+    });
+    child.stderr.on("data", (d) => {
+      err += d;
+      if (err.length > 20000) err = err.slice(-10000);
+    });
+    child.on("exit", (code) => {
+      clearTimeout(timer);
+      reject(new Error(`tesserad exited with ${code}: ${err}`));
+    });
+  });
+}
+
+before(async () => {
+  assert.ok(fs.existsSync(TESSERAD), `no tesserad at ${TESSERAD}`);
+  assert.ok(fs.existsSync(CHROMIUM), `no chromium at ${CHROMIUM} (deploy/install-deps.sh test installs it)`);
+  tmp = fs.mkdtempSync(path.join(os.tmpdir(), "tessera-web-"));
+  fs.mkdirSync(ARTIFACTS, { recursive: true });
+  const d = await startDaemon(path.join(tmp, "data"));
+  daemon = d.child;
+  baseUrl = d.url;
+  context = await chromium.launchPersistentContext(path.join(tmp, "profile"), {
+    executablePath: CHROMIUM,
+    headless: true,
+    args: [
+      "--headless",
+      "--no-sandbox",
+      "--disable-gpu",
+      "--disable-quic",
+      "--no-first-run",
+      "--disable-background-networking",
+      "--disable-component-update",
+      "--disable-sync",
+    ],
+    viewport: { width: 1440, height: 1000 },
+    acceptDownloads: true,
+  });
+  page = context.pages()[0] || (await context.newPage());
+  page.setDefaultTimeout(30000);
+  page.on("pageerror", (e) => pageErrors.push(`page error: ${e.message}`));
+  page.on("console", (m) => {
+    // HTTP errors (404 before a preview exists, the 422 provoked below) are the page's to show, not script errors.
+    if (m.type() === "error" && !/Failed to load resource/.test(m.text())) pageErrors.push(`console: ${m.text()}`);
+  });
+});
+
+after(async () => {
+  await context?.close().catch(() => {});
+  if (daemon && daemon.exitCode === null) {
+    const exited = new Promise((r) => daemon.once("exit", r));
+    daemon.kill("SIGTERM");
+    await Promise.race([exited, new Promise((r) => setTimeout(r, 10000))]);
+    if (daemon.exitCode === null) daemon.kill("SIGKILL");
+  }
+  if (tmp) fs.rmSync(tmp, { recursive: true, force: true });
+});
+
+test("the built-in Cornell example equals proto/examples/cornell.json", async () => {
+  const { CORNELL } = await import(path.join(repo, "clients/web/examples.js"));
+  const file = JSON.parse(fs.readFileSync(path.join(repo, "proto/examples/cornell.json"), "utf8"));
+  assert.deepEqual(CORNELL, file);
+});
+
+// Steps run in order; after a failed one the rest are skipped (they depend on it).
+let broken = false;
+function step(t, name, fn) {
+  return t.test(name, async (st) => {
+    if (broken) return st.skip("an earlier step failed");
+    try {
+      await fn(st);
+    } catch (e) {
+      broken = true;
+      throw e;
+    }
+  });
+}
+
+test("the web client submits, follows, cancels, deletes and downloads", async (t) => {
+  await step(t, "the page loads and connects", async () => {
+    const res = await page.goto(`${baseUrl}/`);
+    assert.equal(res.status(), 200);
+    for (const f of ["app.js", "api.js", "style.css"]) {
+      const r = await page.request.get(`${baseUrl}/${f}`);
+      assert.equal(r.status(), 200, `GET /${f}: tesserad must serve every file of clients/web`);
+    }
+    await page.locator('#connection[data-state="online"]').waitFor();
+    // The material models arrived and generated controls.
+    await page.locator("#material-type option").first().waitFor({ state: "attached" });
+  });
+
+  let mainId;
+  await step(t, "submit the Cornell example at 128x128", async () => {
+    await page.getByRole("tab", { name: "Example" }).click();
+    await page.getByLabel("Example scene").selectOption("cornell");
+    await page.getByLabel("Width").fill("128");
+    await page.getByLabel("Height").fill("128");
+    await page.getByLabel("Samples per pixel").fill("1024");
+    await page.getByRole("button", { name: "Submit job" }).click();
+    await page.locator("#job-title", { hasText: /Job [0-9a-f]{8}/ }).waitFor();
+    mainId = await page.locator("#job-title").getAttribute("title");
+    assert.match(mainId || "", /^[0-9a-zA-Z_-]+$/);
+  });
+
+  await step(t, "the preview changes at least twice while it renders", async () => {
+    const seen = new Map(); // bytes hash -> pass
+    const deadline = Date.now() + 90000;
+    let lastSrc = null;
+    while (seen.size < 3 && Date.now() < deadline) {
+      const src = await page.locator("#preview").getAttribute("src");
+      if (src && src !== lastSrc) {
+        lastSrc = src;
+        const bytes = await page.evaluate(async (u) => {
+          const r = await fetch(u);
+          return Array.from(new Uint8Array(await r.arrayBuffer()));
+        }, src);
+        const hash = createHash("sha256").update(Buffer.from(bytes)).digest("hex");
+        if (!seen.has(hash)) seen.set(hash, await page.locator("#preview").getAttribute("data-pass"));
+      }
+      const state = await page.locator("#job-state").textContent();
+      if (state === "succeeded" && seen.size < 3) break;
+      await page.waitForTimeout(100);
+    }
+    assert.ok(seen.size >= 3, `the preview showed ${seen.size} distinct images (passes ${[...seen.values()]})`);
+    const mode = await page.locator("#live-mode").getAttribute("data-mode");
+    assert.ok(["sse", "polling", "done"].includes(mode), `live mode ${mode}`);
+  });
+
+  await step(t, "another job is cancelled from the queue, then deleted with confirmation", async () => {
+    await page.getByRole("tab", { name: "Example" }).click();
+    await page.getByLabel("Example scene").selectOption("material");
+    await page.getByRole("button", { name: "Submit job" }).click();
+    // The new job is selected; find its row (the main job still renders, so this one waits in the queue).
+    await page.waitForFunction((id) => {
+      const t = document.querySelector("#job-title")?.title;
+      return t && t !== id;
+    }, mainId);
+    const otherId = await page.locator("#job-title").getAttribute("title");
+    const row = page.locator(`#jobs tr[data-id="${otherId}"]`);
+    await row.waitFor();
+    const cancel = row.getByRole("button", { name: /^Cancel job/ });
+    await cancel.click();
+    await row.locator('.badge[data-state="cancelled"]').waitFor();
+    assert.ok(await cancel.isDisabled(), "Cancel stays disabled on a cancelled job");
+    assert.ok(await row.getByRole("button", { name: /^Requeue job/ }).isEnabled(), "Requeue is offered");
+    // Delete asks first: "Keep" keeps it, "Delete" deletes it.
+    await row.getByRole("button", { name: /^Delete job/ }).click();
+    await page.locator("#confirm[open]").waitFor();
+    await page.locator("#confirm").getByRole("button", { name: "Keep" }).click();
+    assert.equal(await row.count(), 1);
+    await row.getByRole("button", { name: /^Delete job/ }).click();
+    await page.locator("#confirm").getByRole("button", { name: "Delete" }).click();
+    await row.waitFor({ state: "detached" });
+    const gone = await page.request.get(`${baseUrl}/v1/jobs/${otherId}`);
+    assert.equal(gone.status(), 404);
+  });
+
+  await step(t, "the Cornell job finishes and its PNG downloads", async () => {
+    await page.locator(`#jobs tr[data-id="${mainId}"] button.link`).click();
+    await page.locator('#job-state[data-state="succeeded"]').waitFor({ timeout: 180000 });
+    const png = page.locator("#download-png");
+    await png.waitFor();
+    await page.waitForFunction(() => !document.querySelector("#download-png").disabled);
+    const [download] = await Promise.all([page.waitForEvent("download"), png.click()]);
+    const file = await download.path();
+    const bytes = fs.readFileSync(file);
+    assert.deepEqual([...bytes.subarray(0, 8)], [0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a], "PNG signature");
+    assert.match(download.suggestedFilename(), /\.png$/);
+  });
+
+  await step(t, "a refused document shows the problem's title and detail", async () => {
+    await page.getByRole("tab", { name: "JSON" }).click();
+    await page.getByLabel("Job document").fill('{"kind": "scene", "scene": {"objects": []}, "render": {"width": 0}}');
+    await page.getByRole("button", { name: "Submit job" }).click();
+    const toast = page.locator(".toast[role=alert]").last();
+    await toast.waitFor();
+    const text = await toast.textContent();
+    assert.match(text, /422|Invalid/);
+    await toast.getByRole("button", { name: "Dismiss" }).click();
+    await page.getByRole("tab", { name: "Example" }).click();
+  });
+
+  await step(t, "screenshot", async () => {
+    await page.locator(`#jobs tr[data-id="${mainId}"] button.link`).click();
+    await page.waitForTimeout(300);
+    const shot = path.join(ARTIFACTS, "web-client.png");
+    await page.screenshot({ path: shot, fullPage: true });
+    assert.ok(fs.statSync(shot).size > 1000);
+    console.log(`screenshot: ${shot}`);
+  });
+
+  await step(t, "no script errors on the page", () => {
+    assert.deepEqual(pageErrors, []);
+  });
+});

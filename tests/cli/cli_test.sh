@@ -1,0 +1,161 @@
+#!/usr/bin/env bash
+# The command line, for real: `tessera render` of sample ranges (and regions) merged with `tessera merge` equals one
+# render bit for bit; bad input and bad usage exit 1 and 2; the daemon commands (tessera submit/watch/fetch/list/
+# cancel and clients/curl/*.sh) against a real tesserad on a free port with a temporary data directory.
+# usage: cli_test.sh TESSERA TESSERAD     (run by CTest)
+set -uo pipefail
+TESSERA=${1:?usage: cli_test.sh TESSERA TESSERAD}
+TESSERAD=${2:?usage: cli_test.sh TESSERA TESSERAD}
+repo=$(cd "$(dirname "$0")/../.." && pwd)
+curl_dir=$repo/clients/curl
+job=$repo/proto/examples/cornell.json
+tmp=$(mktemp -d)
+daemon_pid=""
+cleanup() {
+  if [[ -n $daemon_pid ]]; then kill -TERM "$daemon_pid" 2>/dev/null; wait "$daemon_pid" 2>/dev/null; fi
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+passed=0
+failed=0
+ok() { echo "ok - $1"; passed=$((passed + 1)); }
+not_ok() { echo "not ok - $1"; failed=$((failed + 1)); }
+# expect CODE NAME COMMAND...: the command exits with CODE.
+expect() {
+  local want=$1 name=$2
+  shift 2
+  "$@" >"$tmp/out" 2>"$tmp/err"
+  local got=$?
+  if [[ $got == "$want" ]]; then ok "$name"; else
+    not_ok "$name (exit $got, expected $want)"
+    sed 's/^/    /' "$tmp/out" "$tmp/err" | tail -20
+  fi
+}
+png_signature() { [[ $(head -c 8 "$1" | od -An -tx1 | tr -d ' \n') == 89504e470d0a1a0a ]]; }
+# The header and the fixed-point radiance sums of a .tfilm (the float luminance sums for the noise estimate that
+# follow are not order-independent).
+sums=$((64 + 48 * 40 * 32))
+same_sums() { cmp -s -n "$sums" "$1" "$2"; }
+same_pixels() { idiff -fail 0 -failpercent 0 -warn 0 "$1" "$2" >/dev/null 2>&1; }
+cd "$tmp"
+
+# --- sample ranges and regions merge into exactly one render -----------------------------------------------------
+r=(--width 40 --height 32 --threads 2 -q)
+expect 0 "render all 12 samples" "$TESSERA" render "$job" "${r[@]}" --spp 12 -o all.exr -o all.png -o all.tfilm
+expect 0 "render samples 5:7" "$TESSERA" render "$job" "${r[@]}" --samples 5:7 -o b.tfilm
+expect 0 "render samples 0:5 of the top half" "$TESSERA" render "$job" "${r[@]}" --samples 0:5 --region 0,0,40,16 -o a1.tfilm
+expect 0 "render samples 0:5 of the bottom half" "$TESSERA" render "$job" "${r[@]}" --samples 0:5 --region 0,16,40,16 -o a2.tfilm
+expect 0 "merge three parts out of order" "$TESSERA" merge b.tfilm a2.tfilm a1.tfilm -o merged.exr -o merged.png -o merged.tfilm
+if same_sums merged.tfilm all.tfilm; then ok "the merged film has the single render's header and radiance sums, bit for bit"; else not_ok "merged film differs"; fi
+if same_pixels merged.exr all.exr; then ok "the merged EXR has the single render's pixels"; else not_ok "merged EXR differs"; fi
+if cmp -s merged.png all.png; then ok "the merged PNG equals the single render's PNG"; else not_ok "merged PNG differs"; fi
+expect 0 "render samples 0:5 whole" "$TESSERA" render "$job" "${r[@]}" --samples 0:5 -o a.tfilm
+expect 0 "merge two ranges" "$TESSERA" merge a.tfilm b.tfilm -o two.tfilm
+if same_sums two.tfilm all.tfilm; then ok "two ranges merge into the single render"; else not_ok "two ranges differ"; fi
+expect 0 "a merged film merges again (nothing to add: one part)" "$TESSERA" merge two.tfilm -o again.tfilm
+if same_sums again.tfilm all.tfilm; then ok "a merge of one part is that part"; else not_ok "re-merge differs"; fi
+
+# --- refused merges and bad input: fatal (1) ---------------------------------------------------------------------
+expect 1 "overlapping ranges are refused" "$TESSERA" merge a.tfilm all.tfilm -o x.exr
+grep -q "overlapping" "$tmp/err" && ok "the refusal says the parts overlap" || not_ok "no overlap message"
+expect 1 "a gap is refused" "$TESSERA" merge a1.tfilm b.tfilm -o x.exr
+"$TESSERA" render "$job" "${r[@]}" --samples 0:5 --seed 7 -o other-seed.tfilm 2>/dev/null
+expect 1 "parts of different settings are refused" "$TESSERA" merge other-seed.tfilm b.tfilm -o x.exr
+grep -q "fingerprint" "$tmp/err" && ok "the refusal names the fingerprint" || not_ok "no fingerprint message"
+"$TESSERA" render "$job" --width 20 --height 32 --threads 2 -q --samples 0:5 -o small.tfilm 2>/dev/null
+expect 1 "parts of different sizes are refused" "$TESSERA" merge small.tfilm b.tfilm -o x.exr
+head -c 100 all.tfilm >truncated.tfilm
+expect 1 "a truncated film is refused" "$TESSERA" merge truncated.tfilm -o x.exr
+echo "not a film" >junk.tfilm
+expect 1 "a file that is not a film is refused" "$TESSERA" merge junk.tfilm -o x.exr
+expect 1 "a missing job file is fatal" "$TESSERA" render "$tmp/none.json" -o x.png
+echo '{"kind": "scene", "scene": {"objects": [' >broken.json
+expect 1 "a job that is not JSON is fatal" "$TESSERA" render broken.json -o x.png
+echo '{"kind": "scene", "scene": {"objects": [{"shape": "sphere", "center": [0,0,0], "radius": 1, "material": "nope"}]}}' >bad.json
+expect 1 "a job naming an unknown material is fatal" "$TESSERA" render bad.json -o x.png
+expect 1 "a region outside the image is fatal" "$TESSERA" render "$job" "${r[@]}" --samples 0:1 --region 30,0,20,10 -o x.tfilm
+
+# --- usage: 2 ----------------------------------------------------------------------------------------------------
+expect 2 "no command" "$TESSERA"
+expect 2 "an unknown command" "$TESSERA" frobnicate
+expect 2 "render without outputs" "$TESSERA" render "$job"
+expect 2 "an unknown option" "$TESSERA" render "$job" -o x.png --bogus
+expect 2 "a bad --samples" "$TESSERA" render "$job" -o x.png --samples 3
+expect 2 "a bad --region" "$TESSERA" render "$job" -o x.png --region 1,2,3
+expect 2 "an unknown output format" "$TESSERA" render "$job" -o x.gif
+expect 2 "merge without outputs" "$TESSERA" merge a.tfilm
+expect 2 "watch without an id" "$TESSERA" watch
+for c in render merge submit watch fetch list cancel; do expect 0 "tessera $c -h" "$TESSERA" "$c" -h; done
+for s in submit watch fetch list cancel; do expect 0 "$s.sh -h" "$curl_dir/$s.sh" -h; done
+expect 2 "submit.sh without arguments" "$curl_dir/submit.sh"
+
+# --- a daemon that is not there: retry (75) ----------------------------------------------------------------------
+expect 75 "an unreachable daemon is transient" "$TESSERA" list --url http://127.0.0.1:9
+expect 2 "a --url that is not http is usage" "$TESSERA" list --url ftp://x
+
+# --- against a real tesserad -------------------------------------------------------------------------------------
+"$TESSERAD" --port 0 --listen 127.0.0.1 --data-dir "$tmp/data" --threads 2 --log-level warn >"$tmp/daemon.out" 2>"$tmp/daemon.err" &
+daemon_pid=$!
+url=""
+for _ in $(seq 100); do
+  url=$(sed -n 's/.*listening on \(http:[^ ]*\).*/\1/p' "$tmp/daemon.out" | head -1)
+  [[ -n $url ]] && break
+  sleep 0.1
+done
+if [[ -z $url ]]; then
+  not_ok "tesserad did not start"; cat "$tmp/daemon.err"
+else
+  ok "tesserad listens on $url"
+  export TESSERA_URL=$url
+  python3 - "$job" small.json long.json <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))
+j["render"].update(width=32, height=32, spp=8)
+json.dump(j, open(sys.argv[2], "w"))
+j["render"].update(width=256, height=256, spp=65536)
+json.dump(j, open(sys.argv[3], "w"))
+PY
+  expect 0 "tessera submit" "$TESSERA" submit small.json
+  id=$(cat "$tmp/out")
+  expect 0 "tessera watch follows it to success" "$TESSERA" watch "$id"
+  grep -q succeeded "$tmp/out" && ok "watch printed the final state" || not_ok "watch printed no final state"
+  expect 0 "tessera list" "$TESSERA" list
+  grep -q "$id" "$tmp/out" && ok "list shows the job" || not_ok "list misses the job"
+  expect 0 "tessera list --state succeeded --json" "$TESSERA" list --state succeeded --json
+  expect 0 "tessera fetch" "$TESSERA" fetch "$id" -d fetched
+  png_signature "fetched/$id.png" && ok "fetch wrote a PNG" || not_ok "fetched PNG has no PNG signature"
+  [[ -s fetched/$id.exr ]] && ok "fetch wrote the EXR" || not_ok "no EXR fetched"
+  expect 0 "tessera submit --watch" "$TESSERA" submit small.json --spp 4 --watch
+  expect 0 "tessera submit a long job" "$TESSERA" submit long.json
+  long=$(cat "$tmp/out")
+  expect 75 "fetch before the job finished is transient" "$TESSERA" fetch "$long" -d fetched
+  expect 0 "tessera cancel" "$TESSERA" cancel "$long"
+  expect 1 "watch a cancelled job exits 1" "$TESSERA" watch "$long"
+  expect 1 "fetch of a cancelled job is fatal" "$TESSERA" fetch "$long" -d fetched
+  expect 1 "cancel of an ended job is refused (409)" "$TESSERA" cancel "$id"
+  grep -q "409" "$tmp/err" && ok "the refusal quotes the status" || not_ok "no status in the refusal"
+  expect 1 "watch of an unknown job is fatal" "$TESSERA" watch 0123456789abcdef0123456789abcdef
+  echo '{"kind": "scene", "render": {"width": 0}}' >invalid.json
+  expect 1 "a refused job is fatal" "$TESSERA" submit invalid.json
+  grep -q "422" "$tmp/err" && ok "the refusal shows the problem" || not_ok "no problem shown"
+
+  # The curl scripts, on the same daemon.
+  expect 0 "submit.sh" "$curl_dir/submit.sh" small.json
+  cid=$(cat "$tmp/out")
+  expect 0 "watch.sh" "$curl_dir/watch.sh" "$cid"
+  grep -q succeeded "$tmp/out" && ok "watch.sh printed the final state" || not_ok "watch.sh printed no final state"
+  expect 0 "list.sh" "$curl_dir/list.sh"
+  grep -q "$cid" "$tmp/out" && ok "list.sh shows the job" || not_ok "list.sh misses the job"
+  expect 0 "fetch.sh" "$curl_dir/fetch.sh" "$cid" curl-out
+  png_signature curl-out/result.png && ok "fetch.sh wrote a PNG" || not_ok "fetch.sh PNG has no signature"
+  expect 0 "submit.sh a long job" "$curl_dir/submit.sh" long.json
+  clong=$(cat "$tmp/out")
+  expect 0 "cancel.sh" "$curl_dir/cancel.sh" "$clong"
+  expect 1 "cancel.sh of an ended job fails" "$curl_dir/cancel.sh" "$cid"
+  grep -q "error: HTTP 409" "$tmp/err" && ok "cancel.sh says why" || not_ok "cancel.sh gave no reason"
+  expect 1 "submit.sh of an invalid job fails" "$curl_dir/submit.sh" invalid.json
+  expect 1 "watch.sh of an unknown job fails" "$curl_dir/watch.sh" 0123456789abcdef0123456789abcdef
+fi
+
+echo "$passed passed, $failed failed"
+[[ $failed == 0 ]]

@@ -1,0 +1,106 @@
+// Material jobs over HTTP: every model the daemon lists renders on the preview stage; a row of materials renders;
+// a parameter out of range is a 422 naming the field.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <thread>
+
+#include "tests/integration/daemon.h"
+#include "tests/server/test_util.h"
+
+namespace tessera::server::test {
+namespace {
+
+using nlohmann::json;
+
+json wait_until_done(httplib::Client& c, const std::string& id, double timeout_s = 60) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  json status;
+  while (std::chrono::steady_clock::now() < deadline) {
+    auto res = c.Get("/v1/jobs/" + id);
+    if (res && res->status == 200) {
+      status = json::parse(res->body);
+      const std::string state = status.value("state", "");
+      if (state == "succeeded" || state == "failed" || state == "cancelled") return status;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ADD_FAILURE() << "job " << id << " did not finish; last status " << status.dump();
+  return status;
+}
+
+class MaterialJobs : public testing::Test {
+ protected:
+  void SetUp() override {
+    daemon_ = std::make_unique<Daemon>(dir_.path() / "data", std::vector<std::string>{"--threads", "2", "--max-jobs", "2"});
+    client_ = daemon_->client();
+  }
+  void TearDown() override {
+    if (HasFailure() && daemon_) std::fprintf(stderr, "--- tesserad log ---\n%s\n", daemon_->log().c_str());
+  }
+  TempDir dir_;
+  std::unique_ptr<Daemon> daemon_;
+  std::unique_ptr<httplib::Client> client_;
+};
+
+TEST_F(MaterialJobs, EveryListedModelRendersWithItsDefaults) {
+  auto res = client_->Get("/v1/materials");
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 200);
+  const json catalogue = json::parse(res->body);
+  ASSERT_GE(catalogue["materials"].size(), 15u);
+  std::vector<std::pair<std::string, std::string>> jobs;  // (type, id)
+  for (const json& model : catalogue["materials"]) {
+    const std::string type = model["type"];
+    json job = {{"kind", "material"},
+                {"material", {{"type", type}}},
+                {"render", {{"width", 32}, {"height", 32}, {"spp", 4}}},
+                {"outputs", {"png"}}};
+    auto r = client_->Post("/v1/jobs", job.dump(), "application/json");
+    ASSERT_TRUE(r);
+    ASSERT_EQ(r->status, 202) << type << ": " << r->body;
+    jobs.emplace_back(type, json::parse(r->body)["id"].get<std::string>());
+  }
+  for (const auto& [type, id] : jobs) {
+    json status = wait_until_done(*client_, id);
+    EXPECT_EQ(status.value("state", ""), "succeeded") << type << ": " << status.dump();
+    auto png = client_->Get("/v1/jobs/" + id + "/result.png");
+    ASSERT_TRUE(png);
+    EXPECT_EQ(png->status, 200) << type;
+    EXPECT_EQ(png->body.substr(1, 3), "PNG") << type;
+  }
+}
+
+TEST_F(MaterialJobs, ARowOfMaterialsRendersAndBadParametersAreNamed) {
+  json row = {{"kind", "material"},
+              {"materials", {{{"type", "lambert"}}, {{"type", "conductor"}, {"metal", "copper"}}, {{"type", "dielectric"}}}},
+              {"render", {{"width", 48}, {"height", 16}, {"spp", 2}}}};
+  auto r = client_->Post("/v1/jobs", row.dump(), "application/json");
+  ASSERT_TRUE(r);
+  ASSERT_EQ(r->status, 202) << r->body;
+  EXPECT_EQ(wait_until_done(*client_, json::parse(r->body)["id"]).value("state", ""), "succeeded");
+
+  auto expect_422 = [&](const json& doc, const std::string& pointer) {
+    auto res = client_->Post("/v1/jobs", doc.dump(), "application/json");
+    ASSERT_TRUE(res);
+    EXPECT_EQ(res->status, 422) << doc.dump() << ": " << res->body;
+    json body = json::parse(res->body, nullptr, false);
+    EXPECT_EQ(body.value("pointer", std::string()), pointer) << res->body;
+  };
+  json bad = {{"kind", "material"}, {"material", {{"type", "lambert"}, {"albedo", 1.5}}}};
+  expect_422(bad, "/material/albedo");
+  json bad_row = row;
+  bad_row["materials"][1]["roughness"] = -0.5;
+  expect_422(bad_row, "/materials/1/roughness");
+  json both = {{"kind", "material"}, {"material", {{"type", "lambert"}}}, {"materials", {{{"type", "lambert"}}}}};
+  auto res = client_->Post("/v1/jobs", both.dump(), "application/json");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 422) << "material and materials together: " << res->body;
+  // The daemon is still alive.
+  auto live = client_->Get("/livez");
+  ASSERT_TRUE(live);
+  EXPECT_EQ(live->status, 200);
+}
+
+}  // namespace
+}  // namespace tessera::server::test

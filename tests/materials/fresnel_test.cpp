@@ -1,0 +1,89 @@
+// Fresnel reflectance against closed forms (seed 003, "Fresnel Equation"; seed 000, 2.5.3).
+#include <gtest/gtest.h>
+
+#include "renderer/bsdf/fresnel.h"
+
+namespace tessera {
+namespace {
+
+TEST(Fresnel, NormalIncidenceIsSquaredIndexContrast) {
+  for (float eta : {1.2f, 1.33f, 1.5f, 2.42f, 3.5f}) {
+    const float expected = sqr((1 - eta) / (1 + eta));  // ((eta1 - eta2) / (eta1 + eta2))^2
+    EXPECT_NEAR(fresnel_dielectric(1.0f, eta), expected, 1e-6f) << eta;
+    EXPECT_NEAR(fresnel_dielectric(-1.0f, eta), expected, 1e-6f) << eta;  // from inside: the same
+    EXPECT_NEAR(f0_from_ior(eta), expected, 1e-6f);
+    // A conductor with k = 0 is a dielectric.
+    EXPECT_NEAR(fresnel_conductor(1.0f, Rgb(eta), Rgb(0)).x, expected, 1e-5f);
+  }
+}
+
+TEST(Fresnel, ParallelReflectanceVanishesAtBrewstersAngle) {
+  for (float eta : {1.33f, 1.5f, 2.0f}) {
+    // Outside: tan(theta_B) = eta2 / eta1; inside: tan(theta_B) = eta1 / eta2.
+    float rs, rp;
+    fresnel_dielectric_polarized(std::cos(std::atan(eta)), eta, &rs, &rp);
+    EXPECT_NEAR(rp, 0.0f, 1e-6f) << eta;
+    EXPECT_GT(rs, 0.01f) << eta;
+    fresnel_dielectric_polarized(-std::cos(std::atan(1 / eta)), eta, &rs, &rp);
+    EXPECT_NEAR(rp, 0.0f, 1e-6f) << eta;
+    // Away from it R_p is not zero.
+    fresnel_dielectric_polarized(std::cos(std::atan(eta) + 0.2f), eta, &rs, &rp);
+    EXPECT_GT(rp, 1e-3f);
+  }
+}
+
+TEST(Fresnel, TotalReflectionPastTheCriticalAngle) {
+  for (float eta : {1.33f, 1.5f, 2.42f}) {
+    const float critical = std::asin(1 / eta);
+    for (float d : {0.001f, 0.05f, 0.3f}) {
+      EXPECT_EQ(fresnel_dielectric(-std::cos(critical + d), eta), 1.0f) << eta;
+    }
+    EXPECT_LT(fresnel_dielectric(-std::cos(critical - 0.01f), eta), 1.0f) << eta;
+    // From outside there is no total reflection; grazing incidence reflects everything in the limit.
+    EXPECT_LT(fresnel_dielectric(std::cos(critical + 0.3f), eta), 1.0f);
+    EXPECT_NEAR(fresnel_dielectric(1e-6f, eta), 1.0f, 1e-4f);
+    Vec3 wt;
+    EXPECT_FALSE(refract(Vec3(std::sin(critical + 0.01f), 0, std::cos(critical + 0.01f)), Vec3(0, 0, 1), 1 / eta, &wt));
+  }
+}
+
+TEST(Fresnel, ReflectanceIsMonotoneOutsideAndBounded) {
+  float prev = 0;
+  for (int i = 0; i <= 100; ++i) {
+    float cos_theta = 1 - i / 100.0f;
+    float f = fresnel_dielectric(std::max(cos_theta, 1e-6f), 1.5f);
+    EXPECT_GE(f, prev - 1e-6f);
+    EXPECT_LE(f, 1.0f);
+    prev = f;
+  }
+}
+
+TEST(Fresnel, SnellsLawAndEnergy) {
+  for (float theta : {0.1f, 0.5f, 1.0f, 1.4f}) {
+    Vec3 wi(std::sin(theta), 0, std::cos(theta)), wt;
+    ASSERT_TRUE(refract(wi, Vec3(0, 0, 1), 1.5f, &wt));
+    EXPECT_NEAR(std::sin(theta), 1.5f * std::sqrt(1 - wt.z * wt.z), 1e-5f);
+    EXPECT_LT(wt.z, 0);
+    EXPECT_NEAR(length(wt), 1.0f, 1e-5f);
+  }
+  // The hemispherical average obeys 1 - F_ext = eta^2 (1 - F_int) (d'Eon & Irving 2011).
+  for (float eta : {1.33f, 1.5f, 2.0f}) {
+    EXPECT_NEAR(1 - fresnel_diffuse_reflectance(eta), eta * eta * (1 - fresnel_diffuse_reflectance(1 / eta)), 2e-3f);
+  }
+}
+
+TEST(Fresnel, ConductorReflectanceOfNamedMetalsIsPlausible) {
+  // Normal-incidence reflectance of gold is high in red and low in blue; silver and aluminium are bright and
+  // nearly neutral; iron and chromium are greyer.
+  Rgb au = fresnel_conductor(1, Rgb(0.18299f, 0.42108f, 1.3734f), Rgb(3.4242f, 2.3459f, 1.7704f));
+  EXPECT_GT(au.x, 0.9f);
+  EXPECT_LT(au.z, 0.5f);
+  Rgb al = fresnel_conductor(1, Rgb(1.5196f, 0.96565f, 0.53124f), Rgb(7.6635f, 6.4581f, 5.0699f));
+  EXPECT_GT(al.x, 0.88f);
+  EXPECT_GT(al.z, 0.88f);
+  // Grazing incidence reflects everything.
+  EXPECT_NEAR(fresnel_conductor(1e-5f, Rgb(0.2f), Rgb(3.0f)).x, 1.0f, 1e-3f);
+}
+
+}  // namespace
+}  // namespace tessera
