@@ -51,13 +51,34 @@ inline uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed) {
   return reverse_bits(laine_karras_permutation(reverse_bits(x), seed));
 }
 
+// Dimension 1 of the Sobol sequence (primitive polynomial x + 1) is a linear map over GF(2) of the index bits:
+// XOR the direction numbers of its set bits. Tabulated per byte, that is four lookups.
+struct SobolDim1Tables {
+  uint32_t t[4][256];
+  SobolDim1Tables() {
+    uint32_t v[32];
+    v[0] = 1u << 31;
+    for (int k = 1; k < 32; ++k) v[k] = v[k - 1] ^ (v[k - 1] >> 1);
+    for (int b = 0; b < 4; ++b)
+      for (int x = 0; x < 256; ++x) {
+        uint32_t r = 0;
+        for (int k = 0; k < 8; ++k)
+          if (x & (1 << k)) r ^= v[8 * b + k];
+        t[b][x] = r;
+      }
+  }
+};
+
+inline uint32_t sobol_dim1(uint32_t index) {
+  static const SobolDim1Tables tables;
+  return tables.t[0][index & 0xff] ^ tables.t[1][(index >> 8) & 0xff] ^ tables.t[2][(index >> 16) & 0xff] ^
+         tables.t[3][index >> 24];
+}
+
 // The first two dimensions of the Sobol sequence, as 32-bit fractions.
 inline void sobol_2d(uint32_t index, uint32_t* x, uint32_t* y) {
   *x = reverse_bits(index);  // dimension 0: van der Corput
-  uint32_t v = 1u << 31, r = 0;
-  for (; index; index >>= 1, v ^= v >> 1)
-    if (index & 1) r ^= v;  // dimension 1: generator matrix of the polynomial x + 1
-  *y = r;
+  *y = sobol_dim1(index);
 }
 
 }  // namespace sobol_detail
@@ -73,7 +94,15 @@ class PixelSampler {
 
   // Next uniform number in [0, 1).
   float get1d() {
-    if (kind_ == SamplerKind::kSobol) return get2d().x;
+    if (kind_ == SamplerKind::kSobol) {
+      // One dimension: the shuffled, scrambled van der Corput sequence (Sobol's dimension 0).
+      const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * ++dimension_);
+      const uint32_t index = sobol_detail::nested_uniform_scramble(static_cast<uint32_t>(sample_index_),
+                                                                   static_cast<uint32_t>(h));
+      const uint32_t x = sobol_detail::nested_uniform_scramble(sobol_detail::reverse_bits(index),
+                                                               static_cast<uint32_t>(h >> 32));
+      return static_cast<float>(x >> 8) * 0x1p-24f;
+    }
     return to_unit(mix64(key_ + 0x9e3779b97f4a7c15ULL * ++dimension_));
   }
   // Next pair of uniform numbers in [0, 1)^2, stratified jointly with the Sobol sampler.
