@@ -1,7 +1,7 @@
 # The two commands of the README:
 #   make run    installs what is missing, builds Release, starts tesserad on 127.0.0.1:8080 (data in ./data)
 #   make test   installs what is missing, builds, runs the whole test suite
-# Other targets: build, asan (sanitizer build + tests), bench, format, clean.
+# Other targets: build, asan (sanitizer build + tests), bench, image (podman), deb (cpack), format, clean.
 
 BUILD ?= build
 ASAN_BUILD ?= build-asan
@@ -9,7 +9,7 @@ JOBS ?= $(shell nproc)
 DATA_DIR ?= $(CURDIR)/data
 PORT ?= 8080
 
-.PHONY: run test build deps test-deps asan bench format clean
+.PHONY: run test build deps test-deps asan bench image deb format clean
 
 deps:
 	deploy/install-deps.sh build
@@ -39,6 +39,14 @@ asan: test-deps
 bench: deps
 	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_BUILD_BENCH=ON
 	cmake --build $(BUILD) -j $(JOBS)
+
+image:
+	deploy/install-deps.sh deploy
+	CONTAINERS_CONF=$(CURDIR)/deploy/podman/containers.conf deploy/podman/base-image.sh
+	CONTAINERS_CONF=$(CURDIR)/deploy/podman/containers.conf podman build --format docker -f deploy/Dockerfile -t tessera:0.1.0 .
+
+deb: build
+	cd $(BUILD) && cpack -G DEB
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.h')
