@@ -22,7 +22,10 @@ packages=(
   libsqlite3-dev libtbb-dev libssl-dev libstb-dev
 )
 if [ "$mode" = "test" ]; then
-  packages+=(libgtest-dev libgmock-dev libbenchmark-dev nodejs npm chromium prometheus)
+  packages+=(libgtest-dev libgmock-dev libbenchmark-dev chromium prometheus)
+  # Node.js: any working node and npm will do (machines often have a newer one than Debian's, which Debian's npm
+  # package would conflict with); Debian's only when there is none.
+  if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then packages+=(nodejs npm); fi
 fi
 if [ "$mode" = "test" ] || [ "$mode" = "deploy" ]; then
   packages+=(podman runc debootstrap uidmap slirp4netns fuse-overlayfs netavark aardvark-dns iptables
