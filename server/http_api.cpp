@@ -885,9 +885,13 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
     res.headers.clear();
     send_problem(res, 500, "internal error; the daemon's log has the details");
   });
+  // Counted before the response is written (the logger runs after it), so that a client that has its answer also
+  // finds it in /metrics.
+  server.set_post_routing_handler([c](const Request& req, Response& res) {
+    c->metrics.count_request(route_label(req), res.status);
+  });
   server.set_logger([c](const Request& req, const Response& res) {
     const std::string route = route_label(req);
-    c->metrics.count_request(route, res.status);
     // The path, never the query: an access_token may be in it.
     log(LogLevel::kDebug, "request",
         {{"method", req.method}, {"path", req.path}, {"route", route}, {"status", res.status}});
