@@ -211,37 +211,6 @@ double integrate_cell(const std::function<double(double, double)>& g, double x0,
 
 }  // namespace
 
-double gamma_q(double a, double x) {
-  if (x <= 0) return 1;
-  const double gln = std::lgamma(a);
-  if (x < a + 1) {
-    // Series for P(a, x) = e^-x x^a / Gamma(a) * sum x^n / (a (a+1) ... (a+n)).
-    double ap = a, sum = 1 / a, del = sum;
-    for (int n = 0; n < 100000; ++n) {
-      ap += 1;
-      del *= x / ap;
-      sum += del;
-      if (std::abs(del) < std::abs(sum) * 1e-15) break;
-    }
-    return std::max(0.0, 1 - sum * std::exp(-x + a * std::log(x) - gln));
-  }
-  // Continued fraction for Q(a, x) (modified Lentz).
-  double b = x + 1 - a, c = 1e300, d = 1 / b, h = d;
-  for (int i = 1; i < 100000; ++i) {
-    double an = -i * (i - a);
-    b += 2;
-    d = an * d + b;
-    if (std::abs(d) < 1e-300) d = 1e-300;
-    c = b + an / c;
-    if (std::abs(c) < 1e-300) c = 1e-300;
-    d = 1 / d;
-    double del = d * c;
-    h *= del;
-    if (std::abs(del - 1) < 1e-15) break;
-  }
-  return std::exp(-x + a * std::log(x) - gln) * h;
-}
-
 Chi2Result chi2_test(const Bsdf& bsdf, const Vec3& wo, int n, uint64_t seed) {
   Chi2Result r;
   std::vector<double> observed(kRows * kCols, 0.0);

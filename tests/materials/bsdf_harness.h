@@ -11,6 +11,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "tests/renderer/test_util.h"
 #include "renderer/arena.h"
 #include "renderer/material.h"
 
@@ -76,7 +77,6 @@ struct Chi2Result {
 // and delta samples as one extra cell expecting n (1 - \int pdf), and returns Pearson's statistic and p-value.
 Chi2Result chi2_test(const Bsdf& bsdf, const Vec3& wo, int n, uint64_t seed);
 
-// Upper regularised incomplete gamma function Q(a, x) (the chi-square survival function is Q(dof/2, x/2)).
-double gamma_q(double a, double x);
+// gamma_q, the chi-square survival function's building block, is shared with the renderer tests (test_util.h).
 
 }  // namespace tessera::test

@@ -1,6 +1,7 @@
 // Shared helpers for renderer tests: chi-square statistics and small scenes built in code.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <vector>
@@ -21,7 +22,7 @@ inline double gamma_q(double a, double x) {
       sum += del;
       if (std::abs(del) < std::abs(sum) * 1e-15) break;
     }
-    return 1.0 - sum * std::exp(-x + a * std::log(x) - gln);
+    return std::max(0.0, 1.0 - sum * std::exp(-x + a * std::log(x) - gln));
   }
   double b = x + 1 - a, c = 1e300, d = 1 / b, h = d;
   for (int i = 1; i < 10000; ++i) {
