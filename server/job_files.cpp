@@ -65,7 +65,9 @@ fs::path JobFiles::path(const std::string& id, JobFile f) const {
 void JobFiles::write_with(const std::string& id, JobFile f,
                           const std::function<void(const std::string&)>& writer) const {
   const fs::path final_path = path(id, f);
-  fs::create_directories(final_path.parent_path());
+  // The folder is made when the job starts rendering; if it is gone, the job was deleted: write nothing.
+  if (!fs::is_directory(final_path.parent_path()))
+    throw std::runtime_error("job " + id + " has no folder (deleted)");
   // "result.tmp-<pid>-<n>.exr": unique per writer, and the extension still names the format.
   const fs::path temp =
       final_path.parent_path() / (final_path.stem().string() + ".tmp-" + std::to_string(::getpid()) + "-" +

@@ -161,6 +161,12 @@ void Scheduler::dispatch_loop() {
 
 void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record) {
   const std::string& id = record.id;
+  // The job's folder exists from here on; file writes never create it (JobFiles::write_with), so a render still
+  // winding down cannot bring back the folder of a job that was deleted meanwhile.
+  {
+    std::error_code ec;
+    std::filesystem::create_directories(files_.dir(id), ec);
+  }
   notify_state(id);
   auto detach = [&] {
     std::lock_guard lock(mutex_);

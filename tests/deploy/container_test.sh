@@ -24,7 +24,8 @@ if ! timeout "$build_timeout" podman build --format docker --layers --pull=never
 fi
 say "image built in $(( $(date +%s) - start ))s: $(podman image inspect --format '{{.Size}}' "$image" | awk '{printf "%.0f MB", $1/1e6}')"
 [ "$(podman image inspect --format '{{.Config.User}}' "$image")" = "10001:10001" ] || fail "the image does not run as 10001"
-podman image inspect --format '{{.Config.Healthcheck}}' "$image" | grep -q readyz || fail "the image has no HEALTHCHECK on /readyz"
+# Captured first: with pipefail, `grep -q` leaving early can make the writer die of SIGPIPE and fail the pipeline.
+grep -q readyz <<<"$(podman image inspect --format '{{.Config.Healthcheck}}' "$image")" || fail "the image has no HEALTHCHECK on /readyz"
 
 # --- run it --------------------------------------------------------------------------------------------------------
 volume=$tag-data
@@ -61,7 +62,7 @@ port=$(run_container "$first") || exit 1
 url=http://127.0.0.1:$port
 wait_ready "$first" "$url"
 say "ready on $url"
-podman logs "$first" 2>&1 | grep -q "listening on http://0.0.0.0:8080" || fail "tesserad did not print 'listening on http://0.0.0.0:8080'"
+grep -q "listening on http://0.0.0.0:8080" <<<"$(podman logs "$first" 2>&1)" || fail "tesserad did not print 'listening on http://0.0.0.0:8080'"
 [ "$(timeout 30 podman exec "$first" id -u)" = "10001" ] || fail "tesserad does not run as uid 10001"
 curl -fsS -m 5 -o /dev/null "$url/livez" || fail "/livez does not answer"
 timeout 60 podman healthcheck run "$first" >/dev/null 2>&1 || fail "podman healthcheck run: the image's HEALTHCHECK is not healthy"

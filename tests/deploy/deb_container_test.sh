@@ -30,7 +30,7 @@ apt-get update -qq
 apt-get install -y -qq --no-install-recommends /pkg/tessera_*.deb curl >/tmp/apt.log 2>&1 || { tail -20 /tmp/apt.log; exit 1; }
 ok "apt-get install ./tessera_*.deb: Depends resolve on a clean bookworm"
 check_state() {
-  getent passwd tessera | grep -q ":/var/lib/tessera:/usr/sbin/nologin$"
+  grep -q ":/var/lib/tessera:/usr/sbin/nologin$" <<<"$(getent passwd tessera)"
   [ "$(id -u tessera)" -lt 1000 ]
   [ "$(stat -c %U:%G:%a /var/lib/tessera)" = tessera:tessera:750 ]
   [ "$(stat -c %U:%G:%a /etc/tessera/tesserad.env)" = root:tessera:640 ]

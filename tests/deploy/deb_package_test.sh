@@ -61,10 +61,10 @@ web_deb=$(cd "$root/usr/share/tessera/web" && find . -type f | sort)
 stray=$(cd "$root" && find . -type f | grep -vE '^\./(usr/bin/tessera|usr/bin/tesserad|usr/share/tessera/web/.*|lib/systemd/system/tesserad\.service|etc/tessera/tesserad\.(json|env))$')
 [ -z "$stray" ]; check $? "no other files in the package${stray:+: $stray}"
 cmp -s "$root/lib/systemd/system/tesserad.service" "$src/deploy/systemd/tesserad.service"; check $? "the unit is deploy/systemd/tesserad.service"
-"$root/usr/bin/tesserad" --help | grep -q -- '--data-dir'; check $? "the unpacked tesserad runs (--help)"
+grep -q -- '--data-dir' <<<"$("$root/usr/bin/tesserad" --help)"; check $? "the unpacked tesserad runs (--help)"
 env -u TESSERA_CONFIG "$root/usr/bin/tesserad" --config "$root/etc/tessera/tesserad.json" --help >/dev/null
 check $? "the unpacked tesserad accepts the packaged /etc/tessera/tesserad.json"
-"$root/usr/bin/tessera" --help >/dev/null 2>&1 || "$root/usr/bin/tessera" 2>&1 | grep -qi usage; check $? "the unpacked tessera runs"
+"$root/usr/bin/tessera" --help >/dev/null 2>&1 || grep -qi usage <<<"$("$root/usr/bin/tessera" 2>&1)"; check $? "the unpacked tessera runs"
 
 status=0
 "$src/tests/deploy/systemd_unit_test.sh" "$root/lib/systemd/system/tesserad.service" "$root/usr/bin/tesserad" || status=$?

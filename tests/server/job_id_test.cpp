@@ -46,6 +46,9 @@ TEST(JobFiles, WritesAtomicallyAndRemoves) {
   test::TempDir dir;
   JobFiles files(dir.path());
   const std::string id = new_job_id();
+  // Writes never create the job's folder (the scheduler makes it when the job starts).
+  EXPECT_THROW(files.write(id, JobFile::kPreviewPng, "orphan"), std::runtime_error);
+  std::filesystem::create_directories(files.dir(id));
   files.write(id, JobFile::kPreviewPng, "first");
   files.write(id, JobFile::kPreviewPng, "second");
   EXPECT_EQ(files.read(id, JobFile::kPreviewPng), "second");
@@ -57,6 +60,9 @@ TEST(JobFiles, WritesAtomicallyAndRemoves) {
                std::runtime_error);
   EXPECT_FALSE(files.read(id, JobFile::kResultExr));
   files.remove(id);
+  EXPECT_FALSE(std::filesystem::exists(files.dir(id)));
+  // A late write after removal (a render winding down) does not bring the folder back.
+  EXPECT_THROW(files.write(id, JobFile::kPreviewPng, "late"), std::runtime_error);
   EXPECT_FALSE(std::filesystem::exists(files.dir(id)));
 }
 
