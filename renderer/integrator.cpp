@@ -91,7 +91,11 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
         // shading normal says (otherwise light leaks through surfaces with interpolated normals).
         const bool light_transmits = dot(ls.wi, si.sp.ng) * dot(wo_world, si.sp.ng) <= 0;
         const uint32_t needed = light_transmits ? kBsdfTransmission : kBsdfReflection;
-        Rgb f = (flags & needed) ? bsdf->eval(wo, wi) * std::abs(wi.z) : Rgb(0);
+        // The BSDF's pdf is needed only to weight a non-delta light sample by MIS; eval_pdf shares the work.
+        const bool weigh = mis && !ls.delta;
+        float bsdf_pdf = 0;
+        Rgb f(0);
+        if (flags & needed) f = (weigh ? bsdf->eval_pdf(wo, wi, &bsdf_pdf) : bsdf->eval(wo, wi)) * std::abs(wi.z);
         if (!is_black(f)) {
           Ray shadow;
           shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, ls.wi);
@@ -108,7 +112,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
           }
           ++counters.shadow;
           if (!scene.occluded(shadow)) {
-            float w = (mis && !ls.delta) ? power_heuristic(ls.pdf, bsdf->pdf(wo, wi)) : 1.0f;
+            float w = weigh ? power_heuristic(ls.pdf, bsdf_pdf) : 1.0f;
             radiance += throughput * f * ls.radiance * (w / ls.pdf);
           }
         }

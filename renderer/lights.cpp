@@ -14,19 +14,12 @@ TrianglePoints triangle(const Mesh& mesh, uint32_t prim) {
           mesh.positions[mesh.indices[3 * prim + 2]]};
 }
 
-ShadingPoint triangle_point(const Mesh& mesh, uint32_t prim, float b1, float b2) {
-  TrianglePoints t = triangle(mesh, prim);
-  ShadingPoint sp;
-  float b0 = 1 - b1 - b2;
-  sp.p = t.a * b0 + t.b * b1 + t.c * b2;
-  sp.ng = normalize(cross(t.b - t.a, t.c - t.a));
-  sp.frame = Frame::from_normal(sp.ng);
-  if (!mesh.uvs.empty()) {
-    const uint32_t* idx = &mesh.indices[3 * prim];
-    sp.uv = mesh.uvs[idx[0]] * b0 + mesh.uvs[idx[1]] * b1 + mesh.uvs[idx[2]] * b2;
-    sp.uv1 = sp.uv;
-  }
-  return sp;
+// Texture coordinates at barycentrics (b1, b2) of a mesh triangle, for textured emission.
+void triangle_uv(const Mesh& mesh, uint32_t prim, float b1, float b2, ShadingPoint* sp) {
+  if (mesh.uvs.empty()) return;
+  const uint32_t* idx = &mesh.indices[3 * prim];
+  sp->uv = mesh.uvs[idx[0]] * (1 - b1 - b2) + mesh.uvs[idx[1]] * b1 + mesh.uvs[idx[2]] * b2;
+  sp->uv1 = sp->uv;
 }
 
 float emitted_power(const Rgb& average_radiance, float area, bool one_sided) {
@@ -37,6 +30,7 @@ float emitted_power(const Rgb& average_radiance, float area, bool one_sided) {
 
 void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punctual) {
   entries_.clear();
+  triangles_.clear();
   punctual_ = punctual;
   environment_ = kNoLight;
   scene_radius_ = std::max(scene.bounds().radius(), 1e-3f);
@@ -47,8 +41,11 @@ void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punct
     if (mesh.prototype || !mat.emissive()) continue;
     for (uint32_t t = 0; t < mesh.triangle_count(); ++t) {
       TrianglePoints tp = triangle(mesh, t);
-      float area = 0.5f * length(cross(tp.b - tp.a, tp.c - tp.a));
+      const Vec3 c = cross(tp.b - tp.a, tp.c - tp.a);
+      float area = 0.5f * length(c);
       // Degenerate triangles keep their slot (light indices follow triangle order) but are never chosen.
+      triangles_.resize(entries_.size());
+      triangles_.push_back({tp.a, tp.b - tp.a, tp.c - tp.a, area > 0 ? c / (2 * area) : Vec3(0, 0, 1), area});
       entries_.push_back({Kind::kTriangle, m, t});
       power.push_back(area > 0 ? emitted_power(mat.emission.average(), area, mat.emission_one_sided) : -1.0f);
     }
@@ -87,12 +84,16 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
   const Entry& e = entries_[distribution_.sample(u_select, &pmf)];
   switch (e.kind) {
     case Kind::kTriangle: {
+      const TriangleGeometry& tri = triangles_[&e - entries_.data()];
+      const float area = tri.area;
+      if (!(area > 0)) return false;
       const Mesh& mesh = scene.meshes[e.object];
       Vec2 b = sample_uniform_triangle(u);
-      ShadingPoint sp = triangle_point(mesh, e.prim, b.x, b.y);
-      TrianglePoints tp = triangle(mesh, e.prim);
-      float area = 0.5f * length(cross(tp.b - tp.a, tp.c - tp.a));
-      if (!(area > 0)) return false;
+      ShadingPoint sp;
+      sp.p = tri.p0 + tri.e1 * b.x + tri.e2 * b.y;
+      sp.ng = tri.n;
+      sp.frame = Frame(Vec3(1, 0, 0), Vec3(0, 1, 0), tri.n);  // emission reads ng and uv only
+      triangle_uv(mesh, e.prim, b.x, b.y, &sp);
       Vec3 d = sp.p - p;
       float dist2 = length_squared(d);
       if (!(dist2 > 0)) return false;
@@ -210,9 +211,7 @@ float LightSet::pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteract
   const Entry& e = entries_[si.light];
   float pmf = distribution_.pmf(si.light);
   if (e.kind == Kind::kTriangle) {
-    const Mesh& mesh = scene.meshes[e.object];
-    TrianglePoints tp = triangle(mesh, e.prim);
-    float area = 0.5f * length(cross(tp.b - tp.a, tp.c - tp.a));
+    const float area = triangles_[si.light].area;
     Vec3 d = si.sp.p - p;
     float dist2 = length_squared(d);
     if (!(area > 0) || !(dist2 > 0)) return 0;

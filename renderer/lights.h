@@ -56,6 +56,13 @@ class LightSet {
     uint32_t prim;    // triangle index within its mesh
   };
   std::vector<Entry> entries_;
+  // Per entry, for emissive triangles: the corner, edges, unit normal and area, so that sampling a triangle light
+  // reads one compact record instead of the mesh's index and vertex arrays.
+  struct TriangleGeometry {
+    Vec3 p0, e1, e2, n;
+    float area = 0;
+  };
+  std::vector<TriangleGeometry> triangles_;
   std::vector<PunctualLight> punctual_;
   Distribution1D distribution_;
   uint32_t environment_ = kNoLight;

@@ -49,6 +49,11 @@ class Material {
   // shading frame at every hit.
   std::shared_ptr<const Texture> normal_map;
   float normal_scale = 1;
+
+  // True when the BSDF looks the same under any rotation of the tangent frame about the normal (and the material
+  // has no normal map): hits then get a frame built from the normal alone, without deriving a tangent from the
+  // texture coordinates. Models set it when they know it; false is always correct.
+  bool isotropic = false;
 };
 
 // Where texture files named by a material may come from.

@@ -28,11 +28,10 @@ enum class SamplerKind {
 namespace sobol_detail {
 
 inline uint32_t reverse_bits(uint32_t x) {
-  x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
-  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  x = __builtin_bswap32(x);  // bytes in one instruction, then the bits within each byte
   x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
-  x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
-  return (x >> 16) | (x << 16);
+  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  return ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
 }
 
 // Laine-Karras style hash in which each bit depends only on the bits below it: applied to bit-reversed values it
@@ -54,9 +53,9 @@ inline uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed) {
 // Dimension 1 of the Sobol sequence (primitive polynomial x + 1) is a linear map over GF(2) of the index bits:
 // XOR the direction numbers of its set bits. Tabulated per byte, that is four lookups.
 struct SobolDim1Tables {
-  uint32_t t[4][256];
-  SobolDim1Tables() {
-    uint32_t v[32];
+  uint32_t t[4][256] = {};
+  constexpr SobolDim1Tables() {
+    uint32_t v[32] = {};
     v[0] = 1u << 31;
     for (int k = 1; k < 32; ++k) v[k] = v[k - 1] ^ (v[k - 1] >> 1);
     for (int b = 0; b < 4; ++b)
@@ -69,8 +68,10 @@ struct SobolDim1Tables {
   }
 };
 
+inline constexpr SobolDim1Tables kSobolDim1Tables{};  // built by the compiler: no guard on every lookup
+
 inline uint32_t sobol_dim1(uint32_t index) {
-  static const SobolDim1Tables tables;
+  const SobolDim1Tables& tables = kSobolDim1Tables;
   return tables.t[0][index & 0xff] ^ tables.t[1][(index >> 8) & 0xff] ^ tables.t[2][(index >> 16) & 0xff] ^
          tables.t[3][index >> 24];
 }
@@ -89,18 +90,19 @@ class PixelSampler {
                SamplerKind kind = SamplerKind::kIndependent)
       : key_(mix64(mix64(seed ^ 0x9e3779b97f4a7c15ULL) + pixel_index) ^ mix64(sample_index + 0x632be59bd9b4e019ULL)),
         pixel_key_(mix64(mix64(seed ^ 0x5851f42d4c957f2dULL) + pixel_index)),
-        sample_index_(sample_index),
+        reversed_index_(sobol_detail::reverse_bits(static_cast<uint32_t>(sample_index))),
         kind_(kind) {}
 
   // Next uniform number in [0, 1).
   float get1d() {
     if (kind_ == SamplerKind::kSobol) {
       // One dimension: the shuffled, scrambled van der Corput sequence (Sobol's dimension 0).
+      // x = scramble(reverse(index)) with scramble(v) = reverse(LK(reverse(v))): the inner reversals cancel.
       const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * ++dimension_);
-      const uint32_t index = sobol_detail::nested_uniform_scramble(static_cast<uint32_t>(sample_index_),
-                                                                   static_cast<uint32_t>(h));
-      const uint32_t x = sobol_detail::nested_uniform_scramble(sobol_detail::reverse_bits(index),
-                                                               static_cast<uint32_t>(h >> 32));
+      const uint32_t index =
+          sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(reversed_index_, static_cast<uint32_t>(h)));
+      const uint32_t x =
+          sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(index, static_cast<uint32_t>(h >> 32)));
       return static_cast<float>(x >> 8) * 0x1p-24f;
     }
     return to_unit(mix64(key_ + 0x9e3779b97f4a7c15ULL * ++dimension_));
@@ -111,12 +113,13 @@ class PixelSampler {
       // Each dimension pair of each pixel gets its own shuffle of the sample order and its own scramble, so pairs
       // are decorrelated from each other and pixels from their neighbours.
       const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * ++dimension_);
-      const uint32_t index = sobol_detail::nested_uniform_scramble(static_cast<uint32_t>(sample_index_),
-                                                                   static_cast<uint32_t>(h));
-      uint32_t x, y;
-      sobol_detail::sobol_2d(index, &x, &y);
-      x = sobol_detail::nested_uniform_scramble(x, static_cast<uint32_t>(h >> 32));
-      y = sobol_detail::nested_uniform_scramble(y, static_cast<uint32_t>(mix64(h) >> 32));
+      // index = shuffle(i); dimension 0 is reverse(index), whose scramble is reverse(LK(index)).
+      const uint32_t index =
+          sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(reversed_index_, static_cast<uint32_t>(h)));
+      const uint32_t x =
+          sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(index, static_cast<uint32_t>(h >> 32)));
+      const uint32_t y =
+          sobol_detail::nested_uniform_scramble(sobol_detail::sobol_dim1(index), static_cast<uint32_t>(mix64(h) >> 32));
       return {static_cast<float>(x >> 8) * 0x1p-24f, static_cast<float>(y >> 8) * 0x1p-24f};
     }
     float a = get1d();
@@ -131,7 +134,7 @@ class PixelSampler {
   }
   uint64_t key_;
   uint64_t pixel_key_;
-  uint64_t sample_index_;
+  uint32_t reversed_index_;  // the sample index, bit-reversed (Sobol indices are 32-bit)
   SamplerKind kind_;
   uint32_t dimension_ = 0;
 };

@@ -118,9 +118,14 @@ bool Scene::intersect(const Ray& ray, SurfaceInteraction* si) const {
     }
     sp.uv = uv0 * b0 + uv1 * b1 + uv2 * b2;
     sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
-    // Tangent: from the mesh when given, else along dp/du (with the handedness of dp/dv).
+    const Material* material = materials[mesh.material].get();
+    // Tangent: from the mesh when given, else along dp/du (with the handedness of dp/dv); none is needed for an
+    // isotropic material without a normal map.
+    const bool needs_tangent = !material->isotropic || material->normal_map;
     Vec3 tangent;
-    if (!mesh.tangents.empty()) {
+    if (!needs_tangent) {
+      sp.frame = Frame::from_normal(ns);
+    } else if (!mesh.tangents.empty()) {
       tangent = mesh.tangents[idx[0]] * b0 + mesh.tangents[idx[1]] * b1 + mesh.tangents[idx[2]] * b2;
       if (inst) tangent = inst->to_world.vector(tangent);
       sp.tangent_sign = mesh.tangent_signs.empty() || mesh.tangent_signs[idx[0]] >= 0 ? 1.0f : -1.0f;
@@ -136,11 +141,11 @@ bool Scene::intersect(const Ray& ray, SurfaceInteraction* si) const {
         sp.tangent_sign = 1;
       }
     }
-    sp.frame = Frame::from_normal_tangent(ns, tangent);
+    if (needs_tangent) sp.frame = Frame::from_normal_tangent(ns, tangent);
     sp.vertex_color = mesh.colors.empty()
                           ? Rgb(1)
                           : mesh.colors[idx[0]] * b0 + mesh.colors[idx[1]] * b1 + mesh.colors[idx[2]] * b2;
-    si->material = materials[mesh.material].get();
+    si->material = material;
     si->light = si->material->emissive() ? mesh.first_light + hit.prim_id : kNoLight;
   }
   sp.front_face = dot(ray.dir, sp.ng) < 0;

@@ -46,6 +46,11 @@ class Bsdf {
   // `uc` chooses a lobe, `u` samples within it; both uniform in [0,1).
   virtual std::optional<BsdfSample> sample(const Vec3& wo, float uc, Vec2 u) const = 0;
   virtual float pdf(const Vec3& wo, const Vec3& wi) const = 0;
+  // eval and pdf of the same pair at once; models that share work between the two override it.
+  virtual Rgb eval_pdf(const Vec3& wo, const Vec3& wi, float* pdf_out) const {
+    *pdf_out = pdf(wo, wi);
+    return eval(wo, wi);
+  }
   // Union of the lobes this BSDF has.
   virtual uint32_t flags() const = 0;
   // Albedo-like colour for the first-hit albedo AOV and for Russian roulette heuristics.

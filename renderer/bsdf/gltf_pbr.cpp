@@ -200,47 +200,8 @@ class GltfPbrBsdf final : public Bsdf {
     sheen_max_ = max_component(l.sheen_color);
   }
 
-  Rgb eval(const Vec3& wo_in, const Vec3& wi_in) const override {
-    Vec3 wo = wo_in, wi = wi_in;
-    if (wo.z == 0 || wi.z == 0) return Rgb(0);
-    if (wo.z < 0) {
-      wo.z = -wo.z;
-      wi.z = -wi.z;
-    }
-    const bool transmit = wi.z < 0;
-    if (transmit && l_.transmission <= 0) return Rgb(0);
-    const Vec3 wr(wi.x, wi.y, std::abs(wi.z));  // the mirrored pair for transmission
-    Vec3 h;
-    if (!reflection_half_vector(wo, wr, &h)) return Rgb(0);
-    const float vh = dot(wo, h);
-    const float dv = microfacet_reflection_eval(dist_, wo, wr);
-    const Rgb fd = fresnel_schlick(l_.f0_d, Rgb(l_.f90_d), vh);
-    const float fd_max = max_component(fd);
-    const float m = l_.metallic;
-    Rgb f;
-    if (transmit) {
-      f = l_.base_color * ((1 - m) * l_.transmission * (1 - fd_max) * dv);
-    } else {
-      const Rgb fm = fresnel_schlick(l_.base_color, Rgb(1), vh);
-      const float w = (1 - specular_albedo(wo.z)) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
-      f = l_.base_color * ((1 - m) * (1 - l_.transmission) * w * kInvPi) + fd * ((1 - m) * dv) + fm * (m * dv);
-    }
-    if (sheen_max_ > 0) {
-      const float eo = sheen_albedo(wo.z), ei = sheen_albedo(wr.z);
-      f = f * std::min(1 - sheen_max_ * std::min(eo, 1.0f), 1 - sheen_max_ * std::min(ei, 1.0f));
-      // The Charlie lobe's albedo exceeds 1 near grazing angles; dividing by max(1, E_sh(mu_o), E_sh(mu_i)) bounds
-      // it by 1 and stays symmetric.
-      if (!transmit) f += l_.sheen_color * (sheen_eval(wo, wr, l_.alpha_sheen) / std::max(1.0f, std::max(eo, ei)));
-    }
-    if (l_.clearcoat > 0) {
-      f = f * std::min(1 - l_.clearcoat * coat_albedo(wo.z), 1 - l_.clearcoat * coat_albedo(wr.z));
-      if (!transmit) {
-        const float fc = l_.clearcoat * fresnel_schlick(0.04f, vh);
-        f += Rgb(fc * microfacet_reflection_eval(dist_c_, wo, wr));
-      }
-    }
-    return f;
-  }
+  Rgb eval(const Vec3& wo, const Vec3& wi) const override { return evaluate(wo, wi, nullptr); }
+  Rgb eval_pdf(const Vec3& wo, const Vec3& wi, float* pdf_out) const override { return evaluate(wo, wi, pdf_out); }
 
   std::optional<BsdfSample> sample(const Vec3& wo_in, float uc, Vec2 u) const override {
     if (wo_in.z == 0) return std::nullopt;
@@ -266,9 +227,9 @@ class GltfPbrBsdf final : public Bsdf {
       flags = kBsdfReflection | kBsdfGlossy;
     }
     if (flip) wi.z = -wi.z;
-    float pdf_value = pdf(wo_in, wi);
+    float pdf_value;
+    Rgb f = evaluate(wo_in, wi, &pdf_value);
     if (!(pdf_value > 0)) return std::nullopt;
-    Rgb f = eval(wo_in, wi);
     return BsdfSample{f, wi, pdf_value, flags, 1.0f};
   }
 
@@ -294,6 +255,62 @@ class GltfPbrBsdf final : public Bsdf {
   Rgb albedo_hint() const override { return l_.base_color; }
 
  private:
+  // f(wo, wi), and with `pdf_out` also the density with which `sample` picks wi: one pass shares the half vector,
+  // D, Lambda and the lobe weights between the two.
+  Rgb evaluate(const Vec3& wo_in, const Vec3& wi_in, float* pdf_out) const {
+    if (pdf_out) *pdf_out = 0;
+    Vec3 wo = wo_in, wi = wi_in;
+    if (wo.z == 0 || wi.z == 0) return Rgb(0);
+    if (wo.z < 0) {
+      wo.z = -wo.z;
+      wi.z = -wi.z;
+    }
+    const bool transmit = wi.z < 0;
+    if (transmit && l_.transmission <= 0) return Rgb(0);
+    const Vec3 wr(wi.x, wi.y, std::abs(wi.z));  // the mirrored pair for transmission
+    Vec3 h;
+    if (!reflection_half_vector(wo, wr, &h)) return Rgb(0);
+    const float vh = dot(wo, h);
+    float specular_pdf;
+    const float dv = microfacet_reflection_eval_pdf(dist_, wo, wr, h, &specular_pdf);
+    if (pdf_out) {
+      float p[5];
+      lobe_probabilities(wo, p);
+      if (transmit) {
+        *pdf_out = p[2] * specular_pdf;
+      } else {
+        *pdf_out = (p[0] + p[4]) * cosine_hemisphere_pdf(wr.z) + p[1] * specular_pdf;
+        if (p[3] > 0) *pdf_out += p[3] * microfacet_reflection_pdf(dist_c_, wo, wr);
+      }
+    }
+    const Rgb fd = fresnel_schlick(l_.f0_d, Rgb(l_.f90_d), vh);
+    const float fd_max = max_component(fd);
+    const float m = l_.metallic;
+    Rgb f;
+    if (transmit) {
+      f = l_.base_color * ((1 - m) * l_.transmission * (1 - fd_max) * dv);
+    } else {
+      const float w = (1 - specular_albedo(wo.z)) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
+      f = l_.base_color * ((1 - m) * (1 - l_.transmission) * w * kInvPi) + fd * ((1 - m) * dv);
+      if (m > 0) f += fresnel_schlick(l_.base_color, Rgb(1), vh) * (m * dv);
+    }
+    if (sheen_max_ > 0) {
+      const float eo = sheen_albedo(wo.z), ei = sheen_albedo(wr.z);
+      f = f * std::min(1 - sheen_max_ * std::min(eo, 1.0f), 1 - sheen_max_ * std::min(ei, 1.0f));
+      // The Charlie lobe's albedo exceeds 1 near grazing angles; dividing by max(1, E_sh(mu_o), E_sh(mu_i)) bounds
+      // it by 1 and stays symmetric.
+      if (!transmit) f += l_.sheen_color * (sheen_eval(wo, wr, l_.alpha_sheen) / std::max(1.0f, std::max(eo, ei)));
+    }
+    if (l_.clearcoat > 0) {
+      f = f * std::min(1 - l_.clearcoat * coat_albedo(wo.z), 1 - l_.clearcoat * coat_albedo(wr.z));
+      if (!transmit) {
+        const float fc = l_.clearcoat * fresnel_schlick(0.04f, vh);
+        f += Rgb(fc * microfacet_reflection_eval(dist_c_, wo, wr));
+      }
+    }
+    return f;
+  }
+
   // Probabilities of the diffuse, specular, transmission, clearcoat and sheen lobes, from their weights at wo with
   // the Fresnel terms taken at the normal (Schlick at N.V).
   void lobe_probabilities(const Vec3& wo, float p[5]) const {
@@ -372,6 +389,7 @@ class GltfPbrMaterial final : public Material {
 void register_gltf_pbr(MaterialRegistry& registry) {
   registry.add("gltf_pbr", [](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
     auto m = std::make_unique<GltfPbrMaterial>();
+    m->isotropic = true;  // every lobe is isotropic; a normal map (set later by the loader) still gets a tangent
     m->base_color = params::rgb_param(j, "base_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
     m->metallic = params::float_param(j, "metallic", ptr, 1.0f, 0.0f, 1.0f, ctx);
     m->roughness = params::float_param(j, "roughness", ptr, 1.0f, 0.0f, 1.0f, ctx);

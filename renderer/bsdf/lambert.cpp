@@ -50,7 +50,9 @@ class EmissionMaterial final : public Material {
 
 void register_lambert(MaterialRegistry& registry) {
   registry.add("lambert", [](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
-    return std::make_unique<LambertMaterial>(params::rgb_param(j, "albedo", ptr, Rgb(0.8f), 0.0f, 1.0f, ctx));
+    auto m = std::make_unique<LambertMaterial>(params::rgb_param(j, "albedo", ptr, Rgb(0.8f), 0.0f, 1.0f, ctx));
+    m->isotropic = true;
+    return m;
   });
   registry.add("emission", [](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
     auto m = std::make_unique<EmissionMaterial>();

@@ -185,6 +185,24 @@ float microfacet_reflection_pdf(const MicrofacetDistribution& dist, const Vec3& 
   return dist.d_visible(wo, h) / (4 * oh);
 }
 
+float microfacet_reflection_eval_pdf(const MicrofacetDistribution& dist, const Vec3& wo, const Vec3& wi, const Vec3& h,
+                                     float* pdf) {
+  *pdf = 0;
+  if (wo.z <= 0 || wi.z <= 0) return 0;
+  const float oh = dot(wo, h);
+  if (oh <= 0) return 0;  // G and the visible-normal density both vanish
+  const float d = dist.d(h);
+  if (dist.masking == MaskingType::kVCavity) {
+    *pdf = dist.g1(wo, h) * d / (4 * wo.z);
+    return d * dist.g(wo, wi, h) / (4 * wo.z * wi.z);
+  }
+  // Smith: pdf = G1(o) D / (4 cos_o) with G1 = 1 / (1 + Lambda(o)); f = D / ((1 + Lambda(o) + Lambda(i)) 4 cos_o cos_i).
+  const float lambda_o = dist.lambda(wo);
+  *pdf = d / ((1 + lambda_o) * 4 * wo.z);
+  if (dot(wi, h) <= 0) return 0;
+  return d / ((1 + lambda_o + dist.lambda(wi)) * (4 * wo.z * wi.z));
+}
+
 bool microfacet_reflection_sample(const MicrofacetDistribution& dist, const Vec3& wo, Vec2 u, float u_extra, Vec3* wi) {
   Vec3 m = dist.sample_visible(wo, u, u_extra);
   float om = dot(wo, m);

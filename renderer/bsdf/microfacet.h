@@ -60,6 +60,10 @@ inline bool reflection_half_vector(const Vec3& wo, const Vec3& wi, Vec3* h) {
 // wo and wi in the upper hemisphere (callers mirror back-side directions first).
 float microfacet_reflection_eval(const MicrofacetDistribution& dist, const Vec3& wo, const Vec3& wi);
 float microfacet_reflection_pdf(const MicrofacetDistribution& dist, const Vec3& wo, const Vec3& wi);
+// Both of the above for a pair whose half vector `h` (reflection_half_vector) the caller has: eval returned, the pdf
+// of sampling wi stored in *pdf. One evaluation of D and of each Lambda.
+float microfacet_reflection_eval_pdf(const MicrofacetDistribution& dist, const Vec3& wo, const Vec3& wi, const Vec3& h,
+                                     float* pdf);
 // Samples wi; returns false when the sampled direction leaves the upper hemisphere.
 bool microfacet_reflection_sample(const MicrofacetDistribution& dist, const Vec3& wo, Vec2 u, float u_extra, Vec3* wi);
 
