@@ -2,7 +2,7 @@
 denoising, no adaptive sampling, a 1-pixel box filter and a black world. It renders twice from scratch, at 1 sample
 and at SPP samples, and prints the difference of the two times: the time of SPP - 1 samples, without import, scene
 sync, kernel loading and BVH build (persistent data would keep the first render's sample count in Blender 3.4).
-Usage: blender -b --factory-startup --python cycles_render.py -- SCENE.gltf OUT.exr WIDTH HEIGHT SPP BOUNCES THREADS"""
+Usage: blender -b --factory-startup --python cycles_render.py -- SCENE.gltf OUT.exr WIDTH HEIGHT SPP BOUNCES THREADS [SEED]"""
 import sys, time
 import bpy
 import numpy
@@ -13,6 +13,7 @@ if not hasattr(numpy, "bool"):
 
 args = sys.argv[sys.argv.index("--") + 1:]
 gltf, out, width, height, spp, bounces, threads = args[0], args[1], int(args[2]), int(args[3]), int(args[4]), int(args[5]), int(args[6])
+seed = int(args[7]) if len(args) > 7 else 1
 bpy.ops.wm.read_factory_settings(use_empty=True)
 bpy.ops.import_scene.gltf(filepath=gltf)
 scene = bpy.context.scene
@@ -30,7 +31,7 @@ c.caustics_reflective = c.caustics_refractive = True
 c.sample_clamp_direct = c.sample_clamp_indirect = 0
 c.pixel_filter_type = "BOX"
 c.filter_width = 1.0
-c.seed = 1
+c.seed = seed
 scene.render.threads_mode = "FIXED"
 scene.render.threads = threads
 scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100

@@ -4,27 +4,6 @@
 
 namespace tessera {
 
-Vec2 sample_concentric_disk(Vec2 u) {
-  float ox = 2 * u.x - 1, oy = 2 * u.y - 1;
-  if (ox == 0 && oy == 0) return {0, 0};
-  float r, theta;
-  if (std::abs(ox) > std::abs(oy)) {
-    r = ox;
-    theta = (kPi / 4) * (oy / ox);
-  } else {
-    r = oy;
-    theta = kPi / 2 - (kPi / 4) * (ox / oy);
-  }
-  return {r * std::cos(theta), r * std::sin(theta)};
-}
-
-Vec3 sample_cosine_hemisphere(Vec2 u) {
-  // Malley's method: project the uniform disk up onto the hemisphere.
-  Vec2 d = sample_concentric_disk(u);
-  float z = safe_sqrt(1 - d.x * d.x - d.y * d.y);
-  return {d.x, d.y, z};
-}
-
 Vec3 sample_uniform_hemisphere(Vec2 u) {
   float z = u.x;
   float r = safe_sqrt(1 - z * z);
@@ -44,19 +23,6 @@ Vec3 sample_uniform_cone(Vec2 u, float cos_theta_max) {
   float sin_theta = safe_sqrt(1 - cos_theta * cos_theta);
   float phi = 2 * kPi * u.y;
   return {sin_theta * std::cos(phi), sin_theta * std::sin(phi), cos_theta};
-}
-
-Vec2 sample_uniform_triangle(Vec2 u) {
-  // Heitz, "A Low-Distortion Map Between Triangle and Square" (2019).
-  float b0, b1;
-  if (u.x < u.y) {
-    b0 = u.x / 2;
-    b1 = u.y - b0;
-  } else {
-    b1 = u.y / 2;
-    b0 = u.x - b1;
-  }
-  return {b1, 1 - b0 - b1};
 }
 
 Distribution1D::Distribution1D(const float* weights, size_t n) : pdf_(n), cdf_(n + 1) {

@@ -8,10 +8,26 @@
 
 namespace tessera {
 
-// Uniform on the unit disk, by Shirley and Chiu's concentric map (area-preserving, low distortion).
-Vec2 sample_concentric_disk(Vec2 u);
-// Cosine-weighted on the hemisphere z > 0: pdf = cos(theta) / pi.
-Vec3 sample_cosine_hemisphere(Vec2 u);
+// Uniform on the unit disk, by Shirley and Chiu's concentric map (area-preserving, low distortion). Inline, with
+// the next two: they run at every path vertex.
+inline Vec2 sample_concentric_disk(Vec2 u) {
+  float ox = 2 * u.x - 1, oy = 2 * u.y - 1;
+  if (ox == 0 && oy == 0) return {0, 0};
+  float r, theta;
+  if (std::abs(ox) > std::abs(oy)) {
+    r = ox;
+    theta = (kPi / 4) * (oy / ox);
+  } else {
+    r = oy;
+    theta = kPi / 2 - (kPi / 4) * (ox / oy);
+  }
+  return {r * std::cos(theta), r * std::sin(theta)};
+}
+// Cosine-weighted on the hemisphere z > 0: pdf = cos(theta) / pi. Malley's method: the uniform disk projected up.
+inline Vec3 sample_cosine_hemisphere(Vec2 u) {
+  Vec2 d = sample_concentric_disk(u);
+  return {d.x, d.y, safe_sqrt(1 - d.x * d.x - d.y * d.y)};
+}
 inline float cosine_hemisphere_pdf(float cos_theta) { return cos_theta > 0 ? cos_theta * kInvPi : 0.0f; }
 // Uniform on the hemisphere z > 0: pdf = 1 / (2 pi).
 Vec3 sample_uniform_hemisphere(Vec2 u);
@@ -22,8 +38,19 @@ inline constexpr float uniform_sphere_pdf() { return kInv4Pi; }
 // Uniform in the cone around +z with the given cos of its half-angle: pdf = 1 / (2 pi (1 - cos_max)).
 Vec3 sample_uniform_cone(Vec2 u, float cos_theta_max);
 inline float uniform_cone_pdf(float cos_theta_max) { return 1.0f / (2 * kPi * (1 - cos_theta_max)); }
-// Uniform on a triangle: barycentric coordinates (b1, b2) of the second and third vertex (Heitz's low-distortion map).
-Vec2 sample_uniform_triangle(Vec2 u);
+// Uniform on a triangle: barycentric coordinates (b1, b2) of the second and third vertex (Heitz, "A Low-Distortion
+// Map Between Triangle and Square", 2019).
+inline Vec2 sample_uniform_triangle(Vec2 u) {
+  float b0, b1;
+  if (u.x < u.y) {
+    b0 = u.x / 2;
+    b1 = u.y - b0;
+  } else {
+    b1 = u.y / 2;
+    b0 = u.x - b1;
+  }
+  return {b1, 1 - b0 - b1};
+}
 
 // Veach's power heuristic with beta = 2, for two strategies taking one sample each.
 inline float power_heuristic(float pdf_a, float pdf_b) {

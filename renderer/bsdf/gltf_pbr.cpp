@@ -208,8 +208,7 @@ class GltfPbrBsdf final : public Bsdf {
     Vec3 wo = wo_in;
     const bool flip = wo.z < 0;
     if (flip) wo.z = -wo.z;
-    float p[5];
-    lobe_probabilities(wo, p);
+    const float* p = lobes_at(wo);
     Vec3 wi;
     uint32_t flags;
     if (uc < p[0] || uc >= p[0] + p[1] + p[2] + p[3]) {  // diffuse or sheen: cosine-weighted
@@ -240,8 +239,7 @@ class GltfPbrBsdf final : public Bsdf {
       wo.z = -wo.z;
       wi.z = -wi.z;
     }
-    float p[5];
-    lobe_probabilities(wo, p);
+    const float* p = lobes_at(wo);
     if (wi.z < 0) return p[2] * microfacet_reflection_pdf(dist_, wo, Vec3(wi.x, wi.y, -wi.z));
     return (p[0] + p[4]) * cosine_hemisphere_pdf(wi.z) + p[1] * microfacet_reflection_pdf(dist_, wo, wi) +
            p[3] * microfacet_reflection_pdf(dist_c_, wo, wi);
@@ -274,8 +272,7 @@ class GltfPbrBsdf final : public Bsdf {
     float specular_pdf;
     const float dv = microfacet_reflection_eval_pdf(dist_, wo, wr, h, &specular_pdf);
     if (pdf_out) {
-      float p[5];
-      lobe_probabilities(wo, p);
+      const float* p = lobes_at(wo);
       if (transmit) {
         *pdf_out = p[2] * specular_pdf;
       } else {
@@ -290,7 +287,8 @@ class GltfPbrBsdf final : public Bsdf {
     if (transmit) {
       f = l_.base_color * ((1 - m) * l_.transmission * (1 - fd_max) * dv);
     } else {
-      const float w = (1 - specular_albedo(wo.z)) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
+      lobes_at(wo);  // fills cache_.albedo_o
+      const float w = (1 - cache_.albedo_o) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
       f = l_.base_color * ((1 - m) * (1 - l_.transmission) * w * kInvPi) + fd * ((1 - m) * dv);
       if (m > 0) f += fresnel_schlick(l_.base_color, Rgb(1), vh) * (m * dv);
     }
@@ -309,6 +307,17 @@ class GltfPbrBsdf final : public Bsdf {
       }
     }
     return f;
+  }
+
+  // The lobe probabilities and the specular albedo at wo (upper side), kept for the wo of the last call: a path
+  // vertex asks for them up to three times (light sample, BSDF sample, its evaluation) with the same wo.
+  const float* lobes_at(const Vec3& wo) const {
+    if (!(wo.x == cache_.wo.x && wo.y == cache_.wo.y && wo.z == cache_.wo.z)) {
+      lobe_probabilities(wo, cache_.p);
+      cache_.albedo_o = specular_albedo(wo.z);
+      cache_.wo = wo;
+    }
+    return cache_.p;
   }
 
   // Probabilities of the diffuse, specular, transmission, clearcoat and sheen lobes, from their weights at wo with
@@ -354,6 +363,13 @@ class GltfPbrBsdf final : public Bsdf {
 
   GltfLobes l_;
   MicrofacetDistribution dist_, dist_c_;
+  // A BSDF belongs to one path vertex on one thread, so the cache needs no synchronisation. wo starts as a direction
+  // no caller passes (not unit length).
+  mutable struct {
+    Vec3 wo{0, 0, 0};
+    float p[5] = {0, 0, 0, 0, 0};
+    float albedo_o = 0;
+  } cache_;
   float specular_average_ = 0;
   float sheen_max_ = 0;
 };
