@@ -717,8 +717,14 @@ const std::vector<CompiledRoute>& compiled_routes() {
   return list;
 }
 
-// The route pattern a request matched (for metrics labels: never the path itself).
+// The OpenAPI path of the route whose handler runs on this thread for the current request; null before routing and
+// when no handler ran (no route, 405, 401, OPTIONS).
+thread_local const std::string* t_routed = nullptr;
+
+// The route pattern a request matched (for metrics labels: never the path itself). A handler's route is known without
+// matching the path against every route again.
 std::string route_label(const Request& req) {
+  if (t_routed) return *t_routed;
   std::string other;
   for (const CompiledRoute& r : compiled_routes()) {
     if (!std::regex_match(req.path, r.pattern)) continue;
@@ -793,6 +799,11 @@ std::function<std::filesystem::path(const std::string&, const std::string&)> ass
 void install_api(httplib::Server& server, ApiContext& ctx) {
   auto posts = std::make_shared<std::vector<std::pair<std::regex, Handler>>>();
   for (Route& r : routes(&ctx)) {
+    // cpp-httplib dispatches to the first route of the method whose pattern matches, as route_label() would find.
+    r.handler = [handler = std::move(r.handler), label = r.openapi_path](const Request& q, Response& s) {
+      t_routed = &label;
+      handler(q, s);
+    };
     if (r.method == "GET")
       server.Get(r.pattern, r.handler);
     else if (r.method == "POST")
@@ -827,6 +838,7 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
   ctx.scheduler.set_hooks(std::move(hooks));
 
   server.set_pre_routing_handler([posts, c](const Request& req, Response& res) {
+    t_routed = nullptr;
     // CORS: only for the configured origins.
     const std::string origin = req.get_header_value("Origin");
     const bool cors_ok =
@@ -872,6 +884,9 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
   // Without TCP_NODELAY, a keep-alive client waits for the delayed ACK between the header and body writes: ~25 ms
   // a request (150 status requests/s on 4 connections, measured); with it, the latency is the work.
   server.set_tcp_nodelay(true);
+  // cpp-httplib closes a keep-alive connection after 5 requests by default: a poller then reconnects every 5th
+  // request (accept, a pool thread's wake-up, close, on both sides). An idle connection still closes after 5 s.
+  server.set_keep_alive_max_count(1000);
   server.set_error_handler(httplib::Server::HandlerWithResponse(on_error));
   server.set_exception_handler([](const Request& req, Response& res, std::exception_ptr ep) {
     std::string what = "unknown exception";
@@ -890,11 +905,15 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
   server.set_post_routing_handler([c](const Request& req, Response& res) {
     c->metrics.count_request(route_label(req), res.status);
   });
+  // The last step of every request (the pre-routing handler resets it too).
   server.set_logger([c](const Request& req, const Response& res) {
-    const std::string route = route_label(req);
-    // The path, never the query: an access_token may be in it.
-    log(LogLevel::kDebug, "request",
-        {{"method", req.method}, {"path", req.path}, {"route", route}, {"status", res.status}});
+    if (log_enabled(LogLevel::kDebug)) {
+      const std::string route = route_label(req);
+      // The path, never the query: an access_token may be in it.
+      log(LogLevel::kDebug, "request",
+          {{"method", req.method}, {"path", req.path}, {"route", route}, {"status", res.status}});
+    }
+    t_routed = nullptr;
   });
 }
 

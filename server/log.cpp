@@ -42,8 +42,12 @@ void set_log_level(LogLevel level) {
   g_level.store(level);
 }
 
+bool log_enabled(LogLevel level) {
+  return level >= g_level.load();
+}
+
 void log(LogLevel level, std::string_view msg, const nlohmann::json& fields) {
-  if (level < g_level.load()) return;
+  if (!log_enabled(level)) return;
   nlohmann::json line = {{"ts", rfc3339_ms(now_ms())}, {"level", level_name(level)}, {"msg", std::string(msg)}};
   if (fields.is_object())
     for (const auto& [k, v] : fields.items()) line[k] = v;

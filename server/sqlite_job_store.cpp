@@ -60,14 +60,36 @@ constexpr const char* kJobsTableV2 = R"sql(
 
 }  // namespace
 
-// A prepared statement with bound parameters (never values spliced into SQL), finalized on destruction. Prepared per
-// call: next to a disk write the cost is small, and no statement outlives the lock that guards the connection.
+// A prepared statement with bound parameters (never values spliced into SQL), used under the lock that guards the
+// connection. Each SQL text is prepared once and kept: for a small read, preparing cost more than the lookup (most of
+// the daemon's time on a status request was SQLite's parser). Destruction resets the statement (it holds no read or
+// write open) and hands it back; a nested use of the same text, or one beyond the cache's size, gets its own.
 class SqliteJobStore::Statement {
  public:
-  Statement(sqlite3* db, const std::string& sql) : db_(db) {
-    if (sqlite3_prepare_v2(db, sql.c_str(), -1, &stmt_, nullptr) != SQLITE_OK) fail(db, "prepare");
+  Statement(SqliteJobStore& store, const std::string& sql) : db_(store.db_) {
+    auto it = store.statements_.find(sql);
+    if (it == store.statements_.end() && store.statements_.size() < kMaxCachedStatements) {
+      if (sqlite3_prepare_v3(db_, sql.c_str(), -1, SQLITE_PREPARE_PERSISTENT, &stmt_, nullptr) != SQLITE_OK)
+        fail(db_, "prepare");
+      it = store.statements_.emplace(sql, CachedStatement{stmt_, false}).first;
+    }
+    if (it != store.statements_.end() && !it->second.in_use) {
+      cached_ = &it->second;  // elements of an unordered_map keep their address when it grows
+      cached_->in_use = true;
+      stmt_ = cached_->stmt;
+    } else if (sqlite3_prepare_v2(db_, sql.c_str(), -1, &stmt_, nullptr) != SQLITE_OK) {
+      fail(db_, "prepare");
+    }
   }
-  ~Statement() { sqlite3_finalize(stmt_); }
+  ~Statement() {
+    if (!cached_) {
+      sqlite3_finalize(stmt_);
+      return;
+    }
+    sqlite3_reset(stmt_);
+    sqlite3_clear_bindings(stmt_);
+    cached_->in_use = false;
+  }
   Statement(const Statement&) = delete;
   Statement& operator=(const Statement&) = delete;
 
@@ -129,8 +151,11 @@ class SqliteJobStore::Statement {
   void check(int rc) {
     if (rc != SQLITE_OK) fail(db_, "bind");
   }
+  // Distinct SQL texts are few (the statements below, with the state lists of transition() and list()).
+  static constexpr size_t kMaxCachedStatements = 256;
   sqlite3* db_;
   sqlite3_stmt* stmt_ = nullptr;
+  CachedStatement* cached_ = nullptr;
 };
 
 SqliteJobStore::SqliteJobStore(const std::filesystem::path& file) {
@@ -150,14 +175,21 @@ SqliteJobStore::SqliteJobStore(const std::filesystem::path& file) {
     exec("PRAGMA foreign_keys=ON");
     migrate();
   } catch (...) {
-    sqlite3_close(db_);
-    db_ = nullptr;
+    close();
     throw;
   }
 }
 
 SqliteJobStore::~SqliteJobStore() {
+  close();
+}
+
+void SqliteJobStore::close() {
+  // sqlite3_close() refuses a connection with unfinalized statements.
+  for (auto& [sql, cached] : statements_) sqlite3_finalize(cached.stmt);
+  statements_.clear();
   sqlite3_close(db_);
+  db_ = nullptr;
 }
 
 void SqliteJobStore::exec(const char* sql) {
@@ -175,7 +207,7 @@ void SqliteJobStore::migrate() {
     exec("CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL)");
     int version = 0;
     {
-      Statement s(db_, "SELECT MAX(version) FROM schema_version");
+      Statement s(*this, "SELECT MAX(version) FROM schema_version");
       if (s.step() && !s.is_null(0)) version = static_cast<int>(s.int64(0));
     }
     if (version > kSchemaVersion) {
@@ -211,7 +243,7 @@ void SqliteJobStore::migrate() {
 
 void SqliteJobStore::create(const JobRecord& job) {
   std::lock_guard lock(mutex_);
-  Statement s(db_,
+  Statement s(*this,
               "INSERT INTO jobs (id, kind, state, priority, created_at, document, settings, outputs, samples_total, "
               "owner, warnings, idempotency_key, request_hash) "
               "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)");
@@ -234,11 +266,11 @@ void SqliteJobStore::create(const JobRecord& job) {
 std::optional<JobRecord> SqliteJobStore::claim_next(int64_t now_ms) {
   std::lock_guard lock(mutex_);
   // One statement, so two daemons sharing the file can never claim the same job.
-  Statement s(db_, std::string("UPDATE jobs SET state = 'running', started_at = ?1, passes = 0, samples_done = 0, "
-                               "elapsed_s = 0, eta_s = NULL, samples_per_s = 0 "
-                               "WHERE seq = (SELECT seq FROM jobs WHERE state = 'queued' "
-                               "ORDER BY priority DESC, seq LIMIT 1) RETURNING ") +
-                       kColumns + ", document");
+  Statement s(*this, std::string("UPDATE jobs SET state = 'running', started_at = ?1, passes = 0, samples_done = 0, "
+                                 "elapsed_s = 0, eta_s = NULL, samples_per_s = 0 "
+                                 "WHERE seq = (SELECT seq FROM jobs WHERE state = 'queued' "
+                                 "ORDER BY priority DESC, seq LIMIT 1) RETURNING ") +
+                         kColumns + ", document");
   s.bind(1, now_ms);
   if (!s.step()) return std::nullopt;
   JobRecord r = s.record(true);
@@ -249,7 +281,7 @@ std::optional<JobRecord> SqliteJobStore::claim_next(int64_t now_ms) {
 
 void SqliteJobStore::update_progress(const std::string& id, const JobProgress& p) {
   std::lock_guard lock(mutex_);
-  Statement s(db_,
+  Statement s(*this,
               "UPDATE jobs SET passes = ?2, samples_done = ?3, samples_total = ?4, elapsed_s = ?5, eta_s = ?6, "
               "samples_per_s = ?7 WHERE id = ?1 AND state = 'running'");
   s.bind(1, id);
@@ -283,7 +315,7 @@ bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_
         "eta_s = CASE WHEN ?3 = 'succeeded' THEN 0 ELSE eta_s END WHERE id = ?1 AND state IN (" +
         from_states + ")";
   }
-  Statement s(db_, sql);
+  Statement s(*this, sql);
   s.bind(1, id);
   if (to == JobState::kRunning || is_terminal(to)) s.bind(2, now_ms);
   if (is_terminal(to)) {
@@ -297,8 +329,7 @@ bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_
 
 bool SqliteJobStore::set_priority(const std::string& id, int priority) {
   std::lock_guard lock(mutex_);
-  Statement s(db_,
-              "UPDATE jobs SET priority = ?2 WHERE id = ?1 AND state IN ('queued','running','paused')");
+  Statement s(*this, "UPDATE jobs SET priority = ?2 WHERE id = ?1 AND state IN ('queued','running','paused')");
   s.bind(1, id);
   s.bind(2, static_cast<int64_t>(priority));
   s.step();
@@ -307,7 +338,7 @@ bool SqliteJobStore::set_priority(const std::string& id, int priority) {
 
 void SqliteJobStore::set_warnings(const std::string& id, const std::string& warnings_json) {
   std::lock_guard lock(mutex_);
-  Statement s(db_, "UPDATE jobs SET warnings = ?2 WHERE id = ?1");
+  Statement s(*this, "UPDATE jobs SET warnings = ?2 WHERE id = ?1");
   s.bind(1, id);
   s.bind(2, warnings_json);
   s.step();
@@ -315,7 +346,7 @@ void SqliteJobStore::set_warnings(const std::string& id, const std::string& warn
 
 std::optional<int> SqliteJobStore::queue_position(const std::string& id) {
   std::lock_guard lock(mutex_);
-  Statement s(db_,
+  Statement s(*this,
               "SELECT 1 + (SELECT COUNT(*) FROM jobs o WHERE o.state = 'queued' AND "
               "(o.priority > j.priority OR (o.priority = j.priority AND o.seq < j.seq))) "
               "FROM jobs j WHERE j.id = ?1 AND j.state = 'queued'");
@@ -326,7 +357,7 @@ std::optional<int> SqliteJobStore::queue_position(const std::string& id) {
 
 std::optional<JobRecord> SqliteJobStore::find_by_idempotency_key(const std::string& owner, const std::string& key) {
   std::lock_guard lock(mutex_);
-  Statement s(db_, std::string("SELECT ") + kColumns + " FROM jobs WHERE owner = ?1 AND idempotency_key = ?2");
+  Statement s(*this, std::string("SELECT ") + kColumns + " FROM jobs WHERE owner = ?1 AND idempotency_key = ?2");
   s.bind(1, owner);
   s.bind(2, key);
   if (!s.step()) return std::nullopt;
@@ -335,8 +366,8 @@ std::optional<JobRecord> SqliteJobStore::find_by_idempotency_key(const std::stri
 
 std::map<JobState, int> SqliteJobStore::count_by_state(const std::optional<std::string>& owner) {
   std::lock_guard lock(mutex_);
-  Statement s(db_, std::string("SELECT state, COUNT(*) FROM jobs") + (owner ? " WHERE owner = ?1" : "") +
-                       " GROUP BY state");
+  Statement s(*this,
+              std::string("SELECT state, COUNT(*) FROM jobs") + (owner ? " WHERE owner = ?1" : "") + " GROUP BY state");
   if (owner) s.bind(1, *owner);
   std::map<JobState, int> out;
   for (JobState st : kAllJobStates) out[st] = 0;
@@ -347,7 +378,7 @@ std::map<JobState, int> SqliteJobStore::count_by_state(const std::optional<std::
 
 std::optional<JobRecord> SqliteJobStore::get(const std::string& id, bool with_document) {
   std::lock_guard lock(mutex_);
-  Statement s(db_,
+  Statement s(*this,
               std::string("SELECT ") + kColumns + (with_document ? ", document" : "") + " FROM jobs WHERE id = ?1");
   s.bind(1, id);
   if (!s.step()) return std::nullopt;
@@ -367,7 +398,7 @@ std::vector<JobRecord> SqliteJobStore::list(const JobFilter& filter) {
   }
   if (filter.owner) add("owner = ?2");
   if (filter.before_seq) add("seq < ?3");
-  Statement s(db_, std::string("SELECT ") + kColumns + " FROM jobs" + where + " ORDER BY seq DESC LIMIT ?1");
+  Statement s(*this, std::string("SELECT ") + kColumns + " FROM jobs" + where + " ORDER BY seq DESC LIMIT ?1");
   s.bind(1, static_cast<int64_t>(filter.limit));
   if (filter.owner) s.bind(2, *filter.owner);
   if (filter.before_seq) s.bind(3, *filter.before_seq);
@@ -378,7 +409,7 @@ std::vector<JobRecord> SqliteJobStore::list(const JobFilter& filter) {
 
 bool SqliteJobStore::remove(const std::string& id) {
   std::lock_guard lock(mutex_);
-  Statement s(db_, "DELETE FROM jobs WHERE id = ?1");
+  Statement s(*this, "DELETE FROM jobs WHERE id = ?1");
   s.bind(1, id);
   s.step();
   return sqlite3_changes(db_) > 0;
@@ -386,7 +417,7 @@ bool SqliteJobStore::remove(const std::string& id) {
 
 int SqliteJobStore::requeue_running() {
   std::lock_guard lock(mutex_);
-  Statement s(db_,
+  Statement s(*this,
               "UPDATE jobs SET state = 'queued', started_at = NULL, passes = 0, samples_done = 0, elapsed_s = 0, "
               "eta_s = NULL, samples_per_s = 0 WHERE state = 'running'");
   s.step();

@@ -1,9 +1,11 @@
-// The job store of one daemon: SQLite in WAL mode in the data directory. One connection behind a mutex; prepared
-// statements; a schema version table so later versions can migrate.
+// The job store of one daemon: SQLite in WAL mode in the data directory. One connection behind a mutex; each statement
+// prepared once; a schema version table so later versions can migrate.
 #pragma once
 
 #include <filesystem>
 #include <mutex>
+#include <string>
+#include <unordered_map>
 
 #include "server/job_store.h"
 
@@ -39,11 +41,17 @@ class SqliteJobStore final : public JobStore {
 
  private:
   class Statement;
+  struct CachedStatement {
+    sqlite3_stmt* stmt = nullptr;
+    bool in_use = false;
+  };
   void exec(const char* sql);
   void migrate();
+  void close();
 
   std::mutex mutex_;
   sqlite3* db_ = nullptr;
+  std::unordered_map<std::string, CachedStatement> statements_;  // prepared statements by SQL text, under mutex_
 };
 
 }  // namespace tessera::server
