@@ -11,7 +11,9 @@
 
 namespace tessera {
 
-class ScratchArena {
+// Aligned to a cache line: each render thread bumps its own arena at every path vertex, and two arenas sharing a
+// line would bounce it between cores.
+class alignas(64) ScratchArena {
  public:
   explicit ScratchArena(size_t block_bytes = 64 * 1024) : block_bytes_(block_bytes) {}
   ScratchArena(const ScratchArena&) = delete;

@@ -59,7 +59,10 @@ void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, 
   const int x1 = std::min(x0 + settings_.tile_size, region.x + region.width);
   const int y1 = std::min(y0 + settings_.tile_size, region.y + region.height);
   ScratchArena& arena = *arenas_[worker];
-  RayCounters& counters = counters_[worker];
+  // Counted on the stack and added once per tile: the per-worker slots sit side by side, and incrementing them per
+  // ray would make the render threads fight over one cache line.
+  RayCounters counters;
+  uint64_t nonfinite = 0;
   const Scene& scene = *scene_;
   for (int y = y0; y < y1; ++y) {
     for (int x = x0; x < x1; ++x) {
@@ -71,13 +74,15 @@ void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, 
         Ray ray = camera_.generate_ray(Vec2(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y), lens);
         Rgb l = trace_path(scene, ray, sampler, settings_.integrator, arena, counters);
         if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
-          ++nonfinite_[worker];
+          ++nonfinite;
           l = Rgb(0);
         }
         film_.add_sample(x, y, l);
       }
     }
   }
+  counters_[worker] += counters;
+  nonfinite_[worker] += nonfinite;
 }
 
 StopReason RenderSession::run(const std::function<void(const RenderProgress&, const Film&)>& on_pass) {
