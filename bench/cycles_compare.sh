@@ -67,7 +67,8 @@ def rmse(a, b):
     m = re.search(r"RMS error = ([0-9.eE+-]+)", out)
     return float(m.group(1)) if m else float("nan")
 ref = f"{work}/ref_mean.exr"
-e_t, e_c = rmse(clamped("tessera.exr"), ref), rmse(clamped("cycles.exr"), ref)
+c_t, c_c = clamped("tessera.exr"), clamped("cycles.exr")
+e_t, e_c = rmse(c_t, ref), rmse(c_c, ref)
 e_tt = rmse(clamped("tessera-eqtime.exr"), ref)
 m = re.search(r"(\d+) spp in", open(f"{work}/eqtime.log").read())
 print(f"scene: Cornell box as glTF, {size}x{size}, {spp} spp, box filter, no denoising, no adaptive sampling")
@@ -75,8 +76,8 @@ print(f"references: RMSE between tessera's and Cycles' converged images {rmse(re
       f"(the renderers' difference; each timed render is also scored against its own renderer's reference below)")
 print(f"equal samples: tessera {tt:.2f} s, Cycles {tc:.2f} s  ->  tessera is {tc / tt:.2f}x as fast")
 print(f"RMSE vs the mean reference at equal samples: tessera {e_t:.5f}, Cycles {e_c:.5f} (ratio {e_c / e_t:.2f})")
-print(f"RMSE vs its own renderer's reference (noise only): tessera {rmse(clamped('tessera.exr'), refs[0]):.5f}, "
-      f"Cycles {rmse(clamped('cycles.exr'), refs[1]):.5f}")
+print(f"RMSE vs its own renderer's reference (noise only): tessera {rmse(c_t, refs[0]):.5f}, "
+      f"Cycles {rmse(c_c, refs[1]):.5f}")
 print(f"equal time ({tc:.2f} s): tessera {m.group(1) if m else '?'} spp, RMSE {e_tt:.5f} vs Cycles {e_c:.5f} "
       f"(ratio {e_c / e_tt:.2f})")
 PY

@@ -97,13 +97,8 @@ class PixelSampler {
   float get1d() {
     if (kind_ == SamplerKind::kSobol) {
       // One dimension: the shuffled, scrambled van der Corput sequence (Sobol's dimension 0).
-      // x = scramble(reverse(index)) with scramble(v) = reverse(LK(reverse(v))): the inner reversals cancel.
       const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * ++dimension_);
-      const uint32_t index =
-          sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(reversed_index_, static_cast<uint32_t>(h)));
-      const uint32_t x =
-          sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(index, static_cast<uint32_t>(h >> 32)));
-      return static_cast<float>(x >> 8) * 0x1p-24f;
+      return static_cast<float>(sobol_dim0(shuffled_index(h), h) >> 8) * 0x1p-24f;
     }
     return to_unit(mix64(key_ + 0x9e3779b97f4a7c15ULL * ++dimension_));
   }
@@ -113,11 +108,8 @@ class PixelSampler {
       // Each dimension pair of each pixel gets its own shuffle of the sample order and its own scramble, so pairs
       // are decorrelated from each other and pixels from their neighbours.
       const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * ++dimension_);
-      // index = shuffle(i); dimension 0 is reverse(index), whose scramble is reverse(LK(index)).
-      const uint32_t index =
-          sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(reversed_index_, static_cast<uint32_t>(h)));
-      const uint32_t x =
-          sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(index, static_cast<uint32_t>(h >> 32)));
+      const uint32_t index = shuffled_index(h);
+      const uint32_t x = sobol_dim0(index, h);
       const uint32_t y =
           sobol_detail::nested_uniform_scramble(sobol_detail::sobol_dim1(index), static_cast<uint32_t>(mix64(h) >> 32));
       return {static_cast<float>(x >> 8) * 0x1p-24f, static_cast<float>(y >> 8) * 0x1p-24f};
@@ -128,6 +120,16 @@ class PixelSampler {
   uint32_t dimension() const { return dimension_; }
 
  private:
+  // The sample index shuffled by the dimension pair's hash h: nested_uniform_scramble(i) = reverse(LK(reverse(i))),
+  // with reverse(i) computed once per sample.
+  uint32_t shuffled_index(uint64_t h) const {
+    return sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(reversed_index_, static_cast<uint32_t>(h)));
+  }
+  // Dimension 0 (van der Corput, reverse(index)) scrambled: reverse(LK(reverse(reverse(index)))), the inner
+  // reversals cancelling.
+  static uint32_t sobol_dim0(uint32_t index, uint64_t h) {
+    return sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(index, static_cast<uint32_t>(h >> 32)));
+  }
   static float to_unit(uint64_t bits) {
     // 24 high bits give every float in [0, 1) on a 2^-24 grid; never returns 1.
     return static_cast<float>(bits >> 40) * 0x1p-24f;

@@ -232,17 +232,10 @@ class GltfPbrBsdf final : public Bsdf {
     return BsdfSample{f, wi, pdf_value, flags, 1.0f};
   }
 
-  float pdf(const Vec3& wo_in, const Vec3& wi_in) const override {
-    Vec3 wo = wo_in, wi = wi_in;
-    if (wo.z == 0 || wi.z == 0) return 0;
-    if (wo.z < 0) {
-      wo.z = -wo.z;
-      wi.z = -wi.z;
-    }
-    const float* p = lobes_at(wo);
-    if (wi.z < 0) return p[2] * microfacet_reflection_pdf(dist_, wo, Vec3(wi.x, wi.y, -wi.z));
-    return (p[0] + p[4]) * cosine_hemisphere_pdf(wi.z) + p[1] * microfacet_reflection_pdf(dist_, wo, wi) +
-           p[3] * microfacet_reflection_pdf(dist_c_, wo, wi);
+  float pdf(const Vec3& wo, const Vec3& wi) const override {
+    float p;
+    evaluate(wo, wi, &p);  // one formula for the pdf; pdf alone is not on the render loop's path
+    return p;
   }
 
   uint32_t flags() const override {
