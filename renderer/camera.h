@@ -26,6 +26,10 @@ class Camera {
   // Pixel position where the world point `p` projects (for tests); false if behind the camera.
   bool project(const Vec3& p, Vec2* film) const;
   const CameraDesc& desc() const { return desc_; }
+  // Whether generate_ray reads u_lens (a thin lens); a pinhole or orthographic camera ignores it.
+  bool uses_lens() const {
+    return desc_.projection == CameraDesc::Projection::kPerspective && desc_.aperture_radius > 0;
+  }
 
  private:
   CameraDesc desc_;

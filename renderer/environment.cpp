@@ -64,7 +64,10 @@ std::shared_ptr<EnvironmentMap> EnvironmentMap::load(const std::string& path) {
 }
 
 Rgb EnvironmentMap::texel(int x, int y) const {
-  x = ((x % width_) + width_) % width_;
+  // Lookups ask for at most one texel past either edge; the modulo (an integer division) is for anything else.
+  if (x < 0) x += width_;
+  else if (x >= width_) x -= width_;
+  if (x < 0 || x >= width_) x = ((x % width_) + width_) % width_;
   y = clamp(y, 0, height_ - 1);
   const float* p = &rgb_[(static_cast<size_t>(y) * width_ + x) * 3];
   return {p[0], p[1], p[2]};

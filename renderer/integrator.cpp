@@ -80,10 +80,14 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
     if (wo.z == 0) break;
 
     // Next-event estimation: one light sample, unless every lobe is a delta (a light sample cannot hit it).
-    // Draw the light sample's numbers unconditionally so the dimension layout does not depend on the estimator.
-    const float u_light_select = sampler.get1d();
-    const Vec2 u_light = sampler.get2d();
-    if (use_light_sampling && has_non_delta(flags)) {
+    // The light sample's dimensions are spent whether or not it is taken, so the dimension layout does not depend
+    // on the estimator or the material (they are only not computed when unused).
+    if (!use_light_sampling || !has_non_delta(flags) || lights.empty()) {
+      sampler.skip1d();
+      sampler.skip2d();
+    } else {
+      const float u_light_select = sampler.get1d();
+      const Vec2 u_light = sampler.get2d();
       LightSample ls;
       if (lights.sample(scene, si.sp.p, u_light_select, u_light, &ls) && ls.pdf > 0 && !is_black(ls.radiance)) {
         Vec3 wi = frame.to_local(ls.wi);
@@ -140,13 +144,15 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
     prev_p = si.sp.p;
 
     // Russian roulette on the throughput with the radiance-scaling of refraction removed.
-    const float u_rr = sampler.get1d();
     if (depth + 1 >= settings.rr_start_depth) {
+      const float u_rr = sampler.get1d();
       float q = std::max(0.05f, 1 - max_component(throughput) * eta_scale);
       if (q > 0) {
         if (u_rr < q) break;
         throughput /= 1 - q;
       }
+    } else {
+      sampler.skip1d();
     }
     ray.origin = offset_ray_origin(si.sp.p, si.sp.ng, wi_world);
     ray.dir = wi_world;

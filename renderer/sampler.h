@@ -117,6 +117,10 @@ class PixelSampler {
     float a = get1d();
     return {a, get1d()};
   }
+  // Steps over the dimensions a get1d() or get2d() would use, without computing them: for numbers a caller draws
+  // only to keep the dimension layout fixed and would not use. Every later number is the same as after the call.
+  void skip1d() { ++dimension_; }
+  void skip2d() { dimension_ += kind_ == SamplerKind::kSobol ? 1 : 2; }
   uint32_t dimension() const { return dimension_; }
 
  private:

@@ -59,7 +59,9 @@ inline float power_heuristic(float pdf_a, float pdf_b) {
   return a + b > 0 ? a / (a + b) : 0.0f;
 }
 
-// A discrete distribution over n weights, sampled in O(log n) from its cumulative sum.
+// A discrete distribution over n weights, sampled by inverting its cumulative sum. A guide table (Chen and Asau's
+// cutpoint method) narrows the search to the buckets one n-th of the total can span: O(1) on average, and the
+// same index as a binary search over the whole sum for every u.
 class Distribution1D {
  public:
   Distribution1D() = default;
@@ -73,8 +75,15 @@ class Distribution1D {
   double total() const { return total_; }
 
  private:
+  // The k-th of the guide table's equally spaced cutpoints on the cumulative sum.
+  double cutpoint(size_t k) const {
+    return cdf_.back() * static_cast<double>(k) / static_cast<double>(guide_.size() - 1);
+  }
   std::vector<float> pdf_;
   std::vector<double> cdf_;  // n + 1 entries
+  // Empty for small n; else n + 1 entries: guide_[k] is the first j >= 1 with cdf_[j] > cutpoint(k) (guide_[n] = n),
+  // so the answer for a target in [cutpoint(k), cutpoint(k + 1)) lies in cdf_[guide_[k] .. guide_[k + 1]].
+  std::vector<uint32_t> guide_;
   double total_ = 0;
 };
 

@@ -64,13 +64,16 @@ void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, 
   RayCounters counters;
   uint64_t nonfinite = 0;
   const Scene& scene = *scene_;
+  const bool uses_lens = camera_.uses_lens();
   for (int y = y0; y < y1; ++y) {
     for (int x = x0; x < x1; ++x) {
       const uint32_t pixel = static_cast<uint32_t>(y) * static_cast<uint32_t>(settings_.width) + static_cast<uint32_t>(x);
       for (uint32_t s = first_sample; s < first_sample + sample_count; ++s) {
         PixelSampler sampler(settings_.seed, pixel, s, settings_.sampler);
         Vec2 jitter = sampler.get2d();
-        Vec2 lens = sampler.get2d();
+        Vec2 lens;
+        if (uses_lens) lens = sampler.get2d();
+        else sampler.skip2d();
         Ray ray = camera_.generate_ray(Vec2(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y), lens);
         Rgb l = trace_path(scene, ray, sampler, settings_.integrator, arena, counters);
         if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {

@@ -31,6 +31,17 @@ struct Image {
     if (!shared && bytes.empty()) return pixels[i];
     return (srgb && c < 3) ? srgb_table()[b[i]] : b[i] * (1.0f / 255.0f);
   }
+  // The first three channels of a texel of an image with at least three, with one address computation.
+  Rgb texel_rgb(int x, int y) const {
+    const size_t i = (static_cast<size_t>(y) * width + x) * channels;
+    if (!shared && bytes.empty()) return Rgb(pixels[i], pixels[i + 1], pixels[i + 2]);
+    const uint8_t* b = (shared ? shared->data.data() : bytes.data()) + i;
+    if (srgb) {
+      const float* t = srgb_table();
+      return Rgb(t[b[0]], t[b[1]], t[b[2]]);
+    }
+    return Rgb(b[0], b[1], b[2]) * (1.0f / 255.0f);
+  }
   static const float* srgb_table() {
     static const std::array<float, 256> table = [] {
       std::array<float, 256> t{};
@@ -101,6 +112,7 @@ std::shared_ptr<const Image> embedded_image(const std::shared_ptr<const ImagePix
 
 // Wraps integer texel coordinate i into [0, n).
 int wrap_index(int i, int n, WrapMode mode) {
+  if (static_cast<unsigned>(i) < static_cast<unsigned>(n)) return i;  // inside: every mode leaves it alone
   switch (mode) {
     case WrapMode::kRepeat: {
       int r = i % n;
@@ -162,7 +174,7 @@ class ImageTexture final : public Texture {
     const int nc = image_->channels;
     if (channel_ >= 0) return Rgb(image_->texel(x, y, std::min(channel_, nc - 1)));
     if (nc < 3) return Rgb(image_->texel(x, y, 0));
-    return Rgb(image_->texel(x, y, 0), image_->texel(x, y, 1), image_->texel(x, y, 2));
+    return image_->texel_rgb(x, y);
   }
 
   std::shared_ptr<const Image> image_;

@@ -412,7 +412,8 @@ int cmd_render(int argc, char** argv) {
   }
 
   tessera::JobLoadOptions options;
-  options.scene.asset_root = std::filesystem::path(input).parent_path();
+  // Assets resolve beside the job file; absolute, so that "job.json" in the current directory has a root too.
+  options.scene.asset_root = std::filesystem::absolute(std::filesystem::path(input)).parent_path();
   tessera::RenderJob job;
   auto t0 = std::chrono::steady_clock::now();
   try {

@@ -55,6 +55,16 @@ if same_sums two.tfilm all.tfilm; then ok "two ranges merge into the single rend
 expect 0 "a merged film merges again (nothing to add: one part)" "$TESSERA" merge two.tfilm -o again.tfilm
 if same_sums again.tfilm all.tfilm; then ok "a merge of one part is that part"; else not_ok "re-merge differs"; fi
 
+# --- assets resolve beside the job file, also when it is named relative to the current directory -------------------
+mkdir -p assets
+cp all.exr assets/sky.exr
+echo '{"objects": [{"shape": "sphere", "center": [0, 0, 0], "radius": 1, "material": "m"}],
+       "materials": {"m": {"type": "lambert", "albedo": 0.5}}, "environment": {"map": "sky.exr"},
+       "camera": {"from": [0, 0, 4], "to": [0, 0, 0]}}' >assets/job.json
+(cd assets && expect 0 "a job file named relative to the current directory finds its asset" "$TESSERA" render job.json \
+  --width 16 --height 16 --spp 1 --threads 2 -q -o ../rel.png)
+png_signature rel.png && ok "the relative job rendered a PNG" || not_ok "no PNG from the relative job"
+
 # --- refused merges and bad input: fatal (1) ---------------------------------------------------------------------
 expect 1 "overlapping ranges are refused" "$TESSERA" merge a.tfilm all.tfilm -o x.exr
 grep -q "overlapping" "$tmp/err" && ok "the refusal says the parts overlap" || not_ok "no overlap message"
