@@ -73,8 +73,7 @@ Rgb EnvironmentMap::texel(int x, int y) const {
   return {p[0], p[1], p[2]};
 }
 
-Rgb EnvironmentMap::lookup(const Vec3& dir) const {
-  Vec2 uv = direction_to_uv(dir);
+Rgb EnvironmentMap::lookup_uv(Vec2 uv) const {
   float fx = uv.x * width_ - 0.5f, fy = uv.y * height_ - 0.5f;
   int x0 = static_cast<int>(std::floor(fx)), y0 = static_cast<int>(std::floor(fy));
   float tx = fx - x0, ty = fy - y0;
@@ -82,7 +81,13 @@ Rgb EnvironmentMap::lookup(const Vec3& dir) const {
          texel(x0, y0 + 1) * ((1 - tx) * ty) + texel(x0 + 1, y0 + 1) * (tx * ty);
 }
 
-Vec3 EnvironmentMap::sample(Vec2 u, float* pdf) const {
+Rgb EnvironmentMap::lookup(const Vec3& dir, float* pdf) const {
+  const Vec2 uv = direction_to_uv(dir);
+  *pdf = pdf_uv(uv, dir.y);
+  return lookup_uv(uv);
+}
+
+Vec3 EnvironmentMap::sample(Vec2 u, float* pdf, Rgb* radiance) const {
   float pmf_row = 0, pmf_col = 0, ur = 0, uc = 0;
   size_t row = marginal_.sample(u.y, &pmf_row, &ur);
   size_t col = rows_[row].sample(u.x, &pmf_col, &uc);
@@ -91,14 +96,18 @@ Vec3 EnvironmentMap::sample(Vec2 u, float* pdf) const {
   float sin_theta = std::sin(uv.y * kPi);
   // Density over the unit square is pmf * (width * height); dω = 2π² sinθ du dv.
   *pdf = sin_theta > 0 ? pmf_row * pmf_col * width_ * height_ / (2 * kPi * kPi * sin_theta) : 0.0f;
+  if (radiance) *radiance = lookup_uv(uv);
   return dir;
 }
 
-float EnvironmentMap::pdf(const Vec3& dir) const {
-  Vec2 uv = direction_to_uv(dir);
+float EnvironmentMap::pdf(const Vec3& dir) const { return pdf_uv(direction_to_uv(dir), dir.y); }
+
+float EnvironmentMap::pdf_uv(Vec2 uv, float cos_theta) const {
   int col = std::min(width_ - 1, static_cast<int>(uv.x * width_));
   int row = std::min(height_ - 1, static_cast<int>(uv.y * height_));
-  float sin_theta = std::sin(uv.y * kPi);
+  // sin(theta) from cos(theta) as sqrt((1 - c)(1 + c)), which keeps its precision near the poles.
+  const float c = clamp(cos_theta, -1.0f, 1.0f);
+  float sin_theta = safe_sqrt((1 - c) * (1 + c));
   if (sin_theta <= 0) return 0;
   return marginal_.pmf(row) * rows_[row].pmf(col) * width_ * height_ / (2 * kPi * kPi * sin_theta);
 }

@@ -18,9 +18,12 @@ class EnvironmentMap {
   static std::shared_ptr<EnvironmentMap> load(const std::string& path);  // through OpenImageIO; throws on failure
 
   // Radiance towards the viewer from direction `dir` (a direction in map space), bilinearly filtered.
-  Rgb lookup(const Vec3& dir) const;
-  // Samples a direction with density pdf (solid angle) proportional to the map's luminance.
-  Vec3 sample(Vec2 u, float* pdf) const;
+  Rgb lookup(const Vec3& dir) const { return lookup_uv(direction_to_uv(dir)); }
+  // The same, and the density `sample` has for `dir`, from one conversion of the direction to map coordinates.
+  Rgb lookup(const Vec3& dir, float* pdf) const;
+  // Samples a direction with density pdf (solid angle) proportional to the map's luminance; `radiance`, when given,
+  // receives lookup() of the direction, read at the sampled map coordinates.
+  Vec3 sample(Vec2 u, float* pdf, Rgb* radiance = nullptr) const;
   float pdf(const Vec3& dir) const;
   Rgb average() const { return average_; }
   int width() const { return width_; }
@@ -31,6 +34,9 @@ class EnvironmentMap {
 
  private:
   Rgb texel(int x, int y) const;
+  Rgb lookup_uv(Vec2 uv) const;
+  // Solid-angle density at map coordinates `uv` of a direction whose y (cos theta) is `cos_theta`.
+  float pdf_uv(Vec2 uv, float cos_theta) const;
   int width_, height_;
   std::vector<float> rgb_;
   std::vector<Distribution1D> rows_;  // conditional distribution of u within each row
@@ -47,6 +53,15 @@ struct Environment {
   Rgb radiance(const Vec3& dir) const {
     if (!map) return color * intensity;
     return map->lookup(to_map(dir)) * color * intensity;
+  }
+  // The radiance from `dir` and the density of `dir` under the environment's own sampling (the map's, or uniform on
+  // the sphere), sharing the direction's conversion to map coordinates.
+  Rgb radiance(const Vec3& dir, float* pdf_dir) const {
+    if (!map) {
+      *pdf_dir = uniform_sphere_pdf();
+      return color * intensity;
+    }
+    return map->lookup(to_map(dir), pdf_dir) * color * intensity;
   }
   bool black() const { return intensity == 0 || is_black(color); }
   Rgb average() const { return map ? map->average() * color * intensity : color * intensity; }

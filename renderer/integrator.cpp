@@ -44,12 +44,13 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
     SurfaceInteraction si;
     if (!scene.intersect(ray, &si)) {
       if (!scene.environment.black()) {
-        Rgb le = scene.environment.radiance(ray.dir);
-        if (prev_delta) {
-          radiance += throughput * le;
-        } else if (use_bsdf_hits) {
-          float w = mis ? power_heuristic(prev_pdf, lights.pdf_environment(scene, ray.dir)) : 1.0f;
-          radiance += throughput * le * w;
+        if (prev_delta || !mis) {
+          if (prev_delta || use_bsdf_hits) radiance += throughput * scene.environment.radiance(ray.dir);
+        } else {
+          // Weighed against the light sampling of the environment (lights.pdf_environment, from the same lookup).
+          float pdf_dir = 0;
+          const Rgb le = scene.environment.radiance(ray.dir, &pdf_dir);
+          radiance += throughput * le * power_heuristic(prev_pdf, lights.environment_pmf() * pdf_dir);
         }
       }
       break;

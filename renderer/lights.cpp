@@ -45,7 +45,7 @@ void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punct
       float area = 0.5f * length(c);
       // Degenerate triangles keep their slot (light indices follow triangle order) but are never chosen.
       triangles_.resize(entries_.size());
-      triangles_.push_back({tp.a, tp.b - tp.a, tp.c - tp.a, area > 0 ? c / (2 * area) : Vec3(0, 0, 1), area});
+      triangles_.push_back({tp.a, tp.b - tp.a, tp.c - tp.a, area > 0 ? c / (2 * area) : Vec3(0, 0, 1), area, &mat});
       entries_.push_back({Kind::kTriangle, m, t});
       power.push_back(area > 0 ? emitted_power(mat.emission.average(), area, mat.emission_one_sided) : -1.0f);
     }
@@ -87,13 +87,13 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       const TriangleGeometry& tri = triangles_[&e - entries_.data()];
       const float area = tri.area;
       if (!(area > 0)) return false;
-      const Mesh& mesh = scene.meshes[e.object];
+      const Material& mat = *tri.material;
       Vec2 b = sample_uniform_triangle(u);
       ShadingPoint sp;
       sp.p = tri.p0 + tri.e1 * b.x + tri.e2 * b.y;
       sp.ng = tri.n;
       sp.frame = Frame(Vec3(1, 0, 0), Vec3(0, 1, 0), tri.n);  // emission reads ng and uv only
-      triangle_uv(mesh, e.prim, b.x, b.y, &sp);
+      if (mat.emission.texture) triangle_uv(scene.meshes[e.object], e.prim, b.x, b.y, &sp);
       Vec3 d = sp.p - p;
       float dist2 = length_squared(d);
       if (!(dist2 > 0)) return false;
@@ -104,7 +104,7 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       out->wi = wi;
       out->dist = dist;
       out->pdf = pmf * dist2 / (cos_light * area);
-      out->radiance = scene.materials[mesh.material]->emitted(sp, -wi);
+      out->radiance = mat.emitted(sp, -wi);
       out->p_light = sp.p;
       out->n_light = sp.ng;
       out->delta = false;
@@ -189,16 +189,19 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       Vec3 wi;
       float pdf_dir;
       if (env.map) {
-        wi = env.from_map(env.map->sample(u, &pdf_dir));
+        // The radiance read where the direction was sampled, not looked up again from the direction.
+        Rgb le;
+        wi = env.from_map(env.map->sample(u, &pdf_dir, &le));
+        out->radiance = le * env.color * env.intensity;
       } else {
         wi = sample_uniform_sphere(u);
         pdf_dir = uniform_sphere_pdf();
+        out->radiance = env.color * env.intensity;
       }
       if (!(pdf_dir > 0)) return false;
       out->wi = wi;
       out->dist = kInfinity;
       out->pdf = pmf * pdf_dir;
-      out->radiance = scene.environment.radiance(wi);
       out->delta = false;
       return true;
     }
@@ -241,7 +244,7 @@ float LightSet::pdf_environment(const Scene& scene, const Vec3& dir) const {
   if (environment_ == kNoLight) return 0;
   const Environment& env = scene.environment;
   float pdf_dir = env.map ? env.map->pdf(env.to_map(dir)) : uniform_sphere_pdf();
-  return distribution_.pmf(environment_) * pdf_dir;
+  return environment_pmf() * pdf_dir;
 }
 
 }  // namespace tessera

@@ -11,6 +11,7 @@
 
 namespace tessera {
 
+class Material;
 class Scene;
 struct SurfaceInteraction;
 
@@ -47,6 +48,8 @@ class LightSet {
   float pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteraction& si) const;
   // Solid-angle density with which `sample` would have produced the environment direction `dir`.
   float pdf_environment(const Scene& scene, const Vec3& dir) const;
+  // The probability of choosing the environment (times its own directional density, that is pdf_environment).
+  float environment_pmf() const { return environment_ == kNoLight ? 0.0f : distribution_.pmf(environment_); }
 
  private:
   enum class Kind : uint8_t { kTriangle, kSphere, kEnvironment, kPunctual };
@@ -61,6 +64,7 @@ class LightSet {
   struct TriangleGeometry {
     Vec3 p0, e1, e2, n;
     float area = 0;
+    const Material* material = nullptr;  // the mesh's
   };
   std::vector<TriangleGeometry> triangles_;
   std::vector<PunctualLight> punctual_;

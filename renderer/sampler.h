@@ -52,6 +52,15 @@ inline uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed) {
 
 // Dimension 1 of the Sobol sequence (primitive polynomial x + 1) is a linear map over GF(2) of the index bits:
 // XOR the direction numbers of its set bits. Tabulated per byte, that is four lookups.
+// Bit reversal is linear over GF(2) too, so the tables can as well hold the reversed direction numbers: a scramble
+// that starts by reversing the value then reads those instead.
+constexpr uint32_t reverse_bits_constexpr(uint32_t x) {
+  uint32_t r = 0;
+  for (int i = 0; i < 32; ++i) r |= ((x >> i) & 1u) << (31 - i);
+  return r;
+}
+
+template <bool kReversed>
 struct SobolDim1Tables {
   uint32_t t[4][256] = {};
   constexpr SobolDim1Tables() {
@@ -63,18 +72,21 @@ struct SobolDim1Tables {
         uint32_t r = 0;
         for (int k = 0; k < 8; ++k)
           if (x & (1 << k)) r ^= v[8 * b + k];
-        t[b][x] = r;
+        t[b][x] = kReversed ? reverse_bits_constexpr(r) : r;
       }
+  }
+  uint32_t operator()(uint32_t index) const {
+    return t[0][index & 0xff] ^ t[1][(index >> 8) & 0xff] ^ t[2][(index >> 16) & 0xff] ^ t[3][index >> 24];
   }
 };
 
-inline constexpr SobolDim1Tables kSobolDim1Tables{};  // built by the compiler: no guard on every lookup
+// Built by the compiler: no guard on every lookup.
+inline constexpr SobolDim1Tables<false> kSobolDim1Tables{};
+inline constexpr SobolDim1Tables<true> kSobolDim1ReversedTables{};
 
-inline uint32_t sobol_dim1(uint32_t index) {
-  const SobolDim1Tables& tables = kSobolDim1Tables;
-  return tables.t[0][index & 0xff] ^ tables.t[1][(index >> 8) & 0xff] ^ tables.t[2][(index >> 16) & 0xff] ^
-         tables.t[3][index >> 24];
-}
+inline uint32_t sobol_dim1(uint32_t index) { return kSobolDim1Tables(index); }
+// reverse_bits(sobol_dim1(index)), from the reversed tables.
+inline uint32_t sobol_dim1_reversed(uint32_t index) { return kSobolDim1ReversedTables(index); }
 
 // The first two dimensions of the Sobol sequence, as 32-bit fractions.
 inline void sobol_2d(uint32_t index, uint32_t* x, uint32_t* y) {
@@ -88,7 +100,10 @@ class PixelSampler {
  public:
   PixelSampler(uint64_t seed, uint32_t pixel_index, uint64_t sample_index,
                SamplerKind kind = SamplerKind::kIndependent)
-      : key_(mix64(mix64(seed ^ 0x9e3779b97f4a7c15ULL) + pixel_index) ^ mix64(sample_index + 0x632be59bd9b4e019ULL)),
+      // The independent sampler's key (the Sobol sampler does not read it).
+      : key_(kind == SamplerKind::kIndependent
+                 ? mix64(mix64(seed ^ 0x9e3779b97f4a7c15ULL) + pixel_index) ^ mix64(sample_index + 0x632be59bd9b4e019ULL)
+                 : 0),
         pixel_key_(mix64(mix64(seed ^ 0x5851f42d4c957f2dULL) + pixel_index)),
         reversed_index_(sobol_detail::reverse_bits(static_cast<uint32_t>(sample_index))),
         kind_(kind) {}
@@ -110,8 +125,9 @@ class PixelSampler {
       const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * ++dimension_);
       const uint32_t index = shuffled_index(h);
       const uint32_t x = sobol_dim0(index, h);
-      const uint32_t y =
-          sobol_detail::nested_uniform_scramble(sobol_detail::sobol_dim1(index), static_cast<uint32_t>(mix64(h) >> 32));
+      // nested_uniform_scramble(sobol_dim1(index)), its first reversal read from the reversed tables.
+      const uint32_t y = sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(
+          sobol_detail::sobol_dim1_reversed(index), static_cast<uint32_t>(mix64(h) >> 32)));
       return {static_cast<float>(x >> 8) * 0x1p-24f, static_cast<float>(y >> 8) * 0x1p-24f};
     }
     float a = get1d();

@@ -8,20 +8,28 @@
 
 namespace tessera {
 
+// cos and sin of an angle in [-pi/4, pi/4], by their Taylor polynomials to x^8 and x^9: truncation errors below
+// 2.5e-8 at pi/4 (under half a float ulp there). The library call they replace ran at every path vertex.
+inline Vec2 cos_sin_quarter_pi(float x) {
+  const float x2 = x * x;
+  const float c = 1 + x2 * (-1.0f / 2 + x2 * (1.0f / 24 + x2 * (-1.0f / 720 + x2 * (1.0f / 40320))));
+  const float s = x * (1 + x2 * (-1.0f / 6 + x2 * (1.0f / 120 + x2 * (-1.0f / 5040 + x2 * (1.0f / 362880)))));
+  return {c, s};
+}
+
 // Uniform on the unit disk, by Shirley and Chiu's concentric map (area-preserving, low distortion). Inline, with
 // the next two: they run at every path vertex.
 inline Vec2 sample_concentric_disk(Vec2 u) {
   float ox = 2 * u.x - 1, oy = 2 * u.y - 1;
   if (ox == 0 && oy == 0) return {0, 0};
-  float r, theta;
   if (std::abs(ox) > std::abs(oy)) {
-    r = ox;
-    theta = (kPi / 4) * (oy / ox);
-  } else {
-    r = oy;
-    theta = kPi / 2 - (kPi / 4) * (ox / oy);
+    // theta = pi/4 * oy/ox, in [-pi/4, pi/4].
+    const Vec2 cs = cos_sin_quarter_pi((kPi / 4) * (oy / ox));
+    return {ox * cs.x, ox * cs.y};
   }
-  return {r * std::cos(theta), r * std::sin(theta)};
+  // theta = pi/2 - a with a = pi/4 * ox/oy in [-pi/4, pi/4]: cos theta = sin a, sin theta = cos a.
+  const Vec2 cs = cos_sin_quarter_pi((kPi / 4) * (ox / oy));
+  return {oy * cs.y, oy * cs.x};
 }
 // Cosine-weighted on the hemisphere z > 0: pdf = cos(theta) / pi. Malley's method: the uniform disk projected up.
 inline Vec3 sample_cosine_hemisphere(Vec2 u) {

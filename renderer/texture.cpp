@@ -25,23 +25,6 @@ struct Image {
   std::vector<uint8_t> bytes;  // 8-bit sources, row-major from the top row
   std::shared_ptr<const ImagePixels> shared;  // or 8-bit pixels owned elsewhere (embedded images), not copied
   bool srgb = false;           // bytes of the colour channels (not alpha) are sRGB-encoded
-  float texel(int x, int y, int c) const {
-    const size_t i = (static_cast<size_t>(y) * width + x) * channels + c;
-    const uint8_t* b = shared ? shared->data.data() : bytes.data();
-    if (!shared && bytes.empty()) return pixels[i];
-    return (srgb && c < 3) ? srgb_table()[b[i]] : b[i] * (1.0f / 255.0f);
-  }
-  // The first three channels of a texel of an image with at least three, with one address computation.
-  Rgb texel_rgb(int x, int y) const {
-    const size_t i = (static_cast<size_t>(y) * width + x) * channels;
-    if (!shared && bytes.empty()) return Rgb(pixels[i], pixels[i + 1], pixels[i + 2]);
-    const uint8_t* b = (shared ? shared->data.data() : bytes.data()) + i;
-    if (srgb) {
-      const float* t = srgb_table();
-      return Rgb(t[b[0]], t[b[1]], t[b[2]]);
-    }
-    return Rgb(b[0], b[1], b[2]) * (1.0f / 255.0f);
-  }
   static const float* srgb_table() {
     static const std::array<float, 256> table = [] {
       std::array<float, 256> t{};
@@ -138,6 +121,16 @@ class ImageTexture final : public Texture {
         mapping_(mapping),
         cos_(std::cos(mapping.rotation)),
         sin_(std::sin(mapping.rotation)) {
+    // What every fetch needs, resolved once: where the texels are, how they decode, which channels are read.
+    width_ = image_->width;
+    height_ = image_->height;
+    channels_ = image_->channels;
+    if (image_->shared) bytes_ = image_->shared->data.data();
+    else if (!image_->bytes.empty()) bytes_ = image_->bytes.data();
+    else floats_ = image_->pixels.data();
+    if (bytes_ && image_->srgb) srgb_table_ = Image::srgb_table();
+    rgb_ = channel_ < 0 && channels_ >= 3;
+    read_channel_ = channel_ >= 0 ? std::min(channel_, channels_ - 1) : 0;
     average_ = Rgb(0);
     const size_t n = static_cast<size_t>(image_->width) * image_->height;
     double sum[3] = {0, 0, 0};
@@ -156,28 +149,40 @@ class ImageTexture final : public Texture {
     float s = cos_ * su - sin_ * sv + mapping_.offset.x;
     float t = sin_ * su + cos_ * sv + mapping_.offset.y;
     // Bilinear filtering between the four texels around (s, t); texel centres at (i + 0.5) / size.
-    float x = s * image_->width - 0.5f, y = t * image_->height - 0.5f;
+    float x = s * width_ - 0.5f, y = t * height_ - 0.5f;
     if (!std::isfinite(x) || !std::isfinite(y)) return texel(0, 0);
     float fx = std::floor(x), fy = std::floor(y);
     float dx = x - fx, dy = y - fy;
     int x0 = static_cast<int>(clamp(fx, -1e8f, 1e8f)), y0 = static_cast<int>(clamp(fy, -1e8f, 1e8f));
     const WrapMode wrap_t = mapping_.wrap_t.value_or(mapping_.wrap);
-    int xa = wrap_index(x0, image_->width, mapping_.wrap), xb = wrap_index(x0 + 1, image_->width, mapping_.wrap);
-    int ya = wrap_index(y0, image_->height, wrap_t), yb = wrap_index(y0 + 1, image_->height, wrap_t);
+    int xa = wrap_index(x0, width_, mapping_.wrap), xb = wrap_index(x0 + 1, width_, mapping_.wrap);
+    int ya = wrap_index(y0, height_, wrap_t), yb = wrap_index(y0 + 1, height_, wrap_t);
     return texel(xa, ya) * ((1 - dx) * (1 - dy)) + texel(xb, ya) * (dx * (1 - dy)) + texel(xa, yb) * ((1 - dx) * dy) +
            texel(xb, yb) * (dx * dy);
   }
   Rgb average() const override { return average_; }
 
  private:
+  // The same values as Image::texel, read through the pointers resolved at construction.
+  float decode(const uint8_t* b, int c) const {
+    return (srgb_table_ && c < 3) ? srgb_table_[b[c]] : b[c] * (1.0f / 255.0f);
+  }
   Rgb texel(int x, int y) const {
-    const int nc = image_->channels;
-    if (channel_ >= 0) return Rgb(image_->texel(x, y, std::min(channel_, nc - 1)));
-    if (nc < 3) return Rgb(image_->texel(x, y, 0));
-    return image_->texel_rgb(x, y);
+    const size_t i = (static_cast<size_t>(y) * static_cast<size_t>(width_) + static_cast<size_t>(x)) * channels_;
+    if (rgb_) {
+      if (floats_) return Rgb(floats_[i], floats_[i + 1], floats_[i + 2]);
+      return Rgb(decode(bytes_ + i, 0), decode(bytes_ + i, 1), decode(bytes_ + i, 2));
+    }
+    return Rgb(floats_ ? floats_[i + read_channel_] : decode(bytes_ + i, read_channel_));
   }
 
   std::shared_ptr<const Image> image_;
+  int width_ = 0, height_ = 0, channels_ = 0;
+  const uint8_t* bytes_ = nullptr;  // 8-bit texels, or
+  const float* floats_ = nullptr;   // linear float texels
+  const float* srgb_table_ = nullptr;  // set when 8-bit colour channels are sRGB-encoded
+  bool rgb_ = false;                   // three channels read; else one (read_channel_) repeated
+  int read_channel_ = 0;
   int channel_;
   TextureMapping mapping_;
   float cos_, sin_;
