@@ -162,8 +162,26 @@ class ImageTexture final : public Texture {
   }
   Rgb average() const override { return average_; }
 
+  // The RGB texture over the same texels and mapping, when `a` and `b` read single colour channels of one image.
+  static std::shared_ptr<const Texture> shared_channels(const Texture* a, const Texture* b, int* ca, int* cb) {
+    const auto* ta = dynamic_cast<const ImageTexture*>(a);
+    const auto* tb = dynamic_cast<const ImageTexture*>(b);
+    if (!ta || !tb || ta->rgb_ || tb->rgb_ || ta->channels_ < 3 || ta->channel_ > 2 || tb->channel_ > 2) return nullptr;
+    if (ta->bytes_ != tb->bytes_ || ta->floats_ != tb->floats_ || ta->srgb_table_ != tb->srgb_table_ ||
+        ta->width_ != tb->width_ || ta->height_ != tb->height_ || ta->channels_ != tb->channels_)
+      return nullptr;
+    const TextureMapping &ma = ta->mapping_, &mb = tb->mapping_;
+    if (ma.scale.x != mb.scale.x || ma.scale.y != mb.scale.y || ma.offset.x != mb.offset.x ||
+        ma.offset.y != mb.offset.y || ma.rotation != mb.rotation || ma.wrap != mb.wrap || ma.wrap_t != mb.wrap_t ||
+        ma.uv_set != mb.uv_set)
+      return nullptr;
+    *ca = ta->read_channel_;
+    *cb = tb->read_channel_;
+    return std::make_shared<ImageTexture>(ta->image_, -1, ma);
+  }
+
  private:
-  // The same values as Image::texel, read through the pointers resolved at construction.
+  // The texel's value as the image stores it decoded, read through the pointers resolved at construction.
   float decode(const uint8_t* b, int c) const {
     return (srgb_table_ && c < 3) ? srgb_table_[b[c]] : b[c] * (1.0f / 255.0f);
   }
@@ -218,6 +236,11 @@ std::shared_ptr<const Texture> make_image_texture(const std::shared_ptr<const Im
       pixels->data.size() != static_cast<size_t>(pixels->width) * pixels->height * pixels->channels)
     throw std::runtime_error("an embedded image has inconsistent dimensions");
   return std::make_shared<ImageTexture>(embedded_image(pixels, srgb), channel, mapping);
+}
+
+std::shared_ptr<const Texture> make_shared_channels_texture(const Texture* a, const Texture* b, int* channel_a,
+                                                            int* channel_b) {
+  return ImageTexture::shared_channels(a, b, channel_a, channel_b);
 }
 
 std::shared_ptr<const Texture> make_checker_texture(const Rgb& a, const Rgb& b, float squares_per_unit, int uv_set) {

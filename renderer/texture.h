@@ -71,6 +71,11 @@ std::shared_ptr<const Texture> make_image_texture(const std::filesystem::path& f
 // A texture over pixels in memory; `srgb` decodes the colour channels (never alpha). Throws on bad dimensions.
 std::shared_ptr<const Texture> make_image_texture(const std::shared_ptr<const ImagePixels>& pixels, bool srgb,
                                                   int channel, const TextureMapping& mapping);
+// When `a` and `b` are image textures reading one channel each (below 3) of the same texels through the same
+// mapping, a texture returning that image's first three channels with the same filtering, so one lookup serves both
+// (component channel_a of it is a's value, bit for bit); otherwise null.
+std::shared_ptr<const Texture> make_shared_channels_texture(const Texture* a, const Texture* b, int* channel_a,
+                                                            int* channel_b);
 // A checkerboard in uv: `a` where floor(u s) + floor(v s) is even, `b` where odd.
 std::shared_ptr<const Texture> make_checker_texture(const Rgb& a, const Rgb& b, float squares_per_unit, int uv_set = 0);
 // Number of distinct images read so far (for tests of the cache).

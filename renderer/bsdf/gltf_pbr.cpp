@@ -372,12 +372,25 @@ class GltfPbrMaterial final : public Material {
   RgbParam base_color, specular_color, sheen_color;
   FloatParam metallic, roughness, specular, transmission, clearcoat, clearcoat_roughness, sheen_roughness;
   float f0_ior = 0.04f;
+  // metallic's and roughness's textures as one RGB lookup, when they read channels of the same image.
+  std::shared_ptr<const Texture> metallic_roughness;
+  int metallic_channel = 0, roughness_channel = 0;
 
   const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
     GltfLobes l;
     l.base_color = vmin(base_color.eval(sp) * sp.vertex_color, Rgb(1));
-    l.metallic = clamp(metallic.eval(sp), 0.0f, 1.0f);
-    float r = clamp(roughness.eval(sp), 0.045f, 1.0f);
+    float metal, rough;
+    if (metallic_roughness) {
+      // One lookup for both (glTF keeps them in the B and G channels of one image).
+      const Rgb t = metallic_roughness->eval(sp);
+      metal = metallic.value * t[metallic_channel];
+      rough = roughness.value * t[roughness_channel];
+    } else {
+      metal = metallic.eval(sp);
+      rough = roughness.eval(sp);
+    }
+    l.metallic = clamp(metal, 0.0f, 1.0f);
+    float r = clamp(rough, 0.045f, 1.0f);
     l.alpha = r * r;
     float spec = clamp(specular.eval(sp), 0.0f, 1.0f);
     l.f0_d = vmin(Rgb(f0_ior) * specular_color.eval(sp), Rgb(1)) * spec;
@@ -402,6 +415,9 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     m->base_color = params::rgb_param(j, "base_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
     m->metallic = params::float_param(j, "metallic", ptr, 1.0f, 0.0f, 1.0f, ctx);
     m->roughness = params::float_param(j, "roughness", ptr, 1.0f, 0.0f, 1.0f, ctx);
+    if (m->metallic.texture && m->roughness.texture)
+      m->metallic_roughness = make_shared_channels_texture(m->metallic.texture.get(), m->roughness.texture.get(),
+                                                           &m->metallic_channel, &m->roughness_channel);
     float ior = params::number(j, "ior", ptr, 1.5f, 1.0f, 4.0f);
     m->f0_ior = f0_from_ior(ior);
     m->specular = params::float_param(j, "specular", ptr, 1.0f, 0.0f, 1.0f, ctx);

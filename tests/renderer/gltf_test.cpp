@@ -577,6 +577,39 @@ std::vector<unsigned char> tilted_normal_png(double theta) {
   return png_rgba(1, 1, {nx, 128, nz, 255});
 }
 
+// Two single-channel textures over the same pixels and mapping (glTF's metallic in B, roughness in G) share one RGB
+// lookup whose components equal each texture's own value bit for bit; other pairs do not.
+TEST(Textures, ChannelsOfOneImageShareALookup) {
+  auto pixels = std::make_shared<ImagePixels>();
+  pixels->width = 5;
+  pixels->height = 3;
+  pixels->channels = 4;
+  for (int i = 0; i < 5 * 3 * 4; ++i) pixels->data.push_back(static_cast<uint8_t>((i * 37 + 11) % 256));
+  TextureMapping mapping;
+  mapping.scale = Vec2(1.5f, 0.75f);
+  mapping.rotation = 0.3f;
+  auto metal = make_image_texture(pixels, false, 2, mapping), rough = make_image_texture(pixels, false, 1, mapping);
+  int cm = -1, cr = -1;
+  auto both = make_shared_channels_texture(metal.get(), rough.get(), &cm, &cr);
+  ASSERT_TRUE(both);
+  EXPECT_EQ(cm, 2);
+  EXPECT_EQ(cr, 1);
+  for (int i = 0; i < 200; ++i) {
+    ShadingPoint sp;
+    sp.uv = Vec2(std::fmod(i * 0.137f, 3.0f) - 1, std::fmod(i * 0.291f, 2.0f) - 0.5f);
+    const Rgb t = both->eval(sp);
+    EXPECT_EQ(t[cm], metal->eval(sp).x);
+    EXPECT_EQ(t[cr], rough->eval(sp).x);
+  }
+  TextureMapping shifted = mapping;
+  shifted.offset = Vec2(0.1f, 0);
+  auto rough_shifted = make_image_texture(pixels, false, 1, shifted);
+  EXPECT_FALSE(make_shared_channels_texture(metal.get(), rough_shifted.get(), &cm, &cr));
+  auto other = std::make_shared<ImagePixels>(*pixels);  // equal values, other pixels
+  EXPECT_FALSE(make_shared_channels_texture(metal.get(), make_image_texture(other, false, 1, mapping).get(), &cm, &cr));
+  EXPECT_FALSE(make_shared_channels_texture(metal.get(), make_image_texture(pixels, true, 1, mapping).get(), &cm, &cr));
+}
+
 TEST(Textures, NormalMapTiltsTheShadingNormal) {
   // A constant normal map tilting the normal 60 degrees towards +u on a Lambert floor lit straight from above:
   // the reflected radiance falls to cos 60 = one half (the geometric normal is unchanged).
