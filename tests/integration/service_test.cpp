@@ -7,12 +7,14 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <charconv>
 #include <chrono>
 #include <cstring>
 #include <fstream>
 #include <functional>
 #include <random>
 #include <set>
+#include <string_view>
 #include <thread>
 
 #include "renderer/image_io.h"
@@ -721,17 +723,34 @@ TEST_F(ServiceTest, AThousandQueuedJobsTwoHundredWatchersAndPolling) {
         w.set_read_timeout(120);
         httplib::Headers h;
         if (counted) h.emplace("Last-Event-ID", std::to_string(last_id));
+        // The receiver gets the stream as the socket delivers it (at most 4 KiB at a time, possibly less), so a
+        // piece can end anywhere, even inside "id: 123": only complete lines are looked at.
+        std::string pending;
         w.Get("/v1/events", h, [&](const char* d, size_t n) {
-          const std::string chunk(d, n);
           if (!counted) {
             counted = true;
             ++watching;
           }
-          if (size_t at = chunk.rfind("id: "); at != std::string::npos) last_id = std::stoull(chunk.substr(at + 4));
-          if (!seen && chunk.find("\"state\":\"queued\"") != std::string::npos) {
-            seen = true;
-            ++saw_job;
+          pending.append(d, n);
+          size_t start = 0;
+          for (size_t end; (end = pending.find('\n', start)) != std::string::npos; start = end + 1) {
+            const std::string_view line(pending.data() + start, end - start);
+            if (line.starts_with("id: ")) {
+              const std::string_view digits = line.substr(4);
+              uint64_t id = 0;
+              const auto [ptr, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), id);
+              if (ec != std::errc() || ptr != digits.data() + digits.size()) {
+                ADD_FAILURE() << "an event id that is not a number: \"" << line << "\"";
+              } else {
+                last_id = id;
+              }
+            }
+            if (!seen && line.starts_with("data: ") && line.find("\"state\":\"queued\"") != std::string::npos) {
+              seen = true;
+              ++saw_job;
+            }
           }
+          pending.erase(0, start);
           return !done.load();
         });
         if (!done.load()) std::this_thread::sleep_for(std::chrono::milliseconds(100));
