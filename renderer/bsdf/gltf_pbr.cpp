@@ -90,7 +90,8 @@ class SchlickAlbedoTable {
             float pdf = microfacet_reflection_pdf(d, wo, wi);
             if (!(pdf > 0)) continue;
             double w = microfacet_reflection_eval(d, wo, wi) * wi.z / pdf;
-            double c5 = std::pow(1.0 - std::min(1.0f, dot(wo, normalize(wo + wi))), 5.0);
+            const double m = 1.0 - std::min(1.0f, dot(wo, normalize(wo + wi))), m2 = m * m;
+            const double c5 = m2 * m2 * m;
             s1 += w * (1 - c5);
             s2 += w * c5;
           }
@@ -427,6 +428,10 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     m->clearcoat_roughness = params::float_param(j, "clearcoat_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
     m->sheen_color = params::rgb_param(j, "sheen_color", ptr, Rgb(0), 0.0f, 1.0f, ctx);
     m->sheen_roughness = params::float_param(j, "sheen_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    // The albedo tables are computed once per process (0.1 s, and 0.2 s for sheen's): here, while the scene loads,
+    // rather than on a render thread in the first pass, where the other render threads would wait for them.
+    SchlickAlbedoTable::get();
+    if (m->sheen_color.texture || !is_black(m->sheen_color.value)) SheenAlbedoTable::get();
     return m;
   });
 }
