@@ -348,10 +348,9 @@ int main(int argc, char** argv) {
     double first_preview = 0;
     AllocationCount allocs;
     render_image(scene, bs.settings, pool, &p, &first_preview, &allocs);
+    // The same render on one thread: the same passes, so per-pass work weighs the same in both.
     RenderProgress p1;
-    RenderSettings s1 = bs.settings;
-    s1.spp = std::max<uint32_t>(2, bs.settings.spp / 4);
-    render_image(scene, s1, single, &p1);
+    render_image(scene, bs.settings, single, &p1);
     double efficiency = p1.samples_per_s > 0 ? p.samples_per_s / (p1.samples_per_s * pool.size()) : 0;
     double ray_rate = p.rays.total() / p.elapsed_s;
     std::printf("   first preview %.3f s; %.3g samples/s; %.3g rays/s (camera %.3g, bounce %.3g, shadow %.3g)\n",
