@@ -347,7 +347,9 @@ TEST_F(ServiceTest, JobEventsEndWithTheTerminalStateAndReplayFromLastEventId) {
 TEST_F(ServiceTest, PrioritiesPauseResumeRequeue) {
   start(args({"--max-jobs", "1"}));
   const std::string a = submit(*client_, long_job());
-  wait_for(*client_, a, in_state("running"));
+  // Wait for a finished pass, not just "running": a pause that arrives while the scene still loads stops the job
+  // before its first pass, with nothing to checkpoint (samples_done 0), which is right but not what is tested here.
+  wait_for(*client_, a, [](const json& s) { return s["progress"]["passes"].get<int>() >= 1; });
   const std::string b = submit(*client_, long_job()), c = submit(*client_, long_job());
   EXPECT_EQ(get_job(*client_, b)["queue_position"], 1);
   EXPECT_EQ(get_job(*client_, c)["queue_position"], 2);
@@ -455,6 +457,7 @@ TEST_F(ServiceTest, TokensIsolateUsersAdminsSeeAllCorsOnlyForConfiguredOrigins) 
                 "user patch priority");
   EXPECT_EQ(client_->Post("/v1/jobs", bearer(root), urgent.dump(), "application/json")->status, 202);
   // Queue limit per user: 429 with Retry-After (alice's first job runs, the next three wait).
+  wait_for(*client_, a, in_state("running"), 60, bearer(alice));
   for (int i = 0; i < 3; ++i) submit(*client_, long_job(), bearer(alice));
   auto limited = client_->Post("/v1/jobs", bearer(alice), long_job().dump(), "application/json");
   expect_status(limited, 429, "queue limit");
