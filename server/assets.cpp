@@ -7,7 +7,6 @@
 #include <atomic>
 #include <cstring>
 #include <fstream>
-#include <regex>
 #include <set>
 #include <sstream>
 
@@ -90,8 +89,11 @@ json AssetInfo::to_json() const {
 }
 
 bool is_plain_file_name(const std::string& name) {
-  static const std::regex re("^[A-Za-z0-9._-]{1,128}$");
-  return !name.empty() && name[0] != '.' && std::regex_match(name, re);
+  // 1 to 128 of [A-Za-z0-9._-], not starting with a dot (so never "." or ".." or a hidden file).
+  return !name.empty() && name.size() <= 128 && name[0] != '.' && std::all_of(name.begin(), name.end(), [](char c) {
+    return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' || c == '_' ||
+           c == '-';
+  });
 }
 
 bool is_asset_id(const std::string& s) {

@@ -188,7 +188,8 @@ void SqliteJobStore::close() {
   // sqlite3_close() refuses a connection with unfinalized statements.
   for (auto& [sql, cached] : statements_) sqlite3_finalize(cached.stmt);
   statements_.clear();
-  sqlite3_close(db_);
+  // _v2: should a statement still be open, the connection is closed when it is finalized instead of leaking.
+  sqlite3_close_v2(db_);
   db_ = nullptr;
 }
 

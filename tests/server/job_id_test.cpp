@@ -2,6 +2,7 @@
 
 #include <set>
 
+#include "server/assets.h"
 #include "server/job_files.h"
 #include "server/job_id.h"
 #include "server/job_state.h"
@@ -83,6 +84,17 @@ TEST(JobState, Transitions) {
   for (JobState to : kAllJobStates) EXPECT_FALSE(can_transition(JobState::kSucceeded, to));
   for (JobState s : kAllJobStates) EXPECT_EQ(parse_job_state(job_state_name(s)), s);
   EXPECT_FALSE(parse_job_state("done"));
+}
+
+TEST(AssetFileName, PlainNamesOnly) {
+  for (const char* good : {"scene.gltf", "Box0.bin", "a", "tex_01-b.PNG", "x.y.z"})
+    EXPECT_TRUE(is_plain_file_name(good)) << good;
+  EXPECT_TRUE(is_plain_file_name(std::string(128, 'a')));
+  EXPECT_FALSE(is_plain_file_name(std::string(129, 'a')));
+  for (const char* bad : {"", ".", "..", ".hidden", "../x.bin", "dir/x.bin", "dir\\x.bin", "a b.png", "a:b", "%2e%2e",
+                          "t\xc3\xa9.png", "x\n.bin"})
+    EXPECT_FALSE(is_plain_file_name(bad)) << bad;
+  EXPECT_FALSE(is_plain_file_name(std::string("a\0b", 3)));
 }
 
 }  // namespace
