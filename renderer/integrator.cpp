@@ -125,7 +125,9 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
     }
 
     // Continue the path by sampling the BSDF.
-    const float u_lobe = sampler.get1d();
+    float u_lobe = 0;
+    if (flags & kBsdfOneLobe) sampler.skip1d();
+    else u_lobe = sampler.get1d();
     const Vec2 u_dir = sampler.get2d();
     std::optional<BsdfSample> bs = bsdf->sample(wo, u_lobe, u_dir);
     if (!bs || !(bs->pdf > 0) || is_black(bs->f)) break;

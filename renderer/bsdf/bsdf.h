@@ -27,6 +27,7 @@ enum BsdfFlags : uint32_t {
   kBsdfDiffuse = 1u << 2,
   kBsdfGlossy = 1u << 3,
   kBsdfSpecular = 1u << 4,  // a Dirac delta lobe
+  kBsdfOneLobe = 1u << 5,   // sample() ignores its lobe choice `uc` (the integrator then does not compute one)
 };
 
 inline bool is_delta(uint32_t flags) { return (flags & kBsdfSpecular) != 0; }

@@ -22,7 +22,7 @@ class LambertBsdf final : public Bsdf {
   float pdf(const Vec3& wo, const Vec3& wi) const override {
     return same_hemisphere(wo, wi) ? cosine_hemisphere_pdf(std::abs(wi.z)) : 0.0f;
   }
-  uint32_t flags() const override { return kBsdfReflection | kBsdfDiffuse; }
+  uint32_t flags() const override { return kBsdfReflection | kBsdfDiffuse | kBsdfOneLobe; }
   Rgb albedo_hint() const override { return rho_; }
 
  private:

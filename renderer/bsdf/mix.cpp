@@ -41,7 +41,12 @@ class MixBsdf final : public Bsdf {
     if (!(s->pdf > 0)) return std::nullopt;
     return s;
   }
-  uint32_t flags() const override { return (w_ < 1 ? a_->flags() : 0u) | (w_ > 0 ? b_->flags() : 0u); }
+  uint32_t flags() const override {
+    // Choosing between two parts takes the lobe sample, even when each part has one lobe.
+    if (w_ <= 0) return a_->flags();
+    if (w_ >= 1) return b_->flags();
+    return (a_->flags() | b_->flags()) & ~static_cast<uint32_t>(kBsdfOneLobe);
+  }
   Rgb albedo_hint() const override { return a_->albedo_hint() * (1 - w_) + b_->albedo_hint() * w_; }
 
  private:

@@ -64,6 +64,34 @@ TEST_P(BsdfCaseTest, SampleAgreesWithEvalAndPdf) {
   EXPECT_GT(checked, 1000) << c.name;
 }
 
+// A BSDF that says it has one lobe (kBsdfOneLobe) is sampled with no lobe choice by the integrator: its samples
+// must not depend on `uc`. A mix of two one-lobe parts chooses between them with it, so it must not say so.
+TEST_P(BsdfCaseTest, OneLobeSamplesIgnoreTheLobeChoice) {
+  const BsdfCase& c = GetParam();
+  BsdfInstance inst(c.material);
+  const Bsdf& bsdf = inst.bsdf();
+  if (c.material.value("type", "") == "mix") {
+    EXPECT_FALSE(bsdf.flags() & kBsdfOneLobe) << c.name;
+  }
+  if (!(bsdf.flags() & kBsdfOneLobe)) {
+    GTEST_SKIP() << c.name << " chooses among lobes";
+  }
+  std::mt19937_64 rng(777);
+  for (const Vec3& wo : incident_directions(c)) {
+    for (int i = 0; i < 2000; ++i) {
+      const Vec2 u(uniform01(rng), uniform01(rng));
+      const std::optional<BsdfSample> a = bsdf.sample(wo, 0.0f, u), b = bsdf.sample(wo, uniform01(rng), u);
+      ASSERT_EQ(a.has_value(), b.has_value()) << c.name;
+      if (!a) continue;
+      EXPECT_EQ(a->wi.x, b->wi.x);
+      EXPECT_EQ(a->wi.y, b->wi.y);
+      EXPECT_EQ(a->wi.z, b->wi.z);
+      EXPECT_EQ(a->pdf, b->pdf);
+      EXPECT_EQ(a->flags, b->flags);
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(AllModels, BsdfCaseTest, ::testing::ValuesIn(bsdf_cases()),
                          [](const ::testing::TestParamInfo<BsdfCase>& info) { return info.param.name; });
 
