@@ -37,11 +37,15 @@ Distribution1D::Distribution1D(const float* weights, size_t n) : pdf_(n), cdf_(n
     total_ = 0;
   }
   // Below a few dozen buckets the binary search is as fast as the table.
-  if (n >= 32 && n < (size_t(1) << 31)) {
+  if (n >= 32 && n < (size_t(1) << 31) && cdf_.back() > 0) {
     guide_.resize(n + 1);
-    for (size_t k = 0; k < n; ++k)
-      guide_[k] = static_cast<uint32_t>(std::upper_bound(cdf_.begin() + 1, cdf_.end(), cutpoint(k)) - cdf_.begin());
-    guide_[n] = static_cast<uint32_t>(n);
+    slots_per_unit_ = static_cast<double>(n) / cdf_.back();
+    size_t i = 0;
+    for (size_t k = 0; k < n; ++k) {
+      while (i + 1 < n && slot(cdf_[i + 1]) < k) ++i;
+      guide_[k] = static_cast<uint32_t>(i);
+    }
+    guide_[n] = static_cast<uint32_t>(n - 1);
   }
 }
 
@@ -51,14 +55,9 @@ size_t Distribution1D::sample(float u, float* pmf, float* u_remapped) const {
   // First bucket whose upper bound exceeds the target, skipping empty buckets.
   auto first = cdf_.begin() + 1, last = cdf_.end();
   if (!guide_.empty()) {
-    // The cutpoint interval holding the target (the estimate corrected against the exact cutpoints, whatever the
-    // rounding): everything before guide_[k] is <= target, and guide_[k + 1] is past the answer.
-    const size_t buckets = guide_.size() - 1;
-    size_t k = std::min(static_cast<size_t>(static_cast<double>(u) * static_cast<double>(buckets)), buckets - 1);
-    while (k > 0 && cutpoint(k) > target) --k;
-    while (k + 1 < buckets && cutpoint(k + 1) <= target) ++k;
-    first = cdf_.begin() + guide_[k];
-    last = cdf_.begin() + guide_[k + 1];
+    const size_t k = slot(target);
+    first = cdf_.begin() + 1 + guide_[k];
+    last = cdf_.begin() + 2 + guide_[k + 1];
   }
   auto it = std::upper_bound(first, last, target);
   size_t i = static_cast<size_t>(std::min<std::ptrdiff_t>(it - cdf_.begin() - 1, static_cast<std::ptrdiff_t>(size() - 1)));

@@ -83,15 +83,19 @@ class Distribution1D {
   double total() const { return total_; }
 
  private:
-  // The k-th of the guide table's equally spaced cutpoints on the cumulative sum.
-  double cutpoint(size_t k) const {
-    return cdf_.back() * static_cast<double>(k) / static_cast<double>(guide_.size() - 1);
+  // The guide slot of a target in [0, total): monotone in the target, one multiply. The table is built with this
+  // same function, so no rounding of it can send a target to a slot whose range misses the answer.
+  size_t slot(double target) const {
+    const double k = target * slots_per_unit_;
+    return k < static_cast<double>(guide_.size() - 2) ? static_cast<size_t>(k) : guide_.size() - 2;
   }
   std::vector<float> pdf_;
   std::vector<double> cdf_;  // n + 1 entries
-  // Empty for small n; else n + 1 entries: guide_[k] is the first j >= 1 with cdf_[j] > cutpoint(k) (guide_[n] = n),
-  // so the answer for a target in [cutpoint(k), cutpoint(k + 1)) lies in cdf_[guide_[k] .. guide_[k + 1]].
+  // Empty for small n; else n + 1 entries (n slots): guide_[k] is the first bucket i with slot(cdf_[i + 1]) >= k
+  // (guide_[n] = n - 1). The answer for a target in slot k lies in buckets guide_[k] .. guide_[k + 1]: its bucket's
+  // upper bound is above the target (so in slot k or later), its lower bound at or below (so in slot k or earlier).
   std::vector<uint32_t> guide_;
+  double slots_per_unit_ = 0;
   double total_ = 0;
 };
 
