@@ -1,7 +1,5 @@
 #include "renderer/bsdf/fresnel.h"
 
-#include <complex>
-
 namespace tessera {
 
 void fresnel_dielectric_polarized(float cos_theta_i, float eta, float* r_s, float* r_p) {
@@ -34,18 +32,25 @@ float fresnel_dielectric(float cos_theta_i, float eta) {
 }
 
 Rgb fresnel_conductor(float cos_theta_i, const Rgb& eta, const Rgb& k) {
-  using C = std::complex<float>;
-  cos_theta_i = clamp(std::abs(cos_theta_i), 0.0f, 1.0f);
+  // The complex Fresnel equations in real arithmetic: with n^2 - sin^2 theta_i = (a + i b)^2,
+  //   a^2 + b^2 = sqrt((eta^2 - k^2 - sin^2)^2 + 4 eta^2 k^2),  a^2 = (a^2 + b^2 + eta^2 - k^2 - sin^2) / 2,
+  //   R_s = (a^2 + b^2 + cos^2 - 2 a cos) / (a^2 + b^2 + cos^2 + 2 a cos),
+  //   R_p = R_s (cos^2 (a^2 + b^2) + sin^4 - 2 a cos sin^2) / (cos^2 (a^2 + b^2) + sin^4 + 2 a cos sin^2),
+  // equal to the complex form (tested against it) without a complex square root per channel.
+  const float cos_i = clamp(std::abs(cos_theta_i), 0.0f, 1.0f);
+  const float cos2 = cos_i * cos_i, sin2 = 1 - cos2, sin4 = sin2 * sin2;
   Rgb out;
   for (int c = 0; c < 3; ++c) {
-    C n(eta[c], k[c]);
-    // Snell's law with a complex index: sin^2 theta_t = sin^2 theta_i / n^2, cos theta_t = sqrt(1 - sin^2 theta_t).
-    float sin2_i = 1 - cos_theta_i * cos_theta_i;
-    C sin2_t = sin2_i / (n * n);
-    C cos_t = std::sqrt(C(1) - sin2_t);
-    C r_parl = (n * cos_theta_i - cos_t) / (n * cos_theta_i + cos_t);
-    C r_perp = (cos_theta_i - n * cos_t) / (cos_theta_i + n * cos_t);
-    out[c] = 0.5f * (std::norm(r_parl) + std::norm(r_perp));
+    const float eta2 = eta[c] * eta[c], k2 = k[c] * k[c];
+    const float t0 = eta2 - k2 - sin2;
+    const float a2b2 = std::sqrt(t0 * t0 + 4 * eta2 * k2);
+    // a^2 = (a^2 + b^2 + t0) / 2, in the form without cancellation when t0 < 0 (an index below 1 with little k).
+    const float a = std::sqrt(t0 >= 0 ? 0.5f * (a2b2 + t0) : (a2b2 - t0 > 0 ? 2 * eta2 * k2 / (a2b2 - t0) : 0.0f));
+    const float t1 = a2b2 + cos2, t2 = 2 * a * cos_i;
+    const float rs = t1 + t2 > 0 ? (t1 - t2) / (t1 + t2) : 1.0f;
+    const float t3 = cos2 * a2b2 + sin4, t4 = t2 * sin2;
+    const float rp = t3 + t4 > 0 ? rs * (t3 - t4) / (t3 + t4) : rs;
+    out[c] = clamp(0.5f * (rs + rp), 0.0f, 1.0f);
   }
   return out;
 }

@@ -16,8 +16,8 @@ float fresnel_dielectric(float cos_theta_i, float eta);
 void fresnel_dielectric_polarized(float cos_theta_i, float eta, float* r_s, float* r_p);
 
 // Reflectance of a conductor with complex index eta + i k (relative to the outside medium), per RGB channel, from
-// the Fresnel equations with a complex index of refraction (Born & Wolf, Principles of Optics, 14.2; the form with
-// the complex sin/cos of the transmitted angle, as in pbrt-v4 section 9.3.6).
+// the Fresnel equations with a complex index of refraction (Born & Wolf, Principles of Optics, 14.2), evaluated in
+// real arithmetic (the a^2 + b^2 form of the complex cos of the transmitted angle).
 Rgb fresnel_conductor(float cos_theta_i, const Rgb& eta, const Rgb& k);
 
 // Schlick's approximation F = F0 + (F90 - F0)(1 - cos)^5 (Schlick 1994, eq. 24; glTF 2.0 appendix B).

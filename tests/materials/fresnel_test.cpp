@@ -1,4 +1,6 @@
 // Fresnel reflectance against closed forms (seed 003, "Fresnel Equation"; seed 000, 2.5.3).
+#include <complex>
+
 #include <gtest/gtest.h>
 
 #include "renderer/bsdf/fresnel.h"
@@ -83,6 +85,30 @@ TEST(Fresnel, ConductorReflectanceOfNamedMetalsIsPlausible) {
   EXPECT_GT(al.z, 0.88f);
   // Grazing incidence reflects everything.
   EXPECT_NEAR(fresnel_conductor(1e-5f, Rgb(0.2f), Rgb(3.0f)).x, 1.0f, 1e-3f);
+}
+
+// The real-arithmetic conductor Fresnel against the complex equations, evaluated here in double precision: over
+// angles from normal to near grazing and indices from the tabulated metals to dielectric-like and strongly absorbing.
+TEST(Fresnel, ConductorMatchesTheComplexEquations) {
+  using C = std::complex<double>;
+  auto reference = [](double cos_i, double eta, double k) {
+    const C n(eta, k);
+    const C cos_t = std::sqrt(C(1) - (1 - cos_i * cos_i) / (n * n));
+    const C r_p = (n * cos_i - cos_t) / (n * cos_i + cos_t);
+    const C r_s = (cos_i - n * cos_t) / (cos_i + n * cos_t);
+    return 0.5 * (std::norm(r_p) + std::norm(r_s));
+  };
+  int checked = 0;
+  for (double eta : {0.05, 0.18299, 0.5, 1.0, 1.5196, 2.5, 4.0})
+    for (double k : {0.0, 0.01, 0.5, 1.7704, 3.4242, 7.6635, 12.0})
+      for (int a = 0; a <= 40; ++a) {
+        const double cos_i = std::max(0.01, a / 40.0);
+        const float got = fresnel_conductor(static_cast<float>(cos_i), Rgb(static_cast<float>(eta)),
+                                            Rgb(static_cast<float>(k))).x;
+        EXPECT_NEAR(got, reference(cos_i, eta, k), 4e-6) << "eta " << eta << " k " << k << " cos " << cos_i;
+        ++checked;
+      }
+  EXPECT_EQ(checked, 7 * 7 * 41);
 }
 
 }  // namespace
