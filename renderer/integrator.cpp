@@ -47,7 +47,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
         if (prev_delta || !mis) {
           if (prev_delta || use_bsdf_hits) radiance += throughput * scene.environment.radiance(ray.dir);
         } else {
-          // Weighed against the light sampling of the environment (lights.pdf_environment, from the same lookup).
+          // Weighed against the light sampling of the environment, its density from the same lookup.
           float pdf_dir = 0;
           const Rgb le = scene.environment.radiance(ray.dir, &pdf_dir);
           radiance += throughput * le * power_heuristic(prev_pdf, lights.environment_pmf() * pdf_dir);

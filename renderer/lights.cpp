@@ -240,11 +240,4 @@ float LightSet::pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteract
   return 0;
 }
 
-float LightSet::pdf_environment(const Scene& scene, const Vec3& dir) const {
-  if (environment_ == kNoLight) return 0;
-  const Environment& env = scene.environment;
-  float pdf_dir = env.map ? env.map->pdf(env.to_map(dir)) : uniform_sphere_pdf();
-  return environment_pmf() * pdf_dir;
-}
-
 }  // namespace tessera

@@ -46,9 +46,8 @@ class LightSet {
   bool sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u, LightSample* out) const;
   // Solid-angle density with which `sample` from `p` would have produced the emitting point of `si`.
   float pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteraction& si) const;
-  // Solid-angle density with which `sample` would have produced the environment direction `dir`.
-  float pdf_environment(const Scene& scene, const Vec3& dir) const;
-  // The probability of choosing the environment (times its own directional density, that is pdf_environment).
+  // The probability of choosing the environment: times the environment's own density of a direction
+  // (Environment::radiance(dir, &pdf)), the density with which `sample` produces that direction.
   float environment_pmf() const { return environment_ == kNoLight ? 0.0f : distribution_.pmf(environment_); }
 
  private:

@@ -21,6 +21,7 @@ struct Vec2 {
   constexpr Vec2 operator+(Vec2 b) const { return {x + b.x, y + b.y}; }
   constexpr Vec2 operator-(Vec2 b) const { return {x - b.x, y - b.y}; }
   constexpr Vec2 operator*(float s) const { return {x * s, y * s}; }
+  constexpr bool operator==(const Vec2&) const = default;
 };
 
 struct Vec3 {

@@ -46,24 +46,19 @@ inline uint32_t laine_karras_permutation(uint32_t x, uint32_t seed) {
   return x;
 }
 
-inline uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed) {
-  return reverse_bits(laine_karras_permutation(reverse_bits(x), seed));
-}
-
 // Dimension 1 of the Sobol sequence (primitive polynomial x + 1) is a linear map over GF(2) of the index bits:
-// XOR the direction numbers of its set bits. Tabulated per byte, that is four lookups.
-// Bit reversal is linear over GF(2) too, so the tables can as well hold the reversed direction numbers: a scramble
-// that starts by reversing the value then reads those instead.
+// XOR the direction numbers of its set bits. Tabulated per byte, that is four lookups. Bit reversal is linear over
+// GF(2) too, so the tables hold the reversed direction numbers: the Owen scramble, which starts by reversing the
+// value, reads those directly.
 constexpr uint32_t reverse_bits_constexpr(uint32_t x) {
   uint32_t r = 0;
   for (int i = 0; i < 32; ++i) r |= ((x >> i) & 1u) << (31 - i);
   return r;
 }
 
-template <bool kReversed>
-struct SobolDim1Tables {
+struct SobolDim1ReversedTables {
   uint32_t t[4][256] = {};
-  constexpr SobolDim1Tables() {
+  constexpr SobolDim1ReversedTables() {
     uint32_t v[32] = {};
     v[0] = 1u << 31;
     for (int k = 1; k < 32; ++k) v[k] = v[k - 1] ^ (v[k - 1] >> 1);
@@ -72,26 +67,18 @@ struct SobolDim1Tables {
         uint32_t r = 0;
         for (int k = 0; k < 8; ++k)
           if (x & (1 << k)) r ^= v[8 * b + k];
-        t[b][x] = kReversed ? reverse_bits_constexpr(r) : r;
+        t[b][x] = reverse_bits_constexpr(r);
       }
-  }
-  uint32_t operator()(uint32_t index) const {
-    return t[0][index & 0xff] ^ t[1][(index >> 8) & 0xff] ^ t[2][(index >> 16) & 0xff] ^ t[3][index >> 24];
   }
 };
 
 // Built by the compiler: no guard on every lookup.
-inline constexpr SobolDim1Tables<false> kSobolDim1Tables{};
-inline constexpr SobolDim1Tables<true> kSobolDim1ReversedTables{};
+inline constexpr SobolDim1ReversedTables kSobolDim1ReversedTables{};
 
-inline uint32_t sobol_dim1(uint32_t index) { return kSobolDim1Tables(index); }
-// reverse_bits(sobol_dim1(index)), from the reversed tables.
-inline uint32_t sobol_dim1_reversed(uint32_t index) { return kSobolDim1ReversedTables(index); }
-
-// The first two dimensions of the Sobol sequence, as 32-bit fractions.
-inline void sobol_2d(uint32_t index, uint32_t* x, uint32_t* y) {
-  *x = reverse_bits(index);  // dimension 0: van der Corput
-  *y = sobol_dim1(index);
+// reverse_bits(Sobol dimension 1 of index).
+inline uint32_t sobol_dim1_reversed(uint32_t index) {
+  const auto& t = kSobolDim1ReversedTables.t;
+  return t[0][index & 0xff] ^ t[1][(index >> 8) & 0xff] ^ t[2][(index >> 16) & 0xff] ^ t[3][index >> 24];
 }
 
 }  // namespace sobol_detail
@@ -125,7 +112,7 @@ class PixelSampler {
       const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * ++dimension_);
       const uint32_t index = shuffled_index(h);
       const uint32_t x = sobol_dim0(index, h);
-      // nested_uniform_scramble(sobol_dim1(index)), its first reversal read from the reversed tables.
+      // Owen-scrambled Sobol dimension 1: reverse(LK(reverse(dim1(index)))), the inner reversal from the tables.
       const uint32_t y = sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(
           sobol_detail::sobol_dim1_reversed(index), static_cast<uint32_t>(mix64(h) >> 32)));
       return {static_cast<float>(x >> 8) * 0x1p-24f, static_cast<float>(y >> 8) * 0x1p-24f};
@@ -140,8 +127,8 @@ class PixelSampler {
   uint32_t dimension() const { return dimension_; }
 
  private:
-  // The sample index shuffled by the dimension pair's hash h: nested_uniform_scramble(i) = reverse(LK(reverse(i))),
-  // with reverse(i) computed once per sample.
+  // The sample index shuffled by the dimension pair's hash h, by the Owen scramble reverse(LK(reverse(i))), with
+  // reverse(i) computed once per sample.
   uint32_t shuffled_index(uint64_t h) const {
     return sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(reversed_index_, static_cast<uint32_t>(h)));
   }

@@ -37,7 +37,7 @@ Distribution1D::Distribution1D(const float* weights, size_t n) : pdf_(n), cdf_(n
     total_ = 0;
   }
   // Below a few dozen buckets the binary search is as fast as the table.
-  if (n >= 32 && n < (size_t(1) << 31) && cdf_.back() > 0) {
+  if (n >= 32 && n < (size_t(1) << 31)) {
     guide_.resize(n + 1);
     slots_per_unit_ = static_cast<double>(n) / cdf_.back();
     size_t i = 0;

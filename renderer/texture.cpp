@@ -170,14 +170,10 @@ class ImageTexture final : public Texture {
     if (ta->bytes_ != tb->bytes_ || ta->floats_ != tb->floats_ || ta->srgb_table_ != tb->srgb_table_ ||
         ta->width_ != tb->width_ || ta->height_ != tb->height_ || ta->channels_ != tb->channels_)
       return nullptr;
-    const TextureMapping &ma = ta->mapping_, &mb = tb->mapping_;
-    if (ma.scale.x != mb.scale.x || ma.scale.y != mb.scale.y || ma.offset.x != mb.offset.x ||
-        ma.offset.y != mb.offset.y || ma.rotation != mb.rotation || ma.wrap != mb.wrap || ma.wrap_t != mb.wrap_t ||
-        ma.uv_set != mb.uv_set)
-      return nullptr;
+    if (ta->mapping_ != tb->mapping_) return nullptr;
     *ca = ta->read_channel_;
     *cb = tb->read_channel_;
-    return std::make_shared<ImageTexture>(ta->image_, -1, ma);
+    return std::make_shared<ImageTexture>(ta->image_, -1, ta->mapping_);
   }
 
  private:

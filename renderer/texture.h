@@ -53,6 +53,7 @@ struct TextureMapping {
   WrapMode wrap = WrapMode::kRepeat;    // horizontal (and vertical unless wrap_t is set)
   std::optional<WrapMode> wrap_t;       // vertical, when it differs
   int uv_set = 0;  // 0: ShadingPoint::uv, 1: ShadingPoint::uv1
+  bool operator==(const TextureMapping&) const = default;
 };
 
 // 8-bit pixels already in memory (row 0 at the top), e.g. images embedded in a glTF asset.

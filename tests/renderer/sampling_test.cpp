@@ -142,9 +142,9 @@ TEST(Sampling, Distribution1DPicksByWeight) {
   EXPECT_GT(test::chi_square_p_value(obs, exp), kAlpha);
 }
 
-// The guide table only narrows the search: for every u the index (and remapped u) must be the one a binary search
-// over the whole cumulative sum gives, on distributions with runs of empty buckets, spikes and a wide dynamic range
-// (an environment map with a sun), and for u at the cutpoints themselves.
+// The guide table only narrows the search: for every u the index must be the one a binary search over the whole
+// cumulative sum gives, on distributions with runs of empty buckets, spikes and a wide dynamic range (an
+// environment map with a sun), and for u at and beside the slot boundaries k / n.
 TEST(Sampling, Distribution1DGuideTableMatchesBinarySearch) {
   std::mt19937_64 rng(17);
   std::uniform_real_distribution<float> u01(0, 1);

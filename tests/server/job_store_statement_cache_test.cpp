@@ -20,16 +20,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// test::make_job with an owner, a document that tells jobs apart, and optionally an idempotency key.
 JobRecord make_job(const std::string& owner, int priority, int64_t created_at_ms, const std::string& key = "") {
-  JobRecord r;
-  r.id = new_job_id();
-  r.kind = "scene";
-  r.priority = priority;
-  r.created_at_ms = created_at_ms;
+  JobRecord r = test::make_job(priority, created_at_ms);
   r.document = R"({"kind":"scene","n":)" + std::to_string(created_at_ms) + "}";
-  r.settings = R"({"width":64})";
-  r.outputs = R"(["png"])";
-  r.progress.samples_total = 16;
   r.owner = owner;
   r.idempotency_key = key;
   r.request_hash = key.empty() ? "" : "hash-" + key;

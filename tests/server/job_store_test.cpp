@@ -9,18 +9,7 @@
 namespace tessera::server {
 namespace {
 
-JobRecord make_job(int priority, int64_t created_at_ms) {
-  JobRecord r;
-  r.id = new_job_id();
-  r.kind = "scene";
-  r.priority = priority;
-  r.created_at_ms = created_at_ms;
-  r.document = R"({"kind":"scene"})";
-  r.settings = R"({"width":64})";
-  r.outputs = R"(["png"])";
-  r.progress.samples_total = 16;
-  return r;
-}
+using test::make_job;
 
 TEST(SqliteJobStore, ClaimsByPriorityThenFirstCome) {
   test::TempDir dir;

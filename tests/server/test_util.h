@@ -9,7 +9,24 @@
 
 #include <nlohmann/json.hpp>
 
+#include "server/job_id.h"
+#include "server/job_store.h"
+
 namespace tessera::server::test {
+
+// A queued scene job record with a fresh id, as the API would store it.
+inline JobRecord make_job(int priority, int64_t created_at_ms) {
+  JobRecord r;
+  r.id = new_job_id();
+  r.kind = "scene";
+  r.priority = priority;
+  r.created_at_ms = created_at_ms;
+  r.document = R"({"kind":"scene"})";
+  r.settings = R"({"width":64})";
+  r.outputs = R"(["png"])";
+  r.progress.samples_total = 16;
+  return r;
+}
 
 inline std::string read_text(const std::filesystem::path& p) {
   std::ifstream in(p, std::ios::binary);
