@@ -193,6 +193,32 @@ void Accel::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& sp
   check(device, "scene build");
 }
 
+// Fills `hit` from Embree's hit record; false when the ray hit nothing.
+bool Accel::resolve(float t, float u, float v, Vec3 ng, uint32_t geom_id, uint32_t prim_id, uint32_t inst_id,
+                    RayHit* hit) const {
+  if (geom_id == RTC_INVALID_GEOMETRY_ID) return false;
+  hit->t = t;
+  hit->u = u;
+  hit->v = v;
+  hit->ng = ng;
+  hit->geom_id = geom_id;
+  hit->prim_id = prim_id;
+  if (inst_id != RTC_INVALID_GEOMETRY_ID) {
+    // Instanced: instID names the instance in the top scene, geomID the mesh within its group's scene.
+    const GeometryRef& inst = impl_->refs[inst_id];
+    hit->instance = inst.object;
+    const GeometryRef& ref = impl_->group_refs[impl_->instance_group[inst.object]][geom_id];
+    hit->is_sphere = false;
+    hit->object = ref.object;
+    return true;
+  }
+  const GeometryRef& ref = impl_->refs[geom_id];
+  hit->is_sphere = ref.is_sphere;
+  hit->object = ref.object;
+  hit->instance = kNoInstance;
+  return true;
+}
+
 bool Accel::intersect(const Ray& ray, RayHit* hit) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
@@ -212,27 +238,39 @@ bool Accel::intersect(const Ray& ray, RayHit* hit) const {
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(impl_->scene, &ctx, &rh);
-  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
-  hit->t = rh.ray.tfar;
-  hit->u = rh.hit.u;
-  hit->v = rh.hit.v;
-  hit->ng = Vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
-  hit->geom_id = rh.hit.geomID;
-  hit->prim_id = rh.hit.primID;
-  if (rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID) {
-    // Instanced: instID names the instance in the top scene, geomID the mesh within its group's scene.
-    const GeometryRef& inst = impl_->refs[rh.hit.instID[0]];
-    hit->instance = inst.object;
-    const GeometryRef& ref = impl_->group_refs[impl_->instance_group[inst.object]][rh.hit.geomID];
-    hit->is_sphere = false;
-    hit->object = ref.object;
-    return true;
+  return resolve(rh.ray.tfar, rh.hit.u, rh.hit.v, Vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z), rh.hit.geomID,
+                 rh.hit.primID, rh.hit.instID[0], hit);
+}
+
+void Accel::intersect_packet(const Ray* rays, int count, RayHit* hits, bool* found) const {
+  static_assert(kPacketSize == 8, "the packet is an RTCRayHit8");
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  alignas(32) int valid[8];
+  alignas(32) RTCRayHit8 rh;
+  for (int i = 0; i < 8; ++i) {
+    const Ray& ray = rays[i < count ? i : 0];
+    valid[i] = i < count ? -1 : 0;
+    rh.ray.org_x[i] = ray.origin.x;
+    rh.ray.org_y[i] = ray.origin.y;
+    rh.ray.org_z[i] = ray.origin.z;
+    rh.ray.dir_x[i] = ray.dir.x;
+    rh.ray.dir_y[i] = ray.dir.y;
+    rh.ray.dir_z[i] = ray.dir.z;
+    rh.ray.tnear[i] = ray.tmin;
+    rh.ray.tfar[i] = ray.tmax;
+    rh.ray.time[i] = 0;
+    rh.ray.mask[i] = 0xffffffffu;
+    rh.ray.id[i] = static_cast<unsigned>(i);
+    rh.ray.flags[i] = 0;
+    rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
   }
-  const GeometryRef& ref = impl_->refs[rh.hit.geomID];
-  hit->is_sphere = ref.is_sphere;
-  hit->object = ref.object;
-  hit->instance = kNoInstance;
-  return true;
+  rtcIntersect8(valid, impl_->scene, &ctx, &rh);
+  for (int i = 0; i < count; ++i)
+    found[i] = resolve(rh.ray.tfar[i], rh.hit.u[i], rh.hit.v[i], Vec3(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]),
+                       rh.hit.geomID[i], rh.hit.primID[i], rh.hit.instID[0][i], &hits[i]);
 }
 
 bool Accel::occluded(const Ray& ray) const {

@@ -39,8 +39,15 @@ class Accel {
              const std::vector<Instance>& instances, const std::vector<const Material*>& materials);
   bool intersect(const Ray& ray, RayHit* hit) const;
   bool occluded(const Ray& ray) const;
+  // Closest hits of up to kPacketSize rays traced together as one Embree packet: faster than one by one for
+  // coherent rays (camera rays through neighbouring pixels). found[i] says whether rays[i] hit; each hit is the one
+  // intersect() would report.
+  static constexpr int kPacketSize = 8;
+  void intersect_packet(const Ray* rays, int count, RayHit* hits, bool* found) const;
 
  private:
+  bool resolve(float t, float u, float v, Vec3 ng, uint32_t geom_id, uint32_t prim_id, uint32_t inst_id,
+               RayHit* hit) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -21,8 +21,8 @@ bool parse_estimator(const std::string& name, Estimator* out) {
   return true;
 }
 
-Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler, const IntegratorSettings& settings,
-               ScratchArena& arena, RayCounters& counters) {
+Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* primary, PixelSampler& sampler,
+               const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters) {
   const LightSet& lights = scene.lights();
   const bool use_light_sampling = settings.estimator != Estimator::kHemisphere;
   const bool use_bsdf_hits = settings.estimator != Estimator::kArea;
@@ -42,7 +42,14 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, PixelSampler& sampler,
   for (int depth = 0;; ++depth) {
     arena.reset();
     SurfaceInteraction si;
-    if (!scene.intersect(ray, &si)) {
+    bool found;
+    if (depth == 0 && primary) {
+      found = primary->found;
+      if (found) scene.interaction(ray, primary->hit, &si);
+    } else {
+      found = scene.intersect(ray, &si);
+    }
+    if (!found) {
       if (!scene.environment.black()) {
         if (prev_delta || !mis) {
           if (prev_delta || use_bsdf_hits) radiance += throughput * scene.environment.radiance(ray.dir);

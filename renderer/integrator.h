@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <string>
 
+#include "renderer/accel.h"
 #include "renderer/arena.h"
 #include "renderer/math.h"
 #include "renderer/sampler.h"
@@ -42,8 +43,16 @@ struct RayCounters {
   uint64_t total() const { return camera + bounce + shadow; }
 };
 
-// Radiance arriving at the camera along `ray`.
-Rgb trace_path(const Scene& scene, const Ray& ray, PixelSampler& sampler, const IntegratorSettings& settings,
-               ScratchArena& arena, RayCounters& counters);
+// The camera ray's closest hit when the caller has traced it already (camera rays of neighbouring pixels go to
+// Embree together, as a packet).
+struct PrimaryHit {
+  bool found = false;
+  RayHit hit;
+};
+
+// Radiance arriving at the camera along `ray`. With `primary`, the camera ray's hit is taken from it rather than
+// traced again.
+Rgb trace_path(const Scene& scene, const Ray& ray, const PrimaryHit* primary, PixelSampler& sampler,
+               const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters);
 
 }  // namespace tessera

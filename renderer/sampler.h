@@ -85,6 +85,7 @@ inline uint32_t sobol_dim1_reversed(uint32_t index) {
 
 class PixelSampler {
  public:
+  PixelSampler() = default;  // a placeholder, to be assigned before use
   PixelSampler(uint64_t seed, uint32_t pixel_index, uint64_t sample_index,
                SamplerKind kind = SamplerKind::kIndependent)
       // The independent sampler's key (the Sobol sampler does not read it).
@@ -141,10 +142,10 @@ class PixelSampler {
     // 24 high bits give every float in [0, 1) on a 2^-24 grid; never returns 1.
     return static_cast<float>(bits >> 40) * 0x1p-24f;
   }
-  uint64_t key_;
-  uint64_t pixel_key_;
-  uint32_t reversed_index_;  // the sample index, bit-reversed (Sobol indices are 32-bit)
-  SamplerKind kind_;
+  uint64_t key_ = 0;
+  uint64_t pixel_key_ = 0;
+  uint32_t reversed_index_ = 0;  // the sample index, bit-reversed (Sobol indices are 32-bit)
+  SamplerKind kind_ = SamplerKind::kIndependent;
   uint32_t dimension_ = 0;
 };
 

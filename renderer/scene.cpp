@@ -65,6 +65,11 @@ size_t Scene::unique_triangle_count() const {
 bool Scene::intersect(const Ray& ray, SurfaceInteraction* si) const {
   RayHit hit;
   if (!accel_.intersect(ray, &hit)) return false;
+  interaction(ray, hit, si);
+  return true;
+}
+
+void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* si) const {
   si->t = hit.t;
   ShadingPoint& sp = si->sp;
   sp.p = ray.origin + ray.dir * hit.t;
@@ -150,7 +155,6 @@ bool Scene::intersect(const Ray& ray, SurfaceInteraction* si) const {
   }
   sp.front_face = dot(ray.dir, sp.ng) < 0;
   if (si->material->normal_map) apply_normal_map(*si->material, &sp);
-  return true;
 }
 
 void apply_normal_map(const Material& material, ShadingPoint* sp) {

@@ -86,6 +86,8 @@ class Scene {
   void finalize_with_lights(const std::vector<PunctualLight>& punctual);
 
   bool intersect(const Ray& ray, SurfaceInteraction* si) const;
+  // The surface point of a hit `ray` found (by intersect() or in a packet with Accel::intersect_packet).
+  void interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* si) const;
   bool occluded(const Ray& ray) const { return accel_.occluded(ray); }
   // The bare ray queries, without shading (for measuring what Embree alone costs).
   const Accel& accel() const { return accel_; }

@@ -65,22 +65,40 @@ void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, 
   uint64_t nonfinite = 0;
   const Scene& scene = *scene_;
   const bool uses_lens = camera_.uses_lens();
+  // Camera rays of up to kGroup neighbouring pixels in a row, at the same sample index, go to Embree as one packet:
+  // they are coherent, and a packet traces them several times faster than one by one. Each pixel still gets its
+  // samples in order, and its paths are the same as if traced alone.
+  constexpr int kGroup = Accel::kPacketSize;
+  PixelSampler samplers[kGroup];
+  Ray rays[kGroup];
+  RayHit hits[kGroup];
+  bool found[kGroup];
   for (int y = y0; y < y1; ++y) {
-    for (int x = x0; x < x1; ++x) {
-      const uint32_t pixel = static_cast<uint32_t>(y) * static_cast<uint32_t>(settings_.width) + static_cast<uint32_t>(x);
+    for (int gx = x0; gx < x1; gx += kGroup) {
+      const int n = std::min(kGroup, x1 - gx);
+      const uint32_t first_pixel =
+          static_cast<uint32_t>(y) * static_cast<uint32_t>(settings_.width) + static_cast<uint32_t>(gx);
       for (uint32_t s = first_sample; s < first_sample + sample_count; ++s) {
-        PixelSampler sampler(settings_.seed, pixel, s, settings_.sampler);
-        Vec2 jitter = sampler.get2d();
-        Vec2 lens;
-        if (uses_lens) lens = sampler.get2d();
-        else sampler.skip2d();
-        Ray ray = camera_.generate_ray(Vec2(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y), lens);
-        Rgb l = trace_path(scene, ray, sampler, settings_.integrator, arena, counters);
-        if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
-          ++nonfinite;
-          l = Rgb(0);
+        for (int i = 0; i < n; ++i) {
+          PixelSampler& sampler = samplers[i];
+          sampler = PixelSampler(settings_.seed, first_pixel + static_cast<uint32_t>(i), s, settings_.sampler);
+          Vec2 jitter = sampler.get2d();
+          Vec2 lens;
+          if (uses_lens) lens = sampler.get2d();
+          else sampler.skip2d();
+          rays[i] = camera_.generate_ray(Vec2(static_cast<float>(gx + i) + jitter.x, static_cast<float>(y) + jitter.y),
+                                         lens);
         }
-        film_.add_sample(x, y, l);
+        scene.accel().intersect_packet(rays, n, hits, found);
+        for (int i = 0; i < n; ++i) {
+          const PrimaryHit primary{found[i], hits[i]};
+          Rgb l = trace_path(scene, rays[i], &primary, samplers[i], settings_.integrator, arena, counters);
+          if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
+            ++nonfinite;
+            l = Rgb(0);
+          }
+          film_.add_sample(gx + i, y, l);
+        }
       }
     }
   }

@@ -6,10 +6,13 @@
 #include <OpenImageIO/imageio.h>
 
 #include <cmath>
+#include <random>
 
 #include "renderer/gltf_loader.h"
 #include "renderer/job.h"
+#include "renderer/sampling.h"
 #include "renderer/scene_error.h"
+#include "renderer/scene_loader.h"
 #include "tests/renderer/gltf_fixture.h"
 
 namespace tessera {
@@ -657,6 +660,94 @@ TEST(GltfTextures, NormalTextureIsApplied) {
   // A rough dielectric is not Lambertian, but tilting its normal 60 degrees away from the light darkens it a lot.
   EXPECT_GT(radiance[0], 0);
   EXPECT_LT(radiance[1] / radiance[0], 0.7);
+}
+
+}  // namespace
+}  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Camera rays go to Embree in packets (Accel::intersect_packet). Each ray of a packet must find what it finds alone,
+// through instances (one mirrored), alpha-masked and blended triangles (filter functions) and spheres, whatever the
+// packet's other rays do and however many of its lanes are in use.
+TEST(Accel, PacketHitsAreTheSingleRayHits) {
+  GltfBuilder b;
+  int grey = b.material({{"pbrMetallicRoughness", {{"baseColorFactor", {0.7, 0.7, 0.7, 1}}}}});
+  std::vector<float> pos = {-0.5f, -0.5f, 0.5f, 0.5f, -0.5f, 0.5f, 0.5f, 0.5f, 0.5f, -0.5f, 0.5f, 0.5f,
+                            -0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, -0.5f, -0.5f, 0.5f, -0.5f};
+  std::vector<uint16_t> idx = {0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7};
+  int cube = b.mesh(pos, idx, grey);
+  json scales = {{1, 1, 1}, {-1, 1, 1}, {1, 2, 1}};
+  for (int i = 0; i < 3; ++i) b.node({{"mesh", cube}, {"translation", {-2.0 + 2 * i, 0, 0}}, {"scale", scales[i]}}, true);
+  int masked = b.material({{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 0.3}}}}, {"alphaMode", "MASK"}});
+  int blended = b.material({{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 0.5}}}}, {"alphaMode", "BLEND"}});
+  int qm, qb;
+  square(b, -1, 0, 1.5f, masked, &qm);
+  square(b, 1, 0, 1.5f, blended, &qb);
+  b.node({{"mesh", qm}, {"translation", {0, 0, 1.5}}}, true);
+  b.node({{"mesh", qb}, {"translation", {0, 0, 1.2}}}, true);
+  b.write(fixture_dir(), "packets");
+  json doc = {{"gltf", "packets.gltf"},
+              {"objects", {{{"shape", "sphere"}, {"center", {0, 1.5, 0}}, {"radius", 0.6}, {"material", "ball"}},
+                           {{"shape", "sphere"}, {"center", {1.5, -1, 0.5}}, {"radius", 0.3}, {"material", "ball"}}}},
+              {"materials", {{"ball", {{"type", "lambert"}}}}},
+              {"camera", {{"from", {0, 1, 6}}, {"to", {0, 0, 0}}, {"fov_deg", 50}}}};
+  SceneLoadOptions opts;
+  opts.asset_root = fixture_dir();
+  std::shared_ptr<Scene> scene = load_scene(doc, "/scene", opts);
+  ASSERT_FALSE(scene->instances.empty());
+
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> uni(0, 1);
+  const Camera camera(scene->camera, 64, 64);
+  int compared = 0, hits = 0, sphere_hits = 0, instance_hits = 0;
+  auto check_packet = [&](const std::vector<Ray>& rays) {
+    RayHit packet[Accel::kPacketSize];
+    bool found[Accel::kPacketSize];
+    scene->accel().intersect_packet(rays.data(), static_cast<int>(rays.size()), packet, found);
+    for (size_t i = 0; i < rays.size(); ++i) {
+      RayHit single;
+      const bool single_found = scene->accel().intersect(rays[i], &single);
+      ASSERT_EQ(found[i], single_found) << "ray " << i;
+      ++compared;
+      if (!single_found) continue;
+      ++hits;
+      sphere_hits += single.is_sphere;
+      instance_hits += single.instance != kNoInstance;
+      EXPECT_EQ(packet[i].is_sphere, single.is_sphere);
+      EXPECT_EQ(packet[i].object, single.object);
+      EXPECT_EQ(packet[i].instance, single.instance);
+      EXPECT_EQ(packet[i].prim_id, single.prim_id);
+      // Embree's packet kernels may round differently from its single-ray ones (spheres), never more than that.
+      EXPECT_NEAR(packet[i].t, single.t, 1e-5f * single.t);
+      EXPECT_NEAR(packet[i].u, single.u, 1e-4f);
+      EXPECT_NEAR(packet[i].v, single.v, 1e-4f);
+    }
+  };
+  // Camera rays of neighbouring pixels, as the renderer sends them, in packets of every size from 1 to 8.
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64;) {
+      const int n = 1 + (x + y) % Accel::kPacketSize;
+      std::vector<Ray> rays;
+      for (int i = 0; i < n && x < 64; ++i, ++x)
+        rays.push_back(camera.generate_ray(Vec2(x + uni(rng), y + uni(rng)), Vec2(0.5f, 0.5f)));
+      check_packet(rays);
+    }
+  // Incoherent rays from anywhere in the scene's bounds in any direction, full packets.
+  const Bounds& bounds = scene->bounds();
+  for (int p = 0; p < 512; ++p) {
+    std::vector<Ray> rays(Accel::kPacketSize);
+    for (Ray& r : rays) {
+      r.origin = bounds.lo + (bounds.hi - bounds.lo) * Vec3(uni(rng), uni(rng), uni(rng));
+      r.dir = sample_uniform_sphere(Vec2(uni(rng), uni(rng)));
+    }
+    check_packet(rays);
+  }
+  // The scene was hit in every way the test is about.
+  EXPECT_GT(hits, compared / 4);
+  EXPECT_GT(sphere_hits, 50);
+  EXPECT_GT(instance_hits, 50);
 }
 
 }  // namespace
