@@ -6,10 +6,11 @@
 
 namespace tessera {
 
-// Map coordinates: u = 0.5 + atan2(x, -z) / 2pi (u = 0.5 looks down -z), v = acos(y) / pi (v = 0 at +y).
+// Map coordinates: u = 0.5 + atan2(x, -z) / 2pi (u = 0.5 looks down -z), v = acos(y) / pi (v = 0 at +y), with
+// acos(y) as atan2(sqrt(x^2 + z^2), y): the same angle for a unit vector, and well conditioned at the poles.
 Vec2 EnvironmentMap::direction_to_uv(const Vec3& d) {
-  float u = 0.5f + std::atan2(d.x, -d.z) * kInv2Pi;
-  float v = std::acos(clamp(d.y, -1.0f, 1.0f)) * kInvPi;
+  float u = 0.5f + fast_atan2(d.x, -d.z) * kInv2Pi;
+  float v = fast_atan2(std::sqrt(d.x * d.x + d.z * d.z), d.y) * kInvPi;
   return {u - std::floor(u), v};
 }
 

@@ -14,6 +14,21 @@ inline constexpr float kInv2Pi = 0.15915494309189533577f;
 inline constexpr float kInv4Pi = 0.07957747154594766788f;
 inline constexpr float kInfinity = std::numeric_limits<float>::infinity();
 
+// atan2(y, x) in [-pi, pi]: the angle folded into [0, pi/4] (t = min/max of |x|, |y|), there the odd polynomial of
+// Abramowitz and Stegun 4.4.49 (|error| <= 2e-8), then unfolded. Several times faster than the library call, which
+// ran twice for every environment lookup. atan2(0, 0) is 0 (or pi from -0 or negative x, as the library's).
+inline float fast_atan2(float y, float x) {
+  const float ax = std::abs(x), ay = std::abs(y);
+  const float hi = std::max(ax, ay), lo = std::min(ax, ay);
+  const float t = hi > 0 ? lo / hi : 0.0f;
+  const float t2 = t * t;
+  float r = t * (1.0f + t2 * (-0.3333314528f + t2 * (0.1999355085f + t2 * (-0.1420889944f + t2 * (0.1065626393f +
+                t2 * (-0.0752896400f + t2 * (0.0429096138f + t2 * (-0.0161657367f + t2 * 0.0028662257f))))))));
+  if (ay > ax) r = 1.57079632679489661923f - r;
+  if (std::signbit(x)) r = kPi - r;
+  return std::copysign(r, y);
+}
+
 struct Vec2 {
   float x = 0, y = 0;
   constexpr Vec2() = default;

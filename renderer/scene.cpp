@@ -80,8 +80,8 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     sp.p = s.center + n * s.radius;
     sp.ng = n;
     sp.frame = Frame::from_normal_tangent(n, Vec3(-n.z, 0, n.x));
-    float phi = std::atan2(n.z, n.x);
-    sp.uv = Vec2(0.5f + phi * kInv2Pi, std::acos(clamp(n.y, -1.0f, 1.0f)) * kInvPi);
+    float phi = fast_atan2(n.z, n.x);
+    sp.uv = Vec2(0.5f + phi * kInv2Pi, fast_atan2(std::sqrt(n.x * n.x + n.z * n.z), n.y) * kInvPi);
     sp.uv1 = sp.uv;
     sp.vertex_color = Rgb(1);
     si->material = materials[s.material].get();
