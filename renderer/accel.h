@@ -41,7 +41,7 @@ class Accel {
   bool occluded(const Ray& ray) const;
   // Closest hits of up to kPacketSize rays traced together as one Embree packet: faster than one by one for
   // coherent rays (camera rays through neighbouring pixels). found[i] says whether rays[i] hit; each hit is the one
-  // intersect() would report.
+  // intersect() would report (Embree's packet kernels may round a sphere hit's t and normal differently).
   static constexpr int kPacketSize = 8;
   void intersect_packet(const Ray* rays, int count, RayHit* hits, bool* found) const;
 

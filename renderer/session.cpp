@@ -67,7 +67,7 @@ void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, 
   const bool uses_lens = camera_.uses_lens();
   // Camera rays of up to kGroup neighbouring pixels in a row, at the same sample index, go to Embree as one packet:
   // they are coherent, and a packet traces them several times faster than one by one. Each pixel still gets its
-  // samples in order, and its paths are the same as if traced alone.
+  // samples in order, and its paths are those it would trace alone (up to Embree's rounding of sphere hits).
   constexpr int kGroup = Accel::kPacketSize;
   PixelSampler samplers[kGroup];
   Ray rays[kGroup];
