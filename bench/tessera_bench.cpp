@@ -222,54 +222,53 @@ RayBatch collect_rays(const Scene& scene, const RenderSettings& s) {
   return batch;
 }
 
-// Rays per second of Embree alone over `rays`, on the pool.
-double raw_rate(const Scene& scene, const std::vector<Ray>& rays, bool occlusion, ThreadPool& pool) {
-  if (rays.empty()) return 0;
-  const size_t chunk = 4096, chunks = (rays.size() + chunk - 1) / chunk;
+// Rays per second of `count` rays traced by `trace(begin, end)` (which returns how many of rays [begin, end) hit, so
+// the work is not optimised away), in chunks on the pool, repeated for at least half a second.
+template <typename Trace>
+double timed_rate(size_t count, ThreadPool& pool, const Trace& trace) {
+  if (count == 0) return 0;
+  const size_t chunk = 4096, chunks = (count + chunk - 1) / chunk;
   std::vector<uint64_t> hits(pool.size(), 0);
   auto start = Clock::now();
   int repeats = 0;
   do {
     pool.parallel_for(chunks, [&](size_t c, int worker) {
-      uint64_t h = 0;
-      for (size_t i = c * chunk; i < std::min(rays.size(), (c + 1) * chunk); ++i) {
-        if (occlusion) {
-          h += scene.accel().occluded(rays[i]);
-        } else {
-          RayHit hit;
-          h += scene.accel().intersect(rays[i], &hit);
-        }
-      }
-      hits[worker] += h;
+      hits[worker] += trace(c * chunk, std::min(count, (c + 1) * chunk));
     });
     ++repeats;
   } while (seconds_since(start) < 0.5);
-  return static_cast<double>(rays.size()) * repeats / seconds_since(start);
+  return static_cast<double>(count) * repeats / seconds_since(start);
+}
+
+// Rays per second of Embree alone over `rays`, one by one.
+double raw_rate(const Scene& scene, const std::vector<Ray>& rays, bool occlusion, ThreadPool& pool) {
+  return timed_rate(rays.size(), pool, [&](size_t begin, size_t end) {
+    uint64_t h = 0;
+    for (size_t i = begin; i < end; ++i) {
+      if (occlusion) {
+        h += scene.accel().occluded(rays[i]);
+      } else {
+        RayHit hit;
+        h += scene.accel().intersect(rays[i], &hit);
+      }
+    }
+    return h;
+  });
 }
 
 // Rays per second of Embree alone over `rays` traced in packets of neighbours (rays are in scanline order).
 double raw_packet_rate(const Scene& scene, const std::vector<Ray>& rays, ThreadPool& pool) {
-  if (rays.empty()) return 0;
-  const size_t chunk = 4096, chunks = (rays.size() + chunk - 1) / chunk;
-  std::vector<uint64_t> hits(pool.size(), 0);
-  auto start = Clock::now();
-  int repeats = 0;
-  do {
-    pool.parallel_for(chunks, [&](size_t c, int worker) {
-      uint64_t h = 0;
-      RayHit hit[Accel::kPacketSize];
-      bool found[Accel::kPacketSize];
-      const size_t end = std::min(rays.size(), (c + 1) * chunk);
-      for (size_t i = c * chunk; i < end; i += Accel::kPacketSize) {
-        const int n = static_cast<int>(std::min<size_t>(Accel::kPacketSize, end - i));
-        scene.accel().intersect_packet(&rays[i], n, hit, found);
-        for (int k = 0; k < n; ++k) h += found[k];
-      }
-      hits[worker] += h;
-    });
-    ++repeats;
-  } while (seconds_since(start) < 0.5);
-  return static_cast<double>(rays.size()) * repeats / seconds_since(start);
+  return timed_rate(rays.size(), pool, [&](size_t begin, size_t end) {
+    uint64_t h = 0;
+    RayHit hit[Accel::kPacketSize];
+    bool found[Accel::kPacketSize];
+    for (size_t i = begin; i < end; i += Accel::kPacketSize) {
+      const int n = static_cast<int>(std::min<size_t>(Accel::kPacketSize, end - i));
+      scene.accel().intersect_packet(&rays[i], n, hit, found);
+      for (int k = 0; k < n; ++k) h += found[k];
+    }
+    return h;
+  });
 }
 
 // Heap allocations after the first pass of a render (the first pass warms up per-thread arenas).
