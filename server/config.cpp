@@ -1,8 +1,11 @@
 #include "server/config.h"
 
+#include <algorithm>
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <vector>
 
@@ -51,6 +54,91 @@ std::function<std::string(Config&, const std::string&)> text(std::string Config:
     return "";
   };
 }
+
+// The leading decimal digits of `text` as a number and the rest as its unit; false when there are no digits or they
+// do not fit 64 bits (`*too_large` then).
+bool split_number(std::string_view text, uint64_t* n, std::string_view* unit, bool* too_large) {
+  auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), *n);
+  *too_large = ec == std::errc::result_out_of_range;
+  if (ec != std::errc()) return false;
+  *unit = text.substr(static_cast<size_t>(end - text.data()));
+  return true;
+}
+
+bool same_letters(std::string_view a, std::string_view b) {
+  return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) {
+           return std::tolower(static_cast<unsigned char>(x)) == std::tolower(static_cast<unsigned char>(y));
+         });
+}
+
+constexpr int64_t kMaxDurationS = 36500ll * 86400;  // 100 years: far beyond any retention, far below int64 ms
+
+}  // namespace
+
+std::optional<uint64_t> parse_byte_size(std::string_view text, std::string* error) {
+  const std::string wanted = "must be a size in bytes like 268435456, 512MiB, 2GiB or 1G";
+  auto fail = [&](const std::string& why) -> std::optional<uint64_t> {
+    if (error) *error = why;
+    return std::nullopt;
+  };
+  uint64_t n = 0;
+  std::string_view unit;
+  bool too_large = false;
+  if (!split_number(text, &n, &unit, &too_large))
+    return fail(too_large ? "is too large (more than 2^64-1 bytes)"
+                          : wanted + ", not \"" + std::string(text.substr(0, 64)) + "\"");
+  static constexpr struct {
+    const char* unit;
+    uint64_t bytes;
+  } kUnits[] = {{"", 1},
+                {"B", 1},
+                {"K", 1000},
+                {"KB", 1000},
+                {"KiB", 1ull << 10},
+                {"M", 1000000},
+                {"MB", 1000000},
+                {"MiB", 1ull << 20},
+                {"G", 1000000000},
+                {"GB", 1000000000},
+                {"GiB", 1ull << 30},
+                {"T", 1000000000000},
+                {"TB", 1000000000000},
+                {"TiB", 1ull << 40},
+                {"P", 1000000000000000},
+                {"PB", 1000000000000000},
+                {"PiB", 1ull << 50}};
+  for (const auto& u : kUnits) {
+    if (!same_letters(unit, u.unit)) continue;
+    if (n > std::numeric_limits<uint64_t>::max() / u.bytes) return fail("is too large (more than 2^64-1 bytes)");
+    return n * u.bytes;
+  }
+  return fail(wanted + "; \"" + std::string(unit.substr(0, 16)) + "\" is not a unit (B, K, M, G, T, P, KiB ... PiB)");
+}
+
+std::optional<int64_t> parse_duration_s(std::string_view text, std::string* error) {
+  const std::string wanted = "must be a duration like 30d, 12h, 15m, 90s or a number of seconds";
+  auto fail = [&](const std::string& why) -> std::optional<int64_t> {
+    if (error) *error = why;
+    return std::nullopt;
+  };
+  uint64_t n = 0;
+  std::string_view unit;
+  bool too_large = false;
+  const std::string too_long = "is too long (at most 36500d)";
+  if (!split_number(text, &n, &unit, &too_large))
+    return fail(too_large ? too_long : wanted + ", not \"" + std::string(text.substr(0, 64)) + "\"");
+  uint64_t seconds_per = 0;
+  if (unit.empty() || unit == "s") seconds_per = 1;
+  if (unit == "m") seconds_per = 60;
+  if (unit == "h") seconds_per = 3600;
+  if (unit == "d") seconds_per = 86400;
+  if (seconds_per == 0)
+    return fail(wanted + "; \"" + std::string(unit.substr(0, 16)) + "\" is not a unit (s, m, h, d)");
+  if (n > static_cast<uint64_t>(kMaxDurationS) / seconds_per) return fail(too_long);
+  return static_cast<int64_t>(n * seconds_per);
+}
+
+namespace {
 
 const std::vector<Option>& options() {
   static const std::vector<Option> list = {
@@ -114,6 +202,24 @@ const std::vector<Option>& options() {
        "HTTP worker threads; each SSE watcher holds one (default 256)", integer(&Config::http_threads, 4, 4096)},
       {"--keepalive-s", "TESSERA_KEEPALIVE_S", "S", "seconds between SSE keep-alive comments (default 15)",
        integer(&Config::keepalive_s, 1, 3600)},
+      {"--min-free-disk", "TESSERA_MIN_FREE_DISK", "SIZE",
+       "refuse new jobs and uploads (507) while the data dir's disk has less free, e.g. 2GiB (default 256MiB; 0: off)",
+       [](Config& c, const std::string& v) -> std::string {
+         std::string error;
+         auto bytes = parse_byte_size(v, &error);
+         if (!bytes) return error;
+         c.min_free_disk_bytes = *bytes;
+         return "";
+       }},
+      {"--retain-finished", "TESSERA_RETAIN_FINISHED", "DURATION",
+       "delete succeeded/failed/cancelled jobs this long after they end, e.g. 30d, 12h (default 0: keep them)",
+       [](Config& c, const std::string& v) -> std::string {
+         std::string error;
+         auto seconds = parse_duration_s(v, &error);
+         if (!seconds) return error;
+         c.retain_finished_s = *seconds;
+         return "";
+       }},
   };
   return list;
 }

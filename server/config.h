@@ -8,6 +8,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "server/log.h"
@@ -34,6 +35,8 @@ struct Config {
   double grace_s = 20;                  // SIGTERM: running jobs end their pass and checkpoint within this
   int http_threads = 256;               // cpp-httplib's pool: every SSE watcher and keep-alive connection holds one
   int keepalive_s = 15;                 // SSE heartbeat period
+  uint64_t min_free_disk_bytes = 256ull << 20;  // below it on the data dir's filesystem, new jobs/assets are 507
+  int64_t retain_finished_s = 0;                // finished jobs older than this are deleted; 0: kept forever
 };
 
 struct ConfigResult {
@@ -41,6 +44,12 @@ struct ConfigResult {
   std::string error;
   bool help = false;
 };
+
+// "268435456", "512MiB", "2GiB", "1G" (K, M, G, T, P: powers of 1000, with "B" too; KiB ... PiB: of 1024). Nothing
+// when the text is not such a size or does not fit 64 bits, with the reason in `error`.
+std::optional<uint64_t> parse_byte_size(std::string_view text, std::string* error = nullptr);
+// "30d", "12h", "15m", "90s" or plain seconds ("3600"), at most 100 years. Nothing when malformed, with the reason.
+std::optional<int64_t> parse_duration_s(std::string_view text, std::string* error = nullptr);
 
 using GetEnv = std::function<const char*(const char*)>;
 ConfigResult parse_config(int argc, const char* const* argv, const GetEnv& getenv);

@@ -68,6 +68,36 @@ void job_not_found(Response& res) {
   send_problem(res, 404, "no such job");
 }
 
+// ---- storage -------------------------------------------------------------------------------------------------
+
+// Bytes available to the daemon (not to root) on the data directory's filesystem; nothing when it cannot be asked.
+std::optional<uint64_t> available_bytes(const ApiContext& ctx) {
+  std::error_code ec;
+  const std::filesystem::space_info space = std::filesystem::space(ctx.data_dir, ec);
+  if (ec) return std::nullopt;
+  return static_cast<uint64_t>(space.available);
+}
+
+// Answers 507 and returns true when the data directory's filesystem has less than --min-free-disk available: called
+// before a request writes anything. A filesystem that cannot be asked does not refuse (the writes report their own
+// errors).
+bool refused_for_storage(const ApiContext& ctx, Response& res) {
+  if (ctx.min_free_disk_bytes == 0) return false;
+  const std::optional<uint64_t> available = available_bytes(ctx);
+  if (!available) {
+    log(LogLevel::kWarn, "cannot read the free space of the data directory", {{"data_dir", ctx.data_dir.string()}});
+    return false;
+  }
+  if (*available >= ctx.min_free_disk_bytes) return false;
+  log(LogLevel::kWarn, "request refused: the data directory's disk is nearly full",
+      {{"available_bytes", *available}, {"min_free_disk_bytes", ctx.min_free_disk_bytes}});
+  send_problem(res, 507,
+               "the data directory has " + std::to_string(*available) +
+                   " bytes available, less than --min-free-disk (" + std::to_string(ctx.min_free_disk_bytes) +
+                   " bytes); nothing was stored. Retry once finished jobs or assets have been deleted");
+  return true;
+}
+
 // The identity of a file's current version: a preview renamed over gets a new one.
 std::optional<std::string> file_etag(const std::filesystem::path& path) {
   struct stat st {};
@@ -239,6 +269,8 @@ std::variant<Submission, Problem> multipart_submission(ApiContext& ctx, const Re
 }
 
 void post_job(ApiContext& ctx, const Request& req, Response& res) {
+  // Before anything is stored: a multipart submission writes its files as assets first.
+  if (refused_for_storage(ctx, res)) return;
   const Caller caller = caller_of(ctx, req);
   const std::string key = req.get_header_value("Idempotency-Key");
   if (req.has_header("Idempotency-Key") && !valid_idempotency_key(key))
@@ -548,6 +580,7 @@ void stream_events(ApiContext& ctx, const Request& req, Response& res, const std
 // ---- assets --------------------------------------------------------------------------------------------------
 
 void post_asset(ApiContext& ctx, const Request& req, Response& res) {
+  if (refused_for_storage(ctx, res)) return;
   const Caller caller = caller_of(ctx, req);
   const std::string type = media_type(req.get_header_value("Content-Type"));
   std::vector<UploadFile> files;
@@ -614,8 +647,7 @@ std::vector<Route> routes(ApiContext* ctx) {
        [ctx](const Request& q, Response& r) {
          auto j = find_job(*ctx, q, r);
          if (!j) return;
-         if (!ctx->scheduler.remove(j->id)) return job_not_found(r);
-         ctx->events.forget(j->id);
+         if (!remove_job(*ctx, j->id)) return job_not_found(r);
          r.status = 204;
        }},
       {"POST", "/v1/jobs/{id}/cancel", job + "/cancel",
@@ -678,12 +710,19 @@ std::vector<Route> routes(ApiContext* ctx) {
          g.render_threads = ctx->pool ? ctx->pool->size() : 0;
          g.render_threads_busy = ctx->pool ? ctx->pool->busy() : 0;
          g.event_watchers = ctx->events.watchers();
+         g.data_dir_available_bytes = available_bytes(*ctx);
+         g.min_free_disk_bytes = ctx->min_free_disk_bytes;
          r.set_content(ctx->metrics.render(g), "text/plain; version=0.0.4; charset=utf-8");
        }},
       {"GET", "/livez", "/livez", [](const Request&, Response& r) { send_json(r, 200, {{"status", "ok"}}); }},
       {"GET", "/readyz", "/readyz",
        [ctx](const Request&, Response& r) {
-         if (ctx->scheduler.accepting()) return send_json(r, 200, {{"status", "ready"}});
+         // Ready with a nearly full disk too: reads go on; only new jobs and uploads are refused (507).
+         const std::optional<uint64_t> available = available_bytes(*ctx);
+         json storage = {{"available_bytes", available ? json(*available) : json(nullptr)},
+                         {"min_free_disk_bytes", ctx->min_free_disk_bytes},
+                         {"below_minimum", available && *available < ctx->min_free_disk_bytes}};
+         if (ctx->scheduler.accepting()) return send_json(r, 200, {{"status", "ready"}, {"storage", storage}});
          send_problem(r, 503, "not accepting jobs (starting or shutting down)");
        }},
       {"GET", "/", "/",
@@ -778,6 +817,12 @@ std::vector<RouteInfo> api_routes() {
   std::vector<RouteInfo> out;
   for (const Route& r : routes(nullptr)) out.push_back({r.method, r.openapi_path});
   return out;
+}
+
+bool remove_job(ApiContext& ctx, const std::string& id, std::optional<int64_t> only_finished_before_ms) {
+  if (!ctx.scheduler.remove(id, only_finished_before_ms)) return false;
+  ctx.events.forget(id);
+  return true;
 }
 
 std::function<std::filesystem::path(const std::string&, const std::string&)> asset_resolver(const AssetStore& assets) {

@@ -4,6 +4,9 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -38,6 +41,10 @@ struct ApiContext {
   int max_queued_per_user = 0;
   std::vector<std::string> cors_origins;
   int keepalive_s = 15;
+  // Requests that store client data (jobs, assets) are refused with 507 while the filesystem of `data_dir` has
+  // less than this available to the daemon; 0: never.
+  uint64_t min_free_disk_bytes = 0;
+  std::filesystem::path data_dir;
 };
 
 // Every route the API serves, as OpenAPI names it ("/v1/jobs/{id}"), for the test that holds the two in step.
@@ -50,6 +57,11 @@ std::vector<RouteInfo> api_routes();
 // Registers the routes and the error, exception and logging handlers on `server`, and the scheduler hooks that
 // feed the event streams and metrics. `ctx` must outlive both.
 void install_api(httplib::Server& server, ApiContext& ctx);
+
+// Deletes a job as DELETE /v1/jobs/{id} does: its render stopped, its files and store row gone, its event history
+// forgotten. With `only_finished_before_ms` (the retention sweep), only a job that ended before that time; false when
+// nothing was deleted.
+bool remove_job(ApiContext& ctx, const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt);
 
 // The asset resolver jobs use: a 64-hex asset id to its main file; anything else is a SceneError at `pointer`.
 std::function<std::filesystem::path(const std::string&, const std::string&)> asset_resolver(const AssetStore& assets);

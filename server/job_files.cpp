@@ -5,7 +5,6 @@
 
 #include <atomic>
 #include <cerrno>
-#include <cstring>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -21,11 +20,27 @@ namespace {
 
 std::atomic<uint64_t> g_temp_counter{0};
 
-void fsync_path(const fs::path& p, bool directory) {
-  int fd = ::open(p.c_str(), (directory ? O_RDONLY | O_DIRECTORY : O_RDONLY) | O_CLOEXEC);
-  if (fd < 0) return;  // best effort: durability, not correctness, depends on it
+// The directory's entry of a renamed file: best effort, durability (not correctness) depends on it.
+void fsync_dir(const fs::path& p) {
+  int fd = ::open(p.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
   ::fsync(fd);
   ::close(fd);
+}
+
+// A file just written, before it is renamed over the last good version: a filesystem that allocates late (NFS,
+// XFS, btrfs, a quota) reports ENOSPC or EIO only here, and a file whose data never reached the disk must not replace
+// a good one. 0 or the errno.
+int fsync_file(const fs::path& p) {
+  int fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return errno;
+  const int error = ::fsync(fd) == 0 ? 0 : errno;
+  ::close(fd);
+  return error;
+}
+
+[[noreturn]] void write_failed(JobFile f, int error) {
+  throw std::system_error(error, std::generic_category(), std::string("cannot write ") + job_file_name(f));
 }
 
 }  // namespace
@@ -64,6 +79,35 @@ fs::path JobFiles::path(const std::string& id, JobFile f) const {
 
 void JobFiles::write_with(const std::string& id, JobFile f,
                           const std::function<void(const std::string&)>& writer) const {
+  publish(id, f, writer, false);
+}
+
+void JobFiles::write(const std::string& id, JobFile f, std::string_view bytes) const {
+  publish(
+      id, f,
+      [&](const std::string& temp) {
+        // Plain POSIX calls on one descriptor: every write, the fsync and the close report their own errno.
+        const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+        if (fd < 0) write_failed(f, errno);
+        int error = 0;
+        for (size_t done = 0; done < bytes.size() && error == 0;) {
+          const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
+          if (n < 0 && errno == EINTR) continue;
+          if (n <= 0) {
+            error = n < 0 ? errno : EIO;
+          } else {
+            done += static_cast<size_t>(n);
+          }
+        }
+        if (error == 0 && ::fsync(fd) != 0) error = errno;
+        if (::close(fd) != 0 && error == 0) error = errno;
+        if (error != 0) write_failed(f, error);
+      },
+      true);
+}
+
+void JobFiles::publish(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer,
+                       bool writer_synced) const {
   const fs::path final_path = path(id, f);
   // The folder is made when the job starts rendering; if it is gone, the job was deleted: write nothing.
   if (!fs::is_directory(final_path.parent_path()))
@@ -74,23 +118,15 @@ void JobFiles::write_with(const std::string& id, JobFile f,
                                   std::to_string(g_temp_counter.fetch_add(1)) + final_path.extension().string());
   try {
     writer(temp.string());
-    fsync_path(temp, false);
+    if (!writer_synced)
+      if (int error = fsync_file(temp); error != 0) write_failed(f, error);
     fs::rename(temp, final_path);
   } catch (...) {
     std::error_code ignored;
     fs::remove(temp, ignored);
     throw;
   }
-  fsync_path(final_path.parent_path(), true);
-}
-
-void JobFiles::write(const std::string& id, JobFile f, std::string_view bytes) const {
-  write_with(id, f, [&](const std::string& temp) {
-    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
-    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-    out.close();
-    if (!out) throw std::runtime_error("cannot write " + temp + ": " + std::strerror(errno));
-  });
+  fsync_dir(final_path.parent_path());
 }
 
 std::optional<std::string> JobFiles::read(const std::string& id, JobFile f) const {

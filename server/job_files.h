@@ -25,10 +25,11 @@ class JobFiles {
   std::filesystem::path dir(const std::string& id) const;
   std::filesystem::path path(const std::string& id, JobFile f) const;
 
-  // Writes `bytes` atomically (temp file, fsync, rename).
+  // Writes `bytes` atomically (temp file, fsync, rename). On failure (a full disk: std::system_error with ENOSPC,
+  // "cannot write checkpoint.bin") the file's last version stays as it was and no temp file is left.
   void write(const std::string& id, JobFile f, std::string_view bytes) const;
   // Atomically publishes a file written by `writer` to the temp path it is given (which keeps the final extension,
-  // for writers that choose the format by it).
+  // for writers that choose the format by it); fsynced before the rename, failing like write().
   void write_with(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer) const;
   // The file's bytes, or nothing when it does not exist.
   std::optional<std::string> read(const std::string& id, JobFile f) const;
@@ -36,6 +37,9 @@ class JobFiles {
   void remove(const std::string& id, JobFile f) const;
 
  private:
+  void publish(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer,
+               bool writer_synced) const;
+
   std::filesystem::path root_;
 };
 

@@ -48,6 +48,7 @@ struct JobFilter {
   std::vector<JobState> states;        // any of these (with `state`, its union)
   std::optional<std::string> owner;    // only this owner's jobs
   std::optional<int64_t> before_seq;   // only jobs submitted before this one (cursor)
+  std::optional<int64_t> finished_before_ms;  // only jobs that ended before this time (retention)
   int limit = 100;
 };
 
@@ -78,7 +79,9 @@ class JobStore {
   virtual std::optional<JobRecord> get(const std::string& id, bool with_document = false) = 0;
   // Newest first (by seq).
   virtual std::vector<JobRecord> list(const JobFilter& filter) = 0;
-  virtual bool remove(const std::string& id) = 0;
+  // Deletes a job; with `only_finished_before_ms`, only if it has ended (succeeded, failed, cancelled) before that
+  // time, checked in the same step (a job requeued meanwhile is kept). False when nothing was deleted.
+  virtual bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt) = 0;
   // Puts jobs left running by a previous process back in the queue; returns how many.
   virtual int requeue_running() = 0;
 };

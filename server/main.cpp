@@ -19,6 +19,7 @@
 #include "server/job_files.h"
 #include "server/log.h"
 #include "server/metrics.h"
+#include "server/retention.h"
 #include "server/scheduler.h"
 #include "server/sqlite_job_store.h"
 
@@ -67,7 +68,8 @@ int run(const Config& config) {
   limits.max_work = config.max_work;
   limits.resolve_asset = scheduler_options.resolve_asset;
   ApiContext ctx{store,  files, scheduler, assets, events, *auth, metrics, &pool, limits, config.max_body_bytes,
-                 config.max_user_priority, config.max_queued_per_user, config.cors_origins, config.keepalive_s};
+                 config.max_user_priority, config.max_queued_per_user, config.cors_origins, config.keepalive_s,
+                 config.min_free_disk_bytes, data_dir};
   httplib::Server http;
   // Every open event stream and keep-alive connection holds one of these threads.
   const int http_threads = config.http_threads;
@@ -86,6 +88,11 @@ int run(const Config& config) {
     return 1;
   }
   scheduler.start();
+  // Finished jobs older than --retain-finished go as DELETE /v1/jobs/{id} would delete them.
+  RetentionSweeper retention(
+      store, metrics, config.retain_finished_s,
+      [&ctx](const std::string& id, int64_t cutoff_ms) { return remove_job(ctx, id, cutoff_ms); });
+  retention.start();
 
   std::atomic<bool> listening_done{false};
   std::thread signal_thread([&] {
@@ -104,6 +111,7 @@ int run(const Config& config) {
       log(LogLevel::kInfo, "stopping: no new jobs; running ones end their pass and checkpoint",
           {{"signal", sig == SIGINT ? "SIGINT" : "SIGTERM"}, {"grace_s", config.grace_s}});
       scheduler.begin_drain();
+      retention.stop();
       events.close();
       // stop() is a no-op until the listen loop runs; repeat until it has taken effect.
       while (!listening_done.load()) {
@@ -125,6 +133,8 @@ int run(const Config& config) {
        {"max_jobs", config.max_jobs},
        {"http_threads", config.http_threads},
        {"tokens", auth->enabled()},
+       {"min_free_disk_bytes", config.min_free_disk_bytes},
+       {"retain_finished_s", config.retain_finished_s},
        {"config", config.config_file}});
 
   const auto started_stop = std::chrono::steady_clock::now();
@@ -136,6 +146,7 @@ int run(const Config& config) {
 
   // Running renders end their pass (and checkpoint) within the grace time, else are cancelled; their jobs go back
   // to the queue and resume from the checkpoints on the next start.
+  retention.stop();
   scheduler.shutdown(config.grace_s);
   events.close();
   log(LogLevel::kInfo, "stopped");

@@ -60,6 +60,18 @@ std::string Metrics::render(const Gauges& g) const {
   out << "# HELP tessera_event_watchers Server-Sent Events streams waiting for events.\n"
       << "# TYPE tessera_event_watchers gauge\n"
       << "tessera_event_watchers " << g.event_watchers << "\n";
+  out << "# HELP tessera_jobs_expired_total Finished jobs deleted by the retention sweep (--retain-finished).\n"
+      << "# TYPE tessera_jobs_expired_total counter\n"
+      << "tessera_jobs_expired_total " << expired_jobs_.load(std::memory_order_relaxed) << "\n";
+  if (g.data_dir_available_bytes)
+    out << "# HELP tessera_data_dir_available_bytes Bytes available to the daemon on the data directory's "
+           "filesystem.\n"
+        << "# TYPE tessera_data_dir_available_bytes gauge\n"
+        << "tessera_data_dir_available_bytes " << *g.data_dir_available_bytes << "\n";
+  out << "# HELP tessera_min_free_disk_bytes Available bytes below which new jobs and uploads are refused "
+         "(--min-free-disk; 0: never).\n"
+      << "# TYPE tessera_min_free_disk_bytes gauge\n"
+      << "tessera_min_free_disk_bytes " << g.min_free_disk_bytes << "\n";
   std::lock_guard lock(mutex_);
   out << "# HELP tessera_job_duration_seconds Render time of jobs that ended (succeeded, failed or cancelled).\n"
       << "# TYPE tessera_job_duration_seconds histogram\n";

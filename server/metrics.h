@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include "server/job_state.h"
@@ -18,12 +19,15 @@ class Metrics {
   void count_request(const std::string& route, int status);
   void add_samples(uint64_t pixel_samples) { samples_.fetch_add(pixel_samples, std::memory_order_relaxed); }
   void observe_job_duration(double seconds);
+  void count_expired_job() { expired_jobs_.fetch_add(1, std::memory_order_relaxed); }
 
   struct Gauges {
     std::map<JobState, int> jobs;
     int render_threads = 0;
     int render_threads_busy = 0;
     size_t event_watchers = 0;
+    std::optional<uint64_t> data_dir_available_bytes;  // nothing when the filesystem cannot be asked
+    uint64_t min_free_disk_bytes = 0;
   };
   std::string render(const Gauges& g) const;
 
@@ -36,6 +40,7 @@ class Metrics {
   uint64_t duration_count_ = 0;
   double duration_sum_ = 0;
   std::atomic<uint64_t> samples_{0};
+  std::atomic<uint64_t> expired_jobs_{0};
 };
 
 }  // namespace tessera::server

@@ -19,6 +19,7 @@ constexpr Kind kKinds[] = {
     {422, "invalid-document", "Invalid document"},
     {500, "internal-error", "Internal server error"},
     {503, "unavailable", "Service unavailable"},
+    {507, "insufficient-storage", "Insufficient storage"},
 };
 const Kind& kind_of(int status) {
   for (const Kind& k : kKinds)

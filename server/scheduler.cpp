@@ -225,8 +225,10 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
           std::lock_guard lock(mutex_);
           slot->progress = jp;
         }
-        // A missed checkpoint or preview is not worth the render.
-        log(LogLevel::kWarn, "cannot publish progress", {{"job", id}, {"error", e.what()}});
+        // A missed checkpoint or preview (a full disk) is not worth the render: the last good checkpoint stays,
+        // and the next pass writes both again.
+        log(LogLevel::kWarn, "cannot publish progress; retried after the next pass",
+            {{"job", id}, {"error", e.what()}});
       }
     });
     detach();
@@ -386,15 +388,16 @@ Scheduler::Outcome Scheduler::requeue(const std::string& id) {
   return Outcome::kDone;
 }
 
-bool Scheduler::remove(const std::string& id) {
+bool Scheduler::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
   std::lock_guard lock(mutex_);
   if (auto it = running_.find(id); it != running_.end()) {
+    if (only_finished_before_ms) return false;  // still (or again) rendering, or not yet reaped: not expired
     it->second->delete_requested = true;
     if (it->second->session) it->second->session->cancel();
     store_.remove(id);
     return true;  // the render's thread removes the files once it has stopped writing them
   }
-  if (!store_.remove(id)) return false;
+  if (!store_.remove(id, only_finished_before_ms)) return false;
   files_.remove(id);
   log(LogLevel::kInfo, "job deleted", {{"job", id}});
   return true;

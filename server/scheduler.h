@@ -74,8 +74,10 @@ class Scheduler {
   Outcome resume(const std::string& id);
   // failed or cancelled -> queued, from scratch (its checkpoint, preview and outputs are deleted).
   Outcome requeue(const std::string& id);
-  // Deletes a job and its files (cancelling its render first); false for an unknown id.
-  bool remove(const std::string& id);
+  // Deletes a job and its files (cancelling its render first); false for an unknown id. With
+  // `only_finished_before_ms` (retention), only a job that ended before that time and has no render thread left;
+  // anything else is kept (false).
+  bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt);
 
  private:
   class RenderSlot;

@@ -399,19 +399,29 @@ std::vector<JobRecord> SqliteJobStore::list(const JobFilter& filter) {
   }
   if (filter.owner) add("owner = ?2");
   if (filter.before_seq) add("seq < ?3");
+  if (filter.finished_before_ms) add("finished_at < ?4");
   Statement s(*this, std::string("SELECT ") + kColumns + " FROM jobs" + where + " ORDER BY seq DESC LIMIT ?1");
   s.bind(1, static_cast<int64_t>(filter.limit));
   if (filter.owner) s.bind(2, *filter.owner);
   if (filter.before_seq) s.bind(3, *filter.before_seq);
+  if (filter.finished_before_ms) s.bind(4, *filter.finished_before_ms);
   std::vector<JobRecord> out;
   while (s.step()) out.push_back(s.record(false));
   return out;
 }
 
-bool SqliteJobStore::remove(const std::string& id) {
+bool SqliteJobStore::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
   std::lock_guard lock(mutex_);
-  Statement s(*this, "DELETE FROM jobs WHERE id = ?1");
+  std::string sql = "DELETE FROM jobs WHERE id = ?1";
+  if (only_finished_before_ms) {
+    std::string terminal;
+    for (JobState st : kAllJobStates)
+      if (is_terminal(st)) terminal += (terminal.empty() ? "'" : ",'") + std::string(job_state_name(st)) + "'";
+    sql += " AND state IN (" + terminal + ") AND finished_at < ?2";
+  }
+  Statement s(*this, sql);
   s.bind(1, id);
+  if (only_finished_before_ms) s.bind(2, *only_finished_before_ms);
   s.step();
   return sqlite3_changes(db_) > 0;
 }

@@ -34,7 +34,7 @@ class SqliteJobStore final : public JobStore {
   std::map<JobState, int> count_by_state(const std::optional<std::string>& owner) override;
   std::optional<JobRecord> get(const std::string& id, bool with_document) override;
   std::vector<JobRecord> list(const JobFilter& filter) override;
-  bool remove(const std::string& id) override;
+  bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt) override;
   int requeue_running() override;
 
   static constexpr int kSchemaVersion = 2;

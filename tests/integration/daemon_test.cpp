@@ -322,7 +322,10 @@ TEST_F(DaemonTest, RoutesAndTheContract) {
   expect_problem(client_->Get("/v1/jobs?limit=0"), 400, std::nullopt, "bad limit");
   expect_problem(client_->Get("/v1/schemas/..%2Fopenapi.json"), 404, std::nullopt, "schema traversal");
 
-  EXPECT_EQ(fetch(*client_, "/readyz"), R"({"status":"ready"})");
+  const json ready = json::parse(fetch(*client_, "/readyz"));
+  EXPECT_EQ(ready["status"], "ready") << ready.dump();
+  EXPECT_EQ(ready["storage"]["min_free_disk_bytes"], 256u << 20) << ready.dump();  // the default --min-free-disk
+  EXPECT_EQ(ready["storage"]["below_minimum"], false) << ready.dump();
   const json openapi = json::parse(fetch(*client_, "/v1/openapi.json"));
   EXPECT_TRUE(openapi["paths"].contains("/v1/jobs/{id}/result.exr"));
   const json job_schema = json::parse(fetch(*client_, "/v1/schemas/job.schema.json"));

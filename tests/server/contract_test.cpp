@@ -59,12 +59,15 @@ TEST(Contract, OpenApiReferencesResolve) {
 }
 
 TEST(Contract, ProblemsMatchTheirSchema) {
-  for (int status : {400, 404, 405, 409, 413, 415, 422, 500, 503}) {
+  for (int status : {400, 404, 405, 409, 413, 415, 422, 500, 503, 507}) {
     Problem p{status, "something", std::string("/render/width")};
     auto e = contract_schemas().validate(p.to_json(), "problem.schema.json");
     EXPECT_FALSE(e) << status << ": " << e->pointer << " " << e->message;
     EXPECT_FALSE(p.title().empty());
   }
+  const Problem full{507, "", std::nullopt};
+  EXPECT_EQ(full.type(), "https://tessera.dev/problems/insufficient-storage");
+  EXPECT_EQ(full.title(), "Insufficient storage");
 }
 
 TEST(Contract, JobStatusMatchesItsSchema) {

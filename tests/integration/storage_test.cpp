@@ -1,0 +1,216 @@
+// Disk space and retention, with the real daemon: --min-free-disk above any disk refuses every request that would
+// store client data (507, a problem document, nothing written) while reads go on; --retain-finished deletes ended
+// jobs (row and folder) once they are older than the retention and never touches queued, running or paused ones.
+#include <signal.h>
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <functional>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "server/contract.h"
+#include "tests/integration/daemon.h"
+#include "tests/server/test_util.h"
+
+namespace tessera::server::test {
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+json small_job(int size, int spp) {
+  json doc = cornell_job();
+  doc["render"]["width"] = size;
+  doc["render"]["height"] = size;
+  doc["render"]["spp"] = spp;
+  return doc;
+}
+
+// Renders until cancelled (65536 spp of 128x128 on two threads take minutes).
+json long_job() {
+  return small_job(128, 65536);
+}
+
+// One triangle in a .gltf with its .bin: a valid upload.
+httplib::MultipartFormDataItems triangle_files() {
+  const float p[9] = {-1, -1, 0, 1, -1, 0, 0, 1, 0};
+  const json gltf = {{"asset", {{"version", "2.0"}}},
+                     {"scene", 0},
+                     {"scenes", {{{"nodes", {0}}}}},
+                     {"nodes", {{{"mesh", 0}}}},
+                     {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}}}}}}},
+                     {"accessors",
+                      {{{"bufferView", 0},
+                        {"componentType", 5126},
+                        {"count", 3},
+                        {"type", "VEC3"},
+                        {"min", {-1, -1, 0}},
+                        {"max", {1, 1, 0}}}}},
+                     {"bufferViews", {{{"buffer", 0}, {"byteLength", 36}}}},
+                     {"buffers", {{{"uri", "tri.bin"}, {"byteLength", 36}}}}};
+  return {{"file", gltf.dump(), "tri.gltf", "model/gltf+json"},
+          {"file", std::string(reinterpret_cast<const char*>(p), sizeof p), "tri.bin", "application/octet-stream"}};
+}
+
+std::string submit(httplib::Client& c, const json& doc) {
+  auto res = c.Post("/v1/jobs", doc.dump(), "application/json");
+  if (!res || res->status != 202) {
+    ADD_FAILURE() << "submit: " << (res ? std::to_string(res->status) + " " + res->body : "no answer");
+    return "";
+  }
+  return json::parse(res->body).value("id", "");
+}
+
+int status_of(httplib::Client& c, const std::string& path) {
+  auto res = c.Get(path);
+  return res ? res->status : -1;
+}
+
+std::string state_of(httplib::Client& c, const std::string& id) {
+  auto res = c.Get("/v1/jobs/" + id);
+  if (!res || res->status != 200) return res ? std::to_string(res->status) : "no answer";
+  return json::parse(res->body).value("state", "");
+}
+
+// Polls until `done`, for at most `timeout_s`; false on timeout.
+bool eventually(const std::function<bool()>& done, double timeout_s) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (done()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return done();
+}
+
+void expect_507(const httplib::Result& res, const std::string& what) {
+  ASSERT_TRUE(res) << what << ": no answer";
+  EXPECT_EQ(res->status, 507) << what << ": " << res->body;
+  EXPECT_EQ(res->get_header_value("Content-Type"), "application/problem+json") << what;
+  const json body = json::parse(res->body, nullptr, false);
+  ASSERT_TRUE(body.is_object()) << what << ": " << res->body;
+  EXPECT_FALSE(contract_schemas().validate(body, "problem.schema.json")) << what << ": " << body.dump();
+  EXPECT_EQ(body.value("status", 0), 507) << what;
+  EXPECT_EQ(body.value("type", ""), "https://tessera.dev/problems/insufficient-storage") << what;
+  const std::string detail = body.value("detail", "");
+  EXPECT_NE(detail.find("bytes available"), std::string::npos) << what << ": " << detail;
+  EXPECT_NE(detail.find("--min-free-disk"), std::string::npos) << what << ": " << detail;
+}
+
+size_t entries_in(const fs::path& dir) {
+  if (!fs::exists(dir)) return 0;
+  return static_cast<size_t>(std::distance(fs::directory_iterator(dir), fs::directory_iterator()));
+}
+
+TEST(StorageGuard, ANearlyFullDiskRefusesNewJobsAndUploadsAndServesReads) {
+  TempDir dir;
+  const fs::path data = dir.path() / "data";
+  // 1000 TiB free is more than any disk the test runs on; a month's retention sweeps once a minute.
+  Daemon daemon(data, {"--threads", "1", "--min-free-disk", "1000TiB", "--retain-finished", "30d"});
+  auto c = daemon.client();
+
+  expect_507(c->Post("/v1/jobs", small_job(16, 2).dump(), "application/json"), "scene job");
+  expect_507(c->Post("/v1/jobs",
+                     json{{"kind", "material"},
+                          {"material", {{"type", "lambert"}}},
+                          {"render", {{"width", 32}, {"height", 32}, {"spp", 4}}}}
+                         .dump(),
+                     "application/json"),
+             "material job");
+  httplib::MultipartFormDataItems multipart = triangle_files();
+  multipart.push_back(
+      {"job",
+       json{{"kind", "scene"}, {"scene", {{"gltf", "tri.gltf"}}}, {"render", {{"width", 8}, {"height", 8}}}}.dump(), "",
+       "application/json"});
+  expect_507(c->Post("/v1/jobs", multipart), "multipart job with its glTF");
+  expect_507(c->Post("/v1/assets", triangle_files()), "multipart asset");
+  expect_507(c->Post("/v1/assets?name=tri.gltf", triangle_files()[0].content, "model/gltf+json"), "raw asset");
+
+  // Reads go on.
+  auto list = c->Get("/v1/jobs");
+  ASSERT_TRUE(list);
+  EXPECT_EQ(list->status, 200);
+  EXPECT_TRUE(json::parse(list->body)["jobs"].empty()) << list->body;
+  for (const char* path : {"/livez", "/v1/materials", "/v1/openapi.json"}) EXPECT_EQ(status_of(*c, path), 200) << path;
+  EXPECT_EQ(status_of(*c, "/v1/jobs/0123456789abcdef0123456789abcdef"), 404);
+  auto ready = c->Get("/readyz");
+  ASSERT_TRUE(ready);
+  EXPECT_EQ(ready->status, 200) << ready->body;
+  const json storage = json::parse(ready->body)["storage"];
+  EXPECT_EQ(storage["min_free_disk_bytes"], 1000ull << 40) << ready->body;
+  EXPECT_TRUE(storage["available_bytes"].is_number_unsigned()) << ready->body;
+  EXPECT_EQ(storage["below_minimum"], true) << ready->body;
+  auto metrics = c->Get("/metrics");
+  ASSERT_TRUE(metrics);
+  EXPECT_EQ(metrics->status, 200);
+  for (const std::string& name :
+       {"tessera_min_free_disk_bytes " + std::to_string(1000ull << 40) + "\n",
+        std::string("tessera_data_dir_available_bytes "), std::string("tessera_jobs_expired_total 0\n"),
+        std::string("tessera_http_requests_total{route=\"/v1/jobs\",code=\"507\"} 3\n")})
+    EXPECT_NE(metrics->body.find(name), std::string::npos) << name << "\n" << metrics->body;
+
+  // Nothing of the refused requests was stored.
+  EXPECT_EQ(entries_in(data / "jobs"), 0u);
+  EXPECT_EQ(entries_in(data / "assets"), 0u);
+
+  // SIGTERM: the sweeper, between two sweeps a minute apart, does not hold the exit up.
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_EQ(daemon.stop(SIGTERM), 0);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(5));
+}
+
+TEST(RetentionSweep, FinishedJobsExpireAndQueuedRunningPausedJobsStay) {
+  TempDir dir;
+  const fs::path data = dir.path() / "data";
+  Daemon daemon(data, {"--threads", "2", "--max-jobs", "2", "--retain-finished", "2s", "--log-level", "debug"});
+  auto c = daemon.client();
+
+  const std::string running = submit(*c, long_job());
+  const std::string tiny = submit(*c, small_job(16, 4));
+  ASSERT_TRUE(eventually([&] { return state_of(*c, tiny) == "succeeded"; }, 30)) << state_of(*c, tiny);
+  EXPECT_TRUE(fs::is_directory(data / "jobs" / tiny));
+  const std::string running2 = submit(*c, long_job());  // takes the slot the tiny job left
+  const std::string queued = submit(*c, long_job());    // both slots busy: waits
+  const std::string paused = submit(*c, long_job());
+  const std::string cancelled = submit(*c, long_job());
+  auto res = c->Post("/v1/jobs/" + paused + "/pause");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 200) << res->body;
+  res = c->Post("/v1/jobs/" + cancelled + "/cancel");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 200) << res->body;
+
+  // The sweep runs every second: the ended jobs go within about 3 s of ending, the row first, then the folder (as
+  // DELETE /v1/jobs/{id} removes them).
+  auto gone = [&](const std::string& id) {
+    return status_of(*c, "/v1/jobs/" + id) == 404 && !fs::exists(data / "jobs" / id);
+  };
+  EXPECT_TRUE(eventually([&] { return gone(tiny) && gone(cancelled); }, 30))
+      << state_of(*c, tiny) << " " << state_of(*c, cancelled) << "\n"
+      << daemon.log();
+  // Another sweep later, the jobs that have not ended are all still there, each older than the retention.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  EXPECT_EQ(state_of(*c, running), "running");
+  EXPECT_EQ(state_of(*c, running2), "running");
+  EXPECT_EQ(state_of(*c, queued), "queued");
+  EXPECT_EQ(state_of(*c, paused), "paused");
+  EXPECT_TRUE(fs::is_directory(data / "jobs" / running));
+  auto list = c->Get("/v1/jobs");
+  ASSERT_TRUE(list);
+  EXPECT_EQ(json::parse(list->body)["jobs"].size(), 4u) << list->body;
+
+  EXPECT_NE(c->Get("/metrics")->body.find("tessera_jobs_expired_total 2\n"), std::string::npos);
+  // One JSON log line per expired job, naming it.
+  std::set<std::string> expired;
+  std::istringstream log(daemon.log());
+  for (std::string line; std::getline(log, line);) {
+    const json entry = json::parse(line, nullptr, false);
+    if (entry.is_object() && entry.value("msg", "") == "finished job expired") expired.insert(entry.value("job", ""));
+  }
+  EXPECT_EQ(expired, (std::set<std::string>{tiny, cancelled})) << daemon.log();
+}
+
+}  // namespace
+}  // namespace tessera::server::test

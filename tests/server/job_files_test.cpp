@@ -1,0 +1,76 @@
+// Job files under a failing disk: a write that cannot complete (here the file-size limit, EFBIG, standing in for a
+// full disk, ENOSPC: both fail write(2) the same way) throws, names the file, leaves the last good version in place
+// and no temp file behind.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/resource.h>
+
+#include <cerrno>
+#include <system_error>
+
+#include "server/job_files.h"
+#include "server/job_id.h"
+#include "tests/server/test_util.h"
+
+namespace tessera::server {
+namespace {
+
+// Lowers the soft file-size limit for the test's lifetime (SIGXFSZ ignored, so write(2) fails with EFBIG).
+class FileSizeLimit {
+ public:
+  explicit FileSizeLimit(rlim_t bytes) {
+    getrlimit(RLIMIT_FSIZE, &saved_);
+    old_handler_ = signal(SIGXFSZ, SIG_IGN);
+    rlimit lowered = saved_;
+    lowered.rlim_cur = bytes;
+    setrlimit(RLIMIT_FSIZE, &lowered);
+  }
+  ~FileSizeLimit() {
+    setrlimit(RLIMIT_FSIZE, &saved_);
+    signal(SIGXFSZ, old_handler_);
+  }
+
+ private:
+  rlimit saved_{};
+  sighandler_t old_handler_ = SIG_DFL;
+};
+
+std::vector<std::string> names_in(const std::filesystem::path& dir) {
+  std::vector<std::string> out;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) out.push_back(e.path().filename().string());
+  return out;
+}
+
+TEST(JobFiles, AFailedWriteKeepsTheLastGoodVersion) {
+  test::TempDir dir;
+  JobFiles files(dir.path());
+  const std::string id = new_job_id();
+  std::filesystem::create_directories(files.dir(id));
+  const std::string good(1000, 'a');
+  files.write(id, JobFile::kCheckpoint, good);
+  {
+    FileSizeLimit limit(4096);
+    try {
+      files.write(id, JobFile::kCheckpoint, std::string(100000, 'b'));
+      ADD_FAILURE() << "a write over the limit succeeded";
+    } catch (const std::system_error& e) {
+      EXPECT_EQ(e.code().value(), EFBIG) << e.what();
+      EXPECT_NE(std::string(e.what()).find("cannot write checkpoint.bin"), std::string::npos) << e.what();
+    }
+    // The same through write_with (the EXR path): a writer that fails midway.
+    EXPECT_THROW(files.write_with(id, JobFile::kResultExr,
+                                  [](const std::string& temp) {
+                                    std::ofstream(temp) << "half";
+                                    throw std::runtime_error("disk full");
+                                  }),
+                 std::runtime_error);
+  }
+  EXPECT_EQ(files.read(id, JobFile::kCheckpoint), good);
+  EXPECT_EQ(names_in(files.dir(id)), std::vector<std::string>{"checkpoint.bin"});
+  // With room again, the next write goes through (a checkpoint is retried at the next pass).
+  files.write(id, JobFile::kCheckpoint, std::string(100000, 'c'));
+  EXPECT_EQ(files.read(id, JobFile::kCheckpoint)->size(), 100000u);
+}
+
+}  // namespace
+}  // namespace tessera::server
