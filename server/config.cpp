@@ -140,6 +140,19 @@ std::optional<int64_t> parse_duration_s(std::string_view text, std::string* erro
 
 namespace {
 
+// A setting read into `field` by `parse`, whose error says what is wrong with the value.
+template <typename T>
+std::function<std::string(Config&, const std::string&)> parsed(T Config::*field,
+                                                               std::optional<T> (*parse)(std::string_view, std::string*)) {
+  return [=](Config& c, const std::string& v) -> std::string {
+    std::string error;
+    const std::optional<T> value = parse(v, &error);
+    if (!value) return error;
+    c.*field = *value;
+    return "";
+  };
+}
+
 const std::vector<Option>& options() {
   static const std::vector<Option> list = {
       {"--listen", "TESSERA_LISTEN", "ADDR", "address to listen on (default 127.0.0.1)",
@@ -204,22 +217,10 @@ const std::vector<Option>& options() {
        integer(&Config::keepalive_s, 1, 3600)},
       {"--min-free-disk", "TESSERA_MIN_FREE_DISK", "SIZE",
        "refuse new jobs and uploads (507) while the data dir's disk has less free, e.g. 2GiB (default 256MiB; 0: off)",
-       [](Config& c, const std::string& v) -> std::string {
-         std::string error;
-         auto bytes = parse_byte_size(v, &error);
-         if (!bytes) return error;
-         c.min_free_disk_bytes = *bytes;
-         return "";
-       }},
+       parsed(&Config::min_free_disk_bytes, parse_byte_size)},
       {"--retain-finished", "TESSERA_RETAIN_FINISHED", "DURATION",
        "delete succeeded/failed/cancelled jobs this long after they end, e.g. 30d, 12h (default 0: keep them)",
-       [](Config& c, const std::string& v) -> std::string {
-         std::string error;
-         auto seconds = parse_duration_s(v, &error);
-         if (!seconds) return error;
-         c.retain_finished_s = *seconds;
-         return "";
-       }},
+       parsed(&Config::retain_finished_s, parse_duration_s)},
   };
   return list;
 }

@@ -24,19 +24,6 @@ const std::vector<std::string> kDaemonArgs = {"--threads",   "2",     "--max-job
                                               "--max-width", "2048",  "--max-height",     "2048",
                                               "--log-level", "debug", "--max-body-bytes", "1048576"};
 
-json small_cornell(int size = 64, int spp = 16) {
-  json doc = cornell_job();
-  doc["render"]["width"] = size;
-  doc["render"]["height"] = size;
-  doc["render"]["spp"] = spp;
-  return doc;
-}
-
-// A job that renders until cancelled (on two threads, 65536 spp of 128x128 take minutes).
-json long_job() {
-  return small_cornell(128, 65536);
-}
-
 std::string submit(httplib::Client& c, const json& doc, json* status = nullptr) {
   auto res = c.Post("/v1/jobs", doc.dump(), "application/json");
   if (!res) {
@@ -132,7 +119,7 @@ class DaemonTest : public testing::Test {
 
 TEST_F(DaemonTest, RendersTheCornellBox) {
   json queued;
-  const std::string id = submit(*client_, small_cornell(), &queued);
+  const std::string id = submit(*client_, cornell_job(64, 16), &queued);
   ASSERT_FALSE(id.empty());
   EXPECT_FALSE(contract_schemas().validate(queued, "job-status.schema.json"));
 
@@ -168,7 +155,7 @@ TEST_F(DaemonTest, RendersTheCornellBox) {
 }
 
 TEST_F(DaemonTest, PreviewWhileRunningThenCancel) {
-  const std::string id = submit(*client_, long_job());
+  const std::string id = submit(*client_, long_cornell_job());
   ASSERT_FALSE(id.empty());
   const json running = wait_for(
       *client_, id, [](const json& s) { return in_state(s, "running") && s["progress"]["passes"].get<int>() >= 1; });
@@ -203,8 +190,8 @@ TEST_F(DaemonTest, PreviewWhileRunningThenCancel) {
 
 TEST_F(DaemonTest, CancelsAQueuedJobAndDeletesARunningOne) {
   // Two long jobs fill both slots; the third waits in the queue.
-  const std::string a = submit(*client_, long_job()), b = submit(*client_, long_job());
-  const std::string c = submit(*client_, long_job());
+  const std::string a = submit(*client_, long_cornell_job()), b = submit(*client_, long_cornell_job());
+  const std::string c = submit(*client_, long_cornell_job());
   wait_for(*client_, b, [](const json& s) { return in_state(s, "running"); });
   EXPECT_TRUE(in_state(get_job(*client_, c), "queued"));
   expect_problem(client_->Get("/v1/jobs/" + c + "/preview.png"), 409, std::nullopt, "preview while queued");
@@ -234,7 +221,7 @@ struct BadRequest {
 };
 
 json patched(const char* patch) {
-  return small_cornell().patch(json::parse(patch));
+  return cornell_job(64, 16).patch(json::parse(patch));
 }
 
 std::vector<BadRequest> bad_requests() {
@@ -280,11 +267,11 @@ std::vector<BadRequest> bad_requests() {
        "/scene/materials/light/radiance/2"},
       {"unknown kind", json_type, patched(R"([{"op":"replace","path":"/kind","value":"video"}])").dump(), 422, "/kind"},
       {"not JSON at all", json_type, "this is not JSON", 400, ""},
-      {"truncated JSON", json_type, small_cornell().dump().substr(0, 100), 400, ""},
+      {"truncated JSON", json_type, cornell_job(64, 16).dump().substr(0, 100), 400, ""},
       {"empty body", json_type, "", 400, ""},
       {"array instead of object", json_type, "[1, 2, 3]", 422, ""},
       {"deep nesting", json_type, std::string(5000, '[') + std::string(5000, ']'), 422, ""},
-      {"wrong content type", "text/plain", small_cornell().dump(), 415, std::nullopt},
+      {"wrong content type", "text/plain", cornell_job(64, 16).dump(), 415, std::nullopt},
       {"form content type", "application/x-www-form-urlencoded", "kind=scene", 415, std::nullopt},
       {"oversized body", json_type, std::string(2 << 20, ' '), 413, std::nullopt},
   };
@@ -345,11 +332,11 @@ TEST(DaemonRestart, FinishedJobsAndFilesSurviveAndRunningJobsGoBackToTheQueue) {
   {
     Daemon daemon(data, kDaemonArgs);
     auto c = daemon.client();
-    done_id = submit(*c, small_cornell(32, 4));
+    done_id = submit(*c, cornell_job(32, 4));
     ASSERT_TRUE(in_state(wait_for(*c, done_id, [](const json& s) { return in_state(s, "succeeded"); }), "succeeded"));
     png = fetch(*c, "/v1/jobs/" + done_id + "/result.png");
     exr = fetch(*c, "/v1/jobs/" + done_id + "/result.exr");
-    long_id = submit(*c, long_job());
+    long_id = submit(*c, long_cornell_job());
     wait_for(*c, long_id, [](const json& s) { return in_state(s, "running"); });
     // SIGTERM: stop accepting, cancel the render, put its job back in the queue, exit 0.
     EXPECT_EQ(daemon.stop(SIGTERM), 0) << daemon.log();
@@ -378,9 +365,9 @@ TEST(DaemonRestart, QueuedJobsRunAfterACrash) {
   {
     Daemon daemon(data, args);
     auto c = daemon.client();
-    long_id = submit(*c, long_job());
+    long_id = submit(*c, long_cornell_job());
     wait_for(*c, long_id, [](const json& s) { return in_state(s, "running"); });
-    json small = small_cornell(32, 4);
+    json small = cornell_job(32, 4);
     small["priority"] = 5;  // runs first once the daemon is back
     queued_id = submit(*c, small);
     std::this_thread::sleep_for(std::chrono::milliseconds(200));

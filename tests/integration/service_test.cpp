@@ -35,17 +35,6 @@ std::vector<std::string> args(std::vector<std::string> extra = {}) {
   return a;
 }
 
-json small_job(int size = 32, int spp = 8) {
-  json doc = cornell_job();
-  doc["render"]["width"] = size;
-  doc["render"]["height"] = size;
-  doc["render"]["spp"] = spp;
-  return doc;
-}
-json long_job() {
-  return small_job(128, 65536);
-}
-
 httplib::Headers bearer(const std::string& token) {
   return {{"Authorization", "Bearer " + token}};
 }
@@ -313,7 +302,7 @@ std::vector<SseEvent> read_events(int port, const std::string& path, const httpl
 
 TEST_F(ServiceTest, JobEventsEndWithTheTerminalStateAndReplayFromLastEventId) {
   start();
-  const std::string id = submit(*client_, small_job(48, 64));
+  const std::string id = submit(*client_, cornell_job(48, 64));
   const auto events = read_events(daemon_->port(), "/v1/jobs/" + id + "/events");
   ASSERT_GE(events.size(), 3u);
   EXPECT_EQ(events.front().type, "state");
@@ -346,11 +335,11 @@ TEST_F(ServiceTest, JobEventsEndWithTheTerminalStateAndReplayFromLastEventId) {
 
 TEST_F(ServiceTest, PrioritiesPauseResumeRequeue) {
   start(args({"--max-jobs", "1"}));
-  const std::string a = submit(*client_, long_job());
+  const std::string a = submit(*client_, long_cornell_job());
   // Wait for a finished pass, not just "running": a pause that arrives while the scene still loads stops the job
   // before its first pass, with nothing to checkpoint (samples_done 0), which is right but not what is tested here.
   wait_for(*client_, a, [](const json& s) { return s["progress"]["passes"].get<int>() >= 1; });
-  const std::string b = submit(*client_, long_job()), c = submit(*client_, long_job());
+  const std::string b = submit(*client_, long_cornell_job()), c = submit(*client_, long_cornell_job());
   EXPECT_EQ(get_job(*client_, b)["queue_position"], 1);
   EXPECT_EQ(get_job(*client_, c)["queue_position"], 2);
   EXPECT_TRUE(get_job(*client_, a)["queue_position"].is_null());
@@ -382,7 +371,7 @@ TEST_F(ServiceTest, PrioritiesPauseResumeRequeue) {
 
 TEST_F(ServiceTest, IdempotencyETagsPaginationRetryAfter) {
   start();
-  const std::string body = small_job(16, 2).dump();
+  const std::string body = cornell_job(16, 2).dump();
   httplib::Headers key = {{"Idempotency-Key", "order-42"}};
   auto first = client_->Post("/v1/jobs", key, body, "application/json");
   expect_status(first, 202, "first");
@@ -391,7 +380,7 @@ TEST_F(ServiceTest, IdempotencyETagsPaginationRetryAfter) {
   expect_status(again, 200, "retry");
   const std::string id = json::parse(first->body)["id"];
   EXPECT_EQ(json::parse(again->body)["id"], id);
-  expect_status(client_->Post("/v1/jobs", key, small_job(16, 3).dump(), "application/json"), 422, "other body");
+  expect_status(client_->Post("/v1/jobs", key, cornell_job(16, 3).dump(), "application/json"), 422, "other body");
   expect_status(client_->Post("/v1/jobs", {{"Idempotency-Key", std::string(300, 'k')}}, body, "application/json"),
                 400, "long key");
   wait_for(*client_, id, in_state("succeeded"));
@@ -406,7 +395,7 @@ TEST_F(ServiceTest, IdempotencyETagsPaginationRetryAfter) {
   EXPECT_EQ(client_->Get("/v1/jobs/" + id + "/result.png", {{"If-None-Match", "\"other\""}})->status, 200);
   // Cursor pagination over 7 jobs, 3 a page: every job once, newest first.
   std::vector<std::string> ids = {id};
-  for (int i = 0; i < 6; ++i) ids.push_back(submit(*client_, small_job(8, 1)));
+  for (int i = 0; i < 6; ++i) ids.push_back(submit(*client_, cornell_job(8, 1)));
   std::vector<std::string> seen;
   std::string cursor;
   for (int page = 0; page < 10; ++page) {
@@ -441,7 +430,7 @@ TEST_F(ServiceTest, TokensIsolateUsersAdminsSeeAllCorsOnlyForConfiguredOrigins) 
   EXPECT_EQ(client_->Get("/metrics")->status, 200);
   EXPECT_EQ(client_->Get("/")->status, 200);
 
-  const std::string a = submit(*client_, long_job(), bearer(alice));
+  const std::string a = submit(*client_, long_cornell_job(), bearer(alice));
   EXPECT_EQ(get_job(*client_, a, bearer(alice))["owner"], "alice");
   expect_status(client_->Get("/v1/jobs/" + a, bearer(bob)), 404, "bob reads alice's job");
   expect_status(client_->Post("/v1/jobs/" + a + "/cancel", bearer(bob)), 404, "bob cancels alice's job");
@@ -450,7 +439,7 @@ TEST_F(ServiceTest, TokensIsolateUsersAdminsSeeAllCorsOnlyForConfiguredOrigins) 
   EXPECT_EQ(json::parse(client_->Get("/v1/jobs", bearer(root))->body)["jobs"].size(), 1u);
   EXPECT_EQ(client_->Get("/v1/jobs/" + a, bearer(root))->status, 200);
   // Priority above the cap: admin only.
-  json urgent = small_job(8, 1);
+  json urgent = cornell_job(8, 1);
   urgent["priority"] = 50;
   expect_status(client_->Post("/v1/jobs", bearer(alice), urgent.dump(), "application/json"), 403, "user priority");
   expect_status(client_->Patch("/v1/jobs/" + a, bearer(alice), R"({"priority": 50})", "application/json"), 403,
@@ -458,11 +447,11 @@ TEST_F(ServiceTest, TokensIsolateUsersAdminsSeeAllCorsOnlyForConfiguredOrigins) 
   EXPECT_EQ(client_->Post("/v1/jobs", bearer(root), urgent.dump(), "application/json")->status, 202);
   // Queue limit per user: 429 with Retry-After (alice's first job runs, the next three wait).
   wait_for(*client_, a, in_state("running"), 60, bearer(alice));
-  for (int i = 0; i < 3; ++i) submit(*client_, long_job(), bearer(alice));
-  auto limited = client_->Post("/v1/jobs", bearer(alice), long_job().dump(), "application/json");
+  for (int i = 0; i < 3; ++i) submit(*client_, long_cornell_job(), bearer(alice));
+  auto limited = client_->Post("/v1/jobs", bearer(alice), long_cornell_job().dump(), "application/json");
   expect_status(limited, 429, "queue limit");
   EXPECT_FALSE(limited->get_header_value("Retry-After").empty());
-  EXPECT_EQ(client_->Post("/v1/jobs", bearer(bob), small_job(8, 1).dump(), "application/json")->status, 202);
+  EXPECT_EQ(client_->Post("/v1/jobs", bearer(bob), cornell_job(8, 1).dump(), "application/json")->status, 202);
   // Event streams take ?access_token= and show only the caller's jobs.
   const auto events = read_events(daemon_->port(), "/v1/events?access_token=" + bob, {{"Last-Event-ID", "0"}},
                                    [](const std::vector<SseEvent>& e) { return !e.empty(); });
@@ -497,7 +486,7 @@ TEST_F(ServiceTest, TokensIsolateUsersAdminsSeeAllCorsOnlyForConfiguredOrigins) 
 
 TEST_F(ServiceTest, MetricsPassPromtool) {
   start();
-  wait_for(*client_, submit(*client_, small_job(16, 4)), in_state("succeeded"));
+  wait_for(*client_, submit(*client_, cornell_job(16, 4)), in_state("succeeded"));
   client_->Get("/v1/jobs/0123456789abcdef0123456789abcdef");
   const std::string text = client_->Get("/metrics")->body;
   for (const char* name : {"tessera_jobs{state=\"succeeded\"} 1", "tessera_queue_length ",
@@ -515,7 +504,7 @@ TEST_F(ServiceTest, MetricsPassPromtool) {
 
 TEST_F(ServiceTest, SigtermDrainsWithACheckpointAndTheJobResumes) {
   start(args({"--grace-s", "10"}));
-  const std::string id = submit(*client_, long_job());
+  const std::string id = submit(*client_, long_cornell_job());
   wait_for(*client_, id, [](const json& s) { return s["progress"]["passes"].get<int>() >= 3; });
   const auto t0 = std::chrono::steady_clock::now();
   EXPECT_EQ(daemon_->stop(SIGTERM), 0);
@@ -541,13 +530,13 @@ TEST_F(ServiceTest, SixtyHostileRequestsGetTheRight4xx) {
     int status;
     httplib::Headers headers;
   };
-  auto job_with = [](const std::string& patch) { return small_job().patch(json::parse(patch)).dump(); };
+  auto job_with = [](const std::string& patch) { return cornell_job(32, 8).patch(json::parse(patch)).dump(); };
   const std::string J = "application/json";
   std::vector<Case> cases = {
       {"not JSON", "POST", "/v1/jobs", J, "{", 400, {}},
       {"NaN literal", "POST", "/v1/jobs", J, R"({"kind":"scene","render":{"width":NaN}})", 400, {}},
       {"Infinity literal", "POST", "/v1/jobs", J, R"({"kind":"scene","render":{"width":Infinity}})", 400, {}},
-      {"trailing garbage", "POST", "/v1/jobs", J, small_job().dump() + "}", 400, {}},
+      {"trailing garbage", "POST", "/v1/jobs", J, cornell_job(32, 8).dump() + "}", 400, {}},
       {"empty", "POST", "/v1/jobs", J, "", 400, {}},
       {"whitespace", "POST", "/v1/jobs", J, "   \n ", 400, {}},
       {"null", "POST", "/v1/jobs", J, "null", 422, {}},
@@ -590,8 +579,8 @@ TEST_F(ServiceTest, SixtyHostileRequestsGetTheRight4xx) {
       {"index out of range", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/scene/objects/6/indices/0","value":1000000}])"), 422, {}},
       {"radius negative", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/scene/objects/-","value":{"shape":"sphere","center":[0,0,0],"radius":-1,"material":"white"}}])"), 422, {}},
       {"work above --max-work", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/spp","value":60000},{"op":"replace","path":"/render/width","value":1024},{"op":"replace","path":"/render/height","value":1024}])"), 422, {}},
-      {"text/plain", "POST", "/v1/jobs", "text/plain", small_job().dump(), 415, {}},
-      {"no content type", "POST", "/v1/jobs", "", small_job().dump(), 415, {}},
+      {"text/plain", "POST", "/v1/jobs", "text/plain", cornell_job(32, 8).dump(), 415, {}},
+      {"no content type", "POST", "/v1/jobs", "", cornell_job(32, 8).dump(), 415, {}},
       {"xml", "POST", "/v1/jobs", "application/xml", "<job/>", 415, {}},
       {"multipart without job", "POST", "/v1/jobs", "multipart/form-data; boundary=XyZ",
        "--XyZ\r\nContent-Disposition: form-data; name=\"x\"\r\n\r\n1\r\n--XyZ--\r\n", 422, {}},
@@ -618,7 +607,7 @@ TEST_F(ServiceTest, SixtyHostileRequestsGetTheRight4xx) {
       {"huge token", "GET", "/v1/jobs", "", "", 401, {{"Authorization", "Bearer " + std::string(3000, 'x')}}},
       {"lowercase bearer", "GET", "/v1/jobs", "", "", 401, {{"Authorization", "bearer " + user}}},
       {"token in query on non-SSE", "GET", "/v1/jobs?access_token=" + user, "", "", 401, {{"Authorization", ""}}},
-      {"bad idempotency key", "POST", "/v1/jobs", J, small_job().dump(), 400, {{"Idempotency-Key", "has space"}}},
+      {"bad idempotency key", "POST", "/v1/jobs", J, cornell_job(32, 8).dump(), 400, {{"Idempotency-Key", "has space"}}},
   };
   ASSERT_GE(cases.size(), 60u);
   for (const Case& c : cases) {
@@ -645,7 +634,7 @@ TEST_F(ServiceTest, SixtyHostileRequestsGetTheRight4xx) {
 // ---- nothing lost --------------------------------------------------------------------------------------------
 
 json crash_job(int i) {
-  json doc = small_job(40, 96 + 32 * i);
+  json doc = cornell_job(40, 96 + 32 * i);
   doc["render"]["seed"] = 100 + i;
   doc["render"]["exr_precision"] = "float";
   return doc;
@@ -708,7 +697,7 @@ TEST(ServiceCrash, KillLoopLosesNothingAndResumedRendersAreBitIdentical) {
 
 TEST_F(ServiceTest, AThousandQueuedJobsTwoHundredWatchersAndPolling) {
   start(args({"--max-jobs", "1", "--log-level", "warn"}));
-  const std::string blocker = submit(*client_, long_job());
+  const std::string blocker = submit(*client_, long_cornell_job());
   wait_for(*client_, blocker, in_state("running"));
   // 200 watchers of the global stream.
   std::atomic<int> watching{0}, saw_job{0};
@@ -768,7 +757,7 @@ TEST_F(ServiceTest, AThousandQueuedJobsTwoHundredWatchersAndPolling) {
   for (int t = 0; t < 8; ++t) {
     submitters.emplace_back([&] {
       auto c = daemon_->client();
-      const std::string body = small_job(8, 1).dump();
+      const std::string body = cornell_job(8, 1).dump();
       for (int i = 0; i < 125; ++i) {
         auto res = c->Post("/v1/jobs", body, "application/json");
         if (res && res->status == 202) ++accepted;

@@ -21,19 +21,6 @@ namespace {
 using nlohmann::json;
 namespace fs = std::filesystem;
 
-json small_job(int size, int spp) {
-  json doc = cornell_job();
-  doc["render"]["width"] = size;
-  doc["render"]["height"] = size;
-  doc["render"]["spp"] = spp;
-  return doc;
-}
-
-// Renders until cancelled (65536 spp of 128x128 on two threads take minutes).
-json long_job() {
-  return small_job(128, 65536);
-}
-
 // One triangle in a .gltf with its .bin: a valid upload.
 httplib::MultipartFormDataItems triangle_files() {
   const float p[9] = {-1, -1, 0, 1, -1, 0, 0, 1, 0};
@@ -111,7 +98,7 @@ TEST(StorageGuard, ANearlyFullDiskRefusesNewJobsAndUploadsAndServesReads) {
   Daemon daemon(data, {"--threads", "1", "--min-free-disk", "1000TiB", "--retain-finished", "30d"});
   auto c = daemon.client();
 
-  expect_507(c->Post("/v1/jobs", small_job(16, 2).dump(), "application/json"), "scene job");
+  expect_507(c->Post("/v1/jobs", cornell_job(16, 2).dump(), "application/json"), "scene job");
   expect_507(c->Post("/v1/jobs",
                      json{{"kind", "material"},
                           {"material", {{"type", "lambert"}}},
@@ -167,14 +154,14 @@ TEST(RetentionSweep, FinishedJobsExpireAndQueuedRunningPausedJobsStay) {
   Daemon daemon(data, {"--threads", "2", "--max-jobs", "2", "--retain-finished", "2s", "--log-level", "debug"});
   auto c = daemon.client();
 
-  const std::string running = submit(*c, long_job());
-  const std::string tiny = submit(*c, small_job(16, 4));
+  const std::string running = submit(*c, long_cornell_job());
+  const std::string tiny = submit(*c, cornell_job(16, 4));
   ASSERT_TRUE(eventually([&] { return state_of(*c, tiny) == "succeeded"; }, 30)) << state_of(*c, tiny);
   EXPECT_TRUE(fs::is_directory(data / "jobs" / tiny));
-  const std::string running2 = submit(*c, long_job());  // takes the slot the tiny job left
-  const std::string queued = submit(*c, long_job());    // both slots busy: waits
-  const std::string paused = submit(*c, long_job());
-  const std::string cancelled = submit(*c, long_job());
+  const std::string running2 = submit(*c, long_cornell_job());  // takes the slot the tiny job left
+  const std::string queued = submit(*c, long_cornell_job());    // both slots busy: waits
+  const std::string paused = submit(*c, long_cornell_job());
+  const std::string cancelled = submit(*c, long_cornell_job());
   auto res = c->Post("/v1/jobs/" + paused + "/pause");
   ASSERT_TRUE(res);
   EXPECT_EQ(res->status, 200) << res->body;

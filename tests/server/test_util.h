@@ -39,6 +39,16 @@ inline std::string read_text(const std::filesystem::path& p) {
 inline nlohmann::json cornell_job() {
   return nlohmann::json::parse(read_text(std::filesystem::path(TESSERA_SOURCE_DIR) / "proto/examples/cornell.json"));
 }
+// The reference job at size x size pixels and `spp` samples per pixel.
+inline nlohmann::json cornell_job(int size, int spp) {
+  nlohmann::json doc = cornell_job();
+  doc["render"]["width"] = size;
+  doc["render"]["height"] = size;
+  doc["render"]["spp"] = spp;
+  return doc;
+}
+// A job that renders until cancelled (on two threads, 65536 spp of 128x128 take minutes).
+inline nlohmann::json long_cornell_job() { return cornell_job(128, 65536); }
 
 // A fresh directory under the system temp dir, removed with the object.
 class TempDir {
