@@ -1,6 +1,7 @@
 #include "renderer/film.h"
 
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 namespace tessera {
@@ -13,6 +14,23 @@ std::vector<float> Film::resolve() const {
   double inv = samples_ > 0 ? 1.0 / (kFixedScale * samples_) : 0.0;
   for (size_t i = 0; i < sum_.size(); ++i) out[i] = static_cast<float>(static_cast<double>(sum_[i]) * inv);
   return out;
+}
+
+size_t Film::state_size(int width, int height) {
+  return static_cast<size_t>(width) * static_cast<size_t>(height) * (3 * sizeof(FixedSum) + sizeof(float));
+}
+
+void Film::append_state(std::string& out) const {
+  out.append(reinterpret_cast<const char*>(sum_.data()), sum_.size() * sizeof(FixedSum));
+  out.append(reinterpret_cast<const char*>(sum_lum2_.data()), sum_lum2_.size() * sizeof(float));
+}
+
+bool Film::read_state(std::string_view bytes) {
+  if (bytes.size() != state_size(width_, height_)) return false;
+  const size_t sums_bytes = sum_.size() * sizeof(FixedSum);
+  std::memcpy(sum_.data(), bytes.data(), sums_bytes);
+  std::memcpy(sum_lum2_.data(), bytes.data() + sums_bytes, sum_lum2_.size() * sizeof(float));
+  return true;
 }
 
 void Film::merge(const Film& other) {

@@ -8,6 +8,8 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include "renderer/math.h"
@@ -53,8 +55,16 @@ class Film {
   // the mean luminance (over pixels whose mean luminance is above a small floor).
   double relative_error() const;
 
-  // Raw state, for checkpoints and partial films: 3 fixed-point sums per pixel (RGB), and per-pixel sums of squared
-  // luminance (float, only for the noise estimate).
+  // The film's state as bytes, the one layout of checkpoints and partial films: 3 × 128-bit fixed-point sums per
+  // pixel (R, G, B, units of 2^-40), row-major from the top left, then one f32 sum of squared luminance per pixel;
+  // in the machine's byte order (little-endian on the machines we run on). The sample count is not part of it.
+  static size_t state_size(int width, int height);
+  void append_state(std::string& out) const;
+  // Reads state_size(width(), height()) bytes of append_state(); false, and the film unchanged, for any other size.
+  bool read_state(std::string_view bytes);
+
+  // Raw state: 3 fixed-point sums per pixel (RGB), and per-pixel sums of squared luminance (float, only for the noise
+  // estimate).
   const std::vector<FixedSum>& sums() const { return sum_; }
   const std::vector<float>& sums_lum2() const { return sum_lum2_; }
   std::vector<FixedSum>& sums() { return sum_; }

@@ -36,12 +36,11 @@ uint64_t fnv1a64(std::string_view bytes, uint64_t h) {
 }
 
 std::string encode_checkpoint(const Film& film, uint32_t passes, double elapsed_s, uint64_t settings_hash) {
-  const auto& sums = film.sums();
-  const auto& lum2 = film.sums_lum2();
-  const std::string_view a(reinterpret_cast<const char*>(sums.data()), sums.size() * sizeof(sums[0]));
-  const std::string_view b(reinterpret_cast<const char*>(lum2.data()), lum2.size() * sizeof(lum2[0]));
+  std::string payload;
+  payload.reserve(Film::state_size(film.width(), film.height()));
+  film.append_state(payload);
   std::string out;
-  out.reserve(kPrefixBytes + a.size() + b.size());
+  out.reserve(kPrefixBytes + payload.size());
   out.append(kMagic, sizeof kMagic);
   put<uint32_t>(out, kVersion);
   put<uint32_t>(out, static_cast<uint32_t>(film.width()));
@@ -51,9 +50,8 @@ std::string encode_checkpoint(const Film& film, uint32_t passes, double elapsed_
   put<uint32_t>(out, 0);
   put<double>(out, elapsed_s);
   put<uint64_t>(out, settings_hash);
-  put<uint64_t>(out, fnv1a64(b, fnv1a64(a)));
-  out.append(a);
-  out.append(b);
+  put<uint64_t>(out, fnv1a64(payload));
+  out.append(payload);
   return out;
 }
 
@@ -63,18 +61,15 @@ std::optional<Checkpoint> decode_checkpoint(std::string_view bytes, int width, i
   const uint32_t w = get<uint32_t>(bytes, 12), h = get<uint32_t>(bytes, 16);
   if (static_cast<int>(w) != width || static_cast<int>(h) != height) return std::nullopt;
   if (get<uint64_t>(bytes, 40) != settings_hash) return std::nullopt;
-  const size_t pixels = static_cast<size_t>(w) * h;
-  constexpr size_t kSum = sizeof(FixedSum), kLum2 = sizeof(float);
-  if (bytes.size() != kPrefixBytes + pixels * (3 * kSum + kLum2)) return std::nullopt;
   const std::string_view payload = bytes.substr(kPrefixBytes);
+  if (payload.size() != Film::state_size(width, height)) return std::nullopt;
   if (fnv1a64(payload) != get<uint64_t>(bytes, kHeaderBytes)) return std::nullopt;
   Checkpoint c;
   c.film = Film(width, height);
+  if (!c.film.read_state(payload)) return std::nullopt;
   c.film.set_samples(get<uint32_t>(bytes, 20));
   c.passes = get<uint32_t>(bytes, 24);
   c.elapsed_s = get<double>(bytes, 32);
-  std::memcpy(c.film.sums().data(), payload.data(), pixels * 3 * kSum);
-  std::memcpy(c.film.sums_lum2().data(), payload.data() + pixels * 3 * kSum, pixels * kLum2);
   return c;
 }
 

@@ -174,9 +174,9 @@ void write_file_atomic(const std::string& path, const std::string& bytes) {
 //       52     4  u32 tonemap          0 clamp, 1 ACES
 //       56     8  u64 fingerprint      FNV-1a of the scene and the settings the pixels depend on (not the sample
 //                                      range, region, time limit or display): parts of different jobs never merge
-//       64  48·N  sums: 3 × i128 per pixel (R, G, B), row-major from the top left, fixed point in units of 2^-40
-//                 (Film::sums(), zero outside the region)
-//    +48·N   4·N  f32 per pixel: sums of squared luminance (Film::sums_lum2(), for the noise estimate only)
+//       64  52·N  the film's state (Film::append_state; zero outside the region): 3 × i128 per pixel (R, G, B),
+//                 row-major from the top left, fixed point in units of 2^-40, then an f32 per pixel, its sum of
+//                 squared luminance (for the noise estimate only)
 //
 // with N = width × height. The file size is checked exactly.
 
@@ -209,10 +209,9 @@ T get(const std::string& in, size_t offset) {
 }
 
 std::string encode_film(const PartialFilm& p) {
-  static_assert(sizeof(tessera::FixedSum) == 16);
-  const size_t n = p.film.pixel_count();
+  static_assert(sizeof(tessera::FixedSum) == 16);  // the layout above
   std::string out;
-  out.reserve(kFilmHeader + n * 52);
+  out.reserve(kFilmHeader + tessera::Film::state_size(p.width, p.height));
   out.append(kFilmMagic, 8);
   put<uint32_t>(out, kFilmVersion);
   put<int32_t>(out, p.width);
@@ -227,8 +226,7 @@ std::string encode_film(const PartialFilm& p) {
   put<float>(out, p.display.exposure_ev);
   put<uint32_t>(out, p.display.tonemap == tessera::ToneMap::kAces ? 1u : 0u);
   put<uint64_t>(out, p.fingerprint);
-  out.append(reinterpret_cast<const char*>(p.film.sums().data()), n * 3 * sizeof(tessera::FixedSum));
-  out.append(reinterpret_cast<const char*>(p.film.sums_lum2().data()), n * sizeof(float));
+  p.film.append_state(out);
   return out;
 }
 
@@ -253,14 +251,11 @@ PartialFilm decode_film(const std::string& path) {
   const auto& r = p.region;
   if (r.x < 0 || r.y < 0 || r.width < 1 || r.height < 1 || r.x + r.width > p.width || r.y + r.height > p.height)
     fatal(path + ": region outside the image");
-  const size_t n = static_cast<size_t>(p.width) * static_cast<size_t>(p.height);
-  if (in.size() != kFilmHeader + n * (3 * sizeof(tessera::FixedSum) + sizeof(float)))
+  if (in.size() != kFilmHeader + tessera::Film::state_size(p.width, p.height))
     fatal(path + ": truncated or oversized (" + std::to_string(in.size()) + " bytes for " + std::to_string(p.width) +
           "x" + std::to_string(p.height) + ")");
   p.film = tessera::Film(p.width, p.height);
-  std::memcpy(p.film.sums().data(), in.data() + kFilmHeader, n * 3 * sizeof(tessera::FixedSum));
-  std::memcpy(p.film.sums_lum2().data(), in.data() + kFilmHeader + n * 3 * sizeof(tessera::FixedSum),
-              n * sizeof(float));
+  p.film.read_state(std::string_view(in).substr(kFilmHeader));  // the size is checked above
   p.film.set_samples(p.sample_count);
   return p;
 }

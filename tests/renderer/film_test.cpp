@@ -36,5 +36,29 @@ TEST(Film, RelativeErrorMatchesTheSampleStatistics) {
   EXPECT_NEAR(film.relative_error(), 0.5 / std::sqrt(double(n)), 0.005);
 }
 
+TEST(Film, StateRoundTripsExactlyAndRefusesAnotherSize) {
+  Film film(5, 3);
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<float> u(0.0f, 1e6f);
+  for (int s = 0; s < 9; ++s)
+    for (int y = 0; y < 3; ++y)
+      for (int x = 0; x < 5; ++x) film.add_sample(x, y, Rgb(u(rng), u(rng) * 1e-6f, u(rng) * 1e3f));
+  std::string bytes = "prefix";
+  film.append_state(bytes);
+  ASSERT_EQ(bytes.size(), 6 + Film::state_size(5, 3));
+  EXPECT_EQ(Film::state_size(5, 3), 15u * (3 * 16 + 4));
+  const std::string_view state = std::string_view(bytes).substr(6);
+
+  Film copy(5, 3);
+  ASSERT_TRUE(copy.read_state(state));
+  EXPECT_TRUE(copy.sums() == film.sums());
+  EXPECT_TRUE(copy.sums_lum2() == film.sums_lum2());
+
+  Film smaller(4, 3);
+  EXPECT_FALSE(smaller.read_state(state));
+  EXPECT_FALSE(copy.read_state(state.substr(1)));
+  EXPECT_TRUE(copy.sums() == film.sums());  // unchanged by the refused read
+}
+
 }  // namespace
 }  // namespace tessera
