@@ -9,10 +9,12 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <system_error>
 
 #include "renderer/gltf_loader.h"
 #include "renderer/scene_error.h"
 #include "renderer/scene_loader.h"
+#include "server/file_io.h"
 
 namespace tessera::server {
 
@@ -75,11 +77,18 @@ std::string read_file(const fs::path& p) {
   return ss.str();
 }
 
+// Whole and on the disk before the directory is renamed into place: an asset's id promises its content. Throws
+// std::system_error with the errno (ENOSPC on a full disk).
 void write_file(const fs::path& p, std::string_view bytes) {
-  std::ofstream out(p, std::ios::binary | std::ios::trunc);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  out.close();
-  if (!out) throw std::runtime_error("cannot write " + p.string());
+  if (int error = write_file_synced(p, bytes); error != 0)
+    throw std::system_error(error, std::generic_category(), "cannot write " + p.filename().string());
+}
+
+// The answer to an upload that ran out of room while it was written (the disk filled after the --min-free-disk
+// check, or a quota): 507 like the check's, not a fault of the daemon.
+Problem out_of_space(const std::error_code& ec) {
+  return insufficient_storage("the data directory's disk ran out of space while the asset was written (" +
+                              ec.message() + ")");
 }
 
 }  // namespace
@@ -232,12 +241,17 @@ std::variant<StoredAsset, Problem> AssetStore::store(std::vector<UploadFile> fil
     write_file(temp / kMetaFile, meta.dump());
     fs::rename(temp, root_ / info.id, ec);
     if (ec) {  // the same upload won a race, or the disk is full
+      const std::error_code rename_error = ec;
       fs::remove_all(temp, ec);
       if (auto existing = get(info.id)) return StoredAsset{*existing, false};
+      if (is_out_of_space(rename_error)) return out_of_space(rename_error);
       return Problem{500, "cannot store the asset", std::nullopt};
     }
   } catch (const std::exception& e) {
     fs::remove_all(temp, ec);
+    // std::filesystem's errors (creating the temp dir) are system_errors too.
+    if (const auto* se = dynamic_cast<const std::system_error*>(&e); se && is_out_of_space(se->code()))
+      return out_of_space(se->code());
     throw;
   }
   return StoredAsset{info, true};

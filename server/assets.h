@@ -46,6 +46,8 @@ class AssetStore {
  public:
   explicit AssetStore(const std::filesystem::path& data_dir);
 
+  // The asset, stored or found already stored; or why not: 4xx for the upload's fault, 507 when the disk ran out of
+  // room while it was written (ENOSPC, EDQUOT, EFBIG). A refused upload leaves no file behind.
   std::variant<StoredAsset, Problem> store(std::vector<UploadFile> files, const std::string& owner);
   std::optional<AssetInfo> get(const std::string& id) const;
   bool remove(const std::string& id);

@@ -91,10 +91,9 @@ bool refused_for_storage(const ApiContext& ctx, Response& res) {
   if (*available >= ctx.min_free_disk_bytes) return false;
   log(LogLevel::kWarn, "request refused: the data directory's disk is nearly full",
       {{"available_bytes", *available}, {"min_free_disk_bytes", ctx.min_free_disk_bytes}});
-  send_problem(res, 507,
-               "the data directory has " + std::to_string(*available) +
-                   " bytes available, less than --min-free-disk (" + std::to_string(ctx.min_free_disk_bytes) +
-                   " bytes); nothing was stored. Retry once finished jobs or assets have been deleted");
+  send_problem(res, insufficient_storage("the data directory has " + std::to_string(*available) +
+                                         " bytes available, less than --min-free-disk (" +
+                                         std::to_string(ctx.min_free_disk_bytes) + " bytes)"));
   return true;
 }
 
@@ -278,7 +277,8 @@ void post_job(ApiContext& ctx, const Request& req, Response& res) {
 
   std::variant<AcceptedJob, Problem> checked;
   std::string request_hash;
-  if (media_type(req.get_header_value("Content-Type")) == "multipart/form-data") {
+  const bool multipart = media_type(req.get_header_value("Content-Type")) == "multipart/form-data";
+  if (multipart) {
     auto sub = multipart_submission(ctx, req, caller);
     if (auto* p = std::get_if<Problem>(&sub)) return send_problem(res, *p);
     request_hash = std::get<Submission>(sub).request_hash;
@@ -333,10 +333,20 @@ void post_job(ApiContext& ctx, const Request& req, Response& res) {
   job.request_hash = request_hash;
   try {
     ctx.store.create(job);
-  } catch (const std::exception&) {
+  } catch (const std::exception& e) {
     // The same key raced in from another connection: that request's job is this one's.
     if (!key.empty())
       if (auto existing = ctx.store.find_by_idempotency_key(caller.name, key)) return answer_existing(*existing);
+    // The disk filled after the --min-free-disk check: the insert was rolled back whole, so, as the check's refusal,
+    // nothing of the job exists (assets a multipart submission stored stay: whole, and found again by a retry).
+    if (const auto* se = dynamic_cast<const JobStoreError*>(&e); se && se->out_of_space()) {
+      log(LogLevel::kWarn, "job refused: the job store ran out of space", {{"error", e.what()}});
+      const std::string kept = multipart ? "the job was not stored; the files uploaded with it were, whole, and a "
+                                           "retry reuses them"
+                                         : "nothing was stored";
+      return send_problem(
+          res, insufficient_storage("the data directory's disk ran out of space while the job was stored", kept));
+    }
     throw;
   }
   ctx.scheduler.wake();
@@ -614,7 +624,9 @@ void post_asset(ApiContext& ctx, const Request& req, Response& res) {
   }
   auto stored = ctx.assets.store(std::move(files), caller.name);
   if (auto* p = std::get_if<Problem>(&stored)) {
-    log(LogLevel::kInfo, "asset refused", {{"status", p->status}, {"detail", p->detail}});
+    // A disk that filled up is the operator's concern; a bad upload is the client's.
+    log(p->status == 507 ? LogLevel::kWarn : LogLevel::kInfo, "asset refused",
+        {{"status", p->status}, {"detail", p->detail}});
     return send_problem(res, *p);
   }
   const StoredAsset& s = std::get<StoredAsset>(stored);
@@ -717,11 +729,14 @@ std::vector<Route> routes(ApiContext* ctx) {
       {"GET", "/livez", "/livez", [](const Request&, Response& r) { send_json(r, 200, {{"status", "ok"}}); }},
       {"GET", "/readyz", "/readyz",
        [ctx](const Request&, Response& r) {
-         // Ready with a nearly full disk too: reads go on; only new jobs and uploads are refused (507).
+         // Ready with a nearly full disk, and with a job store that fails to record the end of a job, too: reads,
+         // cancels and deletes go on (a store that fails is usually a full disk), and taking the one daemon that
+         // holds these jobs out of a load balancer would cut them off. Both are reported, for alerts.
          const std::optional<uint64_t> available = available_bytes(*ctx);
          json storage = {{"available_bytes", available ? json(*available) : json(nullptr)},
                          {"min_free_disk_bytes", ctx->min_free_disk_bytes},
-                         {"below_minimum", available && *available < ctx->min_free_disk_bytes}};
+                         {"below_minimum", available && *available < ctx->min_free_disk_bytes},
+                         {"job_store_failing", ctx->scheduler.store_failing()}};
          if (ctx->scheduler.accepting()) return send_json(r, 200, {{"status", "ready"}, {"storage", storage}});
          send_problem(r, 503, "not accepting jobs (starting or shutting down)");
        }},
@@ -880,6 +895,7 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
   };
   hooks.samples_rendered = [c](uint64_t n) { c->metrics.add_samples(n); };
   hooks.job_ended = [c](double s) { c->metrics.observe_job_duration(s); };
+  hooks.store_write_failed = [c] { c->metrics.count_job_store_error(); };
   ctx.scheduler.set_hooks(std::move(hooks));
 
   server.set_pre_routing_handler([posts, c](const Request& req, Response& res) {

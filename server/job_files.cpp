@@ -10,6 +10,7 @@
 #include <stdexcept>
 #include <system_error>
 
+#include "server/file_io.h"
 #include "server/job_id.h"
 
 namespace tessera::server {
@@ -86,22 +87,7 @@ void JobFiles::write(const std::string& id, JobFile f, std::string_view bytes) c
   publish(
       id, f,
       [&](const std::string& temp) {
-        // Plain POSIX calls on one descriptor: every write, the fsync and the close report their own errno.
-        const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-        if (fd < 0) write_failed(f, errno);
-        int error = 0;
-        for (size_t done = 0; done < bytes.size() && error == 0;) {
-          const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-          if (n < 0 && errno == EINTR) continue;
-          if (n <= 0) {
-            error = n < 0 ? errno : EIO;
-          } else {
-            done += static_cast<size_t>(n);
-          }
-        }
-        if (error == 0 && ::fsync(fd) != 0) error = errno;
-        if (::close(fd) != 0 && error == 0) error = errno;
-        if (error != 0) write_failed(f, error);
+        if (int error = write_file_synced(temp, bytes); error != 0) write_failed(f, error);
       },
       true);
 }

@@ -1,11 +1,13 @@
 // Where jobs live: a small interface (create, claim, update, finish, get, list, remove) so the SQLite store of one
 // daemon can later be replaced by a queue several daemons share. Nothing outside a store implementation knows how
-// jobs are kept. Every state change goes through can_transition() (job_state.h).
+// jobs are kept. Every state change goes through can_transition() (job_state.h). A store that fails throws
+// JobStoreError, so that callers can tell a store that could not record something from a job that went wrong.
 #pragma once
 
 #include <cstdint>
 #include <map>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -50,6 +52,18 @@ struct JobFilter {
   std::optional<int64_t> before_seq;   // only jobs submitted before this one (cursor)
   std::optional<int64_t> finished_before_ms;  // only jobs that ended before this time (retention)
   int limit = 100;
+};
+
+// The store itself failed (a full disk, a database locked too long, an I/O error): the request may succeed once
+// the store recovers, and it says nothing about the job. Every error of a store is one of these.
+class JobStoreError : public std::runtime_error {
+ public:
+  JobStoreError(const std::string& what, bool out_of_space) : std::runtime_error(what), out_of_space_(out_of_space) {}
+  // The store ran out of room (a full disk or quota, a file-size limit): a client may retry once space is freed.
+  bool out_of_space() const { return out_of_space_; }
+
+ private:
+  bool out_of_space_;
 };
 
 class JobStore {

@@ -63,6 +63,10 @@ std::string Metrics::render(const Gauges& g) const {
   out << "# HELP tessera_jobs_expired_total Finished jobs deleted by the retention sweep (--retain-finished).\n"
       << "# TYPE tessera_jobs_expired_total counter\n"
       << "tessera_jobs_expired_total " << expired_jobs_.load(std::memory_order_relaxed) << "\n";
+  out << "# HELP tessera_job_store_errors_total Writes of renders to the job store that failed (progress, warnings, "
+         "the end of a job; an end is retried until it is recorded).\n"
+      << "# TYPE tessera_job_store_errors_total counter\n"
+      << "tessera_job_store_errors_total " << job_store_errors_.load(std::memory_order_relaxed) << "\n";
   if (g.data_dir_available_bytes)
     out << "# HELP tessera_data_dir_available_bytes Bytes available to the daemon on the data directory's "
            "filesystem.\n"

@@ -20,6 +20,7 @@ class Metrics {
   void add_samples(uint64_t pixel_samples) { samples_.fetch_add(pixel_samples, std::memory_order_relaxed); }
   void observe_job_duration(double seconds);
   void count_expired_job() { expired_jobs_.fetch_add(1, std::memory_order_relaxed); }
+  void count_job_store_error() { job_store_errors_.fetch_add(1, std::memory_order_relaxed); }
 
   struct Gauges {
     std::map<JobState, int> jobs;
@@ -41,6 +42,7 @@ class Metrics {
   double duration_sum_ = 0;
   std::atomic<uint64_t> samples_{0};
   std::atomic<uint64_t> expired_jobs_{0};
+  std::atomic<uint64_t> job_store_errors_{0};
 };
 
 }  // namespace tessera::server

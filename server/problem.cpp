@@ -41,4 +41,8 @@ nlohmann::json Problem::to_json() const {
   return j;
 }
 
+Problem insufficient_storage(const std::string& why, const std::string& kept) {
+  return Problem{507, why + "; " + kept + ". Retry once finished jobs or assets have been deleted", std::nullopt};
+}
+
 }  // namespace tessera::server

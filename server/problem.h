@@ -22,4 +22,9 @@ struct Problem {
 
 inline constexpr const char* kProblemMediaType = "application/problem+json";
 
+// 507: the data directory has no room for what a request would have stored (`why` says how that was found out:
+// below --min-free-disk before writing, or a write that ran out of space) and `kept` what of the request was stored
+// all the same.
+Problem insufficient_storage(const std::string& why, const std::string& kept = "nothing was stored");
+
 }  // namespace tessera::server

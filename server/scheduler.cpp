@@ -1,5 +1,7 @@
 #include "server/scheduler.h"
 
+#include <algorithm>
+
 #include <nlohmann/json.hpp>
 
 #include "renderer/image_io.h"
@@ -24,6 +26,7 @@ class Scheduler::RenderSlot {
   bool pause_requested = false;      // by a client: the job ends its pass and is paused
   bool delete_requested = false;     // by a client: the job is gone, its files go when the render stops
   std::optional<JobProgress> progress;
+  bool awaiting_store = false;  // its end is rendered but the store failed to record it; retried
   bool done = false;
   std::thread thread;
 };
@@ -56,7 +59,18 @@ void Scheduler::set_hooks(SchedulerHooks hooks) {
 }
 
 void Scheduler::notify_state(const std::string& id) {
-  if (hooks_.state_changed) hooks_.state_changed(id);
+  if (!hooks_.state_changed) return;
+  // On a render thread nothing above catches: a hook that cannot read a failing store costs the event, not the
+  // process.
+  try {
+    hooks_.state_changed(id);
+  } catch (const std::exception& e) {
+    log(LogLevel::kWarn, "cannot publish the state of a job", {{"job", id}, {"error", e.what()}});
+  }
+}
+
+void Scheduler::count_store_error() {
+  if (hooks_.store_write_failed) hooks_.store_write_failed();
 }
 
 void Scheduler::start() {
@@ -81,6 +95,11 @@ bool Scheduler::accepting() const {
 int Scheduler::running_count() const {
   std::lock_guard lock(mutex_);
   return static_cast<int>(running_.size());
+}
+
+bool Scheduler::store_failing() const {
+  std::lock_guard lock(mutex_);
+  return std::any_of(running_.begin(), running_.end(), [](const auto& entry) { return entry.second->awaiting_store; });
 }
 
 void Scheduler::begin_drain() {
@@ -180,7 +199,15 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     options.limits = options_.limits;
     options.scene.resolve_asset = options_.resolve_asset;
     const RenderJob job = load_job(doc, options);
-    if (!job.scene->warnings.empty()) store_.set_warnings(id, json(job.scene->warnings).dump());
+    if (!job.scene->warnings.empty()) {
+      try {
+        store_.set_warnings(id, json(job.scene->warnings).dump());
+      } catch (const JobStoreError& e) {
+        // Only the job's status misses them: not worth the render.
+        count_store_error();
+        log(LogLevel::kWarn, "cannot record the warnings of a job", {{"job", id}, {"error", e.what()}});
+      }
+    }
     RenderSession session(job.scene, job.settings, pool_);
     const uint64_t settings_hash = fnv1a64(record.settings);
     if (auto bytes = files_.read(id, JobFile::kCheckpoint)) {
@@ -225,6 +252,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
           std::lock_guard lock(mutex_);
           slot->progress = jp;
         }
+        if (dynamic_cast<const JobStoreError*>(&e)) count_store_error();
         // A missed checkpoint or preview (a full disk) is not worth the render: the last good checkpoint stays,
         // and the next pass writes both again.
         log(LogLevel::kWarn, "cannot publish progress; retried after the next pass",
@@ -234,32 +262,34 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     detach();
     render_s = session.progress().elapsed_s;
 
-    bool cancelled_by_client, paused, deleted, stopping;
+    bool cancelled_by_client, paused, deleted;
     {
       std::lock_guard lock(mutex_);
       cancelled_by_client = slot->cancel_requested;
       paused = slot->pause_requested;
       deleted = slot->delete_requested;
-      stopping = stopping_;
     }
+    // The end of the run goes to the store through record_end(): retried while the store fails; when the daemon
+    // stops first, the job stays running in the store, with its checkpoint, for the next start to resume.
     const bool interrupted = reason == StopReason::kStopped || reason == StopReason::kCancelled;
     if (deleted) {
       log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
     } else if (interrupted && cancelled_by_client) {
-      store_.transition(id, JobState::kCancelled, now_ms(), "cancelled");
-      files_.remove(id, JobFile::kCheckpoint);
-      ended = true;
-      log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+      ended = record_end(*slot, [&] { store_.transition(id, JobState::kCancelled, now_ms(), "cancelled"); });
+      if (ended) {
+        files_.remove(id, JobFile::kCheckpoint);
+        log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+      }
     } else if (interrupted && paused) {
-      store_.transition(id, JobState::kPaused, now_ms());
-      log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", session.progress().samples_done}});
+      if (record_end(*slot, [&] { store_.transition(id, JobState::kPaused, now_ms()); }))
+        log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", session.progress().samples_done}});
     } else if (interrupted) {
       // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
-      (void)stopping;
-      store_.transition(id, JobState::kQueued, now_ms());
-      log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
-          {{"job", id}, {"samples_done", session.progress().samples_done}});
+      if (record_end(*slot, [&] { store_.transition(id, JobState::kQueued, now_ms()); }))
+        log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
+            {{"job", id}, {"samples_done", session.progress().samples_done}});
     } else {
+      // The outputs first: a file that cannot be written (a full disk) fails the job, as it should.
       const Film& film = session.film();
       const std::vector<float> rgb = film.resolve();
       if (job.want_png) {
@@ -273,37 +303,28 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       }
       JobProgress final_progress = to_job_progress(session.progress());
       final_progress.eta_s = 0;
-      store_.update_progress(id, final_progress);
-      store_.transition(id, JobState::kSucceeded, now_ms(), stop_reason_name(reason));
-      files_.remove(id, JobFile::kCheckpoint);
-      ended = true;
-      log(LogLevel::kInfo, "job succeeded",
-          {{"job", id},
-           {"elapsed_s", final_progress.elapsed_s},
-           {"samples_per_s", final_progress.samples_per_s},
-           {"stop_reason", stop_reason_name(reason)}});
+      ended = record_end(*slot, [&] {
+        store_.update_progress(id, final_progress);
+        store_.transition(id, JobState::kSucceeded, now_ms(), stop_reason_name(reason));
+      });
+      if (ended) {
+        files_.remove(id, JobFile::kCheckpoint);
+        log(LogLevel::kInfo, "job succeeded",
+            {{"job", id},
+             {"elapsed_s", final_progress.elapsed_s},
+             {"samples_per_s", final_progress.samples_per_s},
+             {"stop_reason", stop_reason_name(reason)}});
+      }
     }
   } catch (const std::exception& e) {
     detach();
     std::string message = e.what();
     if (const auto* se = dynamic_cast<const SceneError*>(&e); se && !se->pointer().empty())
       message = se->pointer() + ": " + message;
-    try {
-      store_.transition(id, JobState::kFailed, now_ms(), "", message);
-      files_.remove(id, JobFile::kCheckpoint);
-      ended = true;
-    } catch (const std::exception& e2) {
-      log(LogLevel::kError, "cannot record a failed job", {{"job", id}, {"error", e2.what()}});
-    }
-    log(LogLevel::kError, "job failed", {{"job", id}, {"error", message}});
+    ended = record_failure(*slot, message);
   } catch (...) {
     detach();
-    log(LogLevel::kError, "job failed with an unknown exception", {{"job", id}});
-    try {
-      store_.transition(id, JobState::kFailed, now_ms(), "", "unknown error");
-      ended = true;
-    } catch (...) {
-    }
+    ended = record_failure(*slot, "unknown error");
   }
   bool deleted;
   {
@@ -321,6 +342,68 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     slot->done = true;
   }
   cv_.notify_all();
+}
+
+// A failing store is no fault of the job: the render's outcome stands and is written again, after 100 ms doubling up
+// to 5 s (SchedulerOptions), until the store takes it; meanwhile the job's slot stays taken (counting against
+// max_jobs, rightly: no other job could record its end either). Logged at the first failure, then at most every 10 s.
+// False when the daemon stops first: the job is then left running in the store, and requeue_running() at the next
+// start puts it back in the queue, to resume from its checkpoint (kept until its end is recorded). Anything else
+// `write` throws goes through.
+bool Scheduler::record_end(RenderSlot& slot, const std::function<void()>& write) {
+  using Clock = std::chrono::steady_clock;
+  constexpr auto kLogInterval = std::chrono::seconds(10);
+  std::chrono::milliseconds wait = options_.store_retry_first;
+  int failures = 0;
+  Clock::time_point logged_at;
+  for (;;) {
+    try {
+      write();
+      break;
+    } catch (const JobStoreError& e) {
+      count_store_error();
+      if (++failures == 1 || Clock::now() - logged_at >= kLogInterval) {
+        logged_at = Clock::now();
+        log(LogLevel::kError, "cannot record the end of a job: the job store failed; retrying",
+            {{"job", slot.id}, {"error", e.what()}, {"failures", failures}});
+      }
+    }
+    std::unique_lock lock(mutex_);
+    slot.awaiting_store = true;
+    if (cv_.wait_for(lock, wait, [this] { return stopping_; })) {
+      slot.awaiting_store = false;
+      log(LogLevel::kWarn,
+          "stopping with the end of a job unrecorded: it stays running in the store, and the next start resumes it "
+          "from its checkpoint",
+          {{"job", slot.id}, {"failures", failures}});
+      return false;
+    }
+    wait = std::min(wait * 2, options_.store_retry_max);
+  }
+  if (failures > 0) {
+    {
+      std::lock_guard lock(mutex_);
+      slot.awaiting_store = false;
+    }
+    log(LogLevel::kInfo, "the job store recovered; the end of the job is recorded",
+        {{"job", slot.id}, {"failures", failures}});
+  }
+  return true;
+}
+
+// Logs a job that failed (its scene, its outputs) and records it as record_end() does; false when it was not
+// recorded.
+bool Scheduler::record_failure(RenderSlot& slot, const std::string& message) {
+  log(LogLevel::kError, "job failed", {{"job", slot.id}, {"error", message}});
+  try {
+    if (!record_end(slot, [&] { store_.transition(slot.id, JobState::kFailed, now_ms(), "", message); })) return false;
+  } catch (const std::exception& e) {
+    // Not a store failure (those are retried): nothing more can be done for this run.
+    log(LogLevel::kError, "cannot record a failed job", {{"job", slot.id}, {"error", e.what()}});
+    return false;
+  }
+  files_.remove(slot.id, JobFile::kCheckpoint);
+  return true;
 }
 
 std::optional<JobProgress> Scheduler::live_progress(const std::string& id) const {

@@ -3,7 +3,8 @@
 // publishes its progress (in memory for status requests, and to the store) and a preview PNG; at the end it writes
 // the outputs the job asked for. A job claimed with a checkpoint (the daemon stopped or died mid-render, or it was
 // paused) resumes from it; sampling being deterministic, its image is the one an uninterrupted render gives. A job
-// that throws fails alone; the daemon stays up.
+// that throws fails alone; the daemon stays up. A store that fails while a job's end is recorded is retried until it
+// takes it (JobStoreError never fails a job): the store, not the job, is at fault.
 #pragma once
 
 #include <chrono>
@@ -30,6 +31,9 @@ struct SchedulerOptions {
   std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
   // How often the queue is looked at without being woken (jobs another process may have added).
   std::chrono::milliseconds poll_interval{1000};
+  // The wait before recording a job's end again after the store failed, doubled after each failure up to the max.
+  std::chrono::milliseconds store_retry_first{100};
+  std::chrono::milliseconds store_retry_max{5000};
 };
 
 // What the scheduler tells the rest of the daemon (events, metrics). Called on render threads; must not block long.
@@ -39,6 +43,8 @@ struct SchedulerHooks {
   std::function<void(const std::string& id, uint32_t pass)> preview;
   std::function<void(uint64_t pixel_samples)> samples_rendered;
   std::function<void(double render_s)> job_ended;
+  // A write to the job store failed (a job's progress, warnings or end).
+  std::function<void()> store_write_failed;
 };
 
 class Scheduler {
@@ -64,6 +70,8 @@ class Scheduler {
   // The progress of a job rendering here, fresher than the store's.
   std::optional<JobProgress> live_progress(const std::string& id) const;
   int running_count() const;
+  // Whether the end of a job is waiting for the store to take it (its last write failed).
+  bool store_failing() const;
 
   enum class Outcome { kDone, kInProgress, kConflict, kUnknown };
   // queued, paused or running -> cancelled (a running render winds down within one tile's time: kInProgress).
@@ -83,6 +91,9 @@ class Scheduler {
   class RenderSlot;
   void dispatch_loop();
   void run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record);
+  bool record_end(RenderSlot& slot, const std::function<void()>& write);
+  bool record_failure(RenderSlot& slot, const std::string& message);
+  void count_store_error();
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
   void notify_state(const std::string& id);
 

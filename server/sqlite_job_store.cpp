@@ -2,7 +2,9 @@
 
 #include <sqlite3.h>
 
-#include <stdexcept>
+#include <cerrno>
+
+#include "server/file_io.h"
 
 namespace tessera::server {
 
@@ -54,8 +56,21 @@ constexpr const char* kJobsTableV2 = R"sql(
   );
 )sql";
 
+// SQLite says SQLITE_FULL when a write comes short (ENOSPC, or a file-size limit reached midway); a write refused
+// outright with another errno (EDQUOT, EFBIG) is an I/O error, and only the errno tells. sqlite3_system_errno() is
+// not kept on every path (a failed WAL append leaves it 0), so the errno the failed call left is read instead: every
+// call that may do I/O is preceded by errno = 0, so a value here comes from that call.
+bool out_of_space(sqlite3* db, int os_error) {
+  if (!db) return false;
+  const int primary = sqlite3_extended_errcode(db) & 0xff;
+  return primary == SQLITE_FULL || (primary == SQLITE_IOERR && is_out_of_space(os_error));
+}
+
+// Right after the call that failed, before anything else can touch errno.
 [[noreturn]] void fail(sqlite3* db, const std::string& what) {
-  throw std::runtime_error("job store: " + what + ": " + (db ? sqlite3_errmsg(db) : "out of memory"));
+  const int os_error = errno;
+  throw JobStoreError("job store: " + what + ": " + (db ? sqlite3_errmsg(db) : "out of memory"),
+                      out_of_space(db, os_error));
 }
 
 }  // namespace
@@ -67,6 +82,7 @@ constexpr const char* kJobsTableV2 = R"sql(
 class SqliteJobStore::Statement {
  public:
   Statement(SqliteJobStore& store, const std::string& sql) : db_(store.db_) {
+    errno = 0;  // see fail()
     auto it = store.statements_.find(sql);
     if (it == store.statements_.end() && store.statements_.size() < kMaxCachedStatements) {
       if (sqlite3_prepare_v3(db_, sql.c_str(), -1, SQLITE_PREPARE_PERSISTENT, &stmt_, nullptr) != SQLITE_OK)
@@ -104,6 +120,7 @@ class SqliteJobStore::Statement {
 
   // true: a row is available.
   bool step() {
+    errno = 0;  // see fail()
     int rc = sqlite3_step(stmt_);
     if (rc == SQLITE_ROW) return true;
     if (rc == SQLITE_DONE) return false;
@@ -159,12 +176,14 @@ class SqliteJobStore::Statement {
 };
 
 SqliteJobStore::SqliteJobStore(const std::filesystem::path& file) {
+  errno = 0;  // see fail()
   if (sqlite3_open_v2(file.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_NOMUTEX, nullptr) !=
       SQLITE_OK) {
+    const bool full = out_of_space(db_, errno);
     std::string msg = db_ ? sqlite3_errmsg(db_) : "out of memory";
     sqlite3_close(db_);
     db_ = nullptr;
-    throw std::runtime_error("job store: cannot open " + file.string() + ": " + msg);
+    throw JobStoreError("job store: cannot open " + file.string() + ": " + msg, full);
   }
   try {
     // Another process (a second daemon by mistake, a backup) may hold the lock briefly: wait rather than fail.
@@ -195,10 +214,12 @@ void SqliteJobStore::close() {
 
 void SqliteJobStore::exec(const char* sql) {
   char* err = nullptr;
+  errno = 0;  // see fail()
   if (sqlite3_exec(db_, sql, nullptr, nullptr, &err) != SQLITE_OK) {
+    const bool full = out_of_space(db_, errno);
     std::string msg = err ? err : "unknown error";
     sqlite3_free(err);
-    throw std::runtime_error(std::string("job store: ") + msg + " in: " + sql);
+    throw JobStoreError(std::string("job store: ") + msg + " in: " + sql, full);
   }
 }
 
@@ -212,8 +233,9 @@ void SqliteJobStore::migrate() {
       if (s.step() && !s.is_null(0)) version = static_cast<int>(s.int64(0));
     }
     if (version > kSchemaVersion) {
-      throw std::runtime_error("job store: the database has schema version " + std::to_string(version) +
-                               ", newer than this daemon's " + std::to_string(kSchemaVersion));
+      throw JobStoreError("job store: the database has schema version " + std::to_string(version) +
+                              ", newer than this daemon's " + std::to_string(kSchemaVersion),
+                          false);
     }
     if (version < 1) {
       exec(kJobsTableV2);

@@ -16,7 +16,7 @@ namespace tessera::server {
 
 class SqliteJobStore final : public JobStore {
  public:
-  // Opens (creating if needed) the database file. Throws std::runtime_error on failure.
+  // Opens (creating if needed) the database file. Every method throws JobStoreError when SQLite fails.
   explicit SqliteJobStore(const std::filesystem::path& file);
   ~SqliteJobStore() override;
   SqliteJobStore(const SqliteJobStore&) = delete;

@@ -313,6 +313,7 @@ TEST_F(DaemonTest, RoutesAndTheContract) {
   EXPECT_EQ(ready["status"], "ready") << ready.dump();
   EXPECT_EQ(ready["storage"]["min_free_disk_bytes"], 256u << 20) << ready.dump();  // the default --min-free-disk
   EXPECT_EQ(ready["storage"]["below_minimum"], false) << ready.dump();
+  EXPECT_EQ(ready["storage"]["job_store_failing"], false) << ready.dump();
   const json openapi = json::parse(fetch(*client_, "/v1/openapi.json"));
   EXPECT_TRUE(openapi["paths"].contains("/v1/jobs/{id}/result.exr"));
   const json job_schema = json::parse(fetch(*client_, "/v1/schemas/job.schema.json"));

@@ -6,10 +6,11 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
-#include <functional>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <thread>
+#include <vector>
 
 #include "server/contract.h"
 #include "tests/integration/daemon.h"
@@ -21,10 +22,12 @@ namespace {
 using nlohmann::json;
 namespace fs = std::filesystem;
 
-// One triangle in a .gltf with its .bin: a valid upload.
-httplib::MultipartFormDataItems triangle_files() {
+// One triangle in a .gltf with its .bin: a valid upload; the .gltf padded with `padding` bytes of extras.
+httplib::MultipartFormDataItems triangle_files(size_t padding = 0) {
   const float p[9] = {-1, -1, 0, 1, -1, 0, 0, 1, 0};
-  const json gltf = {{"asset", {{"version", "2.0"}}},
+  json asset = {{"version", "2.0"}};
+  if (padding > 0) asset["extras"] = {{"padding", std::string(padding, 'x')}};
+  const json gltf = {{"asset", asset},
                      {"scene", 0},
                      {"scenes", {{{"nodes", {0}}}}},
                      {"nodes", {{{"mesh", 0}}}},
@@ -62,17 +65,11 @@ std::string state_of(httplib::Client& c, const std::string& id) {
   return json::parse(res->body).value("state", "");
 }
 
-// Polls until `done`, for at most `timeout_s`; false on timeout.
-bool eventually(const std::function<bool()>& done, double timeout_s) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (done()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  return done();
-}
+// The words of the --min-free-disk refusal's detail.
+const std::vector<std::string> kBelowMinimum = {"bytes available", "--min-free-disk", "nothing was stored"};
 
-void expect_507(const httplib::Result& res, const std::string& what) {
+// A 507 problem document whose detail holds `words`.
+void expect_507(const httplib::Result& res, const std::string& what, const std::vector<std::string>& words) {
   ASSERT_TRUE(res) << what << ": no answer";
   EXPECT_EQ(res->status, 507) << what << ": " << res->body;
   EXPECT_EQ(res->get_header_value("Content-Type"), "application/problem+json") << what;
@@ -82,8 +79,7 @@ void expect_507(const httplib::Result& res, const std::string& what) {
   EXPECT_EQ(body.value("status", 0), 507) << what;
   EXPECT_EQ(body.value("type", ""), "https://tessera.dev/problems/insufficient-storage") << what;
   const std::string detail = body.value("detail", "");
-  EXPECT_NE(detail.find("bytes available"), std::string::npos) << what << ": " << detail;
-  EXPECT_NE(detail.find("--min-free-disk"), std::string::npos) << what << ": " << detail;
+  for (const std::string& word : words) EXPECT_NE(detail.find(word), std::string::npos) << what << ": " << detail;
 }
 
 size_t entries_in(const fs::path& dir) {
@@ -98,22 +94,23 @@ TEST(StorageGuard, ANearlyFullDiskRefusesNewJobsAndUploadsAndServesReads) {
   Daemon daemon(data, {"--threads", "1", "--min-free-disk", "1000TiB", "--retain-finished", "30d"});
   auto c = daemon.client();
 
-  expect_507(c->Post("/v1/jobs", cornell_job(16, 2).dump(), "application/json"), "scene job");
+  expect_507(c->Post("/v1/jobs", cornell_job(16, 2).dump(), "application/json"), "scene job", kBelowMinimum);
   expect_507(c->Post("/v1/jobs",
                      json{{"kind", "material"},
                           {"material", {{"type", "lambert"}}},
                           {"render", {{"width", 32}, {"height", 32}, {"spp", 4}}}}
                          .dump(),
                      "application/json"),
-             "material job");
+             "material job", kBelowMinimum);
   httplib::MultipartFormDataItems multipart = triangle_files();
   multipart.push_back(
       {"job",
        json{{"kind", "scene"}, {"scene", {{"gltf", "tri.gltf"}}}, {"render", {{"width", 8}, {"height", 8}}}}.dump(), "",
        "application/json"});
-  expect_507(c->Post("/v1/jobs", multipart), "multipart job with its glTF");
-  expect_507(c->Post("/v1/assets", triangle_files()), "multipart asset");
-  expect_507(c->Post("/v1/assets?name=tri.gltf", triangle_files()[0].content, "model/gltf+json"), "raw asset");
+  expect_507(c->Post("/v1/jobs", multipart), "multipart job with its glTF", kBelowMinimum);
+  expect_507(c->Post("/v1/assets", triangle_files()), "multipart asset", kBelowMinimum);
+  expect_507(c->Post("/v1/assets?name=tri.gltf", triangle_files()[0].content, "model/gltf+json"), "raw asset",
+             kBelowMinimum);
 
   // Reads go on.
   auto list = c->Get("/v1/jobs");
@@ -146,6 +143,55 @@ TEST(StorageGuard, ANearlyFullDiskRefusesNewJobsAndUploadsAndServesReads) {
   const auto t0 = std::chrono::steady_clock::now();
   EXPECT_EQ(daemon.stop(SIGTERM), 0);
   EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(5));
+}
+
+// The disk fills between the --min-free-disk check and the write (here a 1 MiB file-size limit the daemon inherits,
+// EFBIG, standing in for another process filling the disk, ENOSPC): the upload and the job are refused with 507 and
+// the problem of the check, nothing of them is left, and the daemon goes on serving what fits.
+TEST(StorageGuard, ADiskThatFillsDuringTheWriteIs507AndLeavesNothing) {
+  TempDir dir;
+  const fs::path data = dir.path() / "data";
+  std::unique_ptr<Daemon> daemon;
+  {
+    FileSizeLimit limit(1 << 20);  // inherited through fork and exec; the test writes nothing meanwhile
+    daemon = std::make_unique<Daemon>(data, std::vector<std::string>{"--threads", "1", "--min-free-disk", "0"});
+  }
+  auto c = daemon->client();
+  const std::vector<std::string> ran_out = {"ran out of space", "nothing was stored"};
+
+  expect_507(c->Post("/v1/assets", triangle_files(2 << 20)), "a 2 MiB asset", ran_out);
+  EXPECT_EQ(entries_in(data / "assets"), 0u);  // no temp dir, no half asset
+
+  // A job document of 2 MiB (unused materials with long names): SQLite cannot append it to its log.
+  json big = cornell_job(16, 1);
+  for (int i = 0; i < 8192; ++i)
+    big["scene"]["materials"][std::string(240, 'm') + std::to_string(i)] = {{"type", "lambert"}};
+  expect_507(c->Post("/v1/jobs", big.dump(), "application/json"), "a 2 MiB job", ran_out);
+  // The same job as a multipart submission with a small glTF: the glTF fits and is kept (whole: a retry reuses it),
+  // the job does not, and the detail says which.
+  httplib::MultipartFormDataItems multipart = triangle_files();
+  big["scene"]["gltf"] = "tri.gltf";
+  multipart.push_back({"job", big.dump(), "", "application/json"});
+  expect_507(c->Post("/v1/jobs", multipart), "a 2 MiB multipart job",
+             {"ran out of space", "the job was not stored", "a retry reuses them"});
+  EXPECT_EQ(entries_in(data / "assets"), 1u);
+  auto list = c->Get("/v1/jobs");
+  ASSERT_TRUE(list);
+  EXPECT_TRUE(json::parse(list->body)["jobs"].empty()) << list->body;
+  EXPECT_EQ(entries_in(data / "jobs"), 0u);
+
+  // What fits is stored and rendered as ever.
+  auto small = c->Post("/v1/assets", triangle_files());
+  ASSERT_TRUE(small);
+  EXPECT_EQ(small->status, 200) << small->body;  // kept from the multipart job
+  const std::string id = submit(*c, cornell_job(16, 1));
+  EXPECT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 60)) << state_of(*c, id);
+  const std::string metrics = c->Get("/metrics")->body;
+  for (const char* line :
+       {"tessera_http_requests_total{route=\"/v1/assets\",code=\"507\"} 1\n",
+        "tessera_http_requests_total{route=\"/v1/jobs\",code=\"507\"} 2\n", "tessera_job_store_errors_total 0\n"})
+    EXPECT_NE(metrics.find(line), std::string::npos) << line << metrics;
+  EXPECT_EQ(daemon->stop(SIGTERM), 0);
 }
 
 TEST(RetentionSweep, FinishedJobsExpireAndQueuedRunningPausedJobsStay) {

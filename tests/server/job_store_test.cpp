@@ -121,7 +121,12 @@ TEST(SqliteJobStore, RemoveAndDuplicateIds) {
   SqliteJobStore store(dir.path() / "jobs.db");
   JobRecord a = make_job(0, 1);
   store.create(a);
-  EXPECT_THROW(store.create(a), std::runtime_error);
+  try {
+    store.create(a);
+    ADD_FAILURE() << "a duplicate id was stored";
+  } catch (const JobStoreError& e) {
+    EXPECT_FALSE(e.out_of_space()) << e.what();  // refused, not for want of room
+  }
   EXPECT_TRUE(store.remove(a.id));
   EXPECT_FALSE(store.remove(a.id));
   EXPECT_FALSE(store.get(a.id, false));
@@ -136,7 +141,30 @@ TEST(SqliteJobStore, RefusesANewerSchema) {
   ASSERT_EQ(sqlite3_open(file.c_str(), &db), SQLITE_OK);
   ASSERT_EQ(sqlite3_exec(db, "INSERT INTO schema_version (version) VALUES (99)", nullptr, nullptr, nullptr), SQLITE_OK);
   sqlite3_close(db);
-  EXPECT_THROW(SqliteJobStore{file}, std::runtime_error);
+  EXPECT_THROW(SqliteJobStore{file}, JobStoreError);
+}
+
+// The file-size limit (EFBIG, or a short write) stands in for a full disk (ENOSPC): SQLite says SQLITE_FULL or an I/O
+// error, and either way the store says it ran out of room, so that POST /v1/jobs can answer 507.
+TEST(SqliteJobStore, AFullDiskIsAnOutOfSpaceErrorAndStoresNothing) {
+  test::TempDir dir;
+  SqliteJobStore store(dir.path() / "jobs.db");
+  JobRecord big = make_job(0, 1);
+  big.document = nlohmann::json{{"kind", "scene"}, {"padding", std::string(1 << 20, 'x')}}.dump();
+  {
+    test::FileSizeLimit limit(256 << 10);
+    try {
+      store.create(big);
+      ADD_FAILURE() << "a 1 MiB job was stored under a 256 KiB file-size limit";
+    } catch (const JobStoreError& e) {
+      EXPECT_TRUE(e.out_of_space()) << e.what();
+    }
+  }
+  EXPECT_FALSE(store.get(big.id, false));  // the insert was rolled back whole
+  // With room again the store goes on.
+  store.create(big);
+  EXPECT_EQ(store.get(big.id, true)->document, big.document);
+  EXPECT_EQ(store.count_by_state(std::nullopt).at(JobState::kQueued), 1);
 }
 
 }  // namespace

@@ -1,0 +1,168 @@
+// The scheduler when the job store fails as it records the end of a job (a full disk, a locked database): the
+// render's outcome stands and is written again until the store takes it, so the job neither fails for it nor stays
+// running; a stop meanwhile returns at once and leaves the job running in the store, for the next start to resume.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <climits>
+#include <memory>
+
+#include "renderer/thread_pool.h"
+#include "server/job_files.h"
+#include "server/scheduler.h"
+#include "server/sqlite_job_store.h"
+#include "server/submission.h"
+#include "tests/server/test_util.h"
+
+namespace tessera::server {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+// The real SQLite store, except that a transition out of running (the end of a run: succeeded, failed, cancelled,
+// paused, back to queued) throws JobStoreError while `failures_left` is above zero, as SQLITE_FULL would.
+class FailingEndStore final : public JobStore {
+ public:
+  explicit FailingEndStore(JobStore& inner) : inner_(inner) {}
+
+  std::atomic<int> failures_left{0};
+  std::atomic<int> failures{0};  // transitions refused so far
+
+  bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
+                  const std::string& error, std::optional<JobState> only_from) override {
+    if (to != JobState::kRunning && failures_left.load() > 0) {
+      failures_left.fetch_sub(1);
+      failures.fetch_add(1);
+      throw JobStoreError("job store: step: database or disk is full", true);
+    }
+    return inner_.transition(id, to, now_ms, stop_reason, error, only_from);
+  }
+
+  void create(const JobRecord& job) override { inner_.create(job); }
+  std::optional<JobRecord> claim_next(int64_t now_ms) override { return inner_.claim_next(now_ms); }
+  void update_progress(const std::string& id, const JobProgress& p) override { inner_.update_progress(id, p); }
+  bool set_priority(const std::string& id, int priority) override { return inner_.set_priority(id, priority); }
+  void set_warnings(const std::string& id, const std::string& w) override { inner_.set_warnings(id, w); }
+  std::optional<int> queue_position(const std::string& id) override { return inner_.queue_position(id); }
+  std::optional<JobRecord> find_by_idempotency_key(const std::string& owner, const std::string& key) override {
+    return inner_.find_by_idempotency_key(owner, key);
+  }
+  std::map<JobState, int> count_by_state(const std::optional<std::string>& owner) override {
+    return inner_.count_by_state(owner);
+  }
+  std::optional<JobRecord> get(const std::string& id, bool with_document) override {
+    return inner_.get(id, with_document);
+  }
+  std::vector<JobRecord> list(const JobFilter& filter) override { return inner_.list(filter); }
+  bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) override {
+    return inner_.remove(id, only_finished_before_ms);
+  }
+  int requeue_running() override { return inner_.requeue_running(); }
+
+ private:
+  JobStore& inner_;
+};
+
+class SchedulerStoreFailure : public ::testing::Test {
+ protected:
+  // One job at a time; the store's retries wait `first_retry`, doubling up to four times that.
+  std::unique_ptr<Scheduler> make_scheduler(std::chrono::milliseconds first_retry) {
+    SchedulerOptions options;
+    options.store_retry_first = first_retry;
+    options.store_retry_max = first_retry * 4;
+    auto scheduler = std::make_unique<Scheduler>(store_, files_, pool_, options);
+    SchedulerHooks hooks;
+    hooks.store_write_failed = [this] { store_errors_.fetch_add(1); };
+    scheduler->set_hooks(std::move(hooks));
+    return scheduler;
+  }
+
+  // Queues the Cornell box at 16x16 and 1 spp (a few milliseconds of rendering) as POST /v1/jobs would.
+  std::string queue_tiny_job() {
+    auto checked = check_job_document(test::cornell_job(16, 1), SubmissionLimits{});
+    const AcceptedJob& accepted = std::get<AcceptedJob>(checked);
+    JobRecord job;
+    job.id = new_job_id();
+    job.kind = accepted.kind;
+    job.created_at_ms = 1;
+    job.document = accepted.document.dump();
+    job.settings = accepted.settings.dump();
+    job.outputs = accepted.outputs.dump();
+    job.progress.samples_total = accepted.spp;
+    sqlite_.create(job);
+    return job.id;
+  }
+
+  JobState state_of(const std::string& id) { return sqlite_.get(id, false).value().state; }
+
+  bool has_ended(const std::string& id) {
+    const JobState s = state_of(id);
+    return s != JobState::kQueued && s != JobState::kRunning;
+  }
+
+  test::TempDir dir_;
+  SqliteJobStore sqlite_{dir_.path() / "jobs.db"};
+  FailingEndStore store_{sqlite_};
+  JobFiles files_{dir_.path()};
+  ThreadPool pool_{2};
+  std::atomic<int> store_errors_{0};
+};
+
+TEST_F(SchedulerStoreFailure, ASucceededJobIsRecordedOnceTheStoreRecovers) {
+  store_.failures_left = 3;
+  auto scheduler = make_scheduler(1ms);
+  const std::string id = queue_tiny_job();
+  scheduler->start();
+
+  ASSERT_TRUE(test::eventually([&] { return has_ended(id); }, 120)) << job_state_name(state_of(id));
+  const JobRecord job = sqlite_.get(id, false).value();
+  EXPECT_EQ(job.state, JobState::kSucceeded) << job.error;  // not failed for the store's fault
+  EXPECT_EQ(job.error, "");
+  EXPECT_EQ(job.stop_reason, "samples");
+  EXPECT_EQ(job.progress.samples_done, 1u);  // the final progress, written with the end
+  EXPECT_EQ(store_.failures.load(), 3);
+  EXPECT_EQ(store_errors_.load(), 3);  // each counted (tessera_job_store_errors_total)
+  EXPECT_TRUE(fs::is_regular_file(files_.path(id, JobFile::kResultPng)));
+  EXPECT_FALSE(fs::exists(files_.path(id, JobFile::kCheckpoint)));  // removed once the end is recorded
+  EXPECT_FALSE(scheduler->store_failing());
+  scheduler->shutdown();
+}
+
+TEST_F(SchedulerStoreFailure, AStopWhileTheStoreFailsLeavesTheJobRunningForTheNextStart) {
+  store_.failures_left = INT_MAX;
+  // After the first failure the retry waits a minute: only the stop can end the wait.
+  auto scheduler = make_scheduler(60s);
+  const std::string first = queue_tiny_job();
+  const std::string second = queue_tiny_job();
+  scheduler->start();
+
+  ASSERT_TRUE(test::eventually([&] { return scheduler->store_failing(); }, 120));
+  // The slot stays taken while the store is retried: the second job waits (max_jobs 1).
+  EXPECT_EQ(scheduler->running_count(), 1);
+  EXPECT_EQ(state_of(second), JobState::kQueued);
+  EXPECT_EQ(store_errors_.load(), 1);
+
+  const auto stop_started = std::chrono::steady_clock::now();
+  scheduler->shutdown();
+  EXPECT_LT(std::chrono::steady_clock::now() - stop_started, 30s);  // well before the minute's retry
+  EXPECT_EQ(store_.failures.load(), 1);
+  EXPECT_EQ(state_of(first), JobState::kRunning);
+  EXPECT_TRUE(fs::is_regular_file(files_.path(first, JobFile::kCheckpoint)));  // kept for the resume
+  scheduler.reset();
+
+  // The next start, the store healthy again: the job is requeued and resumes from its checkpoint; the other follows.
+  store_.failures_left = 0;
+  auto next = make_scheduler(1ms);
+  next->start();
+  ASSERT_TRUE(test::eventually([&] { return has_ended(first) && has_ended(second); }, 120));
+  EXPECT_EQ(state_of(first), JobState::kSucceeded);
+  EXPECT_EQ(state_of(second), JobState::kSucceeded);
+  EXPECT_EQ(sqlite_.get(first, false)->progress.samples_done, 1u);
+  EXPECT_FALSE(fs::exists(files_.path(first, JobFile::kCheckpoint)));
+  next->shutdown();
+}
+
+}  // namespace
+}  // namespace tessera::server
