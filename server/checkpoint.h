@@ -4,7 +4,8 @@
 // Layout (little-endian, as the machines we run on): a 48-byte header
 //   magic "TSRCKPT1" (8) | version u32 | width u32 | height u32 | samples u32 | passes u32 | reserved u32 |
 //   elapsed_s f64 | settings_hash u64 (of the job's render settings: a checkpoint of another render is refused)
-// then checksum u64 (FNV-1a 64 of the payload), then the payload: the film's state (Film::append_state: its RGB sums,
+// then checksum u64 (FNV-1a 64 of the header and the payload; version 2, still read, covered the payload only), then
+// the payload: the film's state (Film::append_state: its RGB sums,
 // 3·w·h 128-bit fixed point, and its luminance square sums, w·h f32).
 #pragma once
 

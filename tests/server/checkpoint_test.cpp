@@ -2,6 +2,7 @@
 // settings or size, a torn or corrupted file, another format) is refused rather than resumed from.
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <random>
 
 #include "server/checkpoint.h"
@@ -42,11 +43,29 @@ TEST(Checkpoint, RefusesAnotherRenderAndDamagedBytes) {
   EXPECT_FALSE(decode_checkpoint(bytes + '\0', 7, 5, 99)) << "trailing bytes";
   EXPECT_FALSE(decode_checkpoint(bytes.substr(0, 20), 7, 5, 99)) << "header only";
   EXPECT_FALSE(decode_checkpoint("", 7, 5, 99));
-  for (size_t at : {size_t{0}, size_t{8}, bytes.size() / 2, bytes.size() - 1}) {
+  // The magic, the version, the sample count, the elapsed time, the payload's middle and its last byte.
+  for (size_t at : {size_t{0}, size_t{8}, size_t{20}, size_t{32}, bytes.size() / 2, bytes.size() - 1}) {
     std::string damaged = bytes;
     damaged[at] = static_cast<char>(damaged[at] ^ 0x10);
     EXPECT_FALSE(decode_checkpoint(damaged, 7, 5, 99)) << "a bit flipped at byte " << at;
   }
+}
+
+// A checkpoint of the format before the header was checksummed (version 2: the checksum covers the payload only)
+// still resumes, so an upgrade does not restart the jobs it interrupted.
+TEST(Checkpoint, ReadsTheVersionBeforeTheHeaderWasChecksummed) {
+  const Film film = noisy_film(4, 3, 5);
+  std::string bytes = encode_checkpoint(film, 3, 0.75, 7);
+  const uint32_t v2 = 2;
+  std::memcpy(bytes.data() + 8, &v2, sizeof v2);
+  const std::string_view payload = std::string_view(bytes).substr(48 + 8);
+  const uint64_t payload_checksum = fnv1a64(payload);
+  std::memcpy(bytes.data() + 48, &payload_checksum, sizeof payload_checksum);
+  const std::optional<Checkpoint> c = decode_checkpoint(bytes, 4, 3, 7);
+  ASSERT_TRUE(c);
+  EXPECT_EQ(c->film.samples(), 5u);
+  EXPECT_EQ(c->passes, 3u);
+  EXPECT_TRUE(c->film.sums() == film.sums());
 }
 
 }  // namespace
