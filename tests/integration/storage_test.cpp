@@ -22,27 +22,14 @@ namespace {
 using nlohmann::json;
 namespace fs = std::filesystem;
 
-// One triangle in a .gltf with its .bin: a valid upload; the .gltf padded with `padding` bytes of extras.
+// One triangle in a .gltf with its .bin (test::triangle_gltf) as multipart files: a valid upload.
 httplib::MultipartFormDataItems triangle_files(size_t padding = 0) {
-  const float p[9] = {-1, -1, 0, 1, -1, 0, 0, 1, 0};
-  json asset = {{"version", "2.0"}};
-  if (padding > 0) asset["extras"] = {{"padding", std::string(padding, 'x')}};
-  const json gltf = {{"asset", asset},
-                     {"scene", 0},
-                     {"scenes", {{{"nodes", {0}}}}},
-                     {"nodes", {{{"mesh", 0}}}},
-                     {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}}}}}}},
-                     {"accessors",
-                      {{{"bufferView", 0},
-                        {"componentType", 5126},
-                        {"count", 3},
-                        {"type", "VEC3"},
-                        {"min", {-1, -1, 0}},
-                        {"max", {1, 1, 0}}}}},
-                     {"bufferViews", {{{"buffer", 0}, {"byteLength", 36}}}},
-                     {"buffers", {{{"uri", "tri.bin"}, {"byteLength", 36}}}}};
-  return {{"file", gltf.dump(), "tri.gltf", "model/gltf+json"},
-          {"file", std::string(reinterpret_cast<const char*>(p), sizeof p), "tri.bin", "application/octet-stream"}};
+  httplib::MultipartFormDataItems items;
+  for (auto& [name, bytes] : triangle_gltf(padding)) {
+    const char* type = name == "tri.gltf" ? "model/gltf+json" : "application/octet-stream";
+    items.push_back({"file", std::move(bytes), name, type});
+  }
+  return items;
 }
 
 std::string submit(httplib::Client& c, const json& doc) {

@@ -13,26 +13,12 @@ namespace tessera::server {
 namespace {
 
 namespace fs = std::filesystem;
-using nlohmann::json;
 
-// One triangle in a .gltf with its .bin, the .gltf padded to `gltf_bytes` or more (extras are ignored).
-std::vector<UploadFile> triangle_upload(size_t gltf_bytes) {
-  const float p[9] = {-1, -1, 0, 1, -1, 0, 0, 1, 0};
-  const json gltf = {{"asset", {{"version", "2.0"}, {"extras", {{"padding", std::string(gltf_bytes, 'x')}}}}},
-                     {"scene", 0},
-                     {"scenes", {{{"nodes", {0}}}}},
-                     {"nodes", {{{"mesh", 0}}}},
-                     {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}}}}}}},
-                     {"accessors",
-                      {{{"bufferView", 0},
-                        {"componentType", 5126},
-                        {"count", 3},
-                        {"type", "VEC3"},
-                        {"min", {-1, -1, 0}},
-                        {"max", {1, 1, 0}}}}},
-                     {"bufferViews", {{{"buffer", 0}, {"byteLength", 36}}}},
-                     {"buffers", {{{"uri", "tri.bin"}, {"byteLength", 36}}}}};
-  return {{"tri.gltf", gltf.dump()}, {"tri.bin", std::string(reinterpret_cast<const char*>(p), sizeof p)}};
+// One triangle in a .gltf with its .bin (test::triangle_gltf), the .gltf padded with `padding` bytes.
+std::vector<UploadFile> triangle_upload(size_t padding) {
+  std::vector<UploadFile> files;
+  for (auto& [name, bytes] : test::triangle_gltf(padding)) files.push_back({name, std::move(bytes)});
+  return files;
 }
 
 TEST(FileIo, OutOfSpaceIsAFullDiskAQuotaOrAFileSizeLimit) {

@@ -12,6 +12,8 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -55,6 +57,29 @@ inline nlohmann::json cornell_job(int size, int spp) {
 }
 // A job that renders until cancelled (on two threads, 65536 spp of 128x128 take minutes).
 inline nlohmann::json long_cornell_job() { return cornell_job(128, 65536); }
+
+// One triangle as an upload: tri.gltf, padded with `padding` bytes of extras (which loaders ignore), and its tri.bin;
+// (file name, bytes) pairs.
+inline std::vector<std::pair<std::string, std::string>> triangle_gltf(size_t padding = 0) {
+  const float p[9] = {-1, -1, 0, 1, -1, 0, 0, 1, 0};
+  nlohmann::json asset = {{"version", "2.0"}};
+  if (padding > 0) asset["extras"] = {{"padding", std::string(padding, 'x')}};
+  const nlohmann::json gltf = {{"asset", asset},
+                               {"scene", 0},
+                               {"scenes", {{{"nodes", {0}}}}},
+                               {"nodes", {{{"mesh", 0}}}},
+                               {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}}}}}}},
+                               {"accessors",
+                                {{{"bufferView", 0},
+                                  {"componentType", 5126},
+                                  {"count", 3},
+                                  {"type", "VEC3"},
+                                  {"min", {-1, -1, 0}},
+                                  {"max", {1, 1, 0}}}}},
+                               {"bufferViews", {{{"buffer", 0}, {"byteLength", 36}}}},
+                               {"buffers", {{{"uri", "tri.bin"}, {"byteLength", 36}}}}};
+  return {{"tri.gltf", gltf.dump()}, {"tri.bin", std::string(reinterpret_cast<const char*>(p), sizeof p)}};
+}
 
 // A fresh directory under the system temp dir, removed with the object.
 class TempDir {
