@@ -23,28 +23,22 @@ Vec3 EnvironmentMap::uv_to_direction(Vec2 uv) {
 
 EnvironmentMap::EnvironmentMap(int width, int height, std::vector<float> rgb)
     : width_(width), height_(height), rgb_(std::move(rgb)) {
-  std::vector<float> row_weights(height_);
-  std::vector<float> w(width_);
+  std::vector<float> weights(static_cast<size_t>(width_) * height_);
   double sum_r = 0, sum_g = 0, sum_b = 0, solid = 0;
-  rows_.reserve(height_);
   for (int y = 0; y < height_; ++y) {
     // Each texel covers a solid angle proportional to sin(theta) at its centre.
     float sin_theta = std::sin((y + 0.5f) * kPi / height_);
-    double row_sum = 0;
     for (int x = 0; x < width_; ++x) {
       Rgb c = texel(x, y);
       // A small floor keeps every direction with radiance possible to sample.
-      w[x] = (std::max(luminance(c), 0.0f) + 1e-6f) * sin_theta;
-      row_sum += w[x];
+      weights[static_cast<size_t>(y) * width_ + x] = (std::max(luminance(c), 0.0f) + 1e-6f) * sin_theta;
       sum_r += c.x * sin_theta;
       sum_g += c.y * sin_theta;
       sum_b += c.z * sin_theta;
       solid += sin_theta;
     }
-    rows_.emplace_back(w.data(), w.size());
-    row_weights[y] = static_cast<float>(row_sum);
   }
-  marginal_ = Distribution1D(row_weights.data(), row_weights.size());
+  distribution_ = Distribution2D(weights.data(), width_, height_);
   average_ = solid > 0 ? Rgb(static_cast<float>(sum_r / solid), static_cast<float>(sum_g / solid),
                              static_cast<float>(sum_b / solid))
                        : Rgb(0);
@@ -89,14 +83,12 @@ Rgb EnvironmentMap::lookup(const Vec3& dir, float* pdf) const {
 }
 
 Vec3 EnvironmentMap::sample(Vec2 u, float* pdf, Rgb* radiance) const {
-  float pmf_row = 0, pmf_col = 0, ur = 0, uc = 0;
-  size_t row = marginal_.sample(u.y, &pmf_row, &ur);
-  size_t col = rows_[row].sample(u.x, &pmf_col, &uc);
-  Vec2 uv((col + uc) / width_, (row + ur) / height_);
+  float pdf_uv = 0;
+  const Vec2 uv = distribution_.sample(u, &pdf_uv);
   Vec3 dir = uv_to_direction(uv);
   float sin_theta = std::sin(uv.y * kPi);
-  // Density over the unit square is pmf * (width * height); dω = 2π² sinθ du dv.
-  *pdf = sin_theta > 0 ? pmf_row * pmf_col * width_ * height_ / (2 * kPi * kPi * sin_theta) : 0.0f;
+  // dω = 2π² sinθ du dv.
+  *pdf = sin_theta > 0 ? pdf_uv / (2 * kPi * kPi * sin_theta) : 0.0f;
   if (radiance) *radiance = lookup_uv(uv);
   return dir;
 }
@@ -110,7 +102,7 @@ float EnvironmentMap::pdf_uv(Vec2 uv, float cos_theta) const {
   const float c = clamp(cos_theta, -1.0f, 1.0f);
   float sin_theta = safe_sqrt((1 - c) * (1 + c));
   if (sin_theta <= 0) return 0;
-  return marginal_.pmf(row) * rows_[row].pmf(col) * width_ * height_ / (2 * kPi * kPi * sin_theta);
+  return distribution_.pdf(col, row) / (2 * kPi * kPi * sin_theta);
 }
 
 }  // namespace tessera

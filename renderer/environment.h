@@ -39,8 +39,7 @@ class EnvironmentMap {
   float pdf_uv(Vec2 uv, float cos_theta) const;
   int width_, height_;
   std::vector<float> rgb_;
-  std::vector<Distribution1D> rows_;  // conditional distribution of u within each row
-  Distribution1D marginal_;           // distribution of rows
+  Distribution2D distribution_;  // over (u, v), proportional to luminance x sin(theta)
   Rgb average_;
 };
 

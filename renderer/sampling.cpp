@@ -25,50 +25,97 @@ Vec3 sample_uniform_cone(Vec2 u, float cos_theta_max) {
   return {sin_theta * std::cos(phi), sin_theta * std::sin(phi), cos_theta};
 }
 
+void CdfInversion::build_guide(const double* cdf, size_t n, uint32_t* guide, double* slots_per_unit) {
+  *slots_per_unit = static_cast<double>(n) / cdf[n];
+  size_t i = 0;
+  for (size_t k = 0; k < n; ++k) {
+    while (i + 1 < n && slot(cdf[i + 1], *slots_per_unit, n) < k) ++i;
+    guide[k] = static_cast<uint32_t>(i);
+  }
+  guide[n] = static_cast<uint32_t>(n - 1);
+}
+
+size_t CdfInversion::find(const double* cdf, size_t n, const uint32_t* guide, double slots_per_unit, double target) {
+  const double *first = cdf + 1, *last = cdf + n + 1;
+  if (guide) {
+    const size_t k = slot(target, slots_per_unit, n);
+    first = cdf + 1 + guide[k];
+    last = cdf + 2 + guide[k + 1];
+  }
+  size_t i = static_cast<size_t>(std::upper_bound(first, last, target) - cdf - 1);
+  i = std::min(i, n - 1);
+  while (i + 1 < n && !(cdf[i + 1] > cdf[i])) ++i;
+  return i;
+}
+
+namespace {
+
+// The cumulative sum of n weights (negative ones as zero) into cdf[0..n]; a uniform one when they sum to zero.
+// Returns the sum.
+double cumulative_sum(const float* weights, size_t n, double* cdf) {
+  cdf[0] = 0;
+  for (size_t i = 0; i < n; ++i) cdf[i + 1] = cdf[i] + std::max(0.0f, weights[i]);
+  const double total = cdf[n];
+  if (!(total > 0))
+    for (size_t i = 0; i <= n; ++i) cdf[i] = static_cast<double>(i);
+  return total > 0 ? total : 0;
+}
+
+// u in [0,1) rescaled to [0,1) within bucket i of the sum, for a target u * cdf[n].
+float remap_within(const double* cdf, size_t i, double target) {
+  const double width = cdf[i + 1] - cdf[i];
+  const double r = width > 0 ? (target - cdf[i]) / width : 0.5;
+  return static_cast<float>(std::clamp(r, 0.0, 0.99999994));
+}
+
+}  // namespace
+
 Distribution1D::Distribution1D(const float* weights, size_t n) : pdf_(n), cdf_(n + 1) {
-  cdf_[0] = 0;
-  for (size_t i = 0; i < n; ++i) cdf_[i + 1] = cdf_[i] + std::max(0.0f, weights[i]);
-  total_ = cdf_[n];
+  total_ = cumulative_sum(weights, n, cdf_.data());
   for (size_t i = 0; i < n; ++i) {
     pdf_[i] = total_ > 0 ? static_cast<float>(std::max(0.0f, weights[i]) / total_) : 1.0f / static_cast<float>(n);
-  }
-  if (!(total_ > 0)) {
-    for (size_t i = 0; i <= n; ++i) cdf_[i] = static_cast<double>(i);
-    total_ = 0;
   }
   // Below a few dozen buckets the binary search is as fast as the table.
   if (n >= 32 && n < (size_t(1) << 31)) {
     guide_.resize(n + 1);
-    slots_per_unit_ = static_cast<double>(n) / cdf_.back();
-    size_t i = 0;
-    for (size_t k = 0; k < n; ++k) {
-      while (i + 1 < n && slot(cdf_[i + 1]) < k) ++i;
-      guide_[k] = static_cast<uint32_t>(i);
-    }
-    guide_[n] = static_cast<uint32_t>(n - 1);
+    CdfInversion::build_guide(cdf_.data(), n, guide_.data(), &slots_per_unit_);
   }
 }
 
 size_t Distribution1D::sample(float u, float* pmf, float* u_remapped) const {
-  const double scale = cdf_.back();
-  const double target = static_cast<double>(u) * scale;
-  // First bucket whose upper bound exceeds the target, skipping empty buckets.
-  auto first = cdf_.begin() + 1, last = cdf_.end();
-  if (!guide_.empty()) {
-    const size_t k = slot(target);
-    first = cdf_.begin() + 1 + guide_[k];
-    last = cdf_.begin() + 2 + guide_[k + 1];
-  }
-  auto it = std::upper_bound(first, last, target);
-  size_t i = static_cast<size_t>(std::min<std::ptrdiff_t>(it - cdf_.begin() - 1, static_cast<std::ptrdiff_t>(size() - 1)));
-  while (i + 1 < size() && pdf_[i] == 0) ++i;
+  const double target = static_cast<double>(u) * cdf_.back();
+  const size_t i =
+      CdfInversion::find(cdf_.data(), size(), guide_.empty() ? nullptr : guide_.data(), slots_per_unit_, target);
   if (pmf) *pmf = pdf_[i];
-  if (u_remapped) {
-    double width = cdf_[i + 1] - cdf_[i];
-    double r = width > 0 ? (target - cdf_[i]) / width : 0.5;
-    *u_remapped = static_cast<float>(std::clamp(r, 0.0, 0.99999994));
-  }
+  if (u_remapped) *u_remapped = remap_within(cdf_.data(), i, target);
   return i;
+}
+
+Distribution2D::Distribution2D(const float* weights, int width, int height)
+    : width_(width),
+      height_(height),
+      cells_(static_cast<float>(width) * static_cast<float>(height)),
+      cdf_(static_cast<size_t>(height) * (width + 1)),
+      guide_(static_cast<size_t>(height) * (width + 1)),
+      slots_per_unit_(height) {
+  std::vector<float> row_weights(height);
+  for (int y = 0; y < height; ++y) {
+    double* c = &cdf_[static_cast<size_t>(y) * (width + 1)];
+    row_weights[y] = static_cast<float>(cumulative_sum(weights + static_cast<size_t>(y) * width, width, c));
+    CdfInversion::build_guide(c, width, &guide_[static_cast<size_t>(y) * (width + 1)], &slots_per_unit_[y]);
+  }
+  marginal_ = Distribution1D(row_weights.data(), row_weights.size());
+}
+
+Vec2 Distribution2D::sample(Vec2 u, float* pdf) const {
+  float ur = 0;
+  const int row = static_cast<int>(marginal_.sample(u.y, nullptr, &ur));
+  const double* c = row_cdf(row);
+  const double target = static_cast<double>(u.x) * c[width_];
+  const int col = static_cast<int>(CdfInversion::find(c, width_, &guide_[static_cast<size_t>(row) * (width_ + 1)],
+                                                      slots_per_unit_[row], target));
+  *pdf = this->pdf(col, row);
+  return {(col + remap_within(c, col, target)) / width_, (row + ur) / height_};
 }
 
 }  // namespace tessera

@@ -2,6 +2,7 @@
 // (the seeds' chapter on Monte Carlo integration: sample proportionally to the integrand's known factors).
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "renderer/math.h"
@@ -67,9 +68,26 @@ inline float power_heuristic(float pdf_a, float pdf_b) {
   return a + b > 0 ? a / (a + b) : 0.0f;
 }
 
-// A discrete distribution over n weights, sampled by inverting its cumulative sum. A guide table (Chen and Asau's
-// cutpoint method) narrows the search to the buckets one n-th of the total can span: O(1) on average, and the
-// same index as a binary search over the whole sum for every u.
+// Inversion of a cumulative sum (n + 1 entries from cdf[0] = 0) with a guide table (Chen and Asau's cutpoint
+// method) that narrows the search to the buckets one n-th of the total can span: O(1) on average, and the same
+// index as a binary search over the whole sum for every target. Shared by the 1D and 2D distributions below.
+struct CdfInversion {
+  // guide[k] (n + 1 entries, n slots) is the first bucket i with slot(cdf[i + 1]) >= k, guide[n] = n - 1. The answer
+  // for a target in slot k lies in buckets guide[k] .. guide[k + 1]: its bucket's upper bound is above the target
+  // (so in slot k or later), its lower bound at or below (so in slot k or earlier).
+  static void build_guide(const double* cdf, size_t n, uint32_t* guide, double* slots_per_unit);
+  // The first bucket with a non-zero width whose upper bound exceeds `target` in [0, cdf[n]); `guide` may be null
+  // (a binary search over the whole sum).
+  static size_t find(const double* cdf, size_t n, const uint32_t* guide, double slots_per_unit, double target);
+  // The guide slot of a target: monotone in the target, one multiply. The table is built with this same function,
+  // so no rounding of it can send a target to a slot whose range misses the answer.
+  static size_t slot(double target, double slots_per_unit, size_t n) {
+    const double k = target * slots_per_unit;
+    return k < static_cast<double>(n - 1) ? static_cast<size_t>(k) : n - 1;
+  }
+};
+
+// A discrete distribution over n weights, sampled by inverting its cumulative sum (CdfInversion).
 class Distribution1D {
  public:
   Distribution1D() = default;
@@ -83,20 +101,41 @@ class Distribution1D {
   double total() const { return total_; }
 
  private:
-  // The guide slot of a target in [0, total): monotone in the target, one multiply. The table is built with this
-  // same function, so no rounding of it can send a target to a slot whose range misses the answer.
-  size_t slot(double target) const {
-    const double k = target * slots_per_unit_;
-    return k < static_cast<double>(guide_.size() - 2) ? static_cast<size_t>(k) : guide_.size() - 2;
-  }
   std::vector<float> pdf_;
   std::vector<double> cdf_;  // n + 1 entries
-  // Empty for small n; else n + 1 entries (n slots): guide_[k] is the first bucket i with slot(cdf_[i + 1]) >= k
-  // (guide_[n] = n - 1). The answer for a target in slot k lies in buckets guide_[k] .. guide_[k + 1]: its bucket's
-  // upper bound is above the target (so in slot k or later), its lower bound at or below (so in slot k or earlier).
-  std::vector<uint32_t> guide_;
+  std::vector<uint32_t> guide_;  // empty below a few dozen buckets (a binary search is as fast), else n + 1 entries
   double slots_per_unit_ = 0;
   double total_ = 0;
+};
+
+// A piecewise-constant density on the unit square over a width x height grid of non-negative weights (row-major,
+// row 0 first), sampled by inversion: a row from the marginal distribution, then a column from that row's
+// conditional one, then a uniform point in the cell. Low-discrepancy points stay well spread in the image of the
+// map. The conditional distributions lie in one block of memory, a row's cumulative sum beside its guide table, so
+// a sample reads two cache lines of the row rather than chasing a per-row object (what an environment map with a
+// sun, sampled at every path vertex, spent most of its time on).
+class Distribution2D {
+ public:
+  Distribution2D() = default;
+  Distribution2D(const float* weights, int width, int height);
+  // A point of the unit square with density *pdf (over the unit square); u in [0,1)^2.
+  Vec2 sample(Vec2 u, float* pdf) const;
+  // The density at cell (col, row), the one sample() reports for points in it.
+  float pdf(int col, int row) const {
+    const double* c = row_cdf(row);
+    return marginal_.pmf(row) * static_cast<float>((c[col + 1] - c[col]) / c[width_]) * cells_;
+  }
+  int width() const { return width_; }
+  int height() const { return height_; }
+
+ private:
+  const double* row_cdf(int row) const { return &cdf_[static_cast<size_t>(row) * (width_ + 1)]; }
+  int width_ = 0, height_ = 0;
+  float cells_ = 0;          // width * height: a cell's probability times this is its density
+  Distribution1D marginal_;  // of rows
+  std::vector<double> cdf_;       // height rows of width + 1 entries: each row's cumulative sum from 0
+  std::vector<uint32_t> guide_;   // height rows of width + 1 entries: each row's guide table
+  std::vector<double> slots_per_unit_;  // per row
 };
 
 }  // namespace tessera

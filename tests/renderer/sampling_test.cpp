@@ -177,6 +177,50 @@ TEST(Sampling, Distribution1DGuideTableMatchesBinarySearch) {
   }
 }
 
+// The 2D distribution picks cells in proportion to their weights (chi-square over the cells), never an empty cell
+// or a cell of an empty row, reports for each sample the density pdf(col, row) of its cell, and spreads points
+// uniformly inside a cell (chi-square over quarters of the heaviest cell).
+TEST(Sampling, Distribution2DPicksCellsByWeight) {
+  const int w = 40, h = 6;  // wider than a guide table's threshold in 1D: the rows always have one
+  std::vector<float> weights(w * h);
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<float> u01(0, 1);
+  for (int i = 0; i < w * h; ++i) weights[i] = u01(rng) < 0.2f ? 0.0f : std::exp(4 * u01(rng));
+  for (int x = 0; x < w; ++x) weights[2 * w + x] = 0;  // an empty row
+  weights[5 * w + 7] = 500;                            // a sun
+  Distribution2D d(weights.data(), w, h);
+  double total = 0;
+  for (float v : weights) total += v;
+  const int n = 400000;
+  std::vector<double> cells(w * h, 0), quarters(4, 0);
+  for (int i = 0; i < n; ++i) {
+    float pdf = 0;
+    const Vec2 p = d.sample(Vec2(u01(rng), u01(rng)), &pdf);
+    ASSERT_GE(p.x, 0.0f);
+    ASSERT_LT(p.x, 1.0f);
+    ASSERT_GE(p.y, 0.0f);
+    ASSERT_LT(p.y, 1.0f);
+    const int col = std::min(w - 1, static_cast<int>(p.x * w)), row = std::min(h - 1, static_cast<int>(p.y * h));
+    ASSERT_GT(weights[row * w + col], 0) << "cell " << col << ", " << row;
+    ASSERT_FLOAT_EQ(pdf, d.pdf(col, row));
+    cells[row * w + col] += 1;
+    if (col == 7 && row == 5) quarters[(p.x * w - col < 0.5f ? 0 : 1) + (p.y * h - row < 0.5f ? 0 : 2)] += 1;
+  }
+  std::vector<double> observed, expected;
+  double integral = 0;
+  for (int i = 0; i < w * h; ++i) {
+    integral += d.pdf(i % w, i / w) / (w * h);
+    if (weights[i] <= 0) continue;
+    EXPECT_NEAR(d.pdf(i % w, i / w), weights[i] / total * w * h, 1e-4 * weights[i] / total * w * h);
+    observed.push_back(cells[i]);
+    expected.push_back(n * weights[i] / total);
+  }
+  EXPECT_NEAR(integral, 1.0, 1e-5);
+  EXPECT_GT(test::chi_square_p_value(observed, expected), kAlpha);
+  const double in_sun = quarters[0] + quarters[1] + quarters[2] + quarters[3];
+  EXPECT_GT(test::chi_square_p_value(quarters, std::vector<double>(4, in_sun / 4)), kAlpha);
+}
+
 TEST(Sampling, PowerHeuristic) {
   EXPECT_FLOAT_EQ(power_heuristic(1, 1), 0.5f);
   EXPECT_FLOAT_EQ(power_heuristic(3, 1), 0.9f);
