@@ -68,6 +68,13 @@ void job_not_found(Response& res) {
   send_problem(res, 404, "no such job");
 }
 
+// Seconds a client waits before retrying a request the job store failed (JobStoreError, answered by the exception
+// handler): a database locked past its busy timeout or an I/O error passes within seconds or needs an operator, and
+// a retry costs the daemon little either way. Space, once full, is freed by someone (a client deleting jobs, the
+// --retain-finished sweep): a slower retry.
+constexpr const char* kStoreRetryAfterS = "5";
+constexpr const char* kStoreFullRetryAfterS = "30";
+
 // ---- storage -------------------------------------------------------------------------------------------------
 
 // Bytes available to the daemon (not to root) on the data directory's filesystem; nothing when it cannot be asked.
@@ -353,11 +360,21 @@ void post_job(ApiContext& ctx, const Request& req, Response& res) {
   log(LogLevel::kInfo, "job queued",
       {{"job", job.id}, {"kind", job.kind}, {"priority", job.priority}, {"owner", job.owner},
        {"render", accepted.settings}});
-  publish_state(ctx, job.id);
+  // The job exists from here on: a store that fails as it is read back costs the answer its queue position (and the
+  // event its watchers), not a 503 whose retry, without an Idempotency-Key, would queue the job twice.
+  json status;
+  try {
+    publish_state(ctx, job.id);
+    auto stored = ctx.store.get(job.id);
+    status = status_of(ctx, stored ? *stored : job);
+  } catch (const JobStoreError& e) {
+    log(LogLevel::kWarn, "job queued, but the job store failed as it was read back",
+        {{"job", job.id}, {"error", e.what()}});
+    status = job_status_json(job);
+  }
   res.set_header("Location", "/v1/jobs/" + job.id);
   res.set_header("Retry-After", "1");
-  auto stored = ctx.store.get(job.id);
-  send_json(res, 202, status_of(ctx, stored ? *stored : job));
+  send_json(res, 202, status);
 }
 
 void list_jobs(ApiContext& ctx, const Request& req, Response& res) {
@@ -533,57 +550,68 @@ void stream_events(ApiContext& ctx, const Request& req, Response& res, const std
   ApiContext* c = &ctx;
   res.set_chunked_content_provider(
       "text/event-stream", [c, state, job_id, caller](size_t, httplib::DataSink& sink) {
-        // The current state of the job as an event whose id is the stream's newest: a reconnect with it as
-        // Last-Event-ID continues right after.
-        auto snapshot = [&]() -> bool {
-          auto now = c->store.get(job_id);
-          if (!now) {
-            sink.done();
-            return true;
-          }
-          state->after = c->events.last_seq(job_id);
-          const std::string event = sse_event(state->after, "state", status_of(*c, *now).dump());
-          if (!sink.write(event.data(), event.size())) return false;
-          if (is_terminal(now->state)) sink.done();
-          return true;
-        };
-        auto write = [&](const std::string& s) { return sink.write(s.data(), s.size()); };
-        if (!state->started) {
-          state->started = true;
-          if (!write(": connected\n\n")) return false;
-          if (!state->resume_from) {
-            if (job_id.empty()) {
-              state->after = c->events.last_seq("");
+        // The answer's status is sent by now: a store that fails from here on cannot be answered 503, and nothing
+        // catches around a content provider of cpp-httplib (the exception would end the daemon). The stream ends
+        // instead; EventSource reconnects (with Last-Event-ID) and gets the 503 until the store recovers.
+        try {
+          // The current state of the job as an event whose id is the stream's newest: a reconnect with it as
+          // Last-Event-ID continues right after.
+          auto snapshot = [&]() -> bool {
+            auto now = c->store.get(job_id);
+            if (!now) {
+              sink.done();
               return true;
             }
-            return snapshot();
+            state->after = c->events.last_seq(job_id);
+            const std::string event = sse_event(state->after, "state", status_of(*c, *now).dump());
+            if (!sink.write(event.data(), event.size())) return false;
+            if (is_terminal(now->state)) sink.done();
+            return true;
+          };
+          auto write = [&](const std::string& s) { return sink.write(s.data(), s.size()); };
+          if (!state->started) {
+            state->started = true;
+            if (!write(": connected\n\n")) return false;
+            if (!state->resume_from) {
+              if (job_id.empty()) {
+                state->after = c->events.last_seq("");
+                return true;
+              }
+              return snapshot();
+            }
+            state->after = *state->resume_from;
+            EventRead r = c->events.wait(job_id, state->after, 0);
+            if (!job_id.empty() && (r.gap || (r.events.empty() && r.last_seq < state->after))) return snapshot();
           }
-          state->after = *state->resume_from;
-          EventRead r = c->events.wait(job_id, state->after, 0);
-          if (!job_id.empty() && (r.gap || (r.events.empty() && r.last_seq < state->after))) return snapshot();
-        }
-        EventRead r = c->events.wait(job_id, state->after, c->keepalive_s * 1000);
-        if (r.closed) {
-          sink.done();
+          EventRead r = c->events.wait(job_id, state->after, c->keepalive_s * 1000);
+          if (r.closed) {
+            sink.done();
+            return true;
+          }
+          if (r.events.empty()) {
+            if (!job_id.empty() && !c->store.get(job_id)) {  // deleted meanwhile
+              sink.done();
+              return true;
+            }
+            return write(": keep-alive\n\n");
+          }
+          for (const JobEvent& e : r.events) {
+            state->after = e.seq;
+            if (!caller.admin && e.owner != caller.name) continue;
+            if (!write(sse_event(e.seq, e.type, e.data))) return false;
+            if (!job_id.empty() && e.terminal) {
+              sink.done();
+              return true;
+            }
+          }
           return true;
+        } catch (const JobStoreError& e) {
+          log(LogLevel::kWarn, "event stream ended: the job store failed", {{"job", job_id}, {"error", e.what()}});
+          return false;
+        } catch (const std::exception& e) {
+          log(LogLevel::kError, "event stream failed", {{"job", job_id}, {"error", e.what()}});
+          return false;
         }
-        if (r.events.empty()) {
-          if (!job_id.empty() && !c->store.get(job_id)) {  // deleted meanwhile
-            sink.done();
-            return true;
-          }
-          return write(": keep-alive\n\n");
-        }
-        for (const JobEvent& e : r.events) {
-          state->after = e.seq;
-          if (!caller.admin && e.owner != caller.name) continue;
-          if (!write(sse_event(e.seq, e.type, e.data))) return false;
-          if (!job_id.empty() && e.terminal) {
-            sink.done();
-            return true;
-          }
-        }
-        return true;
       });
 }
 
@@ -951,14 +979,39 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
   server.set_error_handler(httplib::Server::HandlerWithResponse(on_error));
   server.set_exception_handler([](const Request& req, Response& res, std::exception_ptr ep) {
     std::string what = "unknown exception";
+    std::optional<bool> store_full;  // the job store failed; whether it ran out of space
     try {
       if (ep) std::rethrow_exception(ep);
+    } catch (const JobStoreError& e) {
+      what = e.what();
+      store_full = e.out_of_space();
     } catch (const std::exception& e) {
       what = e.what();
     } catch (...) {
     }
+    // What the handler set before it threw (Location, ETag, a job's Retry-After) belonged to an answer not given. The
+    // CORS headers stay: a browser client must be able to read this answer, and its Retry-After.
+    for (auto it = res.headers.begin(); it != res.headers.end();)
+      it = it->first.rfind("Access-Control-", 0) == 0 || it->first == "Vary" ? std::next(it) : res.headers.erase(it);
+    if (store_full) {
+      // The store, not the request or the daemon, is at fault, and it usually recovers (a lock released, space
+      // freed): the client is told to retry. The operator's alert is tessera_http_requests_total{code="503"|"507"}.
+      log(LogLevel::kWarn, "request failed: the job store failed",
+          {{"method", req.method}, {"path", req.path}, {"error", what}, {"out_of_space", *store_full}});
+      if (*store_full) {
+        // Only a write runs out of space; each is one SQLite statement, rolled back whole, and no route changes
+        // anything (files, renders) before its write: nothing of the request took effect.
+        res.set_header("Retry-After", kStoreFullRetryAfterS);
+        return send_problem(res, insufficient_storage("the job store ran out of space (the data directory's disk or "
+                                                      "quota is full)",
+                                                      "nothing was changed"));
+      }
+      res.set_header("Retry-After", kStoreRetryAfterS);
+      return send_problem(res, 503,
+                          "the job store is failing for now (a database locked too long, an I/O error); the request "
+                          "can be retried in a few seconds");
+    }
     log(LogLevel::kError, "request failed", {{"method", req.method}, {"path", req.path}, {"error", what}});
-    res.headers.clear();
     send_problem(res, 500, "internal error; the daemon's log has the details");
   });
   // Counted before the response is written (the logger runs after it), so that a client that has its answer also

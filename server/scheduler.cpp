@@ -458,13 +458,18 @@ Scheduler::Outcome Scheduler::resume(const std::string& id) {
 }
 
 Scheduler::Outcome Scheduler::requeue(const std::string& id) {
-  auto job = store_.get(id);
-  if (!job) return Outcome::kUnknown;
-  if (job->state != JobState::kFailed && job->state != JobState::kCancelled) return Outcome::kConflict;
-  // From scratch: nothing of the last run survives.
-  for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng, JobFile::kResultPng, JobFile::kResultExr})
-    files_.remove(id, f);
-  if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", job->state)) return Outcome::kConflict;
+  {
+    // The store first: one that fails (JobStoreError) leaves the job as it was, its preview included, for a retry.
+    // Claims happen under this lock, so the job is not claimed before the files of its last run are gone.
+    std::lock_guard lock(mutex_);
+    auto job = store_.get(id);
+    if (!job) return Outcome::kUnknown;
+    if (job->state != JobState::kFailed && job->state != JobState::kCancelled) return Outcome::kConflict;
+    if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", job->state)) return Outcome::kConflict;
+    // From scratch: nothing of the last run survives.
+    for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng, JobFile::kResultPng, JobFile::kResultExr})
+      files_.remove(id, f);
+  }
   log(LogLevel::kInfo, "job requeued", {{"job", id}});
   notify_state(id);
   wake();
@@ -475,9 +480,11 @@ bool Scheduler::remove(const std::string& id, std::optional<int64_t> only_finish
   std::lock_guard lock(mutex_);
   if (auto it = running_.find(id); it != running_.end()) {
     if (only_finished_before_ms) return false;  // still (or again) rendering, or not yet reaped: not expired
+    // The store first: one that fails (JobStoreError) leaves the render going and the job whole. The other way
+    // round, the render would stop and its files go while the store kept the job running, with no render behind it.
+    store_.remove(id);
     it->second->delete_requested = true;
     if (it->second->session) it->second->session->cancel();
-    store_.remove(id);
     return true;  // the render's thread removes the files once it has stopped writing them
   }
   if (!store_.remove(id, only_finished_before_ms)) return false;

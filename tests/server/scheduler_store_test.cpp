@@ -22,13 +22,15 @@ namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
 // The real SQLite store, except that a transition out of running (the end of a run: succeeded, failed, cancelled,
-// paused, back to queued) throws JobStoreError while `failures_left` is above zero, as SQLITE_FULL would.
+// paused, back to queued) throws JobStoreError while `failures_left` is above zero, as SQLITE_FULL would, and a
+// removal while `remove_failures_left` is.
 class FailingEndStore final : public JobStore {
  public:
   explicit FailingEndStore(JobStore& inner) : inner_(inner) {}
 
   std::atomic<int> failures_left{0};
   std::atomic<int> failures{0};  // transitions refused so far
+  std::atomic<int> remove_failures_left{0};
 
   bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                   const std::string& error, std::optional<JobState> only_from) override {
@@ -57,6 +59,10 @@ class FailingEndStore final : public JobStore {
   }
   std::vector<JobRecord> list(const JobFilter& filter) override { return inner_.list(filter); }
   bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) override {
+    if (remove_failures_left.load() > 0) {
+      remove_failures_left.fetch_sub(1);
+      throw JobStoreError("job store: step: database is locked", false);
+    }
     return inner_.remove(id, only_finished_before_ms);
   }
   int requeue_running() override { return inner_.requeue_running(); }
@@ -80,8 +86,10 @@ class SchedulerStoreFailure : public ::testing::Test {
   }
 
   // Queues the Cornell box at 16x16 and 1 spp (a few milliseconds of rendering) as POST /v1/jobs would.
-  std::string queue_tiny_job() {
-    auto checked = check_job_document(test::cornell_job(16, 1), SubmissionLimits{});
+  std::string queue_tiny_job() { return queue_job(test::cornell_job(16, 1)); }
+
+  std::string queue_job(const nlohmann::json& doc) {
+    auto checked = check_job_document(doc, SubmissionLimits{});
     const AcceptedJob& accepted = std::get<AcceptedJob>(checked);
     JobRecord job;
     job.id = new_job_id();
@@ -162,6 +170,51 @@ TEST_F(SchedulerStoreFailure, AStopWhileTheStoreFailsLeavesTheJobRunningForTheNe
   EXPECT_EQ(sqlite_.get(first, false)->progress.samples_done, 1u);
   EXPECT_FALSE(fs::exists(files_.path(first, JobFile::kCheckpoint)));
   next->shutdown();
+}
+
+// A client's DELETE of a rendering job that the store refuses (answered 503, to be retried) changes nothing: the
+// render goes on and its files stay. Were the render stopped first, the store would keep the job running with
+// nothing rendering it, its files gone.
+TEST_F(SchedulerStoreFailure, ADeleteTheStoreRefusesLeavesTheRenderGoing) {
+  auto scheduler = make_scheduler(1ms);
+  const std::string id = queue_job(test::long_cornell_job());
+  scheduler->start();
+  auto passes = [&]() -> uint32_t {
+    auto p = scheduler->live_progress(id);
+    return p ? p->passes : 0;
+  };
+  ASSERT_TRUE(test::eventually([&] { return passes() >= 1; }, 120));
+
+  store_.remove_failures_left = 1;
+  EXPECT_THROW(scheduler->remove(id), JobStoreError);
+  const uint32_t at_failure = passes();
+  EXPECT_TRUE(test::eventually([&] { return passes() >= at_failure + 2; }, 30)) << "the render stopped";
+  EXPECT_EQ(state_of(id), JobState::kRunning);
+  EXPECT_TRUE(fs::is_regular_file(files_.path(id, JobFile::kCheckpoint)));
+
+  // The retry deletes it.
+  EXPECT_TRUE(scheduler->remove(id));
+  EXPECT_FALSE(sqlite_.get(id, false));
+  ASSERT_TRUE(test::eventually([&] { return scheduler->running_count() == 0 && !fs::exists(files_.dir(id)); }, 120));
+  scheduler->shutdown();
+}
+
+// A requeue the store refuses keeps the job as it was, the preview of its last run included.
+TEST_F(SchedulerStoreFailure, ARequeueTheStoreRefusesKeepsTheLastRun) {
+  auto scheduler = make_scheduler(1ms);  // not started: nothing claims the job
+  const std::string id = queue_tiny_job();
+  ASSERT_TRUE(sqlite_.transition(id, JobState::kCancelled, 2, "cancelled", ""));
+  fs::create_directories(files_.dir(id));
+  files_.write(id, JobFile::kPreviewPng, "a preview");
+
+  store_.failures_left = 1;
+  EXPECT_THROW(scheduler->requeue(id), JobStoreError);
+  EXPECT_EQ(state_of(id), JobState::kCancelled);
+  EXPECT_TRUE(fs::is_regular_file(files_.path(id, JobFile::kPreviewPng)));
+
+  EXPECT_EQ(scheduler->requeue(id), Scheduler::Outcome::kDone);
+  EXPECT_EQ(state_of(id), JobState::kQueued);
+  EXPECT_FALSE(fs::exists(files_.path(id, JobFile::kPreviewPng)));  // from scratch
 }
 
 }  // namespace
