@@ -46,6 +46,12 @@ Ray Camera::generate_ray(Vec2 film, Vec2 u_lens) const {
   return ray;
 }
 
+RayCone Camera::pixel_cone() const {
+  const float pixel = 2 * half_h_ / static_cast<float>(height_);
+  if (desc_.projection == CameraDesc::Projection::kOrthographic) return {pixel, 0};
+  return {0, pixel};
+}
+
 bool Camera::project(const Vec3& p, Vec2* film) const {
   Vec3 local = frame_.to_local(p - desc_.from);
   float sx, sy;

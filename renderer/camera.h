@@ -23,6 +23,10 @@ class Camera {
   Camera(const CameraDesc& desc, int width, int height);
   // `film` in pixels: (0,0) is the top-left corner of the image, (width,height) the bottom-right.
   Ray generate_ray(Vec2 film, Vec2 u_lens) const;
+  // The cone of a pixel's rays: a pinhole's start at a point and widen by one pixel's angle (at the image centre) per
+  // unit of distance; an orthographic camera's are a pixel wide and do not widen. (A thin lens's are treated as a
+  // pinhole's: the cone is for texture filtering, not depth of field.)
+  RayCone pixel_cone() const;
   // Pixel position where the world point `p` projects (for tests); false if behind the camera.
   bool project(const Vec3& p, Vec2* film) const;
   const CameraDesc& desc() const { return desc_; }

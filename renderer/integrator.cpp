@@ -22,7 +22,7 @@ bool parse_estimator(const std::string& name, Estimator* out) {
 }
 
 Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* primary, PixelSampler& sampler,
-               const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters) {
+               const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters, RayCone cone) {
   const LightSet& lights = scene.lights();
   const bool use_light_sampling = settings.estimator != Estimator::kHemisphere;
   const bool use_bsdf_hits = settings.estimator != Estimator::kArea;
@@ -45,9 +45,9 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     bool found;
     if (depth == 0 && primary) {
       found = primary->found;
-      if (found) scene.interaction(ray, primary->hit, &si);
+      if (found) scene.interaction(ray, primary->hit, &si, &cone);
     } else {
-      found = scene.intersect(ray, &si);
+      found = scene.intersect(ray, &si, &cone);
     }
     if (!found) {
       if (!scene.environment.black()) {
@@ -149,6 +149,11 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       // Refracting in through the front side enters the object's medium; through the back side leaves it.
       sigma_a = si.sp.front_face ? si.material->volume_sigma_a : Rgb(0);
     }
+    // The cone goes on from its width here. A lobe of density p spreads over a solid angle of about 1/p, a cone of
+    // full angle 2 / sqrt(pi p): after a diffuse or glossy bounce textures are read as blurred as that lobe sees
+    // them. A delta lobe keeps the spread (the surface's curvature is neglected).
+    cone.width += cone.spread * si.t * length(ray.dir);
+    if (!is_delta(bs->flags)) cone.spread = std::max(cone.spread, 2 / std::sqrt(kPi * bs->pdf));
     prev_delta = is_delta(bs->flags);
     prev_pdf = bs->pdf;
     prev_p = si.sp.p;

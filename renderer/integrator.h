@@ -51,8 +51,10 @@ struct PrimaryHit {
 };
 
 // Radiance arriving at the camera along `ray`. With `primary`, the camera ray's hit is taken from it rather than
-// traced again.
+// traced again. `cone` is the camera ray's (Camera::pixel_cone); each bounce carries it on, widened by how much the
+// sampled lobe spreads, and textures are filtered over its footprint. A zero cone reads the finest texels.
 Rgb trace_path(const Scene& scene, const Ray& ray, const PrimaryHit* primary, PixelSampler& sampler,
-               const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters);
+               const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters,
+               RayCone cone = RayCone());
 
 }  // namespace tessera

@@ -114,6 +114,14 @@ struct Ray {
   float tmax = kInfinity;
 };
 
+// A ray's cone (Akenine-Möller et al., "Texture Level of Detail Strategies for Real-Time Ray Tracing", 2019): the
+// width of the beam of rays it stands for at its origin, and how fast that width grows per unit of distance. Its
+// width where it hits, over the surface's texture stretch, picks the mip level textures are read at.
+struct RayCone {
+  float width = 0;
+  float spread = 0;
+};
+
 // 4x4 affine transform (row-major, last row implied 0 0 0 1).
 struct Transform {
   float m[3][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}};

@@ -62,17 +62,18 @@ size_t Scene::unique_triangle_count() const {
   return n;
 }
 
-bool Scene::intersect(const Ray& ray, SurfaceInteraction* si) const {
+bool Scene::intersect(const Ray& ray, SurfaceInteraction* si, const RayCone* cone) const {
   RayHit hit;
   if (!accel_.intersect(ray, &hit)) return false;
-  interaction(ray, hit, si);
+  interaction(ray, hit, si, cone);
   return true;
 }
 
-void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* si) const {
+void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* si, const RayCone* cone) const {
   si->t = hit.t;
   ShadingPoint& sp = si->sp;
   sp.p = ray.origin + ray.dir * hit.t;
+  float uv_per_world = 0;  // how many uv units a unit of length on the surface spans (the square root of areas' ratio)
   if (hit.is_sphere) {
     const Sphere& s = spheres[hit.object];
     Vec3 n = normalize(sp.p - s.center);
@@ -83,6 +84,8 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     float phi = fast_atan2(n.z, n.x);
     sp.uv = Vec2(0.5f + phi * kInv2Pi, fast_atan2(std::sqrt(n.x * n.x + n.z * n.z), n.y) * kInvPi);
     sp.uv1 = sp.uv;
+    // u spans 2 pi r and v spans pi r of length.
+    uv_per_world = 1 / (std::sqrt(2.0f) * kPi * s.radius);
     sp.vertex_color = Rgb(1);
     si->material = materials[s.material].get();
     si->light = si->material->emissive() ? s.light : kNoLight;
@@ -122,6 +125,10 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
       uv2 = mesh.uvs[idx[2]];
     }
     sp.uv = uv0 * b0 + uv1 * b1 + uv2 * b2;
+    if (cone && ng_len > 0) {
+      const Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
+      uv_per_world = std::sqrt(std::abs(d1.x * d2.y - d1.y * d2.x) / ng_len);
+    }
     sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
     const Material* material = materials[mesh.material].get();
     // Tangent: from the mesh when given, else along dp/du (with the handedness of dp/dv); none is needed for an
@@ -154,6 +161,15 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     si->light = si->material->emissive() ? mesh.first_light + hit.prim_id : kNoLight;
   }
   sp.front_face = dot(ray.dir, sp.ng) < 0;
+  sp.uv_footprint = 0;
+  if (cone && uv_per_world > 0) {
+    // The cone's width where it hits, widened as the surface turns away from it (at most 8x, past which isotropic
+    // filtering would blur more than it removes aliasing).
+    const float dir_len = length(ray.dir);
+    const float cos_hit = std::abs(dot(ray.dir, sp.ng)) / dir_len;
+    const float width = cone->width + cone->spread * hit.t * dir_len;
+    sp.uv_footprint = width / std::max(cos_hit, 0.125f) * uv_per_world;
+  }
   if (si->material->normal_map) apply_normal_map(*si->material, &sp);
 }
 

@@ -85,9 +85,10 @@ class Scene {
   void finalize();
   void finalize_with_lights(const std::vector<PunctualLight>& punctual);
 
-  bool intersect(const Ray& ray, SurfaceInteraction* si) const;
+  // `cone`, when given, sets the hit's uv footprint (ShadingPoint::uv_footprint) for texture filtering.
+  bool intersect(const Ray& ray, SurfaceInteraction* si, const RayCone* cone = nullptr) const;
   // The surface point of a hit `ray` found (by intersect() or in a packet with Accel::intersect_packet).
-  void interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* si) const;
+  void interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* si, const RayCone* cone = nullptr) const;
   bool occluded(const Ray& ray) const { return accel_.occluded(ray); }
   // The bare ray queries, without shading (for measuring what Embree alone costs).
   const Accel& accel() const { return accel_; }

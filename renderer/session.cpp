@@ -65,6 +65,7 @@ void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, 
   uint64_t nonfinite = 0;
   const Scene& scene = *scene_;
   const bool uses_lens = camera_.uses_lens();
+  const RayCone cone = camera_.pixel_cone();
   // Camera rays of up to kGroup neighbouring pixels in a row, at the same sample index, go to Embree as one packet:
   // they are coherent, and a packet traces them several times faster than one by one. Each pixel still gets its
   // samples in order, and its paths are those it would trace alone (up to Embree's rounding of sphere hits).
@@ -92,7 +93,7 @@ void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, 
         scene.accel().intersect_packet(rays, n, hits, found);
         for (int i = 0; i < n; ++i) {
           const PrimaryHit primary{found[i], hits[i]};
-          Rgb l = trace_path(scene, rays[i], &primary, samplers[i], settings_.integrator, arena, counters);
+          Rgb l = trace_path(scene, rays[i], &primary, samplers[i], settings_.integrator, arena, counters, cone);
           if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
             ++nonfinite;
             l = Rgb(0);

@@ -25,6 +25,14 @@ struct Image {
   std::vector<uint8_t> bytes;  // 8-bit sources, row-major from the top row
   std::shared_ptr<const ImagePixels> shared;  // or 8-bit pixels owned elsewhere (embedded images), not copied
   bool srgb = false;           // bytes of the colour channels (not alpha) are sRGB-encoded
+  // Mip levels 1, 2, ... (level 0 is the image itself), each half the size of the one before (rounded up) down to
+  // 1x1, averaged in linear values and stored as the image is (8-bit sRGB-encoded bytes, or floats).
+  struct Level {
+    int width = 0, height = 0;
+    std::vector<uint8_t> bytes;
+    std::vector<float> pixels;
+  };
+  std::vector<Level> mips;
   static const float* srgb_table() {
     static const std::array<float, 256> table = [] {
       std::array<float, 256> t{};
@@ -35,9 +43,96 @@ struct Image {
   }
 };
 
+// The 8-bit sRGB code whose decoded value is nearest `linear`: a first guess from a table over [0, 1], then a step
+// or two among the midpoints between codes.
+uint8_t linear_to_srgb_byte(float linear) {
+  struct Tables {
+    std::array<float, 256> midpoints{};  // midpoints[i]: between codes i and i + 1 (the last is above 1)
+    std::array<uint8_t, 1025> guess{};   // the code for linear = k / 1024, rounded down
+  };
+  static const Tables tables = [] {
+    Tables t;
+    const float* decode = Image::srgb_table();
+    for (int i = 0; i < 255; ++i) t.midpoints[i] = 0.5f * (decode[i] + decode[i + 1]);
+    t.midpoints[255] = kInfinity;
+    int code = 0;
+    for (int k = 0; k <= 1024; ++k) {
+      while (code < 255 && t.midpoints[code] <= k / 1024.0f) ++code;
+      t.guess[k] = static_cast<uint8_t>(code);
+    }
+    return t;
+  }();
+  const float v = clamp(linear, 0.0f, 1.0f);
+  int code = tables.guess[static_cast<int>(v * 1024)];
+  while (v >= tables.midpoints[code]) ++code;
+  return static_cast<uint8_t>(code);
+}
+
+// Builds `img`'s mip levels from level 0 (`bytes` or `floats`): each texel of a level is the mean of the 2x2 texels
+// below it (the last row or column repeated where the size is odd), in linear values, so that averages are of light
+// rather than of encoded values. Levels below are kept as floats while the next is made.
+void build_mips(Image* img, const uint8_t* bytes, const float* floats) {
+  const int channels = img->channels;
+  const float* srgb = Image::srgb_table();
+  float decode[4][256];  // per channel: byte to linear
+  for (int c = 0; c < 4; ++c)
+    for (int i = 0; i < 256; ++i) decode[c][i] = img->srgb && c < 3 ? srgb[i] : i * (1.0f / 255.0f);
+  int w = img->width, h = img->height;
+  std::vector<float> prev, next, rows;
+  while (w > 1 || h > 1) {
+    const int nw = (w + 1) / 2, nh = (h + 1) / 2;
+    next.resize(static_cast<size_t>(nw) * nh * channels);
+    const size_t row_values = static_cast<size_t>(w) * channels;
+    rows.resize(2 * row_values);
+    for (int y = 0; y < nh; ++y) {
+      // The two source rows as linear floats (the second is the first again at an odd height's last row).
+      for (int j = 0; j < 2; ++j) {
+        const size_t first = static_cast<size_t>(std::min(2 * y + j, h - 1)) * row_values;
+        float* out = &rows[j * row_values];
+        if (!prev.empty()) std::copy_n(&prev[first], row_values, out);
+        else if (floats) std::copy_n(&floats[first], row_values, out);
+        else
+          for (size_t i = 0; i < row_values; i += channels)
+            for (int c = 0; c < channels; ++c) out[i + c] = decode[std::min(c, 3)][bytes[first + i + c]];
+      }
+      float* out = &next[static_cast<size_t>(y) * nw * channels];
+      for (int x = 0; x < nw; ++x) {
+        const size_t a = static_cast<size_t>(2 * x) * channels;
+        const size_t b = static_cast<size_t>(std::min(2 * x + 1, w - 1)) * channels;
+        for (int c = 0; c < channels; ++c)
+          out[x * channels + c] =
+              0.25f * (rows[a + c] + rows[b + c] + rows[row_values + a + c] + rows[row_values + b + c]);
+      }
+    }
+    Image::Level level;
+    level.width = nw;
+    level.height = nh;
+    if (!bytes) {
+      level.pixels = next;
+    } else {
+      level.bytes.resize(next.size());
+      for (size_t i = 0; i < next.size(); i += channels)
+        for (int c = 0; c < channels; ++c)
+          level.bytes[i + c] = img->srgb && c < 3
+                                   ? linear_to_srgb_byte(next[i + c])
+                                   : static_cast<uint8_t>(std::lround(clamp(next[i + c], 0.0f, 1.0f) * 255));
+    }
+    img->mips.push_back(std::move(level));
+    std::swap(prev, next);
+    w = nw;
+    h = nh;
+  }
+}
+
 std::mutex g_cache_mutex;
 std::map<std::string, std::weak_ptr<const Image>> g_cache;
 size_t g_loads = 0;
+
+// Adds an image to the cache (g_cache_mutex held), dropping the entries of images no texture holds any more.
+void remember(const std::string& key, const std::shared_ptr<const Image>& img) {
+  std::erase_if(g_cache, [](const auto& entry) { return entry.second.expired(); });
+  g_cache[key] = img;
+}
 
 std::shared_ptr<const Image> load_image(const std::filesystem::path& file, bool srgb) {
   const std::string key = file.string() + (srgb ? "|srgb" : "|linear");
@@ -77,19 +172,31 @@ std::shared_ptr<const Image> load_image(const std::filesystem::path& file, bool 
   }
   if (!ok) throw std::runtime_error("cannot decode image \"" + file.filename().string() + "\"");
   in->close();
-  g_cache[key] = img;
+  build_mips(img.get(), img->bytes.empty() ? nullptr : img->bytes.data(),
+             img->pixels.empty() ? nullptr : img->pixels.data());
+  remember(key, img);
   ++g_loads;
   return img;
 }
 
 std::shared_ptr<const Image> embedded_image(const std::shared_ptr<const ImagePixels>& src, bool srgb) {
-  // The pixels are shared with the glTF import; only the flag differs between sRGB and linear uses.
+  // The pixels are shared with the glTF import; only the flag differs between sRGB and linear uses. Textures over
+  // the same pixels with the same flag (a metallic-roughness map read twice) share one Image and its mip levels; the
+  // key's address cannot be reused while the Image, which holds the pixels, lives.
+  char key[64];
+  std::snprintf(key, sizeof key, "embedded:%p|%d", static_cast<const void*>(src.get()), srgb ? 1 : 0);
+  std::lock_guard<std::mutex> lock(g_cache_mutex);
+  if (auto it = g_cache.find(key); it != g_cache.end()) {
+    if (auto img = it->second.lock()) return img;
+  }
   auto img = std::make_shared<Image>();
   img->width = src->width;
   img->height = src->height;
   img->channels = src->channels;
   img->shared = src;
   img->srgb = srgb;
+  build_mips(img.get(), src->data.data(), nullptr);
+  remember(key, img);
   return img;
 }
 
@@ -121,22 +228,28 @@ class ImageTexture final : public Texture {
         mapping_(mapping),
         cos_(std::cos(mapping.rotation)),
         sin_(std::sin(mapping.rotation)) {
-    // What every fetch needs, resolved once: where the texels are, how they decode, which channels are read.
-    width_ = image_->width;
-    height_ = image_->height;
+    // What every fetch needs, resolved once: where each level's texels are, how they decode, which channels are read.
     channels_ = image_->channels;
-    if (image_->shared) bytes_ = image_->shared->data.data();
-    else if (!image_->bytes.empty()) bytes_ = image_->bytes.data();
-    else floats_ = image_->pixels.data();
-    if (bytes_ && image_->srgb) srgb_table_ = Image::srgb_table();
+    LevelView base{image_->width, image_->height, nullptr, nullptr};
+    if (image_->shared) base.bytes = image_->shared->data.data();
+    else if (!image_->bytes.empty()) base.bytes = image_->bytes.data();
+    else base.floats = image_->pixels.data();
+    levels_.push_back(base);
+    for (const Image::Level& l : image_->mips)
+      levels_.push_back({l.width, l.height, l.bytes.empty() ? nullptr : l.bytes.data(),
+                         l.pixels.empty() ? nullptr : l.pixels.data()});
+    if (base.bytes && image_->srgb) srgb_table_ = Image::srgb_table();
     rgb_ = channel_ < 0 && channels_ >= 3;
     read_channel_ = channel_ >= 0 ? std::min(channel_, channels_ - 1) : 0;
+    // A footprint of one uv unit covers this many texels of level 0 (across, the geometric mean of both axes).
+    texels_per_uv_ = std::sqrt(static_cast<float>(base.width) * std::abs(mapping_.scale.x) *
+                               static_cast<float>(base.height) * std::abs(mapping_.scale.y));
     average_ = Rgb(0);
-    const size_t n = static_cast<size_t>(image_->width) * image_->height;
+    const size_t n = static_cast<size_t>(base.width) * base.height;
     double sum[3] = {0, 0, 0};
-    for (int y = 0; y < image_->height; ++y)
-      for (int x = 0; x < image_->width; ++x) {
-        Rgb c = texel(x, y);
+    for (int y = 0; y < base.height; ++y)
+      for (int x = 0; x < base.width; ++x) {
+        Rgb c = texel(base, x, y);
         for (int k = 0; k < 3; ++k) sum[k] += c[k];
       }
     for (int k = 0; k < 3; ++k) average_[k] = static_cast<float>(sum[k] / static_cast<double>(n));
@@ -148,17 +261,15 @@ class ImageTexture final : public Texture {
     float su = uv.x * mapping_.scale.x, sv = uv.y * mapping_.scale.y;
     float s = cos_ * su - sin_ * sv + mapping_.offset.x;
     float t = sin_ * su + cos_ * sv + mapping_.offset.y;
-    // Bilinear filtering between the four texels around (s, t); texel centres at (i + 0.5) / size.
-    float x = s * width_ - 0.5f, y = t * height_ - 0.5f;
-    if (!std::isfinite(x) || !std::isfinite(y)) return texel(0, 0);
-    float fx = std::floor(x), fy = std::floor(y);
-    float dx = x - fx, dy = y - fy;
-    int x0 = static_cast<int>(clamp(fx, -1e8f, 1e8f)), y0 = static_cast<int>(clamp(fy, -1e8f, 1e8f));
-    const WrapMode wrap_t = mapping_.wrap_t.value_or(mapping_.wrap);
-    int xa = wrap_index(x0, width_, mapping_.wrap), xb = wrap_index(x0 + 1, width_, mapping_.wrap);
-    int ya = wrap_index(y0, height_, wrap_t), yb = wrap_index(y0 + 1, height_, wrap_t);
-    return texel(xa, ya) * ((1 - dx) * (1 - dy)) + texel(xb, ya) * (dx * (1 - dy)) + texel(xa, yb) * ((1 - dx) * dy) +
-           texel(xb, yb) * (dx * dy);
+    // Trilinear filtering: the level where the footprint is one texel wide, blended with the next coarser one.
+    const float texels = sp.uv_footprint * texels_per_uv_;
+    if (!(texels > 1)) return bilinear(levels_[0], s, t);
+    const float level = std::log2(texels);
+    const int last = static_cast<int>(levels_.size()) - 1;
+    if (!(level < static_cast<float>(last))) return bilinear(levels_[last], s, t);
+    const int l0 = static_cast<int>(level);
+    const float f = level - static_cast<float>(l0);
+    return bilinear(levels_[l0], s, t) * (1 - f) + bilinear(levels_[l0 + 1], s, t) * f;
   }
   Rgb average() const override { return average_; }
 
@@ -167,9 +278,8 @@ class ImageTexture final : public Texture {
     const auto* ta = dynamic_cast<const ImageTexture*>(a);
     const auto* tb = dynamic_cast<const ImageTexture*>(b);
     if (!ta || !tb || ta->rgb_ || tb->rgb_ || ta->channels_ < 3 || ta->channel_ > 2 || tb->channel_ > 2) return nullptr;
-    if (ta->bytes_ != tb->bytes_ || ta->floats_ != tb->floats_ || ta->srgb_table_ != tb->srgb_table_ ||
-        ta->width_ != tb->width_ || ta->height_ != tb->height_ || ta->channels_ != tb->channels_)
-      return nullptr;
+    // Textures over the same pixels decoded the same way share their Image (the caches above).
+    if (ta->image_ != tb->image_) return nullptr;
     if (ta->mapping_ != tb->mapping_) return nullptr;
     *ca = ta->read_channel_;
     *cb = tb->read_channel_;
@@ -177,29 +287,47 @@ class ImageTexture final : public Texture {
   }
 
  private:
+  struct LevelView {
+    int width, height;
+    const uint8_t* bytes;  // 8-bit texels, or
+    const float* floats;   // linear float texels
+  };
   // The texel's value as the image stores it decoded, read through the pointers resolved at construction.
   float decode(const uint8_t* b, int c) const {
     return (srgb_table_ && c < 3) ? srgb_table_[b[c]] : b[c] * (1.0f / 255.0f);
   }
-  Rgb texel(int x, int y) const {
-    const size_t i = (static_cast<size_t>(y) * static_cast<size_t>(width_) + static_cast<size_t>(x)) * channels_;
+  Rgb texel(const LevelView& l, int x, int y) const {
+    const size_t i = (static_cast<size_t>(y) * static_cast<size_t>(l.width) + static_cast<size_t>(x)) * channels_;
     if (rgb_) {
-      if (floats_) return Rgb(floats_[i], floats_[i + 1], floats_[i + 2]);
-      return Rgb(decode(bytes_ + i, 0), decode(bytes_ + i, 1), decode(bytes_ + i, 2));
+      if (l.floats) return Rgb(l.floats[i], l.floats[i + 1], l.floats[i + 2]);
+      return Rgb(decode(l.bytes + i, 0), decode(l.bytes + i, 1), decode(l.bytes + i, 2));
     }
-    return Rgb(floats_ ? floats_[i + read_channel_] : decode(bytes_ + i, read_channel_));
+    return Rgb(l.floats ? l.floats[i + read_channel_] : decode(l.bytes + i, read_channel_));
+  }
+  // Bilinear filtering between the four texels of level `l` around (s, t); texel centres at (i + 0.5) / size.
+  Rgb bilinear(const LevelView& l, float s, float t) const {
+    float x = s * l.width - 0.5f, y = t * l.height - 0.5f;
+    if (!std::isfinite(x) || !std::isfinite(y)) return texel(l, 0, 0);
+    float fx = std::floor(x), fy = std::floor(y);
+    float dx = x - fx, dy = y - fy;
+    int x0 = static_cast<int>(clamp(fx, -1e8f, 1e8f)), y0 = static_cast<int>(clamp(fy, -1e8f, 1e8f));
+    const WrapMode wrap_t = mapping_.wrap_t.value_or(mapping_.wrap);
+    int xa = wrap_index(x0, l.width, mapping_.wrap), xb = wrap_index(x0 + 1, l.width, mapping_.wrap);
+    int ya = wrap_index(y0, l.height, wrap_t), yb = wrap_index(y0 + 1, l.height, wrap_t);
+    return texel(l, xa, ya) * ((1 - dx) * (1 - dy)) + texel(l, xb, ya) * (dx * (1 - dy)) +
+           texel(l, xa, yb) * ((1 - dx) * dy) + texel(l, xb, yb) * (dx * dy);
   }
 
   std::shared_ptr<const Image> image_;
-  int width_ = 0, height_ = 0, channels_ = 0;
-  const uint8_t* bytes_ = nullptr;  // 8-bit texels, or
-  const float* floats_ = nullptr;   // linear float texels
+  int channels_ = 0;
+  std::vector<LevelView> levels_;      // level 0 (the image) first, then its mips
   const float* srgb_table_ = nullptr;  // set when 8-bit colour channels are sRGB-encoded
   bool rgb_ = false;                   // three channels read; else one (read_channel_) repeated
   int read_channel_ = 0;
   int channel_;
   TextureMapping mapping_;
   float cos_, sin_;
+  float texels_per_uv_ = 0;
   Rgb average_;
 };
 

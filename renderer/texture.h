@@ -20,6 +20,9 @@ struct ShadingPoint {
   Vec2 uv1;     // second set (glTF TEXCOORD_1), equal to uv where absent
   Rgb vertex_color{1, 1, 1};
   float tangent_sign = 1;  // handedness of the tangent frame: bitangent = tangent_sign * cross(n, tangent)
+  // Width, in units of the first uv set, of the patch of surface the ray stands for (its ray cone where it hits):
+  // image textures average their texels over it (mip-mapping). 0 reads the finest texels.
+  float uv_footprint = 0;
   bool front_face = true;  // the ray arrived on the side ng points to
 };
 

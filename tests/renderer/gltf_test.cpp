@@ -613,6 +613,65 @@ TEST(Textures, ChannelsOfOneImageShareALookup) {
   EXPECT_FALSE(make_shared_channels_texture(metal.get(), make_image_texture(pixels, true, 1, mapping).get(), &cm, &cr));
 }
 
+// A black and white checkerboard, one texel per square, as 8-bit sRGB pixels.
+std::shared_ptr<ImagePixels> texel_checker(int w, int h) {
+  auto pixels = std::make_shared<ImagePixels>();
+  pixels->width = w;
+  pixels->height = h;
+  pixels->channels = 3;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c) pixels->data.push_back((x + y) % 2 ? 255 : 0);
+  return pixels;
+}
+
+// A footprint of zero reads the finest texels; wider footprints read mip levels that average linear light (black and
+// white texels average to 0.5, not to the sRGB code 128, 0.22), odd sizes included, and the widest is the mean.
+TEST(Textures, MipLevelsAverageLinearLight) {
+  for (auto [w, h] : {std::pair{16, 16}, std::pair{15, 9}}) {
+    auto tex = make_image_texture(texel_checker(w, h), true, -1, TextureMapping());
+    ShadingPoint sp;
+    sp.uv = Vec2((4 + 0.5f) / w, (5 + 0.5f) / h);  // the centre of texel (4, 5): white
+    EXPECT_FLOAT_EQ(tex->eval(sp).y, 1.0f);
+    sp.uv = Vec2((3 + 0.5f) / w, (5 + 0.5f) / h);
+    EXPECT_FLOAT_EQ(tex->eval(sp).y, 0.0f);
+    for (float texels : {2.0f, 2.8f, 4.0f, 64.0f}) {
+      sp.uv_footprint = texels / std::sqrt(static_cast<float>(w * h));
+      for (Vec2 uv : {Vec2(0.3f, 0.4f), Vec2(0.71f, 0.13f), Vec2(0.5f, 0.9f)}) {
+        sp.uv = uv;
+        // Odd sizes repeat an edge texel into a 2x2 average, which tilts a level's texels off the mean a little.
+        EXPECT_NEAR(tex->eval(sp).y, 0.5f, w % 2 ? 0.13f : 0.01f) << w << "x" << h << ", " << texels << " texels";
+      }
+    }
+  }
+}
+
+// A finely textured surface seen from afar: each pixel covers about eleven texels of a one-texel checkerboard. With
+// the ray cone's footprint every pixel's single sample is the board's mean, where point sampling would give each
+// pixel one texel, black or white.
+TEST(Textures, ADistantTextureIsFilteredOverThePixel) {
+  auto png = png_rgba(256, 256, [] {
+    std::vector<unsigned char> rgba;
+    for (int y = 0; y < 256; ++y)
+      for (int x = 0; x < 256; ++x)
+        rgba.insert(rgba.end(), {0, static_cast<unsigned char>((x + y) % 2 ? 255 : 0), 0, 255});
+    return rgba;
+  }());
+  std::ofstream(fixture_dir() / "fine.png", std::ios::binary)
+      .write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
+  json job = {{"kind", "scene"},
+              {"scene",
+               {{"materials",
+                 {{"board", {{"type", "lambert"}, {"albedo", 0}, {"emission", {{"texture", "fine.png"}}}}}}},
+                {"objects", {{{"shape", "rectangle"}, {"corner", {-0.05, 0, 0.05}}, {"edge1", {0.1, 0, 0}},
+                              {"edge2", {0, 0, -0.1}}, {"material", "board"}}}},
+                {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}}}},
+              {"render", {{"width", 8}, {"height", 8}, {"spp", 1}, {"max_depth", 1}}}};
+  Rendered r = render_job(job);
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) EXPECT_NEAR(r.at(x, y).y, 0.5f, 0.05f) << x << ", " << y;
+}
+
 TEST(Textures, NormalMapTiltsTheShadingNormal) {
   // A constant normal map tilting the normal 60 degrees towards +u on a Lambert floor lit straight from above:
   // the reflected radiance falls to cos 60 = one half (the geometric normal is unchanged).
