@@ -152,7 +152,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     // The cone goes on from its width here. A lobe of density p spreads over a solid angle of about 1/p, a cone of
     // full angle 2 / sqrt(pi p): after a diffuse or glossy bounce textures are read as blurred as that lobe sees
     // them. A delta lobe keeps the spread (the surface's curvature is neglected).
-    cone.width += cone.spread * si.t * length(ray.dir);
+    cone.width = cone.width_at(si.t * length(ray.dir));
     if (!is_delta(bs->flags)) cone.spread = std::max(cone.spread, 2 / std::sqrt(kPi * bs->pdf));
     prev_delta = is_delta(bs->flags);
     prev_pdf = bs->pdf;

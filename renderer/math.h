@@ -120,6 +120,8 @@ struct Ray {
 struct RayCone {
   float width = 0;
   float spread = 0;
+  // The width at a distance along the ray (in units of length, not of t over an unnormalised direction).
+  float width_at(float distance) const { return width + spread * distance; }
 };
 
 // 4x4 affine transform (row-major, last row implied 0 0 0 1).

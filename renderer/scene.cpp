@@ -167,8 +167,7 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     // filtering would blur more than it removes aliasing).
     const float dir_len = length(ray.dir);
     const float cos_hit = std::abs(dot(ray.dir, sp.ng)) / dir_len;
-    const float width = cone->width + cone->spread * hit.t * dir_len;
-    sp.uv_footprint = width / std::max(cos_hit, 0.125f) * uv_per_world;
+    sp.uv_footprint = cone->width_at(hit.t * dir_len) / std::max(cos_hit, 0.125f) * uv_per_world;
   }
   if (si->material->normal_map) apply_normal_map(*si->material, &sp);
 }
