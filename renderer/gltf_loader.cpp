@@ -10,6 +10,7 @@
 #include <set>
 
 #include "renderer/scene_error.h"
+#include "renderer/thread_pool.h"
 
 namespace tessera {
 
@@ -279,17 +280,22 @@ bool fs_write(std::string* err, const std::string&, const std::vector<unsigned c
   return false;
 }
 
-struct ImageContext {
-  size_t max_pixels;
-};
+// tinygltf hands over each image's encoded bytes (from a buffer view, a data: URI or a file) while it parses; they
+// are kept as they are, marked as not yet decoded, and decoded after parsing, all images at once (decode_images).
+bool keep_encoded_image(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
+                        const unsigned char* bytes, int size, void*) {
+  image->image.assign(bytes, bytes + size);
+  image->as_is = true;
+  return true;
+}
 
-// Decodes glTF images with OpenImageIO (PNG, JPEG, and whatever else it reads) into 8-bit RGBA.
-bool load_image(tinygltf::Image* image, const int index, std::string* err, std::string*, int, int,
-                const unsigned char* bytes, int size, void* user) {
-  const ImageContext& ctx = *static_cast<ImageContext*>(user);
-  OIIO::Filesystem::IOMemReader reader(const_cast<unsigned char*>(bytes), static_cast<size_t>(size));
+// Decodes one image's encoded bytes with OpenImageIO (PNG, JPEG, and whatever else it reads) into 8-bit RGBA, read
+// straight into place for three or four channels; returns an empty string, or what is wrong with image `index`.
+std::string decode_image(const std::vector<unsigned char>& bytes, size_t index, size_t max_pixels, ImagePixels* out) {
+  const std::string what = "image " + std::to_string(index);
+  OIIO::Filesystem::IOMemReader reader(const_cast<unsigned char*>(bytes.data()), bytes.size());
   std::string name = "image.png";
-  if (size >= 2 && bytes[0] == 0xFF && bytes[1] == 0xD8) name = "image.jpg";
+  if (bytes.size() >= 2 && bytes[0] == 0xFF && bytes[1] == 0xD8) name = "image.jpg";
   // The proxy goes in the config (OpenImageIO 2.4 ignores the proxy argument when a config is given), with
   // unassociated alpha: glTF colours are not premultiplied, and OpenImageIO would premultiply PNG alpha on read.
   OIIO::ImageSpec config;
@@ -297,39 +303,56 @@ bool load_image(tinygltf::Image* image, const int index, std::string* err, std::
   void* proxy = &reader;
   config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
   auto in = OIIO::ImageInput::open(name, &config);
-  if (!in) {
-    if (err) *err += "image " + std::to_string(index) + " cannot be decoded: " + OIIO::geterror() + "\n";
-    return false;
-  }
+  if (!in) return what + " cannot be decoded: " + OIIO::geterror();
   const OIIO::ImageSpec& spec = in->spec();
-  if (spec.width <= 0 || spec.height <= 0 ||
-      static_cast<size_t>(spec.width) * static_cast<size_t>(spec.height) > ctx.max_pixels) {
-    if (err) *err += "image " + std::to_string(index) + " is too large\n";
-    return false;
-  }
-  std::vector<unsigned char> pixels(static_cast<size_t>(spec.width) * spec.height * spec.nchannels);
-  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UINT8, pixels.data())) {
-    if (err) *err += "image " + std::to_string(index) + ": " + in->geterror() + "\n";
-    return false;
-  }
-  image->width = spec.width;
-  image->height = spec.height;
-  image->component = 4;
-  image->bits = 8;
-  image->pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
-  image->image.assign(static_cast<size_t>(spec.width) * spec.height * 4, 255);
-  for (size_t i = 0; i < static_cast<size_t>(spec.width) * spec.height; ++i) {
-    const unsigned char* src = &pixels[i * spec.nchannels];
-    unsigned char* dst = &image->image[i * 4];
-    if (spec.nchannels >= 3) {
-      dst[0] = src[0]; dst[1] = src[1]; dst[2] = src[2];
-      if (spec.nchannels >= 4) dst[3] = src[3];
-    } else {
-      dst[0] = dst[1] = dst[2] = src[0];
-      if (spec.nchannels == 2) dst[3] = src[1];
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 ||
+      static_cast<size_t>(spec.width) * static_cast<size_t>(spec.height) > max_pixels)
+    return what + " is too large (" + std::to_string(spec.width) + "x" + std::to_string(spec.height) + " pixels)";
+  const size_t w = static_cast<size_t>(spec.width), h = static_cast<size_t>(spec.height), texels = w * h;
+  const int nch = spec.nchannels;
+  out->width = spec.width;
+  out->height = spec.height;
+  out->channels = 4;
+  out->data.assign(texels * 4, 255);  // opaque where the image has no alpha
+  bool ok;
+  if (nch >= 3) {
+    ok = in->read_image(0, 0, 0, std::min(nch, 4), OIIO::TypeDesc::UINT8, out->data.data(), 4, 4 * w);
+  } else {
+    // Grey, or grey and alpha: read, then spread the grey over red, green and blue.
+    std::vector<unsigned char> grey(texels * nch);
+    ok = in->read_image(0, 0, 0, nch, OIIO::TypeDesc::UINT8, grey.data());
+    for (size_t i = 0; ok && i < texels; ++i) {
+      unsigned char* dst = &out->data[i * 4];
+      dst[0] = dst[1] = dst[2] = grey[i * nch];
+      if (nch == 2) dst[3] = grey[i * 2 + 1];
     }
   }
-  return true;
+  if (!ok) return what + " cannot be decoded: " + in->geterror();
+  return {};
+}
+
+// Decodes every image tinygltf kept encoded, in parallel (decoding is most of a textured asset's load time), freeing
+// the encoded bytes as it goes. Throws the first problem, by image index, as a SceneError at `pointer`.
+std::vector<std::shared_ptr<ImagePixels>> decode_images(tinygltf::Model* model, size_t max_pixels,
+                                                        const std::string& pointer) {
+  const size_t n = model->images.size();
+  std::vector<std::shared_ptr<ImagePixels>> decoded(n);
+  std::vector<std::string> problems(n);
+  run_in_parallel(n, [&](size_t i) {
+    tinygltf::Image& img = model->images[i];
+    if (!img.as_is || img.image.empty()) return;
+    auto pixels = std::make_shared<ImagePixels>();
+    try {
+      problems[i] = decode_image(img.image, i, max_pixels, pixels.get());
+    } catch (const std::exception& e) {  // out of memory for a huge image, or a decoder that throws
+      problems[i] = "image " + std::to_string(i) + " cannot be decoded: " + e.what();
+    }
+    std::vector<unsigned char>().swap(img.image);
+    if (problems[i].empty()) decoded[i] = std::move(pixels);
+  });
+  for (const std::string& problem : problems)
+    if (!problem.empty()) throw SceneError(pointer, "the glTF asset is invalid: " + problem);
+  return decoded;
 }
 
 json parse_extensions(const std::string& text) {
@@ -526,8 +549,7 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   tinygltf::TinyGLTF loader;
   FsContext fs_ctx{std::filesystem::weakly_canonical(path.parent_path()), size_t{1} << 31};
   loader.SetFsCallbacks(tinygltf::FsCallbacks{&fs_exists, &fs_expand, &fs_read, &fs_write, &fs_ctx});
-  ImageContext image_ctx{options.max_texture_pixels};
-  loader.SetImageLoader(&load_image, &image_ctx);
+  loader.SetImageLoader(&keep_encoded_image, nullptr);
   loader.SetStoreOriginalJSONForExtrasAndExtensions(true);
   tinygltf::Model model;
   std::string err, warn;
@@ -543,16 +565,9 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
 
   // Images, decoded once, shared by every texture that uses them (as "#image<i>").
   MaterialContext mctx;
-  for (size_t i = 0; i < model.images.size(); ++i) {
-    const tinygltf::Image& img = model.images[i];
-    if (img.width <= 0 || img.height <= 0 || img.component != 4 || img.image.empty()) continue;
-    auto pixels = std::make_shared<ImagePixels>();
-    pixels->width = img.width;
-    pixels->height = img.height;
-    pixels->channels = 4;
-    pixels->data = img.image;
-    mctx.images["image" + std::to_string(i)] = std::move(pixels);
-  }
+  std::vector<std::shared_ptr<ImagePixels>> images = decode_images(&model, options.max_texture_pixels, pointer);
+  for (size_t i = 0; i < images.size(); ++i)
+    if (images[i]) mctx.images["image" + std::to_string(i)] = std::move(images[i]);
 
   // Materials: glTF materials by index, replaced by the job's materials of the same name.
   const MaterialRegistry& registry = MaterialRegistry::builtin();

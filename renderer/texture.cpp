@@ -8,6 +8,8 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include "renderer/thread_pool.h"
+
 namespace tessera {
 
 namespace {
@@ -33,6 +35,7 @@ struct Image {
     std::vector<float> pixels;
   };
   std::vector<Level> mips;
+  std::array<float, 4> mean{};  // of level 0's linear values, per channel (the first four)
   static const float* srgb_table() {
     static const std::array<float, 256> table = [] {
       std::array<float, 256> t{};
@@ -68,60 +71,108 @@ uint8_t linear_to_srgb_byte(float linear) {
   return static_cast<uint8_t>(code);
 }
 
+// Adds the first N channels of a row of w texels (`stride` values apart) to `sum`, in registers.
+template <int N>
+void sum_row(const float* row, int w, int stride, std::array<double, 4>* sum) {
+  double s[N] = {};
+  for (int x = 0; x < w; ++x)
+    for (int c = 0; c < N; ++c) s[c] += row[static_cast<size_t>(x) * stride + c];
+  for (int c = 0; c < N; ++c) (*sum)[c] += s[c];
+}
+
 // Builds `img`'s mip levels from level 0 (`bytes` or `floats`): each texel of a level is the mean of the 2x2 texels
 // below it (the last row or column repeated where the size is odd), in linear values, so that averages are of light
-// rather than of encoded values. Levels below are kept as floats while the next is made.
+// rather than of encoded values. Also sets img->mean. Rows of a large level are made in parallel, each from its own
+// two source rows; per-row sums are added in row order, so the mean does not depend on the number of threads.
 void build_mips(Image* img, const uint8_t* bytes, const float* floats) {
   const int channels = img->channels;
   const float* srgb = Image::srgb_table();
   float decode[4][256];  // per channel: byte to linear
   for (int c = 0; c < 4; ++c)
     for (int i = 0; i < 256; ++i) decode[c][i] = img->srgb && c < 3 ? srgb[i] : i * (1.0f / 255.0f);
+  // Row `r` of level 0 as linear floats.
+  auto level0_row = [&](int r, float* out) {
+    const size_t row_values = static_cast<size_t>(img->width) * channels, first = static_cast<size_t>(r) * row_values;
+    if (floats) std::copy_n(&floats[first], row_values, out);
+    else
+      for (size_t i = 0; i < row_values; i += channels)
+        for (int c = 0; c < channels; ++c) out[i + c] = decode[std::min(c, 3)][bytes[first + i + c]];
+  };
+  auto add_row = [channels](const float* row, int w, std::array<double, 4>* sum) {
+    switch (std::min(channels, 4)) {
+      case 1: sum_row<1>(row, w, channels, sum); break;
+      case 2: sum_row<2>(row, w, channels, sum); break;
+      case 3: sum_row<3>(row, w, channels, sum); break;
+      default: sum_row<4>(row, w, channels, sum); break;
+    }
+  };
   int w = img->width, h = img->height;
-  std::vector<float> prev, next, rows;
+  std::array<double, 4> total{};
+  if (w == 1 && h == 1) {
+    std::vector<float> row(channels);
+    level0_row(0, row.data());
+    add_row(row.data(), 1, &total);
+  }
+  std::vector<float> prev, next;
   while (w > 1 || h > 1) {
     const int nw = (w + 1) / 2, nh = (h + 1) / 2;
+    const bool from_level0 = prev.empty();
     next.resize(static_cast<size_t>(nw) * nh * channels);
-    const size_t row_values = static_cast<size_t>(w) * channels;
-    rows.resize(2 * row_values);
-    for (int y = 0; y < nh; ++y) {
-      // The two source rows as linear floats (the second is the first again at an odd height's last row).
-      for (int j = 0; j < 2; ++j) {
-        const size_t first = static_cast<size_t>(std::min(2 * y + j, h - 1)) * row_values;
-        float* out = &rows[j * row_values];
-        if (!prev.empty()) std::copy_n(&prev[first], row_values, out);
-        else if (floats) std::copy_n(&floats[first], row_values, out);
-        else
-          for (size_t i = 0; i < row_values; i += channels)
-            for (int c = 0; c < channels; ++c) out[i + c] = decode[std::min(c, 3)][bytes[first + i + c]];
-      }
-      float* out = &next[static_cast<size_t>(y) * nw * channels];
-      for (int x = 0; x < nw; ++x) {
-        const size_t a = static_cast<size_t>(2 * x) * channels;
-        const size_t b = static_cast<size_t>(std::min(2 * x + 1, w - 1)) * channels;
-        for (int c = 0; c < channels; ++c)
-          out[x * channels + c] =
-              0.25f * (rows[a + c] + rows[b + c] + rows[row_values + a + c] + rows[row_values + b + c]);
-      }
-    }
     Image::Level level;
     level.width = nw;
     level.height = nh;
-    if (!bytes) {
-      level.pixels = next;
+    if (bytes) level.bytes.resize(next.size());
+    std::vector<std::array<double, 4>> row_sums(from_level0 ? nh : 0);
+    const size_t row_values = static_cast<size_t>(w) * channels;
+    auto make_rows = [&](int y_begin, int y_end) {
+      std::vector<float> rows(2 * row_values);
+      for (int y = y_begin; y < y_end; ++y) {
+        // The two source rows as linear floats (the second is the first again at an odd height's last row).
+        for (int j = 0; j < 2; ++j) {
+          const int r = std::min(2 * y + j, h - 1);
+          float* out = &rows[j * row_values];
+          if (!from_level0) std::copy_n(&prev[static_cast<size_t>(r) * row_values], row_values, out);
+          else level0_row(r, out);
+          if (from_level0 && 2 * y + j < h) add_row(out, w, &row_sums[y]);
+        }
+        const size_t first = static_cast<size_t>(y) * nw * channels;
+        float* out = &next[first];
+        for (int x = 0; x < nw; ++x) {
+          const size_t a = static_cast<size_t>(2 * x) * channels;
+          const size_t b = static_cast<size_t>(std::min(2 * x + 1, w - 1)) * channels;
+          for (int c = 0; c < channels; ++c)
+            out[x * channels + c] =
+                0.25f * (rows[a + c] + rows[b + c] + rows[row_values + a + c] + rows[row_values + b + c]);
+        }
+        if (bytes)
+          for (size_t i = 0; i < static_cast<size_t>(nw) * channels; i += channels)
+            for (int c = 0; c < channels; ++c)
+              level.bytes[first + i + c] = img->srgb && c < 3
+                                               ? linear_to_srgb_byte(out[i + c])
+                                               : static_cast<uint8_t>(std::lround(clamp(out[i + c], 0.0f, 1.0f) * 255));
+      }
+    };
+    // About 64k source texels per item: levels below that are made on this thread alone.
+    const int rows_per_item = std::max(1, 32768 / std::max(w, 1));
+    const size_t items = (static_cast<size_t>(nh) + rows_per_item - 1) / rows_per_item;
+    if (items > 1) {
+      run_in_parallel(items, [&](size_t i) {
+        const int y0 = static_cast<int>(i) * rows_per_item;
+        make_rows(y0, std::min(nh, y0 + rows_per_item));
+      });
     } else {
-      level.bytes.resize(next.size());
-      for (size_t i = 0; i < next.size(); i += channels)
-        for (int c = 0; c < channels; ++c)
-          level.bytes[i + c] = img->srgb && c < 3
-                                   ? linear_to_srgb_byte(next[i + c])
-                                   : static_cast<uint8_t>(std::lround(clamp(next[i + c], 0.0f, 1.0f) * 255));
+      make_rows(0, nh);
     }
+    for (const std::array<double, 4>& sum : row_sums)
+      for (int c = 0; c < 4; ++c) total[c] += sum[c];
+    if (!bytes) level.pixels = next;
     img->mips.push_back(std::move(level));
     std::swap(prev, next);
     w = nw;
     h = nh;
   }
+  const double texels = static_cast<double>(img->width) * img->height;
+  for (int c = 0; c < 4; ++c) img->mean[c] = static_cast<float>(total[c] / texels);
 }
 
 std::mutex g_cache_mutex;
@@ -244,15 +295,9 @@ class ImageTexture final : public Texture {
     // A footprint of one uv unit covers this many texels of level 0 (across, the geometric mean of both axes).
     texels_per_uv_ = std::sqrt(static_cast<float>(base.width) * std::abs(mapping_.scale.x) *
                                static_cast<float>(base.height) * std::abs(mapping_.scale.y));
-    average_ = Rgb(0);
-    const size_t n = static_cast<size_t>(base.width) * base.height;
-    double sum[3] = {0, 0, 0};
-    for (int y = 0; y < base.height; ++y)
-      for (int x = 0; x < base.width; ++x) {
-        Rgb c = texel(base, x, y);
-        for (int k = 0; k < 3; ++k) sum[k] += c[k];
-      }
-    for (int k = 0; k < 3; ++k) average_[k] = static_cast<float>(sum[k] / static_cast<double>(n));
+    // The mean of the texels read, from the one build_mips took over level 0.
+    const std::array<float, 4>& mean = image_->mean;
+    average_ = rgb_ ? Rgb(mean[0], mean[1], mean[2]) : Rgb(mean[std::min(read_channel_, 3)]);
   }
 
   Rgb eval(const ShadingPoint& sp) const override {

@@ -1,7 +1,9 @@
 #include "renderer/thread_pool.h"
 
 #include <algorithm>
+#include <atomic>
 #include <exception>
+#include <system_error>
 
 #include "renderer/accel.h"
 
@@ -80,6 +82,37 @@ void ThreadPool::worker_main(int index) {
     if (error && !batch->error) batch->error = error;
     if (++batch->finished == batch->count) batch->done_cv.notify_all();
   }
+}
+
+void run_in_parallel(size_t count, const std::function<void(size_t)>& fn, unsigned max_threads) {
+  if (count == 0) return;
+  const unsigned hardware = std::max(1u, std::thread::hardware_concurrency());
+  const size_t threads = std::min<size_t>(count, max_threads ? std::min(max_threads, hardware) : hardware);
+  std::atomic<size_t> next{0};
+  std::mutex error_mutex;
+  std::exception_ptr error;
+  auto work = [&] {
+    for (size_t i; (i = next.fetch_add(1)) < count;) {
+      try {
+        fn(i);
+      } catch (...) {
+        std::lock_guard lock(error_mutex);
+        if (!error) error = std::current_exception();
+      }
+    }
+  };
+  std::vector<std::thread> helpers;
+  helpers.reserve(threads - 1);
+  for (size_t t = 1; t < threads; ++t) {
+    try {
+      helpers.emplace_back(work);
+    } catch (const std::system_error&) {
+      break;  // out of threads: the ones started (and this one) take the remaining items
+    }
+  }
+  work();
+  for (std::thread& t : helpers) t.join();
+  if (error) std::rethrow_exception(error);
 }
 
 }  // namespace tessera

@@ -42,4 +42,10 @@ class ThreadPool {
   std::vector<std::thread> workers_;
 };
 
+// Runs fn(i) for every i in [0, count) on up to `max_threads` threads (0: one per hardware thread) started for the
+// call, the calling thread among them, and returns when all items are done: for work outside a render, such as
+// decoding a scene's images, where no pool is at hand. Runs on fewer threads when the system refuses to start one.
+// The first exception thrown by an item is rethrown here after the others have finished.
+void run_in_parallel(size_t count, const std::function<void(size_t)>& fn, unsigned max_threads = 0);
+
 }  // namespace tessera

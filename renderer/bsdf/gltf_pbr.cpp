@@ -37,6 +37,7 @@
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"
+#include "renderer/thread_pool.h"
 
 namespace tessera {
 namespace {
@@ -73,10 +74,12 @@ class SchlickAlbedoTable {
  private:
   static constexpr int kN = 32;
   SchlickAlbedoTable() {
-    MicrofacetDistribution d;
-    d.type = MicrofacetType::kGgx;
     const int n = 40;  // n x n stratified visible-normal samples per entry
-    for (int j = 0; j < kN; ++j) {
+    // Columns (roughnesses) are independent: made in parallel, each the same whatever thread makes it.
+    run_in_parallel(kN, [&](size_t column) {
+      const int j = static_cast<int>(column);
+      MicrofacetDistribution d;
+      d.type = MicrofacetType::kGgx;
       float r = static_cast<float>(j) / (kN - 1);
       d.alpha_x = d.alpha_y = std::max(r * r, 1e-3f);
       for (int i = 0; i < kN; ++i) {
@@ -107,7 +110,7 @@ class SchlickAlbedoTable {
       }
       avg1_[j] = static_cast<float>(2 * a1);
       avg2_[j] = static_cast<float>(2 * a2);
-    }
+    });
   }
   float e1_[kN][kN];
   float e2_[kN][kN];
@@ -151,7 +154,8 @@ class SheenAlbedoTable {
   static constexpr int kN = 32;
   SheenAlbedoTable() {
     const int nt = 96, nphi = 48;  // phi over [0, pi]: the lobe is symmetric about the plane of incidence
-    for (int j = 0; j < kN; ++j) {
+    run_in_parallel(kN, [&](size_t column) {
+      const int j = static_cast<int>(column);
       float r = static_cast<float>(j) / (kN - 1);
       float a = std::max(r * r, kMinAlpha);
       for (int i = 0; i < kN; ++i) {
@@ -170,7 +174,7 @@ class SheenAlbedoTable {
         }
         e_[i][j] = static_cast<float>(2 * sum);
       }
-    }
+    });
   }
   float e_[kN][kN];
 };

@@ -498,17 +498,21 @@ TEST(Gltf, MaskedOutSurfacesCastNoShadow) {
 namespace tessera {
 namespace {
 
-// A w x h PNG of 8-bit RGBA pixels, encoded by OpenImageIO.
-std::vector<unsigned char> png_rgba(int w, int h, const std::vector<unsigned char>& rgba) {
+// A w x h PNG of 8-bit pixels of `channels` channels, encoded by OpenImageIO.
+std::vector<unsigned char> png_pixels(int w, int h, int channels, const std::vector<unsigned char>& values) {
   std::vector<unsigned char> out;
   OIIO::Filesystem::IOVecOutput proxy(out);
   auto o = OIIO::ImageOutput::create("t.png");
   o->set_ioproxy(&proxy);
-  OIIO::ImageSpec spec(w, h, 4, OIIO::TypeDesc::UINT8);
+  OIIO::ImageSpec spec(w, h, channels, OIIO::TypeDesc::UINT8);
+  if (channels == 2) spec.alpha_channel = 1;
   o->open("t.png", spec);
-  o->write_image(OIIO::TypeDesc::UINT8, rgba.data());
+  o->write_image(OIIO::TypeDesc::UINT8, values.data());
   o->close();
   return out;
+}
+std::vector<unsigned char> png_rgba(int w, int h, const std::vector<unsigned char>& rgba) {
+  return png_pixels(w, h, 4, rgba);
 }
 
 // An 8x8 texture of four 4x4 blocks: red, green / blue, white (row 0 at the top); alpha 0 in the white block.
@@ -572,6 +576,79 @@ TEST(GltfTextures, BaseColourAlphaCutsOutUnderMask) {
   EXPECT_NEAR(img.at(8, 8).x, 1, 1e-3);     // red texel: opaque
   EXPECT_NEAR(img.at(24, 24).x, 0.25, 1e-3);  // white texel has alpha 0: the environment shows through
   EXPECT_NEAR(img.at(24, 24).z, 0.25, 1e-3);
+}
+
+double srgb_decoded(int code) {
+  const double v = code / 255.0;
+  return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
+}
+
+// Grey, grey and alpha, RGB and RGBA images, all in one asset (decoded side by side), each read as RGBA with its grey
+// spread over red, green and blue and alpha 1 where it has none; each texture shows its own image.
+TEST(GltfTextures, ImagesOfEveryChannelCountReadAsRgba) {
+  struct Case {
+    int channels;
+    std::vector<unsigned char> texel;
+    int r, g, b;  // expected sRGB codes, or -1 for the environment (cut out by alpha)
+  };
+  const std::vector<Case> cases = {{1, {128}, 128, 128, 128},
+                                   {2, {200, 0}, -1, -1, -1},
+                                   {2, {200, 255}, 200, 200, 200},
+                                   {3, {255, 128, 0}, 255, 128, 0},
+                                   {4, {0, 64, 255, 255}, 0, 64, 255}};
+  for (size_t k = 0; k < cases.size(); ++k) {
+    SCOPED_TRACE("image " + std::to_string(k));
+    GltfBuilder b;
+    std::vector<int> textures;
+    for (const Case& c : cases) {
+      std::vector<unsigned char> values;
+      for (int i = 0; i < 4; ++i) values.insert(values.end(), c.texel.begin(), c.texel.end());  // 2x2 of one value
+      textures.push_back(b.texture_png(png_pixels(2, 2, c.channels, values)));
+    }
+    json mat = {{"emissiveFactor", {1, 1, 1}}, {"emissiveTexture", {{"index", textures[k]}}}, {"alphaMode", "MASK"},
+                {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}, {"baseColorTexture", {{"index", textures[k]}}}}}};
+    Rendered img = render_job(textured_job(b, mat, "channels" + std::to_string(k)));
+    const Rgb got = img.at(16, 16);
+    const Case& c = cases[k];
+    if (c.r < 0) {
+      EXPECT_NEAR(got.x, 0.25, 1e-3);  // the environment behind
+      EXPECT_NEAR(got.z, 0.25, 1e-3);
+    } else {
+      EXPECT_NEAR(got.x, srgb_decoded(c.r), 2e-3);
+      EXPECT_NEAR(got.y, srgb_decoded(c.g), 2e-3);
+      EXPECT_NEAR(got.z, srgb_decoded(c.b), 2e-3);
+    }
+  }
+}
+
+// An image that does not decode, or is larger than allowed, fails the import naming the image, whichever of the
+// images decoded at once fails.
+TEST(GltfHostile, UndecodableAndOversizedImagesAreRefused) {
+  const std::vector<unsigned char> good = png_rgba(4, 4, std::vector<unsigned char>(64, 255));
+  {
+    GltfBuilder b = one_triangle();
+    b.texture_png(good);
+    b.texture_png(good);
+    b.texture_png({0x89, 'P', 'N', 'G', 1, 2, 3, 4});  // a PNG signature, then nothing decodable
+    b.write(fixture_dir(), "undecodable");
+    expect_refused(fixture_dir() / "undecodable.gltf", "image 2 cannot be decoded");
+  }
+  {
+    GltfBuilder b = one_triangle();
+    b.texture_png(good);
+    b.write(fixture_dir(), "oversized");
+    Scene scene;
+    GltfImportOptions options;
+    options.max_texture_pixels = 15;  // the image has 16
+    try {
+      import_gltf(fixture_dir() / "oversized.gltf", "/scene/gltf", scene, options);
+      ADD_FAILURE() << "an image over the pixel limit was accepted";
+    } catch (const SceneError& e) {
+      EXPECT_NE(std::string(e.what()).find("image 0 is too large (4x4 pixels)"), std::string::npos) << e.what();
+    }
+    options.max_texture_pixels = 16;
+    EXPECT_NO_THROW(import_gltf(fixture_dir() / "oversized.gltf", "/scene/gltf", scene, options));
+  }
 }
 
 std::vector<unsigned char> tilted_normal_png(double theta) {
@@ -644,6 +721,38 @@ TEST(Textures, MipLevelsAverageLinearLight) {
       }
     }
   }
+}
+
+// Levels of a large image are made in parallel, rows split between threads: every texel of every level is made
+// (a checker of single texels is grey at every level above the finest), and the texture's mean, which weighs light
+// sources, is the mean of the texels whatever the split (odd sizes included).
+TEST(Textures, LargeImagesAreMippedWhole) {
+  auto tex = make_image_texture(texel_checker(1024, 1024), true, -1, TextureMapping());
+  ShadingPoint sp;
+  for (float texels : {2.0f, 4.0f, 16.0f}) {
+    sp.uv_footprint = texels / 1024;
+    for (int i = 0; i < 32; ++i)
+      for (int j = 0; j < 32; ++j) {
+        sp.uv = Vec2((i + 0.37f) / 32, (j + 0.61f) / 32);
+        ASSERT_NEAR(tex->eval(sp).y, 0.5f, 0.01f) << texels << " texels at " << sp.uv.x << ", " << sp.uv.y;
+      }
+  }
+  EXPECT_NEAR(tex->average().y, 0.5f, 1e-6f);
+
+  auto noise = std::make_shared<ImagePixels>();
+  noise->width = 1023;
+  noise->height = 777;
+  noise->channels = 4;
+  std::mt19937 rng(7);
+  double sum[3] = {0, 0, 0};
+  for (int t = 0; t < noise->width * noise->height; ++t)
+    for (int c = 0; c < 4; ++c) {
+      const int code = static_cast<int>(rng() % 256);
+      noise->data.push_back(static_cast<uint8_t>(code));
+      if (c < 3) sum[c] += srgb_decoded(code);
+    }
+  const Rgb mean = make_image_texture(noise, true, -1, TextureMapping())->average();
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(mean[c], sum[c] / (1023.0 * 777.0), 1e-6) << "channel " << c;
 }
 
 // A finely textured surface seen from afar: each pixel covers about eleven texels of a one-texel checkerboard. With
