@@ -347,6 +347,7 @@ void post_job(ApiContext& ctx, const Request& req, Response& res) {
     // The disk filled after the --min-free-disk check: the insert was rolled back whole, so, as the check's refusal,
     // nothing of the job exists (assets a multipart submission stored stay: whole, and found again by a retry).
     if (const auto* se = dynamic_cast<const JobStoreError*>(&e); se && se->out_of_space()) {
+      ctx.metrics.count_job_store_error();
       log(LogLevel::kWarn, "job refused: the job store ran out of space", {{"error", e.what()}});
       const std::string kept = multipart ? "the job was not stored; the files uploaded with it were, whole, and a "
                                            "retry reuses them"
@@ -368,6 +369,7 @@ void post_job(ApiContext& ctx, const Request& req, Response& res) {
     auto stored = ctx.store.get(job.id);
     status = status_of(ctx, stored ? *stored : job);
   } catch (const JobStoreError& e) {
+    ctx.metrics.count_job_store_error();
     log(LogLevel::kWarn, "job queued, but the job store failed as it was read back",
         {{"job", job.id}, {"error", e.what()}});
     status = job_status_json(job);
@@ -606,6 +608,7 @@ void stream_events(ApiContext& ctx, const Request& req, Response& res, const std
           }
           return true;
         } catch (const JobStoreError& e) {
+          c->metrics.count_job_store_error();
           log(LogLevel::kWarn, "event stream ended: the job store failed", {{"job", job_id}, {"error", e.what()}});
           return false;
         } catch (const std::exception& e) {
@@ -746,7 +749,14 @@ std::vector<Route> routes(ApiContext* ctx) {
       {"GET", "/metrics", "/metrics",
        [ctx](const Request&, Response& r) {
          Metrics::Gauges g;
-         g.jobs = ctx->store.count_by_state();
+         // A failing store costs the scrape its job counts, not the scrape: the rest is what an operator needs then.
+         try {
+           g.jobs = ctx->store.count_by_state();
+         } catch (const JobStoreError& e) {
+           g.job_store_up = false;
+           ctx->metrics.count_job_store_error();
+           log(LogLevel::kWarn, "metrics without job counts: the job store failed", {{"error", e.what()}});
+         }
          g.render_threads = ctx->pool ? ctx->pool->size() : 0;
          g.render_threads_busy = ctx->pool ? ctx->pool->busy() : 0;
          g.event_watchers = ctx->events.watchers();
@@ -977,7 +987,7 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
   // request (accept, a pool thread's wake-up, close, on both sides). An idle connection still closes after 5 s.
   server.set_keep_alive_max_count(1000);
   server.set_error_handler(httplib::Server::HandlerWithResponse(on_error));
-  server.set_exception_handler([](const Request& req, Response& res, std::exception_ptr ep) {
+  server.set_exception_handler([c](const Request& req, Response& res, std::exception_ptr ep) {
     std::string what = "unknown exception";
     std::optional<bool> store_full;  // the job store failed; whether it ran out of space
     try {
@@ -994,6 +1004,7 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
     for (auto it = res.headers.begin(); it != res.headers.end();)
       it = it->first.rfind("Access-Control-", 0) == 0 || it->first == "Vary" ? std::next(it) : res.headers.erase(it);
     if (store_full) {
+      c->metrics.count_job_store_error();
       // The store, not the request or the daemon, is at fault, and it usually recovers (a lock released, space
       // freed): the client is told to retry. The operator's alert is tessera_http_requests_total{code="503"|"507"}.
       log(LogLevel::kWarn, "request failed: the job store failed",

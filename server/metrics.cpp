@@ -44,11 +44,18 @@ void Metrics::observe_job_duration(double seconds) {
 
 std::string Metrics::render(const Gauges& g) const {
   std::ostringstream out;
-  out << "# HELP tessera_jobs Jobs in the store by state.\n# TYPE tessera_jobs gauge\n";
-  for (const auto& [state, n] : g.jobs) out << "tessera_jobs{state=\"" << job_state_name(state) << "\"} " << n << "\n";
-  auto queued = g.jobs.find(JobState::kQueued);
-  out << "# HELP tessera_queue_length Jobs waiting to be rendered.\n# TYPE tessera_queue_length gauge\n"
-      << "tessera_queue_length " << (queued == g.jobs.end() ? 0 : queued->second) << "\n";
+  out << "# HELP tessera_job_store_up Whether the job store answered this scrape (0: it failed, and the job counts "
+         "are left out).\n# TYPE tessera_job_store_up gauge\n"
+      << "tessera_job_store_up " << (g.job_store_up ? 1 : 0) << "\n";
+  if (g.job_store_up) {
+    // Counts the store could not give are left out rather than reported as zero.
+    out << "# HELP tessera_jobs Jobs in the store by state.\n# TYPE tessera_jobs gauge\n";
+    for (const auto& [state, n] : g.jobs)
+      out << "tessera_jobs{state=\"" << job_state_name(state) << "\"} " << n << "\n";
+    auto queued = g.jobs.find(JobState::kQueued);
+    out << "# HELP tessera_queue_length Jobs waiting to be rendered.\n# TYPE tessera_queue_length gauge\n"
+        << "tessera_queue_length " << (queued == g.jobs.end() ? 0 : queued->second) << "\n";
+  }
   out << "# HELP tessera_samples_rendered_total Pixel samples rendered by this process.\n"
       << "# TYPE tessera_samples_rendered_total counter\n"
       << "tessera_samples_rendered_total " << samples_.load(std::memory_order_relaxed) << "\n";
@@ -63,8 +70,9 @@ std::string Metrics::render(const Gauges& g) const {
   out << "# HELP tessera_jobs_expired_total Finished jobs deleted by the retention sweep (--retain-finished).\n"
       << "# TYPE tessera_jobs_expired_total counter\n"
       << "tessera_jobs_expired_total " << expired_jobs_.load(std::memory_order_relaxed) << "\n";
-  out << "# HELP tessera_job_store_errors_total Writes of renders to the job store that failed (progress, warnings, "
-         "the end of a job; an end is retried until it is recorded).\n"
+  out << "# HELP tessera_job_store_errors_total Operations on the job store that failed: requests answered 503 or 507 "
+         "because of it, event streams it ended, scrapes it could not count, and writes of renders (progress, "
+         "warnings, the end of a job; an end is retried until it is recorded).\n"
       << "# TYPE tessera_job_store_errors_total counter\n"
       << "tessera_job_store_errors_total " << job_store_errors_.load(std::memory_order_relaxed) << "\n";
   if (g.data_dir_available_bytes)

@@ -24,6 +24,7 @@ class Metrics {
 
   struct Gauges {
     std::map<JobState, int> jobs;
+    bool job_store_up = true;  // false: the store failed when asked for `jobs`, which is then left out
     int render_threads = 0;
     int render_threads_busy = 0;
     size_t event_watchers = 0;

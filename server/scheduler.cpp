@@ -65,6 +65,7 @@ void Scheduler::notify_state(const std::string& id) {
   try {
     hooks_.state_changed(id);
   } catch (const std::exception& e) {
+    if (dynamic_cast<const JobStoreError*>(&e)) count_store_error();
     log(LogLevel::kWarn, "cannot publish the state of a job", {{"job", id}, {"error", e.what()}});
   }
 }

@@ -305,5 +305,46 @@ TEST_F(ApiStoreFailure, AnEventStreamEndsWhenTheStoreFailsAndTheDaemonStaysUp) {
   EXPECT_EQ(res->get_header_value("Retry-After"), "5");
 }
 
+// The value of the unlabelled metric `name` in a /metrics body, or -1 when it is not there.
+double metric_value(const std::string& body, const std::string& name) {
+  const std::string prefix = "\n" + name + " ";
+  const size_t at = body.find(prefix);
+  return at == std::string::npos ? -1 : std::stod(body.substr(at + prefix.size()));
+}
+
+// Monitoring is what an operator has while the store fails: /metrics still answers, says the store is down, leaves
+// out the job counts it cannot know (rather than reporting zero), and counts the failures, the requests' included.
+TEST_F(ApiStoreFailure, MetricsAnswerWithoutJobCountsWhileTheStoreFails) {
+  const std::string id = queue_job();
+  auto res = client_->Get("/metrics");
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 200) << res->body;
+  EXPECT_EQ(metric_value(res->body, "tessera_job_store_up"), 1);
+  EXPECT_NE(res->body.find("tessera_jobs{state=\"queued\"} 1\n"), std::string::npos) << res->body;
+  EXPECT_EQ(metric_value(res->body, "tessera_queue_length"), 1);
+  const double errors = metric_value(res->body, "tessera_job_store_errors_total");
+  EXPECT_EQ(errors, 0);
+
+  store_.failure = FlakyStore::Failure::kLocked;
+  res = client_->Get(("/v1/jobs/" + id).c_str());
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 503);
+  res = client_->Get("/metrics");
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 200) << res->body;
+  EXPECT_EQ(metric_value(res->body, "tessera_job_store_up"), 0);
+  EXPECT_EQ(res->body.find("tessera_jobs{"), std::string::npos) << res->body;
+  EXPECT_EQ(metric_value(res->body, "tessera_queue_length"), -1);
+  EXPECT_EQ(metric_value(res->body, "tessera_job_store_errors_total"), errors + 2);  // the 503 and this scrape
+  EXPECT_NE(res->body.find("tessera_http_requests_total{route=\"/v1/jobs/{id}\",code=\"503\"} 1"), std::string::npos)
+      << res->body;
+
+  store_.failure = FlakyStore::Failure::kNone;
+  res = client_->Get("/metrics");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(metric_value(res->body, "tessera_job_store_up"), 1);
+  EXPECT_EQ(metric_value(res->body, "tessera_queue_length"), 1);
+}
+
 }  // namespace
 }  // namespace tessera::server
