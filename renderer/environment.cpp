@@ -1,5 +1,6 @@
 #include "renderer/environment.h"
 
+#include <array>
 #include <stdexcept>
 
 #include "renderer/image_io.h"
@@ -23,39 +24,44 @@ Vec3 EnvironmentMap::uv_to_direction(Vec2 uv) {
 
 EnvironmentMap::EnvironmentMap(int width, int height, std::vector<float> rgb)
     : width_(width), height_(height), rgb_(std::move(rgb)) {
-  std::vector<float> weights(static_cast<size_t>(width_) * height_);
-  double sum_r = 0, sum_g = 0, sum_b = 0, solid = 0;
-  for (int y = 0; y < height_; ++y) {
+  // The sampling weights are made row by row as the distribution builds its rows (in parallel; a 4k map has 8
+  // million texels), never held whole. Each row's radiance sums are kept apart and added in row order: the same
+  // average whatever the number of threads.
+  std::vector<std::array<double, 4>> row_sums(height_);
+  distribution_ = Distribution2D(width_, height_, [&](int y, float* weights) {
     // Each texel covers a solid angle proportional to sin(theta) at its centre.
-    float sin_theta = std::sin((y + 0.5f) * kPi / height_);
+    const float sin_theta = std::sin((y + 0.5f) * kPi / height_);
+    double r = 0, g = 0, b = 0;
     for (int x = 0; x < width_; ++x) {
       Rgb c = texel(x, y);
       // A small floor keeps every direction with radiance possible to sample.
-      weights[static_cast<size_t>(y) * width_ + x] = (std::max(luminance(c), 0.0f) + 1e-6f) * sin_theta;
-      sum_r += c.x * sin_theta;
-      sum_g += c.y * sin_theta;
-      sum_b += c.z * sin_theta;
-      solid += sin_theta;
+      weights[x] = (std::max(luminance(c), 0.0f) + 1e-6f) * sin_theta;
+      r += c.x;
+      g += c.y;
+      b += c.z;
     }
+    row_sums[y] = {r * sin_theta, g * sin_theta, b * sin_theta, static_cast<double>(width_) * sin_theta};
+  });
+  double sum_r = 0, sum_g = 0, sum_b = 0, solid = 0;
+  for (const std::array<double, 4>& s : row_sums) {
+    sum_r += s[0];
+    sum_g += s[1];
+    sum_b += s[2];
+    solid += s[3];
   }
-  distribution_ = Distribution2D(weights.data(), width_, height_);
   average_ = solid > 0 ? Rgb(static_cast<float>(sum_r / solid), static_cast<float>(sum_g / solid),
                              static_cast<float>(sum_b / solid))
                        : Rgb(0);
 }
 
 std::shared_ptr<EnvironmentMap> EnvironmentMap::load(const std::string& path) {
-  ImageData img = read_image(path);
+  // RGB read straight into the map's own array (grey repeated, alpha left on disk), then made safe in place. The size
+  // is checked from the header, before anything is allocated: 16384 x 8192 texels at most.
+  ImageData img = read_image(path, 3, kMaxTexels);
   if (img.width < 2 || img.height < 1) throw std::runtime_error("the environment map is too small");
-  std::vector<float> rgb(static_cast<size_t>(img.width) * img.height * 3);
-  for (size_t i = 0; i < static_cast<size_t>(img.width) * img.height; ++i) {
-    const float* p = &img.pixels[i * img.channels];
-    for (int c = 0; c < 3; ++c) {
-      float v = p[img.channels >= 3 ? c : 0];
-      rgb[i * 3 + c] = std::isfinite(v) && v > 0 ? v : 0.0f;
-    }
-  }
-  return std::make_shared<EnvironmentMap>(img.width, img.height, std::move(rgb));
+  if (img.width > Distribution2D::kMaxWidth) throw std::runtime_error("the environment map is too wide");
+  for (float& v : img.pixels) v = std::isfinite(v) && v > 0 ? v : 0.0f;
+  return std::make_shared<EnvironmentMap>(img.width, img.height, std::move(img.pixels));
 }
 
 Rgb EnvironmentMap::texel(int x, int y) const {

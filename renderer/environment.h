@@ -15,7 +15,9 @@ class EnvironmentMap {
  public:
   // `rgb` is width*height linear RGB, row 0 at the top (the +y pole).
   EnvironmentMap(int width, int height, std::vector<float> rgb);
-  static std::shared_ptr<EnvironmentMap> load(const std::string& path);  // through OpenImageIO; throws on failure
+  // Through OpenImageIO; throws on failure, and for maps of more than kMaxTexels texels (1.5 GB of radiance).
+  static std::shared_ptr<EnvironmentMap> load(const std::string& path);
+  static constexpr size_t kMaxTexels = size_t{16384} * 8192;
 
   // Radiance towards the viewer from direction `dir` (a direction in map space), bilinearly filtered.
   Rgb lookup(const Vec3& dir) const { return lookup_uv(direction_to_uv(dir)); }

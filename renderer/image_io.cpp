@@ -3,7 +3,9 @@
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <stdexcept>
 
 namespace tessera {
@@ -88,17 +90,47 @@ std::vector<uint8_t> encode_png(const std::vector<float>& rgb, int width, int he
   return std::vector<uint8_t>(buffer.begin(), buffer.end());
 }
 
-ImageData read_image(const std::string& path) {
+ImageData read_image(const std::string& path, int channels, size_t max_texels) {
+  // Messages name the file, not where it lies (a daemon's data directory is not the client's business), OpenImageIO's
+  // own included.
+  const std::string name = std::filesystem::path(path).filename().string();
+  auto scrub = [&](std::string message) {
+    for (size_t at; !path.empty() && (at = message.find(path)) != std::string::npos;) message.replace(at, path.size(), name);
+    return message;
+  };
   auto in = OIIO::ImageInput::open(path);
-  if (!in) throw std::runtime_error("cannot read " + path + ": " + OIIO::geterror());
+  if (!in) throw std::runtime_error("cannot read " + name + ": " + scrub(OIIO::geterror()));
   const OIIO::ImageSpec& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
+    throw std::runtime_error("cannot read " + name + ": it has no pixels");
+  if (max_texels > 0 && static_cast<size_t>(spec.width) * static_cast<size_t>(spec.height) > max_texels)
+    throw std::runtime_error("cannot read " + name + ": " + std::to_string(spec.width) + "x" +
+                             std::to_string(spec.height) + " is larger than the " + std::to_string(max_texels) +
+                             " texels allowed");
   ImageData img;
   img.width = spec.width;
   img.height = spec.height;
-  img.channels = spec.nchannels;
-  img.pixels.resize(static_cast<size_t>(spec.width) * spec.height * spec.nchannels);
-  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img.pixels.data()))
-    throw std::runtime_error("cannot read " + path + ": " + in->geterror());
+  img.channels = channels > 0 ? channels : spec.nchannels;
+  const size_t texels = static_cast<size_t>(spec.width) * static_cast<size_t>(spec.height);
+  const int stored = spec.nchannels;
+  img.pixels.resize(texels * img.channels);
+  bool ok;
+  if (stored >= img.channels) {
+    ok = in->read_image(0, 0, 0, img.channels, OIIO::TypeDesc::FLOAT, img.pixels.data());
+  } else if (stored < 3 && img.channels >= 3) {
+    // Grey (and alpha): the grey read into the first channel of each texel and repeated over the colour channels,
+    // the alpha into the fourth when asked for.
+    const OIIO::stride_t xstride = static_cast<OIIO::stride_t>(img.channels * sizeof(float));
+    ok = in->read_image(0, 0, 0, 1, OIIO::TypeDesc::FLOAT, img.pixels.data(), xstride);
+    if (ok && stored == 2 && img.channels >= 4)
+      ok = in->read_image(0, 0, 1, 2, OIIO::TypeDesc::FLOAT, img.pixels.data() + 3, xstride);
+    for (size_t i = 0; ok && i < texels; ++i)
+      for (int c = 1; c < 3; ++c) img.pixels[i * img.channels + c] = img.pixels[i * img.channels];
+  } else {
+    const OIIO::stride_t xstride = static_cast<OIIO::stride_t>(img.channels * sizeof(float));
+    ok = in->read_image(0, 0, 0, stored, OIIO::TypeDesc::FLOAT, img.pixels.data(), xstride);
+  }
+  if (!ok) throw std::runtime_error("cannot read " + name + ": " + scrub(in->geterror()));
   in->close();
   return img;
 }

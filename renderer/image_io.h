@@ -34,7 +34,10 @@ struct ImageData {
   int width = 0, height = 0, channels = 0;
   std::vector<float> pixels;  // as stored, converted to float (PNG: 0..1 sRGB-encoded values)
 };
-// Reads any image OpenImageIO reads; throws with OpenImageIO's message on failure.
-ImageData read_image(const std::string& path);
+// Reads any image OpenImageIO reads; throws with OpenImageIO's message on failure. `channels` > 0 reads that many
+// channels straight into place: the first ones stored, a grey image's one repeated, missing ones 0 (an RGB read of
+// an RGBA file never holds the alpha channel in memory). `max_texels` > 0 refuses larger images from their header,
+// before any pixel memory is allocated.
+ImageData read_image(const std::string& path, int channels = 0, size_t max_texels = 0);
 
 }  // namespace tessera

@@ -2,7 +2,9 @@
 // (the seeds' chapter on Monte Carlo integration: sample proportionally to the integrand's known factors).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "renderer/math.h"
@@ -74,11 +76,33 @@ inline float power_heuristic(float pdf_a, float pdf_b) {
 struct CdfInversion {
   // guide[k] (n + 1 entries, n slots) is the first bucket i with slot(cdf[i + 1]) >= k, guide[n] = n - 1. The answer
   // for a target in slot k lies in buckets guide[k] .. guide[k + 1]: its bucket's upper bound is above the target
-  // (so in slot k or later), its lower bound at or below (so in slot k or earlier).
-  static void build_guide(const double* cdf, size_t n, uint32_t* guide, double* slots_per_unit);
+  // (so in slot k or later), its lower bound at or below (so in slot k or earlier). Guide entries are 32-bit, or
+  // 16-bit where n - 1 fits (the rows of a 2D distribution).
+  template <typename Guide>
+  static void build_guide(const double* cdf, size_t n, Guide* guide, double* slots_per_unit) {
+    *slots_per_unit = static_cast<double>(n) / cdf[n];
+    size_t i = 0;
+    for (size_t k = 0; k < n; ++k) {
+      while (i + 1 < n && slot(cdf[i + 1], *slots_per_unit, n) < k) ++i;
+      guide[k] = static_cast<Guide>(i);
+    }
+    guide[n] = static_cast<Guide>(n - 1);
+  }
   // The first bucket with a non-zero width whose upper bound exceeds `target` in [0, cdf[n]); `guide` may be null
   // (a binary search over the whole sum).
-  static size_t find(const double* cdf, size_t n, const uint32_t* guide, double slots_per_unit, double target);
+  template <typename Guide>
+  static size_t find(const double* cdf, size_t n, const Guide* guide, double slots_per_unit, double target) {
+    const double *first = cdf + 1, *last = cdf + n + 1;
+    if (guide) {
+      const size_t k = slot(target, slots_per_unit, n);
+      first = cdf + 1 + guide[k];
+      last = cdf + 2 + guide[k + 1];
+    }
+    size_t i = static_cast<size_t>(std::upper_bound(first, last, target) - cdf - 1);
+    i = std::min(i, n - 1);
+    while (i + 1 < n && !(cdf[i + 1] > cdf[i])) ++i;
+    return i;
+  }
   // The guide slot of a target: monotone in the target, one multiply. The table is built with this same function,
   // so no rounding of it can send a target to a slot whose range misses the answer.
   static size_t slot(double target, double slots_per_unit, size_t n) {
@@ -116,8 +140,13 @@ class Distribution1D {
 // sun, sampled at every path vertex, spent most of its time on).
 class Distribution2D {
  public:
+  // Widest row it takes: its guide tables are 16-bit.
+  static constexpr int kMaxWidth = 65535;
   Distribution2D() = default;
   Distribution2D(const float* weights, int width, int height);
+  // The same with each row's weights written by fill_row(row, weights) when the row is built (rows are built in
+  // parallel, each call with its own array): the whole grid of weights is never held at once.
+  Distribution2D(int width, int height, const std::function<void(int row, float* weights)>& fill_row);
   // A point of the unit square with density *pdf (over the unit square); u in [0,1)^2.
   Vec2 sample(Vec2 u, float* pdf) const;
   // The density at cell (col, row), the one sample() reports for points in it.
@@ -134,7 +163,7 @@ class Distribution2D {
   float cells_ = 0;          // width * height: a cell's probability times this is its density
   Distribution1D marginal_;  // of rows
   std::vector<double> cdf_;       // height rows of width + 1 entries: each row's cumulative sum from 0
-  std::vector<uint32_t> guide_;   // height rows of width + 1 entries: each row's guide table
+  std::vector<uint16_t> guide_;   // height rows of width + 1 entries: each row's guide table
   std::vector<double> slots_per_unit_;  // per row
 };
 

@@ -260,11 +260,24 @@ PartialFilm decode_film(const std::string& path) {
   return p;
 }
 
-uint64_t fnv1a(uint64_t h, const std::string& bytes) {
+uint64_t fnv1a(uint64_t h, std::string_view bytes) {
   for (unsigned char c : bytes) {
     h ^= c;
     h *= 0x100000001b3ull;
   }
+  return h;
+}
+
+// The same over a file's bytes, read a megabyte at a time (an environment map can be hundreds of megabytes).
+uint64_t fnv1a_file(uint64_t h, const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fatal("cannot open " + path.string() + ": " + std::strerror(errno));
+  std::vector<char> chunk(1 << 20);
+  while (in) {
+    in.read(chunk.data(), static_cast<std::streamsize>(chunk.size()));
+    h = fnv1a(h, std::string_view(chunk.data(), static_cast<size_t>(in.gcount())));
+  }
+  if (in.bad()) fatal("cannot read " + path.string());
   return h;
 }
 
@@ -299,7 +312,7 @@ uint64_t fingerprint(const json& doc, const tessera::RenderSettings& s, const st
   for (const std::string& a : assets) {
     std::error_code ec;
     const auto file = asset_root / a;
-    if (std::filesystem::is_regular_file(file, ec)) h = fnv1a(fnv1a(h, a), read_file(file));
+    if (std::filesystem::is_regular_file(file, ec)) h = fnv1a_file(fnv1a(h, a), file);
   }
   return h;
 }

@@ -1,6 +1,9 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
+
+#include <OpenImageIO/imageio.h>
 
 #include "renderer/image_io.h"
 
@@ -80,8 +83,73 @@ TEST(ImageIo, ExposureAndAcesToneCurve) {
   EXPECT_GE(c[3], 250);    // and rolls highlights off to white
 }
 
+// Writes a w x h float EXR of `channels` channels (values[i] is texel i's channel values).
+std::filesystem::path write_channels(const std::string& name, int w, int h, int channels,
+                                     const std::vector<float>& values) {
+  const auto path = temp_file(name);
+  auto out = OIIO::ImageOutput::create(path.string());
+  OIIO::ImageSpec spec(w, h, channels, OIIO::TypeDesc::FLOAT);
+  if (channels == 2) spec.alpha_channel = 1;
+  EXPECT_TRUE(out && out->open(path.string(), spec) && out->write_image(OIIO::TypeDesc::FLOAT, values.data()));
+  out->close();
+  return path;
+}
+
+// A read of a set number of channels takes the first ones stored, repeats a grey image's one over red, green and
+// blue (grey and alpha: the alpha goes to the fourth channel, never to green), fills missing ones with 0, and leaves
+// extra ones on disk.
+TEST(ImageIo, ReadsAGivenNumberOfChannels) {
+  struct Case {
+    int stored;
+    std::vector<float> texel;
+    int wanted;
+    std::vector<float> expected;
+  };
+  const std::vector<Case> cases = {{4, {0.1f, 0.2f, 0.3f, 0.4f}, 3, {0.1f, 0.2f, 0.3f}},
+                                   {3, {0.1f, 0.2f, 0.3f}, 4, {0.1f, 0.2f, 0.3f, 0}},
+                                   {1, {0.7f}, 3, {0.7f, 0.7f, 0.7f}},
+                                   {2, {0.7f, 0.25f}, 3, {0.7f, 0.7f, 0.7f}},
+                                   {2, {0.7f, 0.25f}, 4, {0.7f, 0.7f, 0.7f, 0.25f}},
+                                   {4, {0.1f, 0.2f, 0.3f, 0.4f}, 0, {0.1f, 0.2f, 0.3f, 0.4f}}};
+  for (size_t k = 0; k < cases.size(); ++k) {
+    const Case& c = cases[k];
+    SCOPED_TRACE("stored " + std::to_string(c.stored) + ", read " + std::to_string(c.wanted));
+    std::vector<float> values;
+    for (int t = 0; t < 3 * 2; ++t) values.insert(values.end(), c.texel.begin(), c.texel.end());
+    const auto path = write_channels("c" + std::to_string(k) + ".exr", 3, 2, c.stored, values);
+    const ImageData img = read_image(path.string(), c.wanted);
+    ASSERT_EQ(img.channels, static_cast<int>(c.expected.size()));
+    ASSERT_EQ(img.pixels.size(), 3u * 2u * c.expected.size());
+    for (size_t i = 0; i < img.pixels.size(); ++i)
+      EXPECT_FLOAT_EQ(img.pixels[i], c.expected[i % c.expected.size()]) << "value " << i;
+  }
+}
+
+// An image larger than allowed is refused from its header, naming its size.
+TEST(ImageIo, ImagesAboveTheTexelLimitAreRefused) {
+  const auto path = write_channels("big.exr", 8, 4, 3, std::vector<float>(8 * 4 * 3, 1.0f));
+  EXPECT_NO_THROW(read_image(path.string(), 3, 32));
+  try {
+    read_image(path.string(), 3, 31);
+    ADD_FAILURE() << "an image over the limit was read";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("8x4 is larger than the 31 texels allowed"), std::string::npos) << e.what();
+  }
+}
+
+// The message names the file but not the folder it is in (a daemon's data directory).
 TEST(ImageIo, UnreadableFileThrows) {
   EXPECT_THROW(read_image("/nonexistent/file.exr"), std::runtime_error);
+  const auto path = temp_file("not-an-image.exr");
+  std::ofstream(path) << "plain text";
+  try {
+    read_image(path.string());
+    ADD_FAILURE() << "text was read as an image";
+  } catch (const std::runtime_error& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("not-an-image.exr"), std::string::npos) << message;
+    EXPECT_EQ(message.find(path.parent_path().string()), std::string::npos) << message;
+  }
 }
 
 }  // namespace
