@@ -1,6 +1,9 @@
 #include "renderer/texture.h"
 
 #include <array>
+#include <atomic>
+#include <functional>
+#include <future>
 #include <map>
 #include <mutex>
 #include <stdexcept>
@@ -177,57 +180,84 @@ void build_mips(Image* img, const uint8_t* bytes, const float* floats) {
 
 std::mutex g_cache_mutex;
 std::map<std::string, std::weak_ptr<const Image>> g_cache;
-size_t g_loads = 0;
+// Images being made, by key: a second caller for the same image waits for the first one's result rather than making
+// it again; callers for other images do not wait (an image is made outside the lock).
+std::map<std::string, std::shared_future<std::shared_ptr<const Image>>> g_pending;
+std::atomic<size_t> g_loads{0};
 
-// Adds an image to the cache (g_cache_mutex held), dropping the entries of images no texture holds any more.
-void remember(const std::string& key, const std::shared_ptr<const Image>& img) {
+// The cached image for `key`, or the one `make` returns (then cached). Concurrent jobs load their textures side by
+// side; an exception from `make` reaches every caller waiting for that key, and nothing is cached.
+std::shared_ptr<const Image> cached(const std::string& key, const std::function<std::shared_ptr<const Image>()>& make) {
+  std::unique_lock lock(g_cache_mutex);
+  if (auto it = g_cache.find(key); it != g_cache.end())
+    if (auto img = it->second.lock()) return img;
+  if (auto it = g_pending.find(key); it != g_pending.end()) {
+    std::shared_future<std::shared_ptr<const Image>> pending = it->second;
+    lock.unlock();
+    return pending.get();
+  }
+  std::promise<std::shared_ptr<const Image>> promise;
+  g_pending.emplace(key, promise.get_future().share());
+  lock.unlock();
+  std::shared_ptr<const Image> img;
+  try {
+    img = make();
+  } catch (...) {
+    lock.lock();
+    g_pending.erase(key);
+    promise.set_exception(std::current_exception());
+    throw;
+  }
+  lock.lock();
+  // Entries of images no texture holds any more are dropped as new ones come.
   std::erase_if(g_cache, [](const auto& entry) { return entry.second.expired(); });
   g_cache[key] = img;
+  g_pending.erase(key);
+  promise.set_value(img);
+  return img;
 }
 
 std::shared_ptr<const Image> load_image(const std::filesystem::path& file, bool srgb) {
   const std::string key = file.string() + (srgb ? "|srgb" : "|linear");
-  std::lock_guard<std::mutex> lock(g_cache_mutex);
-  if (auto it = g_cache.find(key); it != g_cache.end()) {
-    if (auto img = it->second.lock()) return img;
-  }
-  // Unassociated alpha: colour channels as stored (OpenImageIO would premultiply PNG alpha on read).
-  OIIO::ImageSpec config;
-  config.attribute("oiio:UnassociatedAlpha", 1);
-  auto in = OIIO::ImageInput::open(file.string(), &config);
-  if (!in) throw std::runtime_error("cannot read image \"" + file.filename().string() + "\"");
-  const OIIO::ImageSpec& spec = in->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 ||
-      static_cast<int64_t>(spec.width) * spec.height > (int64_t(1) << 28))
-    throw std::runtime_error("image \"" + file.filename().string() + "\" has an unsupported size");
-  auto img = std::make_shared<Image>();
-  img->width = spec.width;
-  img->height = spec.height;
-  img->channels = spec.nchannels;
-  const size_t count = static_cast<size_t>(spec.width) * spec.height * spec.nchannels;
-  bool ok;
-  if (spec.format.basetype == OIIO::TypeDesc::UINT8) {
-    img->bytes.resize(count);
-    img->srgb = srgb;
-    ok = in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UINT8, img->bytes.data());
-  } else {
-    const bool is_float = spec.format.basetype == OIIO::TypeDesc::FLOAT ||
-                          spec.format.basetype == OIIO::TypeDesc::HALF || spec.format.basetype == OIIO::TypeDesc::DOUBLE;
-    img->pixels.resize(count);
-    ok = in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img->pixels.data());
-    if (ok && srgb && !is_float) {
-      const int colour_channels = std::min(spec.nchannels, 3);
-      for (size_t i = 0; i < img->pixels.size(); ++i)
-        if (static_cast<int>(i % spec.nchannels) < colour_channels) img->pixels[i] = srgb_to_linear(img->pixels[i]);
+  return cached(key, [&]() -> std::shared_ptr<const Image> {
+    // Unassociated alpha: colour channels as stored (OpenImageIO would premultiply PNG alpha on read).
+    OIIO::ImageSpec config;
+    config.attribute("oiio:UnassociatedAlpha", 1);
+    auto in = OIIO::ImageInput::open(file.string(), &config);
+    if (!in) throw std::runtime_error("cannot read image \"" + file.filename().string() + "\"");
+    const OIIO::ImageSpec& spec = in->spec();
+    if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 ||
+        static_cast<int64_t>(spec.width) * spec.height > (int64_t(1) << 28))
+      throw std::runtime_error("image \"" + file.filename().string() + "\" has an unsupported size");
+    auto img = std::make_shared<Image>();
+    img->width = spec.width;
+    img->height = spec.height;
+    img->channels = spec.nchannels;
+    const size_t count = static_cast<size_t>(spec.width) * spec.height * spec.nchannels;
+    bool ok;
+    if (spec.format.basetype == OIIO::TypeDesc::UINT8) {
+      img->bytes.resize(count);
+      img->srgb = srgb;
+      ok = in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UINT8, img->bytes.data());
+    } else {
+      const bool is_float = spec.format.basetype == OIIO::TypeDesc::FLOAT ||
+                            spec.format.basetype == OIIO::TypeDesc::HALF ||
+                            spec.format.basetype == OIIO::TypeDesc::DOUBLE;
+      img->pixels.resize(count);
+      ok = in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, img->pixels.data());
+      if (ok && srgb && !is_float) {
+        const int colour_channels = std::min(spec.nchannels, 3);
+        for (size_t i = 0; i < img->pixels.size(); ++i)
+          if (static_cast<int>(i % spec.nchannels) < colour_channels) img->pixels[i] = srgb_to_linear(img->pixels[i]);
+      }
     }
-  }
-  if (!ok) throw std::runtime_error("cannot decode image \"" + file.filename().string() + "\"");
-  in->close();
-  build_mips(img.get(), img->bytes.empty() ? nullptr : img->bytes.data(),
-             img->pixels.empty() ? nullptr : img->pixels.data());
-  remember(key, img);
-  ++g_loads;
-  return img;
+    if (!ok) throw std::runtime_error("cannot decode image \"" + file.filename().string() + "\"");
+    in->close();
+    build_mips(img.get(), img->bytes.empty() ? nullptr : img->bytes.data(),
+               img->pixels.empty() ? nullptr : img->pixels.data());
+    ++g_loads;
+    return img;
+  });
 }
 
 std::shared_ptr<const Image> embedded_image(const std::shared_ptr<const ImagePixels>& src, bool srgb) {
@@ -236,19 +266,16 @@ std::shared_ptr<const Image> embedded_image(const std::shared_ptr<const ImagePix
   // key's address cannot be reused while the Image, which holds the pixels, lives.
   char key[64];
   std::snprintf(key, sizeof key, "embedded:%p|%d", static_cast<const void*>(src.get()), srgb ? 1 : 0);
-  std::lock_guard<std::mutex> lock(g_cache_mutex);
-  if (auto it = g_cache.find(key); it != g_cache.end()) {
-    if (auto img = it->second.lock()) return img;
-  }
-  auto img = std::make_shared<Image>();
-  img->width = src->width;
-  img->height = src->height;
-  img->channels = src->channels;
-  img->shared = src;
-  img->srgb = srgb;
-  build_mips(img.get(), src->data.data(), nullptr);
-  remember(key, img);
-  return img;
+  return cached(key, [&]() -> std::shared_ptr<const Image> {
+    auto img = std::make_shared<Image>();
+    img->width = src->width;
+    img->height = src->height;
+    img->channels = src->channels;
+    img->shared = src;
+    img->srgb = srgb;
+    build_mips(img.get(), src->data.data(), nullptr);
+    return img;
+  });
 }
 
 // Wraps integer texel coordinate i into [0, n).
@@ -416,9 +443,6 @@ std::shared_ptr<const Texture> make_checker_texture(const Rgb& a, const Rgb& b, 
   return std::make_shared<CheckerTexture>(a, b, squares_per_unit, uv_set);
 }
 
-size_t texture_cache_loads() {
-  std::lock_guard<std::mutex> lock(g_cache_mutex);
-  return g_loads;
-}
+size_t texture_cache_loads() { return g_loads.load(); }
 
 }  // namespace tessera

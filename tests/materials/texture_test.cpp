@@ -2,7 +2,10 @@
 // the asset-folder confinement of texture paths.
 #include <unistd.h>
 
+#include <atomic>
 #include <filesystem>
+#include <fstream>
+#include <thread>
 
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
@@ -80,6 +83,42 @@ TEST_F(TextureTest, OneFileLoadsOnce) {
   auto c = MaterialRegistry::builtin().create({{"type", "gltf_pbr"}, {"base_color", {{"texture", "sub/grey.exr"}}}},
                                               "/m", ctx_);
   EXPECT_EQ(texture_cache_loads(), before + 1);
+}
+
+// Jobs loading the same file at the same moment share one read (the later ones wait for the first); a file that
+// cannot be read fails every one of them, and is not remembered as read.
+TEST_F(TextureTest, ConcurrentLoadsOfOneFileReadItOnce) {
+  std::vector<float> big(512 * 512 * 3);
+  for (size_t i = 0; i < big.size(); ++i) big[i] = static_cast<float>(i % 7) / 7;
+  write(root_ / "assets" / "big.exr", 512, 512, big);
+  std::ofstream(root_ / "assets" / "broken.exr") << "not an image";
+  for (const char* file : {"big.exr", "broken.exr"}) {
+    SCOPED_TRACE(file);
+    const size_t before = texture_cache_loads();
+    const json m = {{"type", "lambert"}, {"albedo", {{"texture", file}}}};
+    std::vector<std::unique_ptr<Material>> made(8);
+    std::atomic<int> ready{0}, failed{0};
+    std::vector<std::thread> threads;
+    for (size_t t = 0; t < made.size(); ++t)
+      threads.emplace_back([&, t] {
+        ++ready;
+        while (ready.load() < static_cast<int>(made.size())) std::this_thread::yield();  // start together
+        try {
+          made[t] = MaterialRegistry::builtin().create(m, "/m", ctx_);
+        } catch (const SceneError&) {
+          ++failed;
+        }
+      });
+    for (std::thread& t : threads) t.join();
+    if (std::string(file) == "big.exr") {
+      EXPECT_EQ(texture_cache_loads(), before + 1);
+      EXPECT_EQ(failed.load(), 0);
+      EXPECT_NEAR(eval({{"texture", file}}, 0.5f / 512, 0.5f / 512).y, big[1], 1e-6f);
+    } else {
+      EXPECT_EQ(texture_cache_loads(), before);
+      EXPECT_EQ(failed.load(), static_cast<int>(made.size()));
+    }
+  }
 }
 
 TEST_F(TextureTest, CheckerboardAndScalarChannels) {
