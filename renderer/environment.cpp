@@ -24,6 +24,9 @@ Vec3 EnvironmentMap::uv_to_direction(Vec2 uv) {
 
 EnvironmentMap::EnvironmentMap(int width, int height, std::vector<float> rgb)
     : width_(width), height_(height), rgb_(std::move(rgb)) {
+  if (width_ < 1 || height_ < 1 ||
+      rgb_.size() != static_cast<size_t>(width_) * static_cast<size_t>(height_) * 3)
+    throw std::invalid_argument("EnvironmentMap: the radiance array does not match the size");
   // The sampling weights are made row by row as the distribution builds its rows (in parallel; a 4k map has 8
   // million texels), never held whole. Each row's radiance sums are kept apart and added in row order: the same
   // average whatever the number of threads.
@@ -57,9 +60,8 @@ EnvironmentMap::EnvironmentMap(int width, int height, std::vector<float> rgb)
 std::shared_ptr<EnvironmentMap> EnvironmentMap::load(const std::string& path) {
   // RGB read straight into the map's own array (grey repeated, alpha left on disk), then made safe in place. The size
   // is checked from the header, before anything is allocated: 16384 x 8192 texels at most.
-  ImageData img = read_image(path, 3, kMaxTexels);
+  ImageData img = read_image(path, 3, kMaxTexels, Distribution2D::kMaxWidth);
   if (img.width < 2 || img.height < 1) throw std::runtime_error("the environment map is too small");
-  if (img.width > Distribution2D::kMaxWidth) throw std::runtime_error("the environment map is too wide");
   for (float& v : img.pixels) v = std::isfinite(v) && v > 0 ? v : 0.0f;
   return std::make_shared<EnvironmentMap>(img.width, img.height, std::move(img.pixels));
 }

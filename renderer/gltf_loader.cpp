@@ -340,7 +340,11 @@ std::vector<std::shared_ptr<ImagePixels>> decode_images(tinygltf::Model* model, 
   std::vector<std::string> problems(n);
   run_in_parallel(n, [&](size_t i) {
     tinygltf::Image& img = model->images[i];
-    if (!img.as_is || img.image.empty()) return;
+    if (!img.as_is) return;
+    if (img.image.empty()) {
+      problems[i] = "image " + std::to_string(i) + " cannot be decoded: it has no bytes";
+      return;
+    }
     auto pixels = std::make_shared<ImagePixels>();
     try {
       problems[i] = decode_image(img.image, i, max_pixels, pixels.get());

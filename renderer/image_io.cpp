@@ -90,12 +90,14 @@ std::vector<uint8_t> encode_png(const std::vector<float>& rgb, int width, int he
   return std::vector<uint8_t>(buffer.begin(), buffer.end());
 }
 
-ImageData read_image(const std::string& path, int channels, size_t max_texels) {
+ImageData read_image(const std::string& path, int channels, size_t max_texels, int max_width) {
   // Messages name the file, not where it lies (a daemon's data directory is not the client's business), OpenImageIO's
   // own included.
   const std::string name = std::filesystem::path(path).filename().string();
   auto scrub = [&](std::string message) {
-    for (size_t at; !path.empty() && (at = message.find(path)) != std::string::npos;) message.replace(at, path.size(), name);
+    if (path.empty() || path == name) return message;
+    for (size_t at = message.find(path); at != std::string::npos; at = message.find(path, at + name.size()))
+      message.replace(at, path.size(), name);
     return message;
   };
   auto in = OIIO::ImageInput::open(path);
@@ -107,6 +109,9 @@ ImageData read_image(const std::string& path, int channels, size_t max_texels) {
     throw std::runtime_error("cannot read " + name + ": " + std::to_string(spec.width) + "x" +
                              std::to_string(spec.height) + " is larger than the " + std::to_string(max_texels) +
                              " texels allowed");
+  if (max_width > 0 && spec.width > max_width)
+    throw std::runtime_error("cannot read " + name + ": it is " + std::to_string(spec.width) + " texels wide, more than the " +
+                             std::to_string(max_width) + " allowed");
   ImageData img;
   img.width = spec.width;
   img.height = spec.height;

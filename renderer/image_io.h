@@ -36,8 +36,8 @@ struct ImageData {
 };
 // Reads any image OpenImageIO reads; throws with OpenImageIO's message on failure. `channels` > 0 reads that many
 // channels straight into place: the first ones stored, a grey image's one repeated, missing ones 0 (an RGB read of
-// an RGBA file never holds the alpha channel in memory). `max_texels` > 0 refuses larger images from their header,
-// before any pixel memory is allocated.
-ImageData read_image(const std::string& path, int channels = 0, size_t max_texels = 0);
+// an RGBA file never holds the alpha channel in memory). `max_texels` > 0 and `max_width` > 0 refuse larger images
+// from their header, before any pixel memory is allocated.
+ImageData read_image(const std::string& path, int channels = 0, size_t max_texels = 0, int max_width = 0);
 
 }  // namespace tessera

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include <string>
 
 #include "renderer/thread_pool.h"
 
@@ -76,23 +77,46 @@ Distribution2D::Distribution2D(const float* weights, int width, int height)
         std::copy_n(weights + static_cast<size_t>(row) * width, width, out);
       }) {}
 
+namespace {
+
+// `width`, once width and height are known to be sizes a Distribution2D takes (before anything is allocated).
+int checked_width(int width, int height) {
+  if (width < 1 || width > Distribution2D::kMaxWidth || height < 1 || height > (1 << 24))
+    throw std::invalid_argument("Distribution2D: unsupported size " + std::to_string(width) + "x" +
+                                std::to_string(height));
+  return width;
+}
+
+}  // namespace
+
 Distribution2D::Distribution2D(int width, int height, const std::function<void(int, float*)>& fill_row)
-    : width_(width),
+    : width_(checked_width(width, height)),
       height_(height),
       cells_(static_cast<float>(width) * static_cast<float>(height)),
       cdf_(static_cast<size_t>(height) * (width + 1)),
       guide_(static_cast<size_t>(height) * (width + 1)),
       slots_per_unit_(height) {
-  if (width < 1 || width > kMaxWidth || height < 1) throw std::invalid_argument("Distribution2D: unsupported size");
   std::vector<float> row_weights(height);
-  // Rows are independent: built in parallel (a 4k environment map has 2048 rows of 4096).
-  run_in_parallel(static_cast<size_t>(height), [&](size_t y) {
+  auto build_rows = [&](size_t first, size_t last) {
     std::vector<float> weights(width);
-    fill_row(static_cast<int>(y), weights.data());
-    double* c = &cdf_[y * (width + 1)];
-    row_weights[y] = static_cast<float>(cumulative_sum(weights.data(), width, c));
-    CdfInversion::build_guide(c, width, &guide_[y * (width + 1)], &slots_per_unit_[y]);
-  });
+    for (size_t y = first; y < last; ++y) {
+      fill_row(static_cast<int>(y), weights.data());
+      double* c = &cdf_[y * (width + 1)];
+      row_weights[y] = static_cast<float>(cumulative_sum(weights.data(), width, c));
+      CdfInversion::build_guide(c, width, &guide_[y * (width + 1)], &slots_per_unit_[y]);
+    }
+  };
+  // Rows are independent: built in parallel, about 64k cells per item (a 4k environment map has 2048 rows of 4096);
+  // a small grid on this thread alone.
+  const size_t rows_per_item = std::max<size_t>(1, 65536 / static_cast<size_t>(width));
+  const size_t items = (static_cast<size_t>(height) + rows_per_item - 1) / rows_per_item;
+  if (items > 1) {
+    run_in_parallel(items, [&](size_t i) {
+      build_rows(i * rows_per_item, std::min<size_t>(height, (i + 1) * rows_per_item));
+    });
+  } else {
+    build_rows(0, height);
+  }
   marginal_ = Distribution1D(row_weights.data(), row_weights.size());
 }
 

@@ -2,15 +2,12 @@
 
 #include <array>
 #include <atomic>
-#include <functional>
-#include <future>
-#include <map>
-#include <mutex>
 #include <stdexcept>
 #include <vector>
 
 #include <OpenImageIO/imageio.h>
 
+#include "renderer/once_cache.h"
 #include "renderer/thread_pool.h"
 
 namespace tessera {
@@ -178,48 +175,16 @@ void build_mips(Image* img, const uint8_t* bytes, const float* floats) {
   for (int c = 0; c < 4; ++c) img->mean[c] = static_cast<float>(total[c] / texels);
 }
 
-std::mutex g_cache_mutex;
-std::map<std::string, std::weak_ptr<const Image>> g_cache;
-// Images being made, by key: a second caller for the same image waits for the first one's result rather than making
-// it again; callers for other images do not wait (an image is made outside the lock).
-std::map<std::string, std::shared_future<std::shared_ptr<const Image>>> g_pending;
-std::atomic<size_t> g_loads{0};
-
-// The cached image for `key`, or the one `make` returns (then cached). Concurrent jobs load their textures side by
-// side; an exception from `make` reaches every caller waiting for that key, and nothing is cached.
-std::shared_ptr<const Image> cached(const std::string& key, const std::function<std::shared_ptr<const Image>()>& make) {
-  std::unique_lock lock(g_cache_mutex);
-  if (auto it = g_cache.find(key); it != g_cache.end())
-    if (auto img = it->second.lock()) return img;
-  if (auto it = g_pending.find(key); it != g_pending.end()) {
-    std::shared_future<std::shared_ptr<const Image>> pending = it->second;
-    lock.unlock();
-    return pending.get();
-  }
-  std::promise<std::shared_ptr<const Image>> promise;
-  g_pending.emplace(key, promise.get_future().share());
-  lock.unlock();
-  std::shared_ptr<const Image> img;
-  try {
-    img = make();
-  } catch (...) {
-    lock.lock();
-    g_pending.erase(key);
-    promise.set_exception(std::current_exception());
-    throw;
-  }
-  lock.lock();
-  // Entries of images no texture holds any more are dropped as new ones come.
-  std::erase_if(g_cache, [](const auto& entry) { return entry.second.expired(); });
-  g_cache[key] = img;
-  g_pending.erase(key);
-  promise.set_value(img);
-  return img;
+// Decoded images by file and colour space, or by embedded pixels: read once however many materials and jobs ask.
+OnceCache<Image>& image_cache() {
+  static OnceCache<Image> cache;
+  return cache;
 }
+std::atomic<size_t> g_loads{0};
 
 std::shared_ptr<const Image> load_image(const std::filesystem::path& file, bool srgb) {
   const std::string key = file.string() + (srgb ? "|srgb" : "|linear");
-  return cached(key, [&]() -> std::shared_ptr<const Image> {
+  return image_cache().get(key, [&]() -> std::shared_ptr<const Image> {
     // Unassociated alpha: colour channels as stored (OpenImageIO would premultiply PNG alpha on read).
     OIIO::ImageSpec config;
     config.attribute("oiio:UnassociatedAlpha", 1);
@@ -266,7 +231,7 @@ std::shared_ptr<const Image> embedded_image(const std::shared_ptr<const ImagePix
   // key's address cannot be reused while the Image, which holds the pixels, lives.
   char key[64];
   std::snprintf(key, sizeof key, "embedded:%p|%d", static_cast<const void*>(src.get()), srgb ? 1 : 0);
-  return cached(key, [&]() -> std::shared_ptr<const Image> {
+  return image_cache().get(key, [&]() -> std::shared_ptr<const Image> {
     auto img = std::make_shared<Image>();
     img->width = src->width;
     img->height = src->height;

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <atomic>
 #include <exception>
-#include <system_error>
 
 #include "renderer/accel.h"
 
@@ -84,10 +83,44 @@ void ThreadPool::worker_main(int index) {
   }
 }
 
+namespace {
+
+// The helper-thread budget of run_in_parallel.
+std::mutex g_helpers_mutex;
+int g_helpers_limit = -1;  // unset: one per hardware thread but one
+int g_helpers_used = 0;
+
+int take_helpers(int wanted) {
+  std::lock_guard lock(g_helpers_mutex);
+  const int limit =
+      g_helpers_limit >= 0 ? g_helpers_limit : static_cast<int>(std::max(1u, std::thread::hardware_concurrency())) - 1;
+  const int taken = std::clamp(limit - g_helpers_used, 0, std::max(wanted, 0));
+  g_helpers_used += taken;
+  return taken;
+}
+
+void give_back_helpers(int count) {
+  std::lock_guard lock(g_helpers_mutex);
+  g_helpers_used -= count;
+}
+
+}  // namespace
+
+void limit_parallel_helpers(int helpers) {
+  std::lock_guard lock(g_helpers_mutex);
+  g_helpers_limit = std::max(helpers, 0);
+}
+
 void run_in_parallel(size_t count, const std::function<void(size_t)>& fn, unsigned max_threads) {
   if (count == 0) return;
   const unsigned hardware = std::max(1u, std::thread::hardware_concurrency());
-  const size_t threads = std::min<size_t>(count, max_threads ? std::min(max_threads, hardware) : hardware);
+  const size_t wanted = std::min<size_t>(count, max_threads ? std::min(max_threads, hardware) : hardware);
+  const int helper_budget = count > 1 ? take_helpers(static_cast<int>(wanted) - 1) : 0;
+  struct GiveBack {
+    int count;
+    ~GiveBack() { give_back_helpers(count); }
+  } give_back{helper_budget};
+  const size_t threads = 1 + static_cast<size_t>(helper_budget);
   std::atomic<size_t> next{0};
   std::mutex error_mutex;
   std::exception_ptr error;
@@ -106,8 +139,8 @@ void run_in_parallel(size_t count, const std::function<void(size_t)>& fn, unsign
   for (size_t t = 1; t < threads; ++t) {
     try {
       helpers.emplace_back(work);
-    } catch (const std::system_error&) {
-      break;  // out of threads: the ones started (and this one) take the remaining items
+    } catch (...) {
+      break;  // out of threads or memory: the ones started (and this one) take the remaining items
     }
   }
   work();

@@ -46,6 +46,11 @@ class ThreadPool {
 // call, the calling thread among them, and returns when all items are done: for work outside a render, such as
 // decoding a scene's images, where no pool is at hand. Runs on fewer threads when the system refuses to start one.
 // The first exception thrown by an item is rethrown here after the others have finished.
+// Helper threads are a process-wide budget (limit_parallel_helpers): concurrent calls (jobs loading side by side,
+// submissions checked on HTTP threads) share it, and a call that finds none free runs on the calling thread alone.
 void run_in_parallel(size_t count, const std::function<void(size_t)>& fn, unsigned max_threads = 0);
+// At most `helpers` threads, across the process, help run_in_parallel calls at once (default: one per hardware
+// thread but one); a daemon sets it from its --threads.
+void limit_parallel_helpers(int helpers);
 
 }  // namespace tessera

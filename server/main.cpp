@@ -52,6 +52,8 @@ int run(const Config& config) {
   JobFiles files(data_dir);
   AssetStore assets(data_dir);
   tessera::ThreadPool pool(config.threads);
+  // Loading (image decoding, mip levels, environment maps) borrows at most as many extra threads as render threads.
+  tessera::limit_parallel_helpers(pool.size() - 1);
   EventHub events;
   Metrics metrics;
 

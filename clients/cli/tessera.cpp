@@ -419,6 +419,8 @@ int cmd_render(int argc, char** argv) {
     if (samples && doc["render"].is_object()) doc["render"]["spp"] = samples->first + samples->second;
   }
 
+  // Loading borrows at most as many extra threads as --threads allows.
+  if (threads > 0) tessera::limit_parallel_helpers(threads - 1);
   tessera::JobLoadOptions options;
   // Assets resolve beside the job file; absolute, so that "job.json" in the current directory has a root too.
   options.scene.asset_root = std::filesystem::absolute(std::filesystem::path(input)).parent_path();

@@ -128,7 +128,13 @@ TEST(ImageIo, ReadsAGivenNumberOfChannels) {
 // An image larger than allowed is refused from its header, naming its size.
 TEST(ImageIo, ImagesAboveTheTexelLimitAreRefused) {
   const auto path = write_channels("big.exr", 8, 4, 3, std::vector<float>(8 * 4 * 3, 1.0f));
-  EXPECT_NO_THROW(read_image(path.string(), 3, 32));
+  EXPECT_NO_THROW(read_image(path.string(), 3, 32, 8));
+  try {
+    read_image(path.string(), 3, 0, 7);
+    ADD_FAILURE() << "an image over the width limit was read";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("it is 8 texels wide, more than the 7 allowed"), std::string::npos) << e.what();
+  }
   try {
     read_image(path.string(), 3, 31);
     ADD_FAILURE() << "an image over the limit was read";
@@ -140,6 +146,7 @@ TEST(ImageIo, ImagesAboveTheTexelLimitAreRefused) {
 // The message names the file but not the folder it is in (a daemon's data directory).
 TEST(ImageIo, UnreadableFileThrows) {
   EXPECT_THROW(read_image("/nonexistent/file.exr"), std::runtime_error);
+  EXPECT_THROW(read_image("tessera-no-such-file.exr"), std::runtime_error);  // a bare name: nothing to scrub
   const auto path = temp_file("not-an-image.exr");
   std::ofstream(path) << "plain text";
   try {
