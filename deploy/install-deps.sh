@@ -19,7 +19,7 @@ if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 packages=(
   build-essential cmake ninja-build pkg-config git ca-certificates curl python3
   libembree-dev libopenimageio-dev openimageio-tools libcpp-httplib-dev nlohmann-json3-dev libtinygltf-dev
-  libsqlite3-dev libtbb-dev libssl-dev libstb-dev
+  libsqlite3-dev libtbb-dev libssl-dev libstb-dev libjpeg-dev
 )
 if [ "$mode" = "test" ]; then
   packages+=(libgtest-dev libgmock-dev libbenchmark-dev chromium prometheus)

@@ -57,6 +57,11 @@ EnvironmentMap::EnvironmentMap(int width, int height, std::vector<float> rgb)
                        : Rgb(0);
 }
 
+void EnvironmentMap::check(const std::string& path) {
+  const ImageHeader header = read_image_header(path, kMaxTexels, Distribution2D::kMaxWidth);
+  if (header.width < 2) throw std::runtime_error("the environment map is too small");
+}
+
 std::shared_ptr<EnvironmentMap> EnvironmentMap::load(const std::string& path) {
   // RGB read straight into the map's own array (grey repeated, alpha left on disk), then made safe in place. The size
   // is checked from the header, before anything is allocated: 16384 x 8192 texels at most.

@@ -17,6 +17,9 @@ class EnvironmentMap {
   EnvironmentMap(int width, int height, std::vector<float> rgb);
   // Through OpenImageIO; throws on failure, and for maps of more than kMaxTexels texels (1.5 GB of radiance).
   static std::shared_ptr<EnvironmentMap> load(const std::string& path);
+  // What load() checks before it reads the pixels (the file opens as an image within the limits), from the header
+  // alone; throws the same way.
+  static void check(const std::string& path);
   static constexpr size_t kMaxTexels = size_t{16384} * 8192;
 
   // Radiance towards the viewer from direction `dir` (a direction in map space), bilinearly filtered.

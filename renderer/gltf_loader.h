@@ -31,6 +31,9 @@ struct GltfImportOptions {
   std::map<std::string, uint32_t> material_overrides;
   size_t max_triangles = 50'000'000;
   size_t max_texture_pixels = 64u << 20;
+  // Images are checked from their headers (they open, within max_texture_pixels) and stand in as 1x1 white: for a
+  // scene that is checked, not rendered.
+  bool headers_only = false;
 };
 
 // Appends the default scene of the glTF file `path` (.glb or .gltf) to `scene`. URIs inside may name only files in

@@ -5,8 +5,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <csetjmp>
+#include <cstdio>
 #include <filesystem>
 #include <stdexcept>
+
+#include <jpeglib.h>  // after <cstdio>: it uses FILE without including it
 
 namespace tessera {
 
@@ -90,28 +94,104 @@ std::vector<uint8_t> encode_png(const std::vector<float>& rgb, int width, int he
   return std::vector<uint8_t>(buffer.begin(), buffer.end());
 }
 
-ImageData read_image(const std::string& path, int channels, size_t max_texels, int max_width) {
-  // Messages name the file, not where it lies (a daemon's data directory is not the client's business), OpenImageIO's
-  // own included.
-  const std::string name = std::filesystem::path(path).filename().string();
-  auto scrub = [&](std::string message) {
-    if (path.empty() || path == name) return message;
-    for (size_t at = message.find(path); at != std::string::npos; at = message.find(path, at + name.size()))
-      message.replace(at, path.size(), name);
-    return message;
-  };
+namespace {
+
+// The file's name for messages: not where it lies (a daemon's data directory is not the client's business).
+std::string file_name(const std::string& path) { return std::filesystem::path(path).filename().string(); }
+
+// `message` with every mention of `path` (OpenImageIO quotes it) replaced by the file's name.
+std::string scrub(std::string message, const std::string& path) {
+  const std::string name = file_name(path);
+  if (path.empty() || path == name) return message;
+  for (size_t at = message.find(path); at != std::string::npos; at = message.find(path, at + name.size()))
+    message.replace(at, path.size(), name);
+  return message;
+}
+
+// The limits of read_image applied to a header.
+void check_limits(const ImageHeader& h, const std::string& path, size_t max_texels, int max_width) {
+  const std::string name = file_name(path);
+  if (max_texels > 0 && static_cast<size_t>(h.width) * static_cast<size_t>(h.height) > max_texels)
+    throw std::runtime_error("cannot read " + name + ": " + std::to_string(h.width) + "x" + std::to_string(h.height) +
+                             " is larger than the " + std::to_string(max_texels) + " texels allowed");
+  if (max_width > 0 && h.width > max_width)
+    throw std::runtime_error("cannot read " + name + ": it is " + std::to_string(h.width) +
+                             " texels wide, more than the " + std::to_string(max_width) + " allowed");
+}
+
+// Opens an image and checks its header against the limits; throws std::runtime_error naming the file.
+std::unique_ptr<OIIO::ImageInput> open_checked(const std::string& path, size_t max_texels, int max_width) {
+  const std::string name = file_name(path);
   auto in = OIIO::ImageInput::open(path);
-  if (!in) throw std::runtime_error("cannot read " + name + ": " + scrub(OIIO::geterror()));
+  if (!in) throw std::runtime_error("cannot read " + name + ": " + scrub(OIIO::geterror(), path));
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
     throw std::runtime_error("cannot read " + name + ": it has no pixels");
-  if (max_texels > 0 && static_cast<size_t>(spec.width) * static_cast<size_t>(spec.height) > max_texels)
-    throw std::runtime_error("cannot read " + name + ": " + std::to_string(spec.width) + "x" +
-                             std::to_string(spec.height) + " is larger than the " + std::to_string(max_texels) +
-                             " texels allowed");
-  if (max_width > 0 && spec.width > max_width)
-    throw std::runtime_error("cannot read " + name + ": it is " + std::to_string(spec.width) + " texels wide, more than the " +
-                             std::to_string(max_width) + " allowed");
+  check_limits({spec.width, spec.height, spec.nchannels}, path, max_texels, max_width);
+  return in;
+}
+
+// libjpeg reports errors by calling error_exit, which must not return: it jumps back to the setjmp in
+// read_jpeg_header (no C++ object with a destructor lives between the two).
+struct JpegErrors {
+  jpeg_error_mgr mgr;
+  std::jmp_buf jump;
+};
+[[noreturn]] void jpeg_error_exit(j_common_ptr info) { std::longjmp(reinterpret_cast<JpegErrors*>(info->err)->jump, 1); }
+void jpeg_no_message(j_common_ptr, int) {}
+
+// A JPEG header from memory or from an open file (one of the two), read with jpeg_read_header: markers up to the
+// frame header, no scan. False when it is not readable JPEG.
+bool read_jpeg_header(const unsigned char* bytes, size_t size, std::FILE* file, ImageHeader* out) {
+  jpeg_decompress_struct info;
+  JpegErrors errors;
+  info.err = jpeg_std_error(&errors.mgr);
+  errors.mgr.error_exit = jpeg_error_exit;
+  errors.mgr.emit_message = jpeg_no_message;
+  if (setjmp(errors.jump)) {
+    jpeg_destroy_decompress(&info);
+    return false;
+  }
+  jpeg_create_decompress(&info);
+  if (file) jpeg_stdio_src(&info, file);
+  else jpeg_mem_src(&info, bytes, static_cast<unsigned long>(size));
+  const bool ok = jpeg_read_header(&info, TRUE) == JPEG_HEADER_OK;
+  *out = {static_cast<int>(info.image_width), static_cast<int>(info.image_height), info.num_components};
+  jpeg_destroy_decompress(&info);
+  return ok && out->width > 0 && out->height > 0;
+}
+
+}  // namespace
+
+std::optional<ImageHeader> jpeg_header(const unsigned char* bytes, size_t size) {
+  ImageHeader header;
+  if (size < 2 || bytes[0] != 0xFF || bytes[1] != 0xD8 || !read_jpeg_header(bytes, size, nullptr, &header))
+    return std::nullopt;
+  return header;
+}
+
+ImageHeader read_image_header(const std::string& path, size_t max_texels, int max_width) {
+  if (std::FILE* file = std::fopen(path.c_str(), "rb")) {
+    unsigned char magic[2] = {0, 0};
+    const bool jpeg = std::fread(magic, 1, 2, file) == 2 && magic[0] == 0xFF && magic[1] == 0xD8;
+    ImageHeader header;
+    const bool read = jpeg && std::fseek(file, 0, SEEK_SET) == 0 && read_jpeg_header(nullptr, 0, file, &header);
+    std::fclose(file);
+    if (read) {
+      check_limits(header, path, max_texels, max_width);
+      return header;
+    }
+    // Not JPEG, or JPEG libjpeg cannot read: OpenImageIO decides, and words the error.
+  }
+  auto in = open_checked(path, max_texels, max_width);
+  ImageHeader header{in->spec().width, in->spec().height, in->spec().nchannels};
+  in->close();
+  return header;
+}
+
+ImageData read_image(const std::string& path, int channels, size_t max_texels, int max_width) {
+  auto in = open_checked(path, max_texels, max_width);
+  const OIIO::ImageSpec& spec = in->spec();
   ImageData img;
   img.width = spec.width;
   img.height = spec.height;
@@ -135,7 +215,7 @@ ImageData read_image(const std::string& path, int channels, size_t max_texels, i
     const OIIO::stride_t xstride = static_cast<OIIO::stride_t>(img.channels * sizeof(float));
     ok = in->read_image(0, 0, 0, stored, OIIO::TypeDesc::FLOAT, img.pixels.data(), xstride);
   }
-  if (!ok) throw std::runtime_error("cannot read " + name + ": " + scrub(in->geterror()));
+  if (!ok) throw std::runtime_error("cannot read " + file_name(path) + ": " + scrub(in->geterror(), path));
   in->close();
   return img;
 }

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -39,5 +40,13 @@ struct ImageData {
 // an RGBA file never holds the alpha channel in memory). `max_texels` > 0 and `max_width` > 0 refuse larger images
 // from their header, before any pixel memory is allocated.
 ImageData read_image(const std::string& path, int channels = 0, size_t max_texels = 0, int max_width = 0);
+struct ImageHeader {
+  int width = 0, height = 0, channels = 0;
+};
+// The same checks as read_image (the file opens, the limits hold) from the header alone: no pixels are read. JPEG
+// headers are read with libjpeg itself: OpenImageIO's open decodes a progressive JPEG's every scan.
+ImageHeader read_image_header(const std::string& path, size_t max_texels = 0, int max_width = 0);
+// The header of JPEG data in memory (libjpeg's, without decoding any scan), or nothing when it is not readable JPEG.
+std::optional<ImageHeader> jpeg_header(const unsigned char* bytes, size_t size);
 
 }  // namespace tessera

@@ -61,6 +61,9 @@ struct MaterialContext {
   std::filesystem::path asset_root;  // empty: no file textures allowed
   // Images in memory that texture parameters may name as "#<key>" (a glTF asset's images, "#image3").
   std::map<std::string, std::shared_ptr<const ImagePixels>> images;
+  // Image files are checked from their headers only, and textures over them are a 1x1 stand-in (validating a job at
+  // submission: the scene is not rendered).
+  bool headers_only = false;
 };
 
 // Makes a material from its JSON object; throws SceneError naming the field (`pointer` is the object's pointer).

@@ -210,6 +210,17 @@ std::shared_ptr<const Texture> parse_texture(const nlohmann::json& v, const std:
   if (!colour && (factor->x != factor->y || factor->x != factor->z))
     throw SceneError(at + "/factor", "must be a number for this parameter");
   try {
+    if (!embedded && ctx.headers_only) {
+      check_image_file(file);
+      static const auto stand_in = [] {
+        auto pixels = std::make_shared<ImagePixels>();
+        pixels->width = pixels->height = 1;
+        pixels->channels = 4;
+        pixels->data.assign(4, 255);
+        return pixels;
+      }();
+      embedded = stand_in;
+    }
     if (embedded) return make_image_texture(embedded, cs == "srgb", channel, mapping);
     return make_image_texture(file, cs == "srgb", channel, mapping);
   } catch (const std::runtime_error& e) {

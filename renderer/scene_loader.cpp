@@ -173,6 +173,8 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
   auto scene = std::make_shared<Scene>();
   MaterialContext mctx;
   mctx.asset_root = options.asset_root;
+  // A scene that will not be rendered (a job checked at submission) reads its images' headers, not their pixels.
+  mctx.headers_only = !options.build;
 
   // Materials by name.
   std::map<std::string, uint32_t> names;
@@ -195,6 +197,7 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     GltfImportOptions gopts;
     gopts.material_overrides = names;
     gopts.max_triangles = options.max_triangles;
+    gopts.headers_only = !options.build;
     gltf = import_gltf(resolve(options, *it, gp), gp, *scene, gopts);
     has_gltf = true;
     for (const std::string& w : gltf.warnings) scene->warnings.push_back(w);
@@ -265,7 +268,12 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
       // An equirectangular HDR/EXR map; "color" tints it.
       std::filesystem::path file = resolve(options, *m, at(ep, "map"));
       try {
-        scene->environment.map = EnvironmentMap::load(file.string());
+        if (options.build) {
+          scene->environment.map = EnvironmentMap::load(file.string());
+        } else {
+          EnvironmentMap::check(file.string());
+          scene->environment.map = std::make_shared<EnvironmentMap>(2, 1, std::vector<float>(6, 1.0f));  // a stand-in
+        }
       } catch (const std::exception& e) {
         throw SceneError(at(ep, "map"), std::string("cannot read the environment map: ") + e.what());
       }

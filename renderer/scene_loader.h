@@ -17,8 +17,9 @@ struct SceneLoadOptions {
   // Folder that file references inside the scene (textures, glTF) resolve against; empty: none allowed.
   std::filesystem::path asset_root;
   size_t max_triangles = 50'000'000;
-  // false: check the document and make its objects but build no lights or acceleration structure (for validating
-  // a job at submission, cheaply); the scene is then not renderable.
+  // false: check the document and make its objects but build no lights or acceleration structure, and check images
+  // (textures, environment maps) from their headers without reading their pixels (for validating a job at
+  // submission, cheaply); the scene is then not renderable.
   bool build = true;
   // Maps an asset reference of the document ("gltf": "<ref>", an environment map) to a file; throws SceneError at
   // `pointer` when the reference is unknown. Unset: references are paths relative to asset_root.

@@ -7,6 +7,7 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include "renderer/image_io.h"
 #include "renderer/once_cache.h"
 #include "renderer/thread_pool.h"
 
@@ -182,18 +183,26 @@ OnceCache<Image>& image_cache() {
 }
 std::atomic<size_t> g_loads{0};
 
+// Opens an image file and checks its header: a size and channel count a texture takes. Throws std::runtime_error
+// naming the file (not its folder).
+std::unique_ptr<OIIO::ImageInput> open_image_file(const std::filesystem::path& file) {
+  // Unassociated alpha: colour channels as stored (OpenImageIO would premultiply PNG alpha on read).
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open(file.string(), &config);
+  if (!in) throw std::runtime_error("cannot read image \"" + file.filename().string() + "\"");
+  const OIIO::ImageSpec& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 ||
+      static_cast<int64_t>(spec.width) * spec.height > (int64_t(1) << 28))
+    throw std::runtime_error("image \"" + file.filename().string() + "\" has an unsupported size");
+  return in;
+}
+
 std::shared_ptr<const Image> load_image(const std::filesystem::path& file, bool srgb) {
   const std::string key = file.string() + (srgb ? "|srgb" : "|linear");
   return image_cache().get(key, [&]() -> std::shared_ptr<const Image> {
-    // Unassociated alpha: colour channels as stored (OpenImageIO would premultiply PNG alpha on read).
-    OIIO::ImageSpec config;
-    config.attribute("oiio:UnassociatedAlpha", 1);
-    auto in = OIIO::ImageInput::open(file.string(), &config);
-    if (!in) throw std::runtime_error("cannot read image \"" + file.filename().string() + "\"");
+    auto in = open_image_file(file);
     const OIIO::ImageSpec& spec = in->spec();
-    if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 ||
-        static_cast<int64_t>(spec.width) * spec.height > (int64_t(1) << 28))
-      throw std::runtime_error("image \"" + file.filename().string() + "\" has an unsupported size");
     auto img = std::make_shared<Image>();
     img->width = spec.width;
     img->height = spec.height;
@@ -406,6 +415,11 @@ std::shared_ptr<const Texture> make_shared_channels_texture(const Texture* a, co
 
 std::shared_ptr<const Texture> make_checker_texture(const Rgb& a, const Rgb& b, float squares_per_unit, int uv_set) {
   return std::make_shared<CheckerTexture>(a, b, squares_per_unit, uv_set);
+}
+
+void check_image_file(const std::filesystem::path& file) {
+  const ImageHeader header = read_image_header(file.string(), size_t{1} << 28);
+  if (header.channels <= 0) throw std::runtime_error("image \"" + file.filename().string() + "\" has no channels");
 }
 
 size_t texture_cache_loads() { return g_loads.load(); }

@@ -72,6 +72,9 @@ struct ImagePixels {
 // (a texture cache); throws std::runtime_error when the file cannot be read as an image.
 std::shared_ptr<const Texture> make_image_texture(const std::filesystem::path& file, bool srgb, int channel,
                                                   const TextureMapping& mapping);
+// Checks from its header alone (no pixels are read) that `file` is an image make_image_texture would take; throws
+// std::runtime_error as make_image_texture does. For validating a job cheaply, with a stand-in texture.
+void check_image_file(const std::filesystem::path& file);
 // A texture over pixels in memory; `srgb` decodes the colour channels (never alpha). Throws on bad dimensions.
 std::shared_ptr<const Texture> make_image_texture(const std::shared_ptr<const ImagePixels>& pixels, bool srgb,
                                                   int channel, const TextureMapping& mapping);

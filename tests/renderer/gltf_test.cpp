@@ -5,6 +5,7 @@
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -619,6 +620,63 @@ TEST(GltfTextures, ImagesOfEveryChannelCountReadAsRgba) {
       EXPECT_NEAR(got.z, srgb_decoded(c.b), 2e-3);
     }
   }
+}
+
+// An 8-bit RGB JPEG of w x h, encoded by OpenImageIO (baseline or progressive).
+std::vector<unsigned char> jpeg_rgb(int w, int h, bool progressive) {
+  std::vector<unsigned char> out;
+  OIIO::Filesystem::IOVecOutput proxy(out);
+  auto o = OIIO::ImageOutput::create("t.jpg");
+  o->set_ioproxy(&proxy);
+  OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
+  if (progressive) spec.attribute("jpeg:progressive", 1);
+  o->open("t.jpg", spec);
+  std::vector<unsigned char> rgb(static_cast<size_t>(w) * h * 3, 128);
+  o->write_image(OIIO::TypeDesc::UINT8, rgb.data());
+  o->close();
+  return out;
+}
+
+// A scene checked rather than rendered (a job at submission) reads its images' headers only: pixels that cannot be
+// decoded pass the check (the render fails on them later, naming the image), while a header that does not open or an
+// image over the size limit is refused at once; JPEG headers included, read through libjpeg.
+TEST(GltfHostile, ACheckedSceneReadsImageHeadersOnly) {
+  std::vector<unsigned char> png = png_rgba(4, 4, std::vector<unsigned char>(64, 255));
+  // Corrupt the compressed pixels: the IDAT chunk's data, after its length and type.
+  const size_t idat = std::search(png.begin(), png.end(), std::begin("IDAT"), std::begin("IDAT") + 4) - png.begin();
+  ASSERT_LT(idat + 12, png.size());
+  for (size_t i = idat + 4; i < idat + 12; ++i) png[i] ^= 0x5a;
+  GltfBuilder b = one_triangle();
+  b.texture_png(png);
+  b.write(fixture_dir(), "corrupt-pixels");
+  Scene checked, rendered;
+  GltfImportOptions check;
+  check.headers_only = true;
+  EXPECT_NO_THROW(import_gltf(fixture_dir() / "corrupt-pixels.gltf", "/scene/gltf", checked, check));
+  expect_refused(fixture_dir() / "corrupt-pixels.gltf", "image 0 cannot be decoded");
+
+  for (bool progressive : {false, true}) {
+    SCOPED_TRACE(progressive ? "progressive JPEG" : "baseline JPEG");
+    GltfBuilder j = one_triangle();
+    j.texture_png(jpeg_rgb(40, 30, progressive));  // the data is sniffed, whatever the data URI's type says
+    j.write(fixture_dir(), "jpeg");
+    Scene scene;
+    check.max_texture_pixels = 1200;
+    EXPECT_NO_THROW(import_gltf(fixture_dir() / "jpeg.gltf", "/scene/gltf", scene, check));
+    check.max_texture_pixels = 1199;
+    try {
+      import_gltf(fixture_dir() / "jpeg.gltf", "/scene/gltf", scene, check);
+      ADD_FAILURE() << "a JPEG over the pixel limit passed the check";
+    } catch (const SceneError& e) {
+      EXPECT_NE(std::string(e.what()).find("image 0 is too large (40x30 pixels)"), std::string::npos) << e.what();
+    }
+  }
+  GltfBuilder garbage = one_triangle();
+  garbage.texture_png({0xFF, 0xD8, 0xFF, 0x00, 1, 2, 3});  // a JPEG signature and nothing readable
+  garbage.write(fixture_dir(), "garbage");
+  Scene scene;
+  check.max_texture_pixels = 1 << 20;
+  EXPECT_THROW(import_gltf(fixture_dir() / "garbage.gltf", "/scene/gltf", scene, check), SceneError);
 }
 
 // An image that does not decode, or is larger than allowed, fails the import naming the image, whichever of the

@@ -143,6 +143,35 @@ TEST(ImageIo, ImagesAboveTheTexelLimitAreRefused) {
   }
 }
 
+// A header read gives the size without the pixels, JPEG (baseline and progressive, through libjpeg) and others
+// alike, under the same limits and errors as a full read.
+TEST(ImageIo, HeadersAreReadWithoutThePixels) {
+  for (bool progressive : {false, true}) {
+    const auto path = temp_file(progressive ? "p.jpg" : "b.jpg");
+    auto out = OIIO::ImageOutput::create(path.string());
+    OIIO::ImageSpec spec(40, 30, 3, OIIO::TypeDesc::UINT8);
+    if (progressive) spec.attribute("jpeg:progressive", 1);
+    ASSERT_TRUE(out->open(path.string(), spec));
+    std::vector<unsigned char> rgb(40 * 30 * 3, 200);
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, rgb.data()));
+    out->close();
+    const ImageHeader h = read_image_header(path.string());
+    EXPECT_EQ(h.width, 40);
+    EXPECT_EQ(h.height, 30);
+    EXPECT_EQ(h.channels, 3);
+    EXPECT_THROW(read_image_header(path.string(), 1199), std::runtime_error);
+    EXPECT_THROW(read_image_header(path.string(), 0, 39), std::runtime_error);
+  }
+  const auto exr = write_channels("h.exr", 8, 4, 2, std::vector<float>(8 * 4 * 2, 0.5f));
+  const ImageHeader h = read_image_header(exr.string());
+  EXPECT_EQ(h.width, 8);
+  EXPECT_EQ(h.height, 4);
+  EXPECT_EQ(h.channels, 2);
+  const auto text = temp_file("text.jpg");
+  std::ofstream(text) << "\xff\xd8 not really";
+  EXPECT_THROW(read_image_header(text.string()), std::runtime_error);
+}
+
 // The message names the file but not the folder it is in (a daemon's data directory).
 TEST(ImageIo, UnreadableFileThrows) {
   EXPECT_THROW(read_image("/nonexistent/file.exr"), std::runtime_error);
