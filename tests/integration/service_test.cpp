@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <charconv>
 #include <chrono>
@@ -210,6 +211,44 @@ TEST_F(ServiceTest, MultipartJobWithGltfAndBin) {
   ASSERT_TRUE(res);
   EXPECT_EQ(res->status, 200) << res->body;
   EXPECT_EQ(json::parse(res->body)["files"], json({"tri.bin", "tri.gltf"}));
+}
+
+// Uploads and submissions check a job's images from their headers, so they are answered at once: an image whose
+// header does not open is refused (422, naming the file and the image), one whose pixels do not decode is accepted
+// and fails the job when it starts, naming the image; the daemon goes on.
+TEST_F(ServiceTest, ImagesAreCheckedByTheirHeadersAtSubmissionAndByTheirPixelsAtRender) {
+  start();
+  std::vector<uint8_t> png = tessera::encode_png(std::vector<float>(8 * 8 * 3, 0.5f), 8, 8, tessera::DisplaySettings{});
+  const auto idat = std::search(png.begin(), png.end(), std::begin("IDAT"), std::begin("IDAT") + 4);
+  ASSERT_LT(idat - png.begin() + 12, static_cast<std::ptrdiff_t>(png.size()));
+  for (auto it = idat + 4; it < idat + 12; ++it) *it ^= 0x5a;  // the compressed pixels, not the header
+  json gltf = triangle_gltf("tri.bin");
+  gltf["images"] = {{{"uri", "tex.png"}}};
+  gltf["textures"] = {{{"source", 0}}};
+  gltf["materials"] = {{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
+  gltf["meshes"][0]["primitives"][0]["material"] = 0;
+  auto submit_with = [&](const std::string& image) {
+    httplib::MultipartFormDataItems items = {
+        {"job", json{{"kind", "scene"}, {"scene", {{"gltf", "tri.gltf"}}}, {"render", {{"width", 16}, {"height", 16}, {"spp", 1}}}}.dump(), "", "application/json"},
+        {"file", gltf.dump(), "tri.gltf", "model/gltf+json"},
+        {"file", triangle_bin(), "tri.bin", "application/octet-stream"},
+        {"file", image, "tex.png", "image/png"}};
+    return client_->Post("/v1/jobs", items);
+  };
+
+  auto res = submit_with("not an image at all");
+  expect_status(res, 422, "an image that does not open");
+  EXPECT_NE(json::parse(res->body).value("detail", "").find("tri.gltf: the glTF asset is invalid: image 0 cannot be decoded"),
+            std::string::npos)
+      << res->body;
+
+  res = submit_with(std::string(png.begin(), png.end()));
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 202) << res->body;
+  const json done = wait_for(*client_, json::parse(res->body)["id"], ended);
+  EXPECT_EQ(done.value("state", ""), "failed") << done.dump();
+  EXPECT_NE(done.dump().find("image 0 cannot be decoded"), std::string::npos) << done.dump();
+  EXPECT_EQ(client_->Get("/livez")->status, 200);
 }
 
 TEST_F(ServiceTest, HostileUploadsAreRefusedAndTheDaemonLives) {
