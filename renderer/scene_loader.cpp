@@ -1,9 +1,11 @@
 #include "renderer/scene_loader.h"
 
 #include <cmath>
+#include <exception>
 
 #include "renderer/gltf_loader.h"
 #include "renderer/scene_error.h"
+#include "renderer/thread_pool.h"
 
 namespace tessera {
 
@@ -181,11 +183,29 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
   if (auto it = doc.find("materials"); it != doc.end()) {
     const std::string mp = at(pointer, "materials");
     if (!it->is_object()) throw SceneError(mp, "must be an object mapping names to materials");
+    std::vector<std::pair<std::string, const json*>> items;
     for (const auto& [name, m] : it->items()) {
       if (name.empty() || name.size() > 256) throw SceneError(mp, "material names must have 1 to 256 characters");
-      names[name] = static_cast<uint32_t>(scene->materials.size());
-      scene->materials.push_back(MaterialRegistry::builtin().create(m, at(mp, name), mctx));
-      scene->material_names.push_back(name);
+      items.emplace_back(name, &m);
+    }
+    // Made side by side: a material reads its image files as it is made (decoding them is most of such a scene's
+    // load). Each error is kept by material, and the first in document order is reported, as one by one would.
+    std::vector<std::unique_ptr<Material>> made(items.size());
+    std::vector<std::exception_ptr> errors(items.size());
+    auto make = [&](size_t i) {
+      try {
+        made[i] = MaterialRegistry::builtin().create(*items[i].second, at(mp, items[i].first), mctx);
+      } catch (...) {
+        errors[i] = std::current_exception();
+      }
+    };
+    if (items.size() > 1) run_in_parallel(items.size(), make);
+    else if (!items.empty()) make(0);
+    for (size_t i = 0; i < items.size(); ++i) {
+      if (errors[i]) std::rethrow_exception(errors[i]);
+      names[items[i].first] = static_cast<uint32_t>(scene->materials.size());
+      scene->materials.push_back(std::move(made[i]));
+      scene->material_names.push_back(items[i].first);
     }
   }
 

@@ -11,7 +11,9 @@
 #include <gtest/gtest.h>
 
 #include "renderer/material.h"
+#include "renderer/scene.h"
 #include "renderer/scene_error.h"
+#include "renderer/scene_loader.h"
 
 namespace tessera {
 namespace {
@@ -165,6 +167,41 @@ TEST_F(TextureTest, PathsStayInsideTheAssetFolder) {
     ADD_FAILURE();
   } catch (const SceneError& e) {
     EXPECT_EQ(e.pointer(), "/m/albedo/wrap");
+  }
+}
+
+// A scene's materials are made side by side (each reads its own image files): each material keeps its own name and
+// textures, and of several bad materials the first in the document's order is reported, whatever the timing.
+TEST_F(TextureTest, ASceneMakesItsMaterialsSideBySide) {
+  json materials = json::object();
+  for (int i = 0; i < 6; ++i) {
+    const float v = 0.1f * (i + 1);
+    write(root_ / "assets" / ("t" + std::to_string(i) + ".exr"), 1, 1, {v, v, v});
+    materials["m" + std::to_string(i)] = {{"type", "lambert"}, {"albedo", {{"texture", "t" + std::to_string(i) + ".exr"}}}};
+  }
+  json doc = {{"materials", materials},
+              {"objects", {{{"shape", "sphere"}, {"center", {0, 0, 0}}, {"radius", 1}, {"material", "m3"}}}},
+              {"camera", {{"from", {0, 0, 5}}, {"to", {0, 0, 0}}}}};
+  SceneLoadOptions options;
+  options.asset_root = root_ / "assets";
+  auto scene = load_scene(doc, "/scene", options);
+  ASSERT_EQ(scene->materials.size(), 6u);
+  ScratchArena arena;
+  ShadingPoint sp;
+  for (int i = 0; i < 6; ++i) {
+    EXPECT_EQ(scene->material_names[i], "m" + std::to_string(i));
+    EXPECT_NEAR(scene->materials[i]->bsdf(sp, arena)->albedo_hint().x, 0.1f * (i + 1), 1e-6f) << i;
+  }
+  doc["materials"]["m1"]["albedo"]["texture"] = "missing.exr";
+  doc["materials"]["m2"]["type"] = "no-such-model";
+  doc["materials"]["m4"]["albedo"]["texture"] = "missing-too.exr";
+  for (int run = 0; run < 10; ++run) {
+    try {
+      load_scene(doc, "/scene", options);
+      ADD_FAILURE() << "a scene with bad materials loaded";
+    } catch (const SceneError& e) {
+      EXPECT_EQ(e.pointer(), "/scene/materials/m1/albedo/texture") << e.what();
+    }
   }
 }
 
