@@ -291,23 +291,17 @@ bool keep_encoded_image(tinygltf::Image* image, const int, std::string*, std::st
 }
 
 // Decodes one image's encoded bytes with OpenImageIO (PNG, JPEG, and whatever else it reads) into 8-bit RGBA, read
-// straight into place for three or four channels (`header_only`: only the header is read, and `out` is a 1x1 white
-// stand-in); returns an empty string, or what is wrong with image `index`.
+// straight into place for three or four channels (`header_only`: only the header is checked, and `out` is left
+// alone); returns an empty string, or what is wrong with image `index`.
 std::string decode_image(const std::vector<unsigned char>& bytes, size_t index, size_t max_pixels, bool header_only,
                          ImagePixels* out) {
   const std::string what = "image " + std::to_string(index);
-  auto stand_in = [out] {
-    out->width = out->height = 1;
-    out->channels = 4;
-    out->data.assign(4, 255);
-  };
   if (header_only) {
     // A JPEG's header through libjpeg: OpenImageIO's open would decode every scan of a progressive one.
     if (auto header = jpeg_header(bytes.data(), bytes.size())) {
       if (static_cast<size_t>(header->width) * static_cast<size_t>(header->height) > max_pixels)
         return what + " is too large (" + std::to_string(header->width) + "x" + std::to_string(header->height) +
                " pixels)";
-      stand_in();
       return {};
     }
   }
@@ -326,10 +320,7 @@ std::string decode_image(const std::vector<unsigned char>& bytes, size_t index, 
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 ||
       static_cast<size_t>(spec.width) * static_cast<size_t>(spec.height) > max_pixels)
     return what + " is too large (" + std::to_string(spec.width) + "x" + std::to_string(spec.height) + " pixels)";
-  if (header_only) {
-    stand_in();
-    return {};
-  }
+  if (header_only) return {};
   const size_t w = static_cast<size_t>(spec.width), h = static_cast<size_t>(spec.height), texels = w * h;
   const int nch = spec.nchannels;
   out->width = spec.width;
@@ -356,29 +347,25 @@ std::string decode_image(const std::vector<unsigned char>& bytes, size_t index, 
 // Decodes every image tinygltf kept encoded, in parallel (decoding is most of a textured asset's load time), freeing
 // the encoded bytes as it goes; with `headers_only`, checks their headers and gives 1x1 stand-ins. Throws the first
 // problem, by image index, as a SceneError at `pointer`.
-std::vector<std::shared_ptr<ImagePixels>> decode_images(tinygltf::Model* model, size_t max_pixels, bool headers_only,
-                                                        const std::string& pointer) {
-  const size_t n = model->images.size();
-  std::vector<std::shared_ptr<ImagePixels>> decoded(n);
-  std::vector<std::string> problems(n);
-  run_in_parallel(n, [&](size_t i) {
+std::vector<std::shared_ptr<const ImagePixels>> decode_images(tinygltf::Model* model, size_t max_pixels,
+                                                              bool headers_only, const std::string& pointer) {
+  std::vector<std::shared_ptr<const ImagePixels>> decoded(model->images.size());
+  run_in_parallel(decoded.size(), [&](size_t i) {
     tinygltf::Image& img = model->images[i];
     if (!img.as_is) return;
-    if (img.image.empty()) {
-      problems[i] = "image " + std::to_string(i) + " cannot be decoded: it has no bytes";
-      return;
-    }
+    std::string problem = "image " + std::to_string(i) + " cannot be decoded: it has no bytes";
     auto pixels = std::make_shared<ImagePixels>();
-    try {
-      problems[i] = decode_image(img.image, i, max_pixels, headers_only, pixels.get());
-    } catch (const std::exception& e) {  // out of memory for a huge image, or a decoder that throws
-      problems[i] = "image " + std::to_string(i) + " cannot be decoded: " + e.what();
+    if (!img.image.empty()) {
+      try {
+        problem = decode_image(img.image, i, max_pixels, headers_only, pixels.get());
+      } catch (const std::exception& e) {  // out of memory for a huge image, or a decoder that throws
+        problem = "image " + std::to_string(i) + " cannot be decoded: " + e.what();
+      }
     }
     std::vector<unsigned char>().swap(img.image);
-    if (problems[i].empty()) decoded[i] = std::move(pixels);
-  });
-  for (const std::string& problem : problems)
     if (!problem.empty()) throw SceneError(pointer, "the glTF asset is invalid: " + problem);
+    decoded[i] = headers_only ? stand_in_image() : std::move(pixels);
+  });
   return decoded;
 }
 
@@ -592,7 +579,7 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
 
   // Images, decoded once, shared by every texture that uses them (as "#image<i>").
   MaterialContext mctx;
-  std::vector<std::shared_ptr<ImagePixels>> images =
+  std::vector<std::shared_ptr<const ImagePixels>> images =
       decode_images(&model, options.max_texture_pixels, options.headers_only, pointer);
   for (size_t i = 0; i < images.size(); ++i)
     if (images[i]) mctx.images["image" + std::to_string(i)] = std::move(images[i]);

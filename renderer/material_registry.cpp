@@ -212,14 +212,7 @@ std::shared_ptr<const Texture> parse_texture(const nlohmann::json& v, const std:
   try {
     if (!embedded && ctx.headers_only) {
       check_image_file(file);
-      static const auto stand_in = [] {
-        auto pixels = std::make_shared<ImagePixels>();
-        pixels->width = pixels->height = 1;
-        pixels->channels = 4;
-        pixels->data.assign(4, 255);
-        return pixels;
-      }();
-      embedded = stand_in;
+      embedded = stand_in_image();
     }
     if (embedded) return make_image_texture(embedded, cs == "srgb", channel, mapping);
     return make_image_texture(file, cs == "srgb", channel, mapping);

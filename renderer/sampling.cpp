@@ -107,16 +107,11 @@ Distribution2D::Distribution2D(int width, int height, const std::function<void(i
     }
   };
   // Rows are independent: built in parallel, about 64k cells per item (a 4k environment map has 2048 rows of 4096);
-  // a small grid on this thread alone.
+  // a small grid is one item, built on this thread.
   const size_t rows_per_item = std::max<size_t>(1, 65536 / static_cast<size_t>(width));
-  const size_t items = (static_cast<size_t>(height) + rows_per_item - 1) / rows_per_item;
-  if (items > 1) {
-    run_in_parallel(items, [&](size_t i) {
-      build_rows(i * rows_per_item, std::min<size_t>(height, (i + 1) * rows_per_item));
-    });
-  } else {
-    build_rows(0, height);
-  }
+  run_in_parallel((static_cast<size_t>(height) + rows_per_item - 1) / rows_per_item, [&](size_t i) {
+    build_rows(i * rows_per_item, std::min<size_t>(height, (i + 1) * rows_per_item));
+  });
   marginal_ = Distribution1D(row_weights.data(), row_weights.size());
 }
 

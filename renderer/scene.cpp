@@ -125,10 +125,10 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
       uv2 = mesh.uvs[idx[2]];
     }
     sp.uv = uv0 * b0 + uv1 * b1 + uv2 * b2;
-    if (cone && ng_len > 0) {
-      const Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
-      uv_per_world = std::sqrt(std::abs(d1.x * d2.y - d1.y * d2.x) / ng_len);
-    }
+    // The uv edges: their cross product is twice the triangle's uv area (for the footprint and the tangent).
+    const Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
+    const float uv_det = d1.x * d2.y - d1.y * d2.x;
+    if (cone && ng_len > 0) uv_per_world = std::sqrt(std::abs(uv_det) / ng_len);
     sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
     const Material* material = materials[mesh.material].get();
     // Tangent: from the mesh when given, else along dp/du (with the handedness of dp/dv); none is needed for an
@@ -142,11 +142,9 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
       if (inst) tangent = inst->to_world.vector(tangent);
       sp.tangent_sign = mesh.tangent_signs.empty() || mesh.tangent_signs[idx[0]] >= 0 ? 1.0f : -1.0f;
     } else {
-      Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
-      float det = d1.x * d2.y - d1.y * d2.x;
-      if (std::abs(det) > 1e-12f) {
-        tangent = (e1 * d2.y - e2 * d1.y) / det;
-        Vec3 bitangent = (e2 * d1.x - e1 * d2.x) / det;
+      if (std::abs(uv_det) > 1e-12f) {
+        tangent = (e1 * d2.y - e2 * d1.y) / uv_det;
+        Vec3 bitangent = (e2 * d1.x - e1 * d2.x) / uv_det;
         sp.tangent_sign = dot(cross(ns, tangent), bitangent) < 0 ? -1.0f : 1.0f;
       } else {
         tangent = e1;

@@ -1,7 +1,6 @@
 #include "renderer/scene_loader.h"
 
 #include <cmath>
-#include <exception>
 
 #include "renderer/gltf_loader.h"
 #include "renderer/scene_error.h"
@@ -189,20 +188,12 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
       items.emplace_back(name, &m);
     }
     // Made side by side: a material reads its image files as it is made (decoding them is most of such a scene's
-    // load). Each error is kept by material, and the first in document order is reported, as one by one would.
+    // load). Of several bad materials, the first in document order is reported (run_in_parallel's rule).
     std::vector<std::unique_ptr<Material>> made(items.size());
-    std::vector<std::exception_ptr> errors(items.size());
-    auto make = [&](size_t i) {
-      try {
-        made[i] = MaterialRegistry::builtin().create(*items[i].second, at(mp, items[i].first), mctx);
-      } catch (...) {
-        errors[i] = std::current_exception();
-      }
-    };
-    if (items.size() > 1) run_in_parallel(items.size(), make);
-    else if (!items.empty()) make(0);
+    run_in_parallel(items.size(), [&](size_t i) {
+      made[i] = MaterialRegistry::builtin().create(*items[i].second, at(mp, items[i].first), mctx);
+    });
     for (size_t i = 0; i < items.size(); ++i) {
-      if (errors[i]) std::rethrow_exception(errors[i]);
       names[items[i].first] = static_cast<uint32_t>(scene->materials.size());
       scene->materials.push_back(std::move(made[i]));
       scene->material_names.push_back(items[i].first);

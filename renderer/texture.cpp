@@ -153,17 +153,12 @@ void build_mips(Image* img, const uint8_t* bytes, const float* floats) {
                                                : static_cast<uint8_t>(std::lround(clamp(out[i + c], 0.0f, 1.0f) * 255));
       }
     };
-    // About 64k source texels per item: levels below that are made on this thread alone.
+    // About 64k source texels per item: levels below that are one item, made on this thread.
     const int rows_per_item = std::max(1, 32768 / std::max(w, 1));
-    const size_t items = (static_cast<size_t>(nh) + rows_per_item - 1) / rows_per_item;
-    if (items > 1) {
-      run_in_parallel(items, [&](size_t i) {
-        const int y0 = static_cast<int>(i) * rows_per_item;
-        make_rows(y0, std::min(nh, y0 + rows_per_item));
-      });
-    } else {
-      make_rows(0, nh);
-    }
+    run_in_parallel((static_cast<size_t>(nh) + rows_per_item - 1) / rows_per_item, [&](size_t i) {
+      const int y0 = static_cast<int>(i) * rows_per_item;
+      make_rows(y0, std::min(nh, y0 + rows_per_item));
+    });
     for (const std::array<double, 4>& sum : row_sums)
       for (int c = 0; c < 4; ++c) total[c] += sum[c];
     if (!bytes) level.pixels = next;
@@ -175,6 +170,9 @@ void build_mips(Image* img, const uint8_t* bytes, const float* floats) {
   const double texels = static_cast<double>(img->width) * img->height;
   for (int c = 0; c < 4; ++c) img->mean[c] = static_cast<float>(total[c] / texels);
 }
+
+// Largest image file a texture reads (2^28 texels).
+constexpr size_t kMaxTextureTexels = size_t{1} << 28;
 
 // Decoded images by file and colour space, or by embedded pixels: read once however many materials and jobs ask.
 OnceCache<Image>& image_cache() {
@@ -193,7 +191,7 @@ std::unique_ptr<OIIO::ImageInput> open_image_file(const std::filesystem::path& f
   if (!in) throw std::runtime_error("cannot read image \"" + file.filename().string() + "\"");
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 ||
-      static_cast<int64_t>(spec.width) * spec.height > (int64_t(1) << 28))
+      static_cast<size_t>(spec.width) * static_cast<size_t>(spec.height) > kMaxTextureTexels)
     throw std::runtime_error("image \"" + file.filename().string() + "\" has an unsupported size");
   return in;
 }
@@ -417,9 +415,17 @@ std::shared_ptr<const Texture> make_checker_texture(const Rgb& a, const Rgb& b, 
   return std::make_shared<CheckerTexture>(a, b, squares_per_unit, uv_set);
 }
 
-void check_image_file(const std::filesystem::path& file) {
-  const ImageHeader header = read_image_header(file.string(), size_t{1} << 28);
-  if (header.channels <= 0) throw std::runtime_error("image \"" + file.filename().string() + "\" has no channels");
+void check_image_file(const std::filesystem::path& file) { read_image_header(file.string(), kMaxTextureTexels); }
+
+std::shared_ptr<const ImagePixels> stand_in_image() {
+  static const std::shared_ptr<const ImagePixels> texel = [] {
+    auto pixels = std::make_shared<ImagePixels>();
+    pixels->width = pixels->height = 1;
+    pixels->channels = 4;
+    pixels->data.assign(4, 255);
+    return pixels;
+  }();
+  return texel;
 }
 
 size_t texture_cache_loads() { return g_loads.load(); }

@@ -73,8 +73,10 @@ struct ImagePixels {
 std::shared_ptr<const Texture> make_image_texture(const std::filesystem::path& file, bool srgb, int channel,
                                                   const TextureMapping& mapping);
 // Checks from its header alone (no pixels are read) that `file` is an image make_image_texture would take; throws
-// std::runtime_error as make_image_texture does. For validating a job cheaply, with a stand-in texture.
+// std::runtime_error as make_image_texture does. For validating a job cheaply, with stand_in_image() in its place.
 void check_image_file(const std::filesystem::path& file);
+// One opaque white texel: what an image checked but not read stands in for (a scene that is validated, not rendered).
+std::shared_ptr<const ImagePixels> stand_in_image();
 // A texture over pixels in memory; `srgb` decodes the colour channels (never alpha). Throws on bad dimensions.
 std::shared_ptr<const Texture> make_image_texture(const std::shared_ptr<const ImagePixels>& pixels, bool srgb,
                                                   int channel, const TextureMapping& mapping);

@@ -8,6 +8,13 @@
 
 namespace tessera {
 
+namespace {
+
+// Hardware threads, at least one (the standard allows 0 for "unknown").
+unsigned hardware_threads() { return std::max(1u, std::thread::hardware_concurrency()); }
+
+}  // namespace
+
 struct ThreadPool::Batch {
   const std::function<void(size_t, int)>* fn;
   size_t count;
@@ -18,7 +25,7 @@ struct ThreadPool::Batch {
 };
 
 ThreadPool::ThreadPool(int threads) {
-  int n = threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  int n = threads > 0 ? threads : static_cast<int>(hardware_threads());
   workers_.reserve(n);
   for (int i = 0; i < n; ++i) workers_.emplace_back([this, i] { worker_main(i); });
 }
@@ -92,8 +99,7 @@ int g_helpers_used = 0;
 
 int take_helpers(int wanted) {
   std::lock_guard lock(g_helpers_mutex);
-  const int limit =
-      g_helpers_limit >= 0 ? g_helpers_limit : static_cast<int>(std::max(1u, std::thread::hardware_concurrency())) - 1;
+  const int limit = g_helpers_limit >= 0 ? g_helpers_limit : static_cast<int>(hardware_threads()) - 1;
   const int taken = std::clamp(limit - g_helpers_used, 0, std::max(wanted, 0));
   g_helpers_used += taken;
   return taken;
@@ -113,7 +119,7 @@ void limit_parallel_helpers(int helpers) {
 
 void run_in_parallel(size_t count, const std::function<void(size_t)>& fn, unsigned max_threads) {
   if (count == 0) return;
-  const unsigned hardware = std::max(1u, std::thread::hardware_concurrency());
+  const unsigned hardware = hardware_threads();
   const size_t wanted = std::min<size_t>(count, max_threads ? std::min(max_threads, hardware) : hardware);
   const int helper_budget = count > 1 ? take_helpers(static_cast<int>(wanted) - 1) : 0;
   struct GiveBack {
@@ -123,14 +129,18 @@ void run_in_parallel(size_t count, const std::function<void(size_t)>& fn, unsign
   const size_t threads = 1 + static_cast<size_t>(helper_budget);
   std::atomic<size_t> next{0};
   std::mutex error_mutex;
-  std::exception_ptr error;
+  std::exception_ptr error;  // of the lowest item that threw: the one a loop over the items would have stopped at
+  size_t error_item = count;
   auto work = [&] {
     for (size_t i; (i = next.fetch_add(1)) < count;) {
       try {
         fn(i);
       } catch (...) {
         std::lock_guard lock(error_mutex);
-        if (!error) error = std::current_exception();
+        if (i < error_item) {
+          error = std::current_exception();
+          error_item = i;
+        }
       }
     }
   };

@@ -45,7 +45,8 @@ class ThreadPool {
 // Runs fn(i) for every i in [0, count) on up to `max_threads` threads (0: one per hardware thread) started for the
 // call, the calling thread among them, and returns when all items are done: for work outside a render, such as
 // decoding a scene's images, where no pool is at hand. Runs on fewer threads when the system refuses to start one.
-// The first exception thrown by an item is rethrown here after the others have finished.
+// The exception of the lowest item that threw (the one a loop over the items would report, whatever the timing) is
+// rethrown here after the others have finished; a single item runs on the calling thread.
 // Helper threads are a process-wide budget (limit_parallel_helpers): concurrent calls (jobs loading side by side,
 // submissions checked on HTTP threads) share it, and a call that finds none free runs on the calling thread alone.
 void run_in_parallel(size_t count, const std::function<void(size_t)>& fn, unsigned max_threads = 0);

@@ -165,6 +165,16 @@ json problem_of(const httplib::Result& res, int status) {
   return body;
 }
 
+// The problem body of an answer to a failing store: `status`, its Retry-After, and the problem's type and title.
+json store_problem_of(const httplib::Result& res, int status, const std::string& retry_after, const std::string& type,
+                      const std::string& title) {
+  const json p = problem_of(res, status);
+  EXPECT_EQ(res->get_header_value("Retry-After"), retry_after);
+  EXPECT_EQ(p.value("type", ""), "https://tessera.dev/problems/" + type);
+  EXPECT_EQ(p.value("title", ""), title);
+  return p;
+}
+
 TEST_F(ApiStoreFailure, ReadsAnswer503WithRetryAfter) {
   const std::string id = queue_job();
   store_.failure = FlakyStore::Failure::kLocked;
@@ -173,10 +183,7 @@ TEST_F(ApiStoreFailure, ReadsAnswer503WithRetryAfter) {
     SCOPED_TRACE(path);
     auto res = client_->Get(path.c_str());
     ASSERT_TRUE(res);
-    const json p = problem_of(res, 503);
-    EXPECT_EQ(res->get_header_value("Retry-After"), "5");
-    EXPECT_EQ(p.value("type", ""), "https://tessera.dev/problems/unavailable");
-    EXPECT_EQ(p.value("title", ""), "Service unavailable");
+    const json p = store_problem_of(res, 503, "5", "unavailable", "Service unavailable");
     EXPECT_NE(p.value("detail", "").find("job store"), std::string::npos) << p.dump();
     EXPECT_NE(p.value("detail", "").find("retried"), std::string::npos) << p.dump();
     // The store's own message stays in the log.
@@ -234,10 +241,7 @@ TEST_F(ApiStoreFailure, AFullStoreAnswers507WithRetryAfterAndChangesNothing) {
     SCOPED_TRACE(call.what);
     auto res = call.send();
     ASSERT_TRUE(res);
-    const json p = problem_of(res, 507);
-    EXPECT_EQ(res->get_header_value("Retry-After"), "30");
-    EXPECT_EQ(p.value("type", ""), "https://tessera.dev/problems/insufficient-storage");
-    EXPECT_EQ(p.value("title", ""), "Insufficient storage");
+    const json p = store_problem_of(res, 507, "30", "insufficient-storage", "Insufficient storage");
     EXPECT_NE(p.value("detail", "").find("nothing was changed"), std::string::npos) << p.dump();
     const JobRecord job = stored(id);
     EXPECT_EQ(job.state, JobState::kQueued);
