@@ -6,7 +6,10 @@
 // It also counts heap allocations (operator new, replaced in this program) during renders after the first pass, to
 // show that the render loop allocates nothing per sample or per ray: what it reports is per pass, not per sample.
 //
-//   tessera-bench [--quick] [--scene NAME] [--threads N] [--json FILE]
+//   tessera-bench [--quick] [--scene NAME] [--threads N] [--env-width W] [--json FILE]
+//
+// --env-width sets the width of glossy_env's sky (its height is half): 512 by default, 4096 for the size of the HDR
+// maps scenes are lit with, where light sampling is bound by memory reads.
 //
 // Run it from the repository root (it reads proto/examples/ and ../shared/scenes/).
 #include <sys/resource.h>
@@ -147,9 +150,9 @@ std::shared_ptr<Scene> million_scene() {
   return scene;
 }
 
-// Glossy objects under a sky with a sun: environment importance sampling and glossy BSDFs.
-std::shared_ptr<Scene> glossy_env_scene() {
-  const int w = 512, h = 256;
+// Glossy objects under a sky with a sun (a w x w/2 map): environment importance sampling and glossy BSDFs.
+std::shared_ptr<Scene> glossy_env_scene(int w) {
+  const int h = w / 2;
   std::vector<float> rgb(static_cast<size_t>(w) * h * 3);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
@@ -318,15 +321,18 @@ double rmse(const std::vector<float>& a, const std::vector<float>& b) {
 int main(int argc, char** argv) {
   bool quick = false;
   std::string only, json_path;
-  int threads = 0;
+  int threads = 0, env_width = 512;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     if (a == "--quick") quick = true;
     else if (a == "--scene" && i + 1 < argc) only = argv[++i];
     else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
     else if (a == "--json" && i + 1 < argc) json_path = argv[++i];
+    else if (a == "--env-width" && i + 1 < argc && std::atoi(argv[i + 1]) >= 2 && std::atoi(argv[i + 1]) <= 16384)
+      env_width = std::atoi(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: tessera-bench [--quick] [--scene cornell|helmet|million|glossy_env] [--threads N] [--json FILE]\n");
+      std::fprintf(stderr, "usage: tessera-bench [--quick] [--scene cornell|helmet|million|glossy_env] [--threads N] "
+                           "[--env-width 2..16384] [--json FILE]\n");
       return 2;
     }
   }
@@ -337,7 +343,10 @@ int main(int argc, char** argv) {
       {"helmet", "DamagedHelmet.glb (textured glTF), 512x512, white environment",
        [] { return gltf_scene("../shared/scenes/damagedhelmet/DamagedHelmet.glb"); }, base_settings(512, 512, 8)},
       {"million", "16 spheres x 65,536 triangles + floor, area light, 512x512", million_scene, base_settings(512, 512, 6)},
-      {"glossy_env", "glossy spheres under an HDR sky with a sun, 512x512", glossy_env_scene, base_settings(512, 512, 8)},
+      {"glossy_env",
+       "glossy spheres under an HDR sky (" + std::to_string(env_width) + "x" + std::to_string(env_width / 2) +
+           ") with a sun, 512x512",
+       [env_width] { return glossy_env_scene(env_width); }, base_settings(512, 512, 8)},
   };
   const std::vector<double> budgets = quick ? std::vector<double>{0.25, 1, 4} : std::vector<double>{1, 4, 16};
   ThreadPool pool(threads);

@@ -22,23 +22,37 @@ Vec3 EnvironmentMap::uv_to_direction(Vec2 uv) {
   return {st * std::sin(phi), std::cos(theta), -st * std::cos(phi)};
 }
 
-EnvironmentMap::EnvironmentMap(int width, int height, std::vector<float> rgb)
-    : width_(width), height_(height), rgb_(std::move(rgb)) {
-  if (width_ < 1 || height_ < 1 ||
-      rgb_.size() != static_cast<size_t>(width_) * static_cast<size_t>(height_) * 3)
+EnvironmentMap::EnvironmentMap(int width, int height, std::vector<float> rgb) : EnvironmentMap(width, height) {
+  if (rgb.size() != static_cast<size_t>(width_) * static_cast<size_t>(height_) * 3)
     throw std::invalid_argument("EnvironmentMap: the radiance array does not match the size");
-  // The sampling weights are made row by row as the distribution builds its rows (in parallel; a 4k map has 8
-  // million texels), never held whole. Each row's radiance sums are kept apart and added in row order: the same
-  // average whatever the number of threads.
+  Distribution2D::Cell* cells = distribution_.cells();
+  for (size_t i = 0; i < rgb.size() / 3; ++i) cells[i].value = Rgb(rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]);
+  rgb = {};  // not held through the build
+  build();
+}
+
+EnvironmentMap::EnvironmentMap(int width, int height) : width_(width), height_(height) {
+  if (width_ < 2 || height_ < 1) throw std::invalid_argument("the environment map is too small");
+  distribution_ = Distribution2D(width_, height_);
+}
+
+void EnvironmentMap::build() {
+  // Radiance is made safe in place (not finite or negative: 0; above kMaxRadiance: clamped). The sampling weights
+  // are made row by row as the distribution builds its rows (in parallel; a 4k map has 8 million texels), never held
+  // whole. Each row's radiance sums are kept apart and added in row order: the same average whatever the number of
+  // threads.
   std::vector<std::array<double, 4>> row_sums(height_);
-  distribution_ = Distribution2D(width_, height_, [&](int y, float* weights) {
+  Distribution2D::Cell* cells = distribution_.cells();
+  distribution_.build([&](int y, const Distribution2D::Cell*, float* weights) {
     // Each texel covers a solid angle proportional to sin(theta) at its centre.
     const float sin_theta = std::sin((y + 0.5f) * kPi / height_);
     double r = 0, g = 0, b = 0;
+    Distribution2D::Cell* row = &cells[static_cast<size_t>(y) * width_];
     for (int x = 0; x < width_; ++x) {
-      Rgb c = texel(x, y);
+      Rgb& c = row[x].value;
+      for (int k = 0; k < 3; ++k) c[k] = std::isfinite(c[k]) && c[k] > 0 ? std::min(c[k], kMaxRadiance) : 0.0f;
       // A small floor keeps every direction with radiance possible to sample.
-      weights[x] = (std::max(luminance(c), 0.0f) + 1e-6f) * sin_theta;
+      weights[x] = (luminance(c) + 1e-6f) * sin_theta;
       r += c.x;
       g += c.y;
       b += c.z;
@@ -63,12 +77,17 @@ void EnvironmentMap::check(const std::string& path) {
 }
 
 std::shared_ptr<EnvironmentMap> EnvironmentMap::load(const std::string& path) {
-  // RGB read straight into the map's own array (grey repeated, alpha left on disk), then made safe in place. The size
-  // is checked from the header, before anything is allocated: 16384 x 8192 texels at most.
-  ImageData img = read_image(path, 3, kMaxTexels, Distribution2D::kMaxWidth);
-  if (img.width < 2 || img.height < 1) throw std::runtime_error("the environment map is too small");
-  for (float& v : img.pixels) v = std::isfinite(v) && v > 0 ? v : 0.0f;
-  return std::make_shared<EnvironmentMap>(img.width, img.height, std::move(img.pixels));
+  // RGB read straight into the map's cells (grey repeated, alpha left on disk), then made safe in place. The size is
+  // checked from the header, before anything is allocated: 16384 x 8192 texels at most.
+  std::shared_ptr<EnvironmentMap> map;
+  read_image_into(path, 3, sizeof(Distribution2D::Cell) / sizeof(float), kMaxTexels, Distribution2D::kMaxWidth,
+                  [&](int width, int height) {
+                    if (width < 2 || height < 1) throw std::runtime_error("the environment map is too small");
+                    map.reset(new EnvironmentMap(width, height));
+                    return &map->distribution_.cells()->value.x;
+                  });
+  map->build();
+  return map;
 }
 
 Rgb EnvironmentMap::texel(int x, int y) const {
@@ -77,8 +96,7 @@ Rgb EnvironmentMap::texel(int x, int y) const {
   else if (x >= width_) x -= width_;
   if (x < 0 || x >= width_) x = ((x % width_) + width_) % width_;
   y = clamp(y, 0, height_ - 1);
-  const float* p = &rgb_[(static_cast<size_t>(y) * width_ + x) * 3];
-  return {p[0], p[1], p[2]};
+  return distribution_.cell(x, y).value;
 }
 
 Rgb EnvironmentMap::lookup_uv(Vec2 uv) const {
@@ -89,28 +107,36 @@ Rgb EnvironmentMap::lookup_uv(Vec2 uv) const {
          texel(x0, y0 + 1) * ((1 - tx) * ty) + texel(x0 + 1, y0 + 1) * (tx * ty);
 }
 
-Rgb EnvironmentMap::lookup(const Vec3& dir, float* pdf) const {
-  const Vec2 uv = direction_to_uv(dir);
-  *pdf = pdf_uv(uv, dir.y);
-  return lookup_uv(uv);
+Rgb EnvironmentMap::lighting(const Vec3& dir, float* pdf) const {
+  const TexelIndex at = texel_of(dir);
+  *pdf = pdf_cell(at.col, at.row, dir.y);
+  return distribution_.cell(at.col, at.row).value;
 }
 
 Vec3 EnvironmentMap::sample(Vec2 u, float* pdf, Rgb* radiance) const {
   float pdf_uv = 0;
-  const Vec2 uv = distribution_.sample(u, &pdf_uv);
+  const Distribution2D::Cell* cell = nullptr;
+  const Vec2 uv = distribution_.sample(u, &pdf_uv, &cell);
   Vec3 dir = uv_to_direction(uv);
   float sin_theta = std::sin(uv.y * kPi);
   // dω = 2π² sinθ du dv.
   *pdf = sin_theta > 0 ? pdf_uv / (2 * kPi * kPi * sin_theta) : 0.0f;
-  if (radiance) *radiance = lookup_uv(uv);
+  if (radiance) *radiance = cell->value;
   return dir;
 }
 
-float EnvironmentMap::pdf(const Vec3& dir) const { return pdf_uv(direction_to_uv(dir), dir.y); }
+float EnvironmentMap::pdf(const Vec3& dir) const {
+  const TexelIndex at = texel_of(dir);
+  return pdf_cell(at.col, at.row, dir.y);
+}
 
-float EnvironmentMap::pdf_uv(Vec2 uv, float cos_theta) const {
-  int col = std::min(width_ - 1, static_cast<int>(uv.x * width_));
-  int row = std::min(height_ - 1, static_cast<int>(uv.y * height_));
+EnvironmentMap::TexelIndex EnvironmentMap::texel_of(const Vec3& dir) const {
+  const Vec2 uv = direction_to_uv(dir);
+  return {std::min(width_ - 1, static_cast<int>(uv.x * width_)),
+          std::min(height_ - 1, static_cast<int>(uv.y * height_))};
+}
+
+float EnvironmentMap::pdf_cell(int col, int row, float cos_theta) const {
   // sin(theta) from cos(theta) as sqrt((1 - c)(1 + c)), which keeps its precision near the poles.
   const float c = clamp(cos_theta, -1.0f, 1.0f);
   float sin_theta = safe_sqrt((1 - c) * (1 + c));

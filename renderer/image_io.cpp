@@ -189,35 +189,49 @@ ImageHeader read_image_header(const std::string& path, size_t max_texels, int ma
   return header;
 }
 
-ImageData read_image(const std::string& path, int channels, size_t max_texels, int max_width) {
-  auto in = open_checked(path, max_texels, max_width);
-  const OIIO::ImageSpec& spec = in->spec();
-  ImageData img;
-  img.width = spec.width;
-  img.height = spec.height;
-  img.channels = channels > 0 ? channels : spec.nchannels;
+namespace {
+
+// The pixels of an open image as `channels` floats per texel, texels `stride` floats apart (see read_image).
+void read_pixels(OIIO::ImageInput& in, const std::string& path, int channels, size_t stride, float* pixels) {
+  const OIIO::ImageSpec& spec = in.spec();
   const size_t texels = static_cast<size_t>(spec.width) * static_cast<size_t>(spec.height);
   const int stored = spec.nchannels;
-  img.pixels.resize(texels * img.channels);
+  const OIIO::stride_t xstride = static_cast<OIIO::stride_t>(stride * sizeof(float));
   bool ok;
-  if (stored >= img.channels) {
-    ok = in->read_image(0, 0, 0, img.channels, OIIO::TypeDesc::FLOAT, img.pixels.data());
-  } else if (stored < 3 && img.channels >= 3) {
+  if (stored < 3 && channels >= 3) {
     // Grey (and alpha): the grey read into the first channel of each texel and repeated over the colour channels,
     // the alpha into the fourth when asked for.
-    const OIIO::stride_t xstride = static_cast<OIIO::stride_t>(img.channels * sizeof(float));
-    ok = in->read_image(0, 0, 0, 1, OIIO::TypeDesc::FLOAT, img.pixels.data(), xstride);
-    if (ok && stored == 2 && img.channels >= 4)
-      ok = in->read_image(0, 0, 1, 2, OIIO::TypeDesc::FLOAT, img.pixels.data() + 3, xstride);
+    ok = in.read_image(0, 0, 0, 1, OIIO::TypeDesc::FLOAT, pixels, xstride);
+    if (ok && stored == 2 && channels >= 4)
+      ok = in.read_image(0, 0, 1, 2, OIIO::TypeDesc::FLOAT, pixels + 3, xstride);
     for (size_t i = 0; ok && i < texels; ++i)
-      for (int c = 1; c < 3; ++c) img.pixels[i * img.channels + c] = img.pixels[i * img.channels];
+      for (int c = 1; c < 3; ++c) pixels[i * stride + c] = pixels[i * stride];
   } else {
-    const OIIO::stride_t xstride = static_cast<OIIO::stride_t>(img.channels * sizeof(float));
-    ok = in->read_image(0, 0, 0, stored, OIIO::TypeDesc::FLOAT, img.pixels.data(), xstride);
+    ok = in.read_image(0, 0, 0, std::min(stored, channels), OIIO::TypeDesc::FLOAT, pixels, xstride);
   }
-  if (!ok) throw std::runtime_error("cannot read " + file_name(path) + ": " + scrub(in->geterror(), path));
-  in->close();
+  if (!ok) throw std::runtime_error("cannot read " + file_name(path) + ": " + scrub(in.geterror(), path));
+  in.close();
+}
+
+}  // namespace
+
+ImageData read_image(const std::string& path, int channels, size_t max_texels, int max_width) {
+  auto in = open_checked(path, max_texels, max_width);
+  ImageData img;
+  img.width = in->spec().width;
+  img.height = in->spec().height;
+  img.channels = channels > 0 ? channels : in->spec().nchannels;
+  img.pixels.resize(static_cast<size_t>(img.width) * static_cast<size_t>(img.height) * img.channels);
+  read_pixels(*in, path, img.channels, static_cast<size_t>(img.channels), img.pixels.data());
   return img;
+}
+
+void read_image_into(const std::string& path, int channels, size_t stride, size_t max_texels, int max_width,
+                     const std::function<float*(int width, int height)>& place) {
+  if (channels < 1 || stride < static_cast<size_t>(channels))
+    throw std::invalid_argument("read_image_into: a texel's stride is smaller than its channels");
+  auto in = open_checked(path, max_texels, max_width);
+  read_pixels(*in, path, channels, stride, place(in->spec().width, in->spec().height));
 }
 
 }  // namespace tessera

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -40,6 +41,10 @@ struct ImageData {
 // an RGBA file never holds the alpha channel in memory). `max_texels` > 0 and `max_width` > 0 refuse larger images
 // from their header, before any pixel memory is allocated.
 ImageData read_image(const std::string& path, int channels = 0, size_t max_texels = 0, int max_width = 0);
+// The same into memory of the caller's: once the header is checked, place(width, height) returns where texel (x, y)
+// goes, at offset (y * width + x) * stride floats; `channels` floats of it are written (stride >= channels).
+void read_image_into(const std::string& path, int channels, size_t stride, size_t max_texels, int max_width,
+                     const std::function<float*(int width, int height)>& place);
 struct ImageHeader {
   int width = 0, height = 0, channels = 0;
 };

@@ -51,13 +51,15 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     }
     if (!found) {
       if (!scene.environment.black()) {
-        if (prev_delta || !mis) {
-          if (prev_delta || use_bsdf_hits) radiance += throughput * scene.environment.radiance(ray.dir);
-        } else {
-          // Weighed against the light sampling of the environment, its density from the same lookup.
+        if (prev_delta) {
+          // Seen from the camera, directly or through mirrors and glass.
+          radiance += throughput * scene.environment.radiance(ray.dir);
+        } else if (use_bsdf_hits) {
+          // Light onto the last surface: the radiance light sampling estimates too, weighed against it (its density
+          // from the same lookup).
           float pdf_dir = 0;
-          const Rgb le = scene.environment.radiance(ray.dir, &pdf_dir);
-          radiance += throughput * le * power_heuristic(prev_pdf, lights.environment_pmf() * pdf_dir);
+          const Rgb le = scene.environment.lighting(ray.dir, &pdf_dir);
+          radiance += throughput * le * (mis ? power_heuristic(prev_pdf, lights.environment_pmf() * pdf_dir) : 1.0f);
         }
       }
       break;

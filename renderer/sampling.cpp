@@ -42,11 +42,9 @@ double cumulative_sum(const float* weights, size_t n, double* cdf) {
   return total > 0 ? total : 0;
 }
 
-// u in [0,1) rescaled to [0,1) within bucket i of the sum, for a target u * cdf[n].
-float remap_within(const double* cdf, size_t i, double target) {
-  const double width = cdf[i + 1] - cdf[i];
-  const double r = width > 0 ? (target - cdf[i]) / width : 0.5;
-  return static_cast<float>(std::clamp(r, 0.0, 0.99999994));
+// An accessor of a cumulative sum stored as an array.
+auto cdf_at(const double* cdf) {
+  return [cdf](size_t i) { return cdf[i]; };
 }
 
 }  // namespace
@@ -59,23 +57,25 @@ Distribution1D::Distribution1D(const float* weights, size_t n) : pdf_(n), cdf_(n
   // Below a few dozen buckets the binary search is as fast as the table.
   if (n >= 32 && n < (size_t(1) << 31)) {
     guide_.resize(n + 1);
-    CdfInversion::build_guide(cdf_.data(), n, guide_.data(), &slots_per_unit_);
+    CdfInversion::build_guide(cdf_at(cdf_.data()), n, n, guide_.data(), &slots_per_unit_);
   }
 }
 
 size_t Distribution1D::sample(float u, float* pmf, float* u_remapped) const {
   const double target = static_cast<double>(u) * cdf_.back();
-  const size_t i =
-      CdfInversion::find(cdf_.data(), size(), guide_.empty() ? nullptr : guide_.data(), slots_per_unit_, target);
+  const size_t i = CdfInversion::find(cdf_at(cdf_.data()), size(), size(), guide_.empty() ? nullptr : guide_.data(),
+                                      slots_per_unit_, target);
   if (pmf) *pmf = pdf_[i];
-  if (u_remapped) *u_remapped = remap_within(cdf_.data(), i, target);
+  if (u_remapped) *u_remapped = CdfInversion::remap_within(cdf_[i], cdf_[i + 1], target);
   return i;
 }
 
-Distribution2D::Distribution2D(const float* weights, int width, int height)
-    : Distribution2D(width, height, [weights, width](int row, float* out) {
-        std::copy_n(weights + static_cast<size_t>(row) * width, width, out);
-      }) {}
+Distribution2D::Distribution2D(const float* weights, int width, int height) : Distribution2D(width, height) {
+  for (size_t i = 0; i < cells_.size(); ++i) cells_[i].value = Rgb(weights[i]);
+  build([weights, width](int row, const Cell*, float* out) {
+    std::copy_n(weights + static_cast<size_t>(row) * width, width, out);
+  });
+}
 
 namespace {
 
@@ -89,41 +89,59 @@ int checked_width(int width, int height) {
 
 }  // namespace
 
-Distribution2D::Distribution2D(int width, int height, const std::function<void(int, float*)>& fill_row)
+Distribution2D::Distribution2D(int width, int height)
     : width_(checked_width(width, height)),
       height_(height),
-      cells_(static_cast<float>(width) * static_cast<float>(height)),
-      cdf_(static_cast<size_t>(height) * (width + 1)),
-      guide_(static_cast<size_t>(height) * (width + 1)),
-      slots_per_unit_(height) {
-  std::vector<float> row_weights(height);
+      area_(static_cast<float>(width) * static_cast<float>(height)),
+      cells_(static_cast<size_t>(width) * height),
+      row_total_(height),
+      slots_((static_cast<size_t>(width) + kCellsPerSlot - 1) / kCellsPerSlot),
+      guide_(static_cast<size_t>(height) * (slots_ + 1)),
+      slots_per_unit_(height) {}
+
+void Distribution2D::build(const std::function<void(int, const Cell*, float*)>& row_weights) {
+  const size_t n = static_cast<size_t>(width_);
+  std::vector<float> marginal_weights(height_);
   auto build_rows = [&](size_t first, size_t last) {
-    std::vector<float> weights(width);
+    std::vector<float> weights(n);
+    std::vector<double> sum(n + 1);
     for (size_t y = first; y < last; ++y) {
-      fill_row(static_cast<int>(y), weights.data());
-      double* c = &cdf_[y * (width + 1)];
-      row_weights[y] = static_cast<float>(cumulative_sum(weights.data(), width, c));
-      CdfInversion::build_guide(c, width, &guide_[y * (width + 1)], &slots_per_unit_[y]);
+      Cell* c = &cells_[y * n];
+      row_weights(static_cast<int>(y), c, weights.data());
+      // Summed in double, stored in float: rounding is monotone, so the stored sums never decrease.
+      const double total = cumulative_sum(weights.data(), n, sum.data());
+      for (size_t x = 0; x < n; ++x) c[x].cdf = static_cast<float>(sum[x]);
+      const float row_total = row_total_[y] = static_cast<float>(sum[n]);
+      // The row's weight in the marginal: its stored total, or 0 for an empty row (whose cells then have equal
+      // weights, should it ever be sampled).
+      marginal_weights[y] = total > 0 ? row_total : 0.0f;
+      CdfInversion::build_guide([c, n, row_total](size_t i) -> double { return i < n ? c[i].cdf : row_total; }, n,
+                                slots_, &guide_[y * (slots_ + 1)], &slots_per_unit_[y]);
     }
   };
   // Rows are independent: built in parallel, about 64k cells per item (a 4k environment map has 2048 rows of 4096);
   // a small grid is one item, built on this thread.
-  const size_t rows_per_item = std::max<size_t>(1, 65536 / static_cast<size_t>(width));
-  run_in_parallel((static_cast<size_t>(height) + rows_per_item - 1) / rows_per_item, [&](size_t i) {
-    build_rows(i * rows_per_item, std::min<size_t>(height, (i + 1) * rows_per_item));
+  const size_t rows_per_item = std::max<size_t>(1, 65536 / n);
+  run_in_parallel((static_cast<size_t>(height_) + rows_per_item - 1) / rows_per_item, [&](size_t i) {
+    build_rows(i * rows_per_item, std::min<size_t>(height_, (i + 1) * rows_per_item));
   });
-  marginal_ = Distribution1D(row_weights.data(), row_weights.size());
+  marginal_ = Distribution1D(marginal_weights.data(), marginal_weights.size());
 }
 
-Vec2 Distribution2D::sample(Vec2 u, float* pdf) const {
+Vec2 Distribution2D::sample(Vec2 u, float* pdf, const Cell** cell) const {
   float ur = 0;
   const int row = static_cast<int>(marginal_.sample(u.y, nullptr, &ur));
-  const double* c = row_cdf(row);
-  const double target = static_cast<double>(u.x) * c[width_];
-  const int col = static_cast<int>(CdfInversion::find(c, width_, &guide_[static_cast<size_t>(row) * (width_ + 1)],
-                                                      slots_per_unit_[row], target));
-  *pdf = this->pdf(col, row);
-  return {(col + remap_within(c, col, target)) / width_, (row + ur) / height_};
+  const Cell* c = row_cells(row);
+  const size_t n = static_cast<size_t>(width_);
+  const float row_total = row_total_[row];
+  auto cdf = [c, n, row_total](size_t i) -> double { return i < n ? c[i].cdf : row_total; };
+  const double target = static_cast<double>(u.x) * row_total;
+  const size_t col = CdfInversion::find(cdf, n, slots_, &guide_[static_cast<size_t>(row) * (slots_ + 1)],
+                                        slots_per_unit_[row], target);
+  const double lo = c[col].cdf, hi = cdf(col + 1);
+  *pdf = marginal_.pmf(row) * static_cast<float>((hi - lo) / row_total) * area_;
+  if (cell) *cell = &c[col];
+  return {(col + CdfInversion::remap_within(lo, hi, target)) / width_, (row + ur) / height_};
 }
 
 }  // namespace tessera

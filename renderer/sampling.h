@@ -70,44 +70,61 @@ inline float power_heuristic(float pdf_a, float pdf_b) {
   return a + b > 0 ? a / (a + b) : 0.0f;
 }
 
-// Inversion of a cumulative sum (n + 1 entries from cdf[0] = 0) with a guide table (Chen and Asau's cutpoint
-// method) that narrows the search to the buckets one n-th of the total can span: O(1) on average, and the same
-// index as a binary search over the whole sum for every target. Shared by the 1D and 2D distributions below.
+// Inversion of a cumulative sum (n + 1 entries from cdf(0) = 0, read through an accessor so the sum may be stored
+// apart or interleaved with other data) with a guide table (Chen and Asau's cutpoint method) that narrows the search
+// to the buckets one n-th of the total can span: O(1) on average, and the same index as a binary search over the
+// whole sum for every target. Shared by the 1D and 2D distributions below.
 struct CdfInversion {
-  // guide[k] (n + 1 entries, n slots) is the first bucket i with slot(cdf[i + 1]) >= k, guide[n] = n - 1. The answer
-  // for a target in slot k lies in buckets guide[k] .. guide[k + 1]: its bucket's upper bound is above the target
-  // (so in slot k or later), its lower bound at or below (so in slot k or earlier). Guide entries are 32-bit, or
-  // 16-bit where n - 1 fits (the rows of a 2D distribution).
-  template <typename Guide>
-  static void build_guide(const double* cdf, size_t n, Guide* guide, double* slots_per_unit) {
-    *slots_per_unit = static_cast<double>(n) / cdf[n];
+  // guide[k] (m + 1 entries for m slots) is the first bucket i with slot(cdf(i + 1)) >= k, guide[m] = n - 1. The
+  // answer for a target in slot k lies in buckets guide[k] .. guide[k + 1]: its bucket's upper bound is above the
+  // target (so in slot k or later), its lower bound at or below (so in slot k or earlier). With m = n slots the range
+  // holds about one bucket; fewer slots make a smaller table and longer ranges. Guide entries are 32-bit, or 16-bit
+  // where n - 1 fits (the rows of a 2D distribution).
+  template <typename Cdf, typename Guide>
+  static void build_guide(const Cdf& cdf, size_t n, size_t m, Guide* guide, double* slots_per_unit) {
+    *slots_per_unit = static_cast<double>(m) / cdf(n);
     size_t i = 0;
-    for (size_t k = 0; k < n; ++k) {
-      while (i + 1 < n && slot(cdf[i + 1], *slots_per_unit, n) < k) ++i;
+    for (size_t k = 0; k < m; ++k) {
+      while (i + 1 < n && slot(cdf(i + 1), *slots_per_unit, m) < k) ++i;
       guide[k] = static_cast<Guide>(i);
     }
-    guide[n] = static_cast<Guide>(n - 1);
+    guide[m] = static_cast<Guide>(n - 1);
   }
-  // The first bucket with a non-zero width whose upper bound exceeds `target` in [0, cdf[n]); `guide` may be null
-  // (a binary search over the whole sum).
-  template <typename Guide>
-  static size_t find(const double* cdf, size_t n, const Guide* guide, double slots_per_unit, double target) {
-    const double *first = cdf + 1, *last = cdf + n + 1;
+  // The first bucket with a non-zero width whose upper bound exceeds `target` in [0, cdf(n)); `guide` (of m slots)
+  // may be null (a binary search over the whole sum).
+  template <typename Cdf, typename Guide>
+  static size_t find(const Cdf& cdf, size_t n, size_t m, const Guide* guide, double slots_per_unit, double target) {
+    // The first j in [first, last) with cdf(j) > target (an upper bound); the bucket is j - 1.
+    size_t first = 1, last = n + 1;
     if (guide) {
-      const size_t k = slot(target, slots_per_unit, n);
-      first = cdf + 1 + guide[k];
-      last = cdf + 2 + guide[k + 1];
+      const size_t k = slot(target, slots_per_unit, m);
+      first = 1 + guide[k];
+      last = 2 + guide[k + 1];
     }
-    size_t i = static_cast<size_t>(std::upper_bound(first, last, target) - cdf - 1);
-    i = std::min(i, n - 1);
-    while (i + 1 < n && !(cdf[i + 1] > cdf[i])) ++i;
+    for (size_t count = last - first; count > 0;) {
+      const size_t step = count / 2;
+      if (!(target < cdf(first + step))) {
+        first += step + 1;
+        count -= step + 1;
+      } else {
+        count = step;
+      }
+    }
+    size_t i = std::min(first - 1, n - 1);
+    while (i + 1 < n && !(cdf(i + 1) > cdf(i))) ++i;
     return i;
   }
-  // The guide slot of a target: monotone in the target, one multiply. The table is built with this same function,
-  // so no rounding of it can send a target to a slot whose range misses the answer.
-  static size_t slot(double target, double slots_per_unit, size_t n) {
+  // The guide slot (of m) of a target: monotone in the target, one multiply. The table is built with this same
+  // function, so no rounding of it can send a target to a slot whose range misses the answer.
+  static size_t slot(double target, double slots_per_unit, size_t m) {
     const double k = target * slots_per_unit;
-    return k < static_cast<double>(n - 1) ? static_cast<size_t>(k) : n - 1;
+    return k < static_cast<double>(m - 1) ? static_cast<size_t>(k) : m - 1;
+  }
+  // u in [0,1) rescaled to [0,1) within a bucket [lo, hi) of the sum, for the target that found it.
+  static float remap_within(double lo, double hi, double target) {
+    const double width = hi - lo;
+    const double r = width > 0 ? (target - lo) / width : 0.5;
+    return static_cast<float>(std::clamp(r, 0.0, 0.99999994));
   }
 };
 
@@ -135,36 +152,57 @@ class Distribution1D {
 // A piecewise-constant density on the unit square over a width x height grid of non-negative weights (row-major,
 // row 0 first), sampled by inversion: a row from the marginal distribution, then a column from that row's
 // conditional one, then a uniform point in the cell. Low-discrepancy points stay well spread in the image of the
-// map. The conditional distributions lie in one block of memory, a row's cumulative sum beside its guide table, so
-// a sample reads two cache lines of the row rather than chasing a per-row object (what an environment map with a
-// sun, sampled at every path vertex, spent most of its time on).
+// map. Each cell carries a colour (an environment map's radiance) beside the row's cumulative weight before it, in
+// 16 bytes: sampling a cell, reading its density and reading its colour touch the same cache line, where separate
+// arrays of colours, sums and densities cost a cache miss each (most of the time of a 4k environment map's light
+// sampling). The sums are floats: the uniform numbers that invert them are on a 2^-24 grid anyway, and a cell's
+// density is computed from the same stored sums its sampling inverts, so the two always agree.
 class Distribution2D {
  public:
+  struct alignas(16) Cell {
+    Rgb value;
+    float cdf = 0;  // the row's weights summed before this cell
+  };
   // Widest row it takes: its guide tables are 16-bit.
   static constexpr int kMaxWidth = 65535;
   Distribution2D() = default;
+  // A grid whose cells hold weights[i] both as their weight and as their value.
   Distribution2D(const float* weights, int width, int height);
-  // The same with each row's weights written by fill_row(row, weights) when the row is built (rows are built in
-  // parallel, each call with its own array): the whole grid of weights is never held at once.
-  Distribution2D(int width, int height, const std::function<void(int row, float* weights)>& fill_row);
-  // A point of the unit square with density *pdf (over the unit square); u in [0,1)^2.
-  Vec2 sample(Vec2 u, float* pdf) const;
+  // A grid of cells whose values the caller writes (through cells()) before build(); throws std::invalid_argument
+  // for a size outside 1..kMaxWidth x 1..2^24, before anything is allocated.
+  Distribution2D(int width, int height);
+  Cell* cells() { return cells_.data(); }
+  // Makes the distribution: row_weights(row, cells, weights) writes the weights of a row's cells (rows are built in
+  // parallel, each call with its own array).
+  void build(const std::function<void(int row, const Cell* cells, float* weights)>& row_weights);
+
+  // A point of the unit square with density *pdf (over the unit square); u in [0,1)^2. `cell`, when given, receives
+  // the cell the point is in.
+  Vec2 sample(Vec2 u, float* pdf, const Cell** cell = nullptr) const;
   // The density at cell (col, row), the one sample() reports for points in it.
   float pdf(int col, int row) const {
-    const double* c = row_cdf(row);
-    return marginal_.pmf(row) * static_cast<float>((c[col + 1] - c[col]) / c[width_]) * cells_;
+    const Cell* c = row_cells(row);
+    const double hi = col + 1 < width_ ? c[col + 1].cdf : row_total_[row];
+    return marginal_.pmf(row) * static_cast<float>((hi - c[col].cdf) / row_total_[row]) * area_;
   }
+  const Cell& cell(int col, int row) const { return row_cells(row)[col]; }
   int width() const { return width_; }
   int height() const { return height_; }
 
  private:
-  const double* row_cdf(int row) const { return &cdf_[static_cast<size_t>(row) * (width_ + 1)]; }
+  const Cell* row_cells(int row) const { return &cells_[static_cast<size_t>(row) * width_]; }
   int width_ = 0, height_ = 0;
-  float cells_ = 0;          // width * height: a cell's probability times this is its density
+  float area_ = 0;  // width * height: a cell's probability times this is its density
+  std::vector<Cell> cells_;
   Distribution1D marginal_;  // of rows
-  std::vector<double> cdf_;       // height rows of width + 1 entries: each row's cumulative sum from 0
-  std::vector<uint16_t> guide_;   // height rows of width + 1 entries: each row's guide table
+  std::vector<float> row_total_;        // per row: the sum of its weights (its cdf past the last cell)
+  // A row's guide table has a slot per kCellsPerSlot cells: a quarter of the memory of one per cell (the table is read
+  // at random, like the cells), and the range it leaves is about one cache line of cells.
+  static constexpr int kCellsPerSlot = 4;
+  size_t slots_ = 0;
+  std::vector<uint16_t> guide_;         // height rows of slots_ + 1 entries: each row's guide table
   std::vector<double> slots_per_unit_;  // per row
 };
+static_assert(sizeof(Distribution2D::Cell) == 4 * sizeof(float), "a cell is four floats: colour and sum");
 
 }  // namespace tessera

@@ -1,6 +1,9 @@
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <random>
+
+#include <OpenImageIO/imageio.h>
 
 #include "renderer/environment.h"
 #include "tests/renderer/test_util.h"
@@ -75,6 +78,82 @@ TEST(EnvironmentMap, AverageIsSolidAngleWeighted) {
   EnvironmentMap flat(16, 8, rgb);
   EXPECT_NEAR(flat.average().y, 0.5f, 1e-5);
   EXPECT_NEAR(flat.lookup(Vec3(0, 1, 0)).x, 0.5f, 1e-5);
+}
+
+// Surfaces are lit by the texel a direction falls in: the radiance sample() returns is exactly the lighting() of the
+// direction it returns, with the same density. What is seen is filtered: at a texel's centre it is the texel, halfway
+// between two texel centres their mean.
+TEST(EnvironmentMap, LightingIsTheSampledTexelAndWhatIsSeenIsFiltered) {
+  const int w = 32, h = 16;
+  std::vector<float> rgb(static_cast<size_t>(w) * h * 3);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<float> u(0, 1);
+  for (float& v : rgb) v = 0.1f + 10 * u(rng) * u(rng);
+  const EnvironmentMap map(w, h, rgb);
+  auto texel = [&](int x, int y) {
+    const float* p = &rgb[(static_cast<size_t>(y) * w + x) * 3];
+    return Rgb(p[0], p[1], p[2]);
+  };
+  int same = 0;
+  const int n = 4000;
+  for (int i = 0; i < n; ++i) {
+    float pdf = 0, lit_pdf = 0;
+    Rgb sampled;
+    const Vec3 d = map.sample(Vec2(u(rng), u(rng)), &pdf, &sampled);
+    const Rgb lit = map.lighting(d, &lit_pdf);
+    const Vec2 uv = EnvironmentMap::direction_to_uv(d);
+    const Rgb in = texel(std::min(w - 1, static_cast<int>(uv.x * w)), std::min(h - 1, static_cast<int>(uv.y * h)));
+    // A direction within float rounding of a texel edge may convert back into the neighbour: allow a few.
+    same += sampled == lit && lit == in && std::abs(pdf - lit_pdf) <= 1e-3f * pdf;
+  }
+  EXPECT_GE(same, n * 99 / 100);
+  for (int y = 1; y < h - 1; ++y)
+    for (int x = 1; x < w - 2; ++x) {
+      const Rgb centre = map.lookup(EnvironmentMap::uv_to_direction(Vec2((x + 0.5f) / w, (y + 0.5f) / h)));
+      const Rgb between = map.lookup(EnvironmentMap::uv_to_direction(Vec2((x + 1.0f) / w, (y + 0.5f) / h)));
+      const Rgb mean = (texel(x, y) + texel(x + 1, y)) * 0.5f;
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(centre[c], texel(x, y)[c], 2e-3f * texel(x, y)[c]) << x << ", " << y;
+        EXPECT_NEAR(between[c], mean[c], 2e-3f * mean[c]) << x << ", " << y;
+      }
+    }
+}
+
+// A map read from a file lands in its texels as stored, with values that are not finite or are negative made 0 and
+// huge ones clamped.
+TEST(EnvironmentMap, LoadsAFileWithBadValuesMadeSafe) {
+  const int w = 8, h = 4;
+  std::vector<float> rgb(static_cast<size_t>(w) * h * 3);
+  for (size_t i = 0; i < rgb.size(); ++i) rgb[i] = 0.25f * static_cast<float>(i % 7);
+  rgb[3 * 9] = std::nanf("");
+  rgb[3 * 10 + 1] = -5;
+  rgb[3 * 11 + 2] = std::numeric_limits<float>::infinity();
+  rgb[3 * 12] = 3e38f;  // finite, but a row of such texels would overflow the sampling sums
+  const auto path = std::filesystem::temp_directory_path() / ("tessera-env-" + std::to_string(::getpid()) + ".exr");
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out && out->open(path.string(), OIIO::ImageSpec(w, h, 3, OIIO::TypeDesc::FLOAT)) &&
+              out->write_image(OIIO::TypeDesc::FLOAT, rgb.data()));
+  out->close();
+  auto map = EnvironmentMap::load(path.string());
+  std::filesystem::remove(path);
+  ASSERT_EQ(map->width(), w);
+  ASSERT_EQ(map->height(), h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      float pdf = 0;
+      const Rgb lit = map->lighting(EnvironmentMap::uv_to_direction(Vec2((x + 0.5f) / w, (y + 0.5f) / h)), &pdf);
+      // Finite densities; in the clamped texel's row the texels after it are lost in its float sum (density 0: never
+      // light-sampled, so paths that reach them by BSDF sampling keep their full weight).
+      EXPECT_TRUE(std::isfinite(pdf));
+      if (y != 1) {
+        EXPECT_GT(pdf, 0) << x << ", " << y;
+      }
+      for (int c = 0; c < 3; ++c) {
+        const float v = rgb[(static_cast<size_t>(y) * w + x) * 3 + c];
+        EXPECT_EQ(lit[c], std::isfinite(v) && v > 0 ? std::min(v, EnvironmentMap::kMaxRadiance) : 0.0f)
+            << x << ", " << y << ", " << c;
+      }
+    }
 }
 
 }  // namespace

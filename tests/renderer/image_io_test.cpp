@@ -125,6 +125,42 @@ TEST(ImageIo, ReadsAGivenNumberOfChannels) {
   }
 }
 
+// A read into the caller's memory asks where once it knows the size, writes the channels asked for at the stride
+// given (grey repeated as above), and leaves the rest of each texel as it was.
+TEST(ImageIo, ReadsIntoTheCallersMemoryAtAStride) {
+  for (int stored : {3, 1}) {
+    SCOPED_TRACE("stored " + std::to_string(stored));
+    std::vector<float> values;
+    for (int t = 0; t < 3 * 2; ++t)
+      for (int c = 0; c < stored; ++c) values.push_back(0.1f * t + 0.01f * c);
+    const auto path = write_channels("s" + std::to_string(stored) + ".exr", 3, 2, stored, values);
+    std::vector<float> memory;
+    int asked_w = 0, asked_h = 0;
+    read_image_into(path.string(), 3, 5, 0, 0, [&](int w, int h) {
+      asked_w = w;
+      asked_h = h;
+      memory.assign(static_cast<size_t>(w) * h * 5, -1.0f);
+      return memory.data();
+    });
+    ASSERT_EQ(asked_w, 3);
+    ASSERT_EQ(asked_h, 2);
+    for (int t = 0; t < 3 * 2; ++t) {
+      for (int c = 0; c < 3; ++c)
+        EXPECT_FLOAT_EQ(memory[t * 5 + c], 0.1f * t + 0.01f * (stored == 1 ? 0 : c)) << "texel " << t << " " << c;
+      EXPECT_EQ(memory[t * 5 + 3], -1.0f);
+      EXPECT_EQ(memory[t * 5 + 4], -1.0f);
+    }
+  }
+  // The limits are checked before memory is asked for.
+  const auto path = write_channels("s.exr", 3, 2, 3, std::vector<float>(3 * 2 * 3, 1.0f));
+  bool asked = false;
+  EXPECT_THROW(read_image_into(path.string(), 3, 4, 5, 0, [&](int, int) {
+    asked = true;
+    return static_cast<float*>(nullptr);
+  }), std::runtime_error);
+  EXPECT_FALSE(asked);
+}
+
 // An image larger than allowed is refused from its header, naming its size.
 TEST(ImageIo, ImagesAboveTheTexelLimitAreRefused) {
   const auto path = write_channels("big.exr", 8, 4, 3, std::vector<float>(8 * 4 * 3, 1.0f));

@@ -195,7 +195,8 @@ TEST(Sampling, Distribution2DPicksCellsByWeight) {
   std::vector<double> cells(w * h, 0), quarters(4, 0);
   for (int i = 0; i < n; ++i) {
     float pdf = 0;
-    const Vec2 p = d.sample(Vec2(u01(rng), u01(rng)), &pdf);
+    const Distribution2D::Cell* cell = nullptr;
+    const Vec2 p = d.sample(Vec2(u01(rng), u01(rng)), &pdf, &cell);
     ASSERT_GE(p.x, 0.0f);
     ASSERT_LT(p.x, 1.0f);
     ASSERT_GE(p.y, 0.0f);
@@ -203,6 +204,8 @@ TEST(Sampling, Distribution2DPicksCellsByWeight) {
     const int col = std::min(w - 1, static_cast<int>(p.x * w)), row = std::min(h - 1, static_cast<int>(p.y * h));
     ASSERT_GT(weights[row * w + col], 0) << "cell " << col << ", " << row;
     ASSERT_FLOAT_EQ(pdf, d.pdf(col, row));
+    ASSERT_EQ(cell, &d.cell(col, row));
+    ASSERT_EQ(cell->value, Rgb(weights[row * w + col]));
     cells[row * w + col] += 1;
     if (col == 7 && row == 5) quarters[(p.x * w - col < 0.5f ? 0 : 1) + (p.y * h - row < 0.5f ? 0 : 2)] += 1;
   }
