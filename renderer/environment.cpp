@@ -42,12 +42,10 @@ void EnvironmentMap::build() {
   // whole. Each row's radiance sums are kept apart and added in row order: the same average whatever the number of
   // threads.
   std::vector<std::array<double, 4>> row_sums(height_);
-  Distribution2D::Cell* cells = distribution_.cells();
-  distribution_.build([&](int y, const Distribution2D::Cell*, float* weights) {
+  distribution_.build([&](int y, Distribution2D::Cell* row, float* weights) {
     // Each texel covers a solid angle proportional to sin(theta) at its centre.
     const float sin_theta = std::sin((y + 0.5f) * kPi / height_);
     double r = 0, g = 0, b = 0;
-    Distribution2D::Cell* row = &cells[static_cast<size_t>(y) * width_];
     for (int x = 0; x < width_; ++x) {
       Rgb& c = row[x].value;
       for (int k = 0; k < 3; ++k) c[k] = std::isfinite(c[k]) && c[k] > 0 ? std::min(c[k], kMaxRadiance) : 0.0f;

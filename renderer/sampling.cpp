@@ -72,7 +72,7 @@ size_t Distribution1D::sample(float u, float* pmf, float* u_remapped) const {
 
 Distribution2D::Distribution2D(const float* weights, int width, int height) : Distribution2D(width, height) {
   for (size_t i = 0; i < cells_.size(); ++i) cells_[i].value = Rgb(weights[i]);
-  build([weights, width](int row, const Cell*, float* out) {
+  build([weights, width](int row, Cell*, float* out) {
     std::copy_n(weights + static_cast<size_t>(row) * width, width, out);
   });
 }
@@ -99,7 +99,7 @@ Distribution2D::Distribution2D(int width, int height)
       guide_(static_cast<size_t>(height) * (slots_ + 1)),
       slots_per_unit_(height) {}
 
-void Distribution2D::build(const std::function<void(int, const Cell*, float*)>& row_weights) {
+void Distribution2D::build(const std::function<void(int, Cell*, float*)>& row_weights) {
   const size_t n = static_cast<size_t>(width_);
   std::vector<float> marginal_weights(height_);
   auto build_rows = [&](size_t first, size_t last) {

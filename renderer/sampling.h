@@ -172,9 +172,9 @@ class Distribution2D {
   // for a size outside 1..kMaxWidth x 1..2^24, before anything is allocated.
   Distribution2D(int width, int height);
   Cell* cells() { return cells_.data(); }
-  // Makes the distribution: row_weights(row, cells, weights) writes the weights of a row's cells (rows are built in
-  // parallel, each call with its own array).
-  void build(const std::function<void(int row, const Cell* cells, float* weights)>& row_weights);
+  // Makes the distribution: row_weights(row, cells, weights) writes the weights of a row's cells, and may adjust
+  // their values first (rows are built in parallel, each call with its own array).
+  void build(const std::function<void(int row, Cell* cells, float* weights)>& row_weights);
 
   // A point of the unit square with density *pdf (over the unit square); u in [0,1)^2. `cell`, when given, receives
   // the cell the point is in.
