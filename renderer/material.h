@@ -54,6 +54,10 @@ class Material {
   // has no normal map): hits then get a frame built from the normal alone, without deriving a tangent from the
   // texture coordinates. Models set it when they know it; false is always correct.
   bool isotropic = false;
+
+  // False when none of the material's parameters is a texture (MaterialRegistry::create sets it): hits on it skip
+  // working out the texture footprint. True is always correct.
+  bool reads_textures = true;
 };
 
 // Where texture files named by a material may come from.

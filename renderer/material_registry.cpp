@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <initializer_list>
@@ -34,6 +35,12 @@ std::unique_ptr<Material> MaterialRegistry::create(const nlohmann::json& params,
   if (it == factories_.end())
     throw SceneError(pointer + "/type", "unknown material type \"" + type_it->get<std::string>() + "\"");
   std::unique_ptr<Material> material = it->second(params, pointer, ctx);
+  // Textures (and nested materials) are objects; numbers, colours and names are not.
+  material->reads_textures = std::any_of(params.begin(), params.end(), [](const nlohmann::json& v) {
+    return v.is_object() || (v.is_array() && std::any_of(v.begin(), v.end(), [](const nlohmann::json& e) {
+                                return e.is_object() || e.is_array();
+                              }));
+  });
   if (params.contains("emission")) {
     material->emission = params::rgb_param(params, "emission", pointer, Rgb(0), 0.0f, 1e9f, ctx);
   }

@@ -6,6 +6,10 @@
 #include <cstdint>
 #include <limits>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace tessera {
 
 inline constexpr float kPi = 3.14159265358979323846f;
@@ -143,6 +147,21 @@ constexpr T clamp(T v, T lo, T hi) {
   return v < lo ? lo : (v > hi ? hi : v);
 }
 constexpr float sqr(float x) { return x * x; }
+// a if `mask` else b, without a branch: for conditions that are a coin toss per sample, where a mispredicted branch
+// costs more than computing both sides (compilers turn a plain ?: on floats back into a branch). `mask` comes from
+// less_mask / greater_mask.
+#if defined(__SSE2__)
+using FloatMask = __m128;
+inline FloatMask greater_mask(float a, float b) { return _mm_cmpgt_ss(_mm_set_ss(a), _mm_set_ss(b)); }
+inline float select(FloatMask mask, float a, float b) {
+  return _mm_cvtss_f32(_mm_or_ps(_mm_and_ps(mask, _mm_set_ss(a)), _mm_andnot_ps(mask, _mm_set_ss(b))));
+}
+#else
+using FloatMask = bool;
+inline FloatMask greater_mask(float a, float b) { return a > b; }
+inline float select(FloatMask mask, float a, float b) { return mask ? a : b; }
+#endif
+
 inline float safe_sqrt(float x) { return std::sqrt(std::max(0.0f, x)); }
 
 }  // namespace tessera

@@ -21,18 +21,17 @@ inline Vec2 cos_sin_quarter_pi(float x) {
 }
 
 // Uniform on the unit disk, by Shirley and Chiu's concentric map (area-preserving, low distortion). Inline, with
-// the next two: they run at every path vertex.
+// the next two: they run at every path vertex. Written with selects, not branches: which of |x| and |y| is larger is
+// a coin toss per sample, and a mispredicted branch cost more than the map.
 inline Vec2 sample_concentric_disk(Vec2 u) {
-  float ox = 2 * u.x - 1, oy = 2 * u.y - 1;
-  if (ox == 0 && oy == 0) return {0, 0};
-  if (std::abs(ox) > std::abs(oy)) {
-    // theta = pi/4 * oy/ox, in [-pi/4, pi/4].
-    const Vec2 cs = cos_sin_quarter_pi((kPi / 4) * (oy / ox));
-    return {ox * cs.x, ox * cs.y};
-  }
-  // theta = pi/2 - a with a = pi/4 * ox/oy in [-pi/4, pi/4]: cos theta = sin a, sin theta = cos a.
-  const Vec2 cs = cos_sin_quarter_pi((kPi / 4) * (ox / oy));
-  return {oy * cs.y, oy * cs.x};
+  const float ox = 2 * u.x - 1, oy = 2 * u.y - 1;
+  // The major axis' coordinate is the radius (signed); theta = pi/4 * minor/major in [-pi/4, pi/4] from it. At the
+  // centre both are 0 and the angle is taken as 0.
+  const FloatMask x_major = greater_mask(std::abs(ox), std::abs(oy));
+  const float major = select(x_major, ox, oy), minor = select(x_major, oy, ox);
+  const Vec2 cs = cos_sin_quarter_pi((kPi / 4) * (minor / (major != 0 ? major : 1.0f)));
+  // About the y axis the angle is pi/2 - theta: cos and sin swap.
+  return {major * select(x_major, cs.x, cs.y), major * select(x_major, cs.y, cs.x)};
 }
 // Cosine-weighted on the hemisphere z > 0: pdf = cos(theta) / pi. Malley's method: the uniform disk projected up.
 inline Vec3 sample_cosine_hemisphere(Vec2 u) {
@@ -52,14 +51,11 @@ inline float uniform_cone_pdf(float cos_theta_max) { return 1.0f / (2 * kPi * (1
 // Uniform on a triangle: barycentric coordinates (b1, b2) of the second and third vertex (Heitz, "A Low-Distortion
 // Map Between Triangle and Square", 2019).
 inline Vec2 sample_uniform_triangle(Vec2 u) {
-  float b0, b1;
-  if (u.x < u.y) {
-    b0 = u.x / 2;
-    b1 = u.y - b0;
-  } else {
-    b1 = u.y / 2;
-    b0 = u.x - b1;
-  }
+  // The smaller coordinate is halved and the other one shifted by it; selects, not a branch (a coin toss per sample).
+  const FloatMask x_smaller = greater_mask(u.y, u.x);
+  const float half = select(x_smaller, u.x, u.y) / 2;
+  const float b0 = select(x_smaller, half, u.x - half);
+  const float b1 = select(x_smaller, u.y - half, half);
   return {b1, 1 - b0 - b1};
 }
 
@@ -101,16 +97,17 @@ struct CdfInversion {
       first = 1 + guide[k];
       last = 2 + guide[k + 1];
     }
-    for (size_t count = last - first; count > 0;) {
-      const size_t step = count / 2;
-      if (!(target < cdf(first + step))) {
-        first += step + 1;
-        count -= step + 1;
-      } else {
-        count = step;
-      }
+    // Halving with a select instead of a branch (Khuong and Morin's layout-free form): the number of steps depends
+    // only on the range's length, and the side taken, a coin toss, costs no misprediction. `base` stays the last
+    // probed entry at or below the target, or the range's start.
+    size_t base = first;
+    for (size_t len = last - first; len > 1;) {
+      const size_t half = len / 2;
+      base = cdf(base + half) <= target ? base + half : base;
+      len -= half;
     }
-    size_t i = std::min(first - 1, n - 1);
+    if (cdf(base) <= target) ++base;
+    size_t i = std::min(base - 1, n - 1);
     while (i + 1 < n && !(cdf(i + 1) > cdf(i))) ++i;
     return i;
   }

@@ -85,9 +85,9 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     sp.uv = Vec2(0.5f + phi * kInv2Pi, fast_atan2(std::sqrt(n.x * n.x + n.z * n.z), n.y) * kInvPi);
     sp.uv1 = sp.uv;
     // u spans 2 pi r and v spans pi r of length.
-    uv_per_world = 1 / (std::sqrt(2.0f) * kPi * s.radius);
-    sp.vertex_color = Rgb(1);
     si->material = materials[s.material].get();
+    if (si->material->reads_textures) uv_per_world = 1 / (std::sqrt(2.0f) * kPi * s.radius);
+    sp.vertex_color = Rgb(1);
     si->light = si->material->emissive() ? s.light : kNoLight;
   } else {
     const Mesh& mesh = meshes[hit.object];
@@ -105,7 +105,7 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     Vec3 e1 = p1 - p0, e2 = p2 - p0;
     Vec3 ng = cross(e1, e2);
     float ng_len = length(ng);
-    ng = ng_len > 0 ? ng / ng_len : Vec3(0, 0, 1);
+    ng = ng_len > 0 ? ng * (1 / ng_len) : Vec3(0, 0, 1);
     if (inst && inst->mirrored) ng = -ng;  // glTF: a mirroring transform makes the clockwise face the front
     sp.ng = ng;
     Vec3 ns = ng;
@@ -128,9 +128,9 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     // The uv edges: their cross product is twice the triangle's uv area (for the footprint and the tangent).
     const Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
     const float uv_det = d1.x * d2.y - d1.y * d2.x;
-    if (cone && ng_len > 0) uv_per_world = std::sqrt(std::abs(uv_det) / ng_len);
-    sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
     const Material* material = materials[mesh.material].get();
+    if (cone && ng_len > 0 && material->reads_textures) uv_per_world = std::sqrt(std::abs(uv_det) / ng_len);
+    sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
     // Tangent: from the mesh when given, else along dp/du (with the handedness of dp/dv); none is needed for an
     // isotropic material without a normal map.
     const bool needs_tangent = !material->isotropic || material->normal_map;
