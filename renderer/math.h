@@ -149,7 +149,7 @@ constexpr T clamp(T v, T lo, T hi) {
 constexpr float sqr(float x) { return x * x; }
 // a if `mask` else b, without a branch: for conditions that are a coin toss per sample, where a mispredicted branch
 // costs more than computing both sides (compilers turn a plain ?: on floats back into a branch). `mask` comes from
-// less_mask / greater_mask.
+// greater_mask.
 #if defined(__SSE2__)
 using FloatMask = __m128;
 inline FloatMask greater_mask(float a, float b) { return _mm_cmpgt_ss(_mm_set_ss(a), _mm_set_ss(b)); }
