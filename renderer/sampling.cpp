@@ -115,8 +115,8 @@ void Distribution2D::build(const std::function<void(int, Cell*, float*)>& row_we
       // The row's weight in the marginal: its stored total, or 0 for an empty row (whose cells then have equal
       // weights, should it ever be sampled).
       marginal_weights[y] = total > 0 ? row_total : 0.0f;
-      CdfInversion::build_guide([c, n, row_total](size_t i) -> double { return i < n ? c[i].cdf : row_total; }, n,
-                                slots_, &guide_[y * (slots_ + 1)], &slots_per_unit_[y]);
+      CdfInversion::build_guide(row_cdf(static_cast<int>(y)), n, slots_, &guide_[y * (slots_ + 1)],
+                                &slots_per_unit_[y]);
     }
   };
   // Rows are independent: built in parallel, about 64k cells per item (a 4k environment map has 2048 rows of 4096);
@@ -131,17 +131,14 @@ void Distribution2D::build(const std::function<void(int, Cell*, float*)>& row_we
 Vec2 Distribution2D::sample(Vec2 u, float* pdf, const Cell** cell) const {
   float ur = 0;
   const int row = static_cast<int>(marginal_.sample(u.y, nullptr, &ur));
-  const Cell* c = row_cells(row);
+  const auto cdf = row_cdf(row);
   const size_t n = static_cast<size_t>(width_);
-  const float row_total = row_total_[row];
-  auto cdf = [c, n, row_total](size_t i) -> double { return i < n ? c[i].cdf : row_total; };
-  const double target = static_cast<double>(u.x) * row_total;
+  const double target = static_cast<double>(u.x) * cdf(n);
   const size_t col = CdfInversion::find(cdf, n, slots_, &guide_[static_cast<size_t>(row) * (slots_ + 1)],
                                         slots_per_unit_[row], target);
-  const double lo = c[col].cdf, hi = cdf(col + 1);
-  *pdf = marginal_.pmf(row) * static_cast<float>((hi - lo) / row_total) * area_;
-  if (cell) *cell = &c[col];
-  return {(col + CdfInversion::remap_within(lo, hi, target)) / width_, (row + ur) / height_};
+  *pdf = this->pdf(static_cast<int>(col), row);
+  if (cell) *cell = &row_cells(row)[col];
+  return {(col + CdfInversion::remap_within(cdf(col), cdf(col + 1), target)) / width_, (row + ur) / height_};
 }
 
 }  // namespace tessera

@@ -164,6 +164,18 @@ class Distribution2D {
   };
   // Widest row it takes: its guide tables are 16-bit.
   static constexpr int kMaxWidth = 65535;
+
+ private:
+  // (Ahead of the members that use it: a deduced return type must be seen first.)
+  const Cell* row_cells(int row) const { return &cells_[static_cast<size_t>(row) * width_]; }
+  // A row's cumulative sum as CdfInversion reads it: cdf(i) for i in 0..width, cdf(width) the row's total.
+  auto row_cdf(int row) const {
+    return [c = row_cells(row), n = static_cast<size_t>(width_), total = row_total_[row]](size_t i) -> double {
+      return i < n ? c[i].cdf : total;
+    };
+  }
+
+ public:
   Distribution2D() = default;
   // A grid whose cells hold weights[i] both as their weight and as their value.
   Distribution2D(const float* weights, int width, int height);
@@ -180,16 +192,14 @@ class Distribution2D {
   Vec2 sample(Vec2 u, float* pdf, const Cell** cell = nullptr) const;
   // The density at cell (col, row), the one sample() reports for points in it.
   float pdf(int col, int row) const {
-    const Cell* c = row_cells(row);
-    const double hi = col + 1 < width_ ? c[col + 1].cdf : row_total_[row];
-    return marginal_.pmf(row) * static_cast<float>((hi - c[col].cdf) / row_total_[row]) * area_;
+    const auto cdf = row_cdf(row);
+    return marginal_.pmf(row) * static_cast<float>((cdf(col + 1) - cdf(col)) / cdf(width_)) * area_;
   }
   const Cell& cell(int col, int row) const { return row_cells(row)[col]; }
   int width() const { return width_; }
   int height() const { return height_; }
 
  private:
-  const Cell* row_cells(int row) const { return &cells_[static_cast<size_t>(row) * width_]; }
   int width_ = 0, height_ = 0;
   float area_ = 0;  // width * height: a cell's probability times this is its density
   std::vector<Cell> cells_;
