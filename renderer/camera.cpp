@@ -18,13 +18,15 @@ Camera::Camera(const CameraDesc& desc, int width, int height) : desc_(desc), wid
     half_h_ = desc.ortho_height * 0.5f;
   }
   half_w_ = half_h_ * aspect;
+  x_scale_ = 2 * half_w_ / static_cast<float>(width);
+  y_scale_ = 2 * half_h_ / static_cast<float>(height);
   focus_ = desc.focus_distance > 0 ? desc.focus_distance : length(desc.to - desc.from);
 }
 
 Ray Camera::generate_ray(Vec2 film, Vec2 u_lens) const {
-  // Screen coordinates in [-1,1], y up.
-  float sx = (2 * film.x / static_cast<float>(width_) - 1) * half_w_;
-  float sy = (1 - 2 * film.y / static_cast<float>(height_)) * half_h_;
+  // Screen coordinates in [-half_w, half_w] x [-half_h, half_h], y up: a multiply-add each (no division per ray).
+  const float sx = film.x * x_scale_ - half_w_;
+  const float sy = half_h_ - film.y * y_scale_;
   Ray ray;
   if (desc_.projection == CameraDesc::Projection::kOrthographic) {
     ray.origin = desc_.from + frame_.s * sx + frame_.t * sy;

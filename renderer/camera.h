@@ -41,6 +41,7 @@ class Camera {
   Frame frame_;       // s = right, t = up, n = forward
   float half_h_ = 1;  // tan(fov/2) or ortho half height
   float half_w_ = 1;
+  float x_scale_ = 1, y_scale_ = 1;  // screen units per pixel: 2 half_w / width, 2 half_h / height
   float focus_ = 1;
 };
 

@@ -48,8 +48,9 @@ inline uint32_t laine_karras_permutation(uint32_t x, uint32_t seed) {
 
 // Dimension 1 of the Sobol sequence (primitive polynomial x + 1) is a linear map over GF(2) of the index bits:
 // XOR the direction numbers of its set bits. Tabulated per byte, that is four lookups. Bit reversal is linear over
-// GF(2) too, so the tables hold the reversed direction numbers: the Owen scramble, which starts by reversing the
-// value, reads those directly.
+// GF(2) too, so the tables are indexed by the bytes of the reversed index (which the shuffle makes) and hold the
+// reversed direction numbers (which the Owen scramble, starting by reversing the value, reads): no reversal on
+// either side.
 constexpr uint32_t reverse_bits_constexpr(uint32_t x) {
   uint32_t r = 0;
   for (int i = 0; i < 32; ++i) r |= ((x >> i) & 1u) << (31 - i);
@@ -65,8 +66,9 @@ struct SobolDim1ReversedTables {
     for (int b = 0; b < 4; ++b)
       for (int x = 0; x < 256; ++x) {
         uint32_t r = 0;
+        // Byte b of the reversed index holds index bits 31 - 8b - k for its bits k.
         for (int k = 0; k < 8; ++k)
-          if (x & (1 << k)) r ^= v[8 * b + k];
+          if (x & (1 << k)) r ^= v[31 - (8 * b + k)];
         t[b][x] = reverse_bits_constexpr(r);
       }
   }
@@ -75,24 +77,35 @@ struct SobolDim1ReversedTables {
 // Built by the compiler: no guard on every lookup.
 inline constexpr SobolDim1ReversedTables kSobolDim1ReversedTables{};
 
-// reverse_bits(Sobol dimension 1 of index).
-inline uint32_t sobol_dim1_reversed(uint32_t index) {
+// reverse_bits(Sobol dimension 1 of index), from reverse_bits(index).
+inline uint32_t sobol_dim1_reversed(uint32_t reversed_index) {
   const auto& t = kSobolDim1ReversedTables.t;
-  return t[0][index & 0xff] ^ t[1][(index >> 8) & 0xff] ^ t[2][(index >> 16) & 0xff] ^ t[3][index >> 24];
+  return t[0][reversed_index & 0xff] ^ t[1][(reversed_index >> 8) & 0xff] ^ t[2][(reversed_index >> 16) & 0xff] ^
+         t[3][reversed_index >> 24];
 }
 
 }  // namespace sobol_detail
 
 class PixelSampler {
  public:
+  // What a render's seed contributes to every pixel's numbers: computed once per render rather than per sample.
+  struct SeedKeys {
+    explicit SeedKeys(uint64_t seed)
+        : independent(mix64(seed ^ 0x9e3779b97f4a7c15ULL)), pixel(mix64(seed ^ 0x5851f42d4c957f2dULL)) {}
+    uint64_t independent, pixel;
+  };
+
   PixelSampler() = default;  // a placeholder, to be assigned before use
   PixelSampler(uint64_t seed, uint32_t pixel_index, uint64_t sample_index,
                SamplerKind kind = SamplerKind::kIndependent)
+      : PixelSampler(SeedKeys(seed), pixel_index, sample_index, kind) {}
+  PixelSampler(const SeedKeys& keys, uint32_t pixel_index, uint64_t sample_index,
+               SamplerKind kind = SamplerKind::kIndependent)
       // The independent sampler's key (the Sobol sampler does not read it).
       : key_(kind == SamplerKind::kIndependent
-                 ? mix64(mix64(seed ^ 0x9e3779b97f4a7c15ULL) + pixel_index) ^ mix64(sample_index + 0x632be59bd9b4e019ULL)
+                 ? mix64(keys.independent + pixel_index) ^ mix64(sample_index + 0x632be59bd9b4e019ULL)
                  : 0),
-        pixel_key_(mix64(mix64(seed ^ 0x5851f42d4c957f2dULL) + pixel_index)),
+        pixel_key_(mix64(keys.pixel + pixel_index)),
         reversed_index_(sobol_detail::reverse_bits(static_cast<uint32_t>(sample_index))),
         kind_(kind) {}
 
@@ -111,11 +124,12 @@ class PixelSampler {
       // Each dimension pair of each pixel gets its own shuffle of the sample order and its own scramble, so pairs
       // are decorrelated from each other and pixels from their neighbours.
       const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * ++dimension_);
-      const uint32_t index = shuffled_index(h);
-      const uint32_t x = sobol_dim0(index, h);
-      // Owen-scrambled Sobol dimension 1: reverse(LK(reverse(dim1(index)))), the inner reversal from the tables.
+      const uint32_t reversed = shuffled_reversed_index(h);
+      const uint32_t x = sobol_dim0(sobol_detail::reverse_bits(reversed), h);
+      // Owen-scrambled Sobol dimension 1: reverse(LK(reverse(dim1(index)))), the inner reversal from the tables,
+      // which read the reversed index (one reversal fewer on the way to y).
       const uint32_t y = sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(
-          sobol_detail::sobol_dim1_reversed(index), static_cast<uint32_t>(mix64(h) >> 32)));
+          sobol_detail::sobol_dim1_reversed(reversed), static_cast<uint32_t>(mix64(h) >> 32)));
       return {static_cast<float>(x >> 8) * 0x1p-24f, static_cast<float>(y >> 8) * 0x1p-24f};
     }
     float a = get1d();
@@ -130,8 +144,10 @@ class PixelSampler {
  private:
   // The sample index shuffled by the dimension pair's hash h, by the Owen scramble reverse(LK(reverse(i))), with
   // reverse(i) computed once per sample.
-  uint32_t shuffled_index(uint64_t h) const {
-    return sobol_detail::reverse_bits(sobol_detail::laine_karras_permutation(reversed_index_, static_cast<uint32_t>(h)));
+  uint32_t shuffled_index(uint64_t h) const { return sobol_detail::reverse_bits(shuffled_reversed_index(h)); }
+  // The same, bit-reversed: LK(reverse(i)).
+  uint32_t shuffled_reversed_index(uint64_t h) const {
+    return sobol_detail::laine_karras_permutation(reversed_index_, static_cast<uint32_t>(h));
   }
   // Dimension 0 (van der Corput, reverse(index)) scrambled: reverse(LK(reverse(reverse(index)))), the inner
   // reversals cancelling.

@@ -70,6 +70,7 @@ void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, 
   // they are coherent, and a packet traces them several times faster than one by one. Each pixel still gets its
   // samples in order, and its paths are those it would trace alone (up to Embree's rounding of sphere hits).
   constexpr int kGroup = Accel::kPacketSize;
+  const PixelSampler::SeedKeys seed_keys(settings_.seed);
   PixelSampler samplers[kGroup];
   Ray rays[kGroup];
   RayHit hits[kGroup];
@@ -82,7 +83,7 @@ void RenderSession::render_tile(size_t tile, int worker, uint32_t first_sample, 
       for (uint32_t s = first_sample; s < first_sample + sample_count; ++s) {
         for (int i = 0; i < n; ++i) {
           PixelSampler& sampler = samplers[i];
-          sampler = PixelSampler(settings_.seed, first_pixel + static_cast<uint32_t>(i), s, settings_.sampler);
+          sampler = PixelSampler(seed_keys, first_pixel + static_cast<uint32_t>(i), s, settings_.sampler);
           Vec2 jitter = sampler.get2d();
           Vec2 lens;
           if (uses_lens) lens = sampler.get2d();

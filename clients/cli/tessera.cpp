@@ -1,5 +1,5 @@
 // tessera: the command-line tool.
-//   tessera render JOB.json -o out.png [-o out.exr] [-o part.tfilm] [--samples START:COUNT] [--region X,Y,W,H] ...
+//   tessera render JOB.json|SCENE.glb -o out.png [-o out.exr] [-o part.tfilm] [--samples START:COUNT] [--region X,Y,W,H] ...
 //   tessera merge part1.tfilm part2.tfilm ... -o out.exr|out.png|out.tfilm
 //   tessera submit|watch|fetch|list|cancel ...   against a tesserad (--url, --token)
 //
@@ -9,12 +9,14 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <optional>
@@ -49,7 +51,8 @@ const char* kUsage =
     "usage: tessera COMMAND [options]\n"
     "\n"
     "local (no daemon):\n"
-    "  render JOB.json -o OUT [-o OUT...]   render a job; OUT is .png, .exr or .tfilm (a partial film for merge)\n"
+    "  render JOB.json|SCENE.glb|SCENE.gltf -o OUT [-o OUT...]   render a job or a glTF asset; OUT is .png, .exr\n"
+    "                                       or .tfilm (a partial film for merge)\n"
     "  merge PART.tfilm... -o OUT           combine sample ranges / regions into one image (bit-exact)\n"
     "against a daemon (--url URL or TESSERA_URL, default http://127.0.0.1:8080; --token T or TESSERA_TOKEN):\n"
     "  submit JOB.json|SCENE.glb|SCENE.gltf [FILE...]   submit a job (multipart with files); prints its id\n"
@@ -62,9 +65,10 @@ const char* kUsage =
     "exit codes: 0 done, 1 fatal (bad input, refused or failed job), 2 usage, 75 transient failure (retry)\n";
 
 const char* kRenderUsage =
-    "usage: tessera render JOB.json -o OUT.png|OUT.exr|OUT.tfilm [-o ...] [options]\n"
+    "usage: tessera render JOB.json|SCENE.glb|SCENE.gltf -o OUT.png|OUT.exr|OUT.tfilm [-o ...] [options]\n"
     "\n"
-    "Renders a job document (or a bare scene document) locally, without a daemon.\n"
+    "Renders a job document (or a bare scene document, or a glTF asset with its own camera and lights) locally,\n"
+    "without a daemon.\n"
     "\n"
     "options:\n"
     "  -o, --output FILE      write the image; the extension picks the format: .png, .exr, or .tfilm (the film's\n"
@@ -405,10 +409,19 @@ int cmd_render(int argc, char** argv) {
   std::ifstream in(input);
   if (!in) fatal("cannot open " + input + ": " + std::strerror(errno));
   json doc;
-  try {
-    doc = json::parse(in);
-  } catch (const json::parse_error& e) {
-    fatal(input + " is not valid JSON: " + e.what());
+  std::string extension = std::filesystem::path(input).extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (extension == ".glb" || extension == ".gltf") {
+    // A glTF asset renders as the scene of a job that names it (its camera, lights and materials; the files it
+    // refers to are read from beside it).
+    doc = json{{"kind", "scene"}, {"scene", {{"gltf", std::filesystem::path(input).filename().string()}}}};
+  } else {
+    try {
+      doc = json::parse(in);
+    } catch (const json::parse_error& e) {
+      fatal(input + " is not valid JSON: " + e.what());
+    }
   }
   // A bare scene document is wrapped into a job.
   if (doc.is_object() && !doc.contains("kind") && doc.contains("objects")) doc = json{{"kind", "scene"}, {"scene", doc}};

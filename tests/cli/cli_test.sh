@@ -65,6 +65,36 @@ echo '{"objects": [{"shape": "sphere", "center": [0, 0, 0], "radius": 1, "materi
   --width 16 --height 16 --spp 1 --threads 2 -q -o ../rel.png)
 png_signature rel.png && ok "the relative job rendered a PNG" || not_ok "no PNG from the relative job"
 
+# --- a glTF asset renders directly, as the job that names it would ---------------------------------------------------
+python3 - <<'PY'
+import base64, json, struct
+pos = struct.pack("<9f", -1, -1, 0, 1, -1, 0, 0, 1, 0)
+gltf = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
+        "nodes": [{"mesh": 0}, {"camera": 0, "translation": [0, 0, 3]}],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 0}]}],
+        "materials": [{"emissiveFactor": [1, 0.5, 0.25]}],
+        "buffers": [{"byteLength": len(pos), "uri": "data:application/octet-stream;base64," + base64.b64encode(pos).decode()}],
+        "bufferViews": [{"buffer": 0, "byteLength": len(pos)}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                       "min": [-1, -1, 0], "max": [1, 1, 0]}]}
+json.dump(gltf, open("assets/tri.gltf", "w"))
+json.dump({"kind": "scene", "scene": {"gltf": "tri.gltf"}}, open("assets/tri-job.json", "w"))
+PY
+expect 0 "tessera render of a .gltf" "$TESSERA" render assets/tri.gltf --width 16 --height 16 --spp 2 --threads 2 -q -o tri.exr
+expect 0 "tessera render of the job naming it" "$TESSERA" render assets/tri-job.json --width 16 --height 16 --spp 2 \
+  --threads 2 -q -o tri-job.exr
+if same_pixels tri.exr tri-job.exr; then ok "the asset rendered as its job does"; else not_ok "the asset and its job differ"; fi
+# The centre pixel sees the emissive triangle through the asset's camera: its emission (1, 0.5, 0.25) plus the grey
+# default sky reflected by its white base colour, so the channels differ by the emission's differences.
+centre=$(oiiotool tri.exr --cut 1x1+8+8 --printstats 2>/dev/null | awk '/Stats Avg/ {print $3, $4, $5}')
+if awk -v c="$centre" 'BEGIN { split(c, v, " "); d1 = v[1] - v[2] - 0.5; d2 = v[2] - v[3] - 0.25;
+                               exit !(v[1] >= 1 && d1 * d1 < 1e-6 && d2 * d2 < 1e-6) }'; then
+  ok "the asset rendered its own camera and emissive triangle"
+else
+  not_ok "the centre pixel of the asset is '$centre', not its emission (1, 0.5, 0.25) over a grey reflection"
+fi
+
 # --- refused merges and bad input: fatal (1) ---------------------------------------------------------------------
 expect 1 "overlapping ranges are refused" "$TESSERA" merge a.tfilm all.tfilm -o x.exr
 grep -q "overlapping" "$tmp/err" && ok "the refusal says the parts overlap" || not_ok "no overlap message"
