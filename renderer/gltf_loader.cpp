@@ -326,18 +326,20 @@ std::string decode_image(const std::vector<unsigned char>& bytes, size_t index, 
   out->width = spec.width;
   out->height = spec.height;
   out->channels = 4;
-  out->data.assign(texels * 4, 255);  // opaque where the image has no alpha
+  out->data.resize(texels * 4);  // written whole below (not zeroed first)
   bool ok;
   if (nch >= 3) {
     ok = in->read_image(0, 0, 0, std::min(nch, 4), OIIO::TypeDesc::UINT8, out->data.data(), 4, 4 * w);
+    if (nch == 3)
+      for (size_t i = 0; i < texels; ++i) out->data[i * 4 + 3] = 255;  // opaque where the image has no alpha
   } else {
     // Grey, or grey and alpha: read, then spread the grey over red, green and blue.
-    std::vector<unsigned char> grey(texels * nch);
+    PixelBuffer<unsigned char> grey(texels * nch);
     ok = in->read_image(0, 0, 0, nch, OIIO::TypeDesc::UINT8, grey.data());
     for (size_t i = 0; ok && i < texels; ++i) {
       unsigned char* dst = &out->data[i * 4];
       dst[0] = dst[1] = dst[2] = grey[i * nch];
-      if (nch == 2) dst[3] = grey[i * 2 + 1];
+      dst[3] = nch == 2 ? grey[i * 2 + 1] : 255;  // opaque where the image has no alpha
     }
   }
   if (!ok) return what + " cannot be decoded: " + in->geterror();

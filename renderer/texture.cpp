@@ -24,16 +24,16 @@ float srgb_to_linear(float v) {
 // texture takes 16 MB, not 64 MB as floats), and as linear floats otherwise (EXR, HDR, 16-bit).
 struct Image {
   int width = 0, height = 0, channels = 0;
-  std::vector<float> pixels;   // linear, row-major from the top row (float sources)
-  std::vector<uint8_t> bytes;  // 8-bit sources, row-major from the top row
+  PixelBuffer<float> pixels;   // linear, row-major from the top row (float sources)
+  PixelBuffer<uint8_t> bytes;  // 8-bit sources, row-major from the top row
   std::shared_ptr<const ImagePixels> shared;  // or 8-bit pixels owned elsewhere (embedded images), not copied
   bool srgb = false;           // bytes of the colour channels (not alpha) are sRGB-encoded
   // Mip levels 1, 2, ... (level 0 is the image itself), each half the size of the one before (rounded up) down to
   // 1x1, averaged in linear values and stored as the image is (8-bit sRGB-encoded bytes, or floats).
   struct Level {
     int width = 0, height = 0;
-    std::vector<uint8_t> bytes;
-    std::vector<float> pixels;
+    PixelBuffer<uint8_t> bytes;
+    PixelBuffer<float> pixels;
   };
   std::vector<Level> mips;
   std::array<float, 4> mean{};  // of level 0's linear values, per channel (the first four)
@@ -114,7 +114,7 @@ void build_mips(Image* img, const uint8_t* bytes, const float* floats) {
     level0_row(0, row.data());
     add_row(row.data(), 1, &total);
   }
-  std::vector<float> prev, next;
+  PixelBuffer<float> prev, next;
   while (w > 1 || h > 1) {
     const int nw = (w + 1) / 2, nh = (h + 1) / 2;
     const bool from_level0 = prev.empty();
