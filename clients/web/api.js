@@ -4,8 +4,9 @@
 const TOKEN_KEY = "tessera.token";
 
 export class ApiError extends Error {
-  // status: the HTTP status (0 when the server could not be reached); problem: the problem+json body, if any.
-  constructor(status, problem, fallback) {
+  // status: the HTTP status (0 when the server could not be reached); problem: the problem+json body, if any;
+  // retryAfterMs: how long the server asked to wait before trying again (Retry-After of a 429 or 503), or null.
+  constructor(status, problem, fallback, retryAfterMs = null) {
     const title = problem?.title || fallback || (status ? `HTTP ${status}` : "Network error");
     const detail = problem?.detail || "";
     super(detail ? `${title}: ${detail}` : title);
@@ -14,7 +15,22 @@ export class ApiError extends Error {
     this.detail = detail;
     this.pointer = problem?.pointer ?? null;
     this.problem = problem || null;
+    this.retryAfterMs = retryAfterMs;
   }
+}
+
+// A Retry-After header (RFC 9110 10.2.3: seconds, or an HTTP date) in milliseconds from now, at most ten minutes;
+// null when absent or unreadable.
+export function retryAfterMs(value, now = Date.now()) {
+  if (value == null || value === "") return null;
+  let ms;
+  if (/^\s*\d+\s*$/.test(value)) ms = Number(value) * 1000;
+  else {
+    const at = Date.parse(value);
+    if (Number.isNaN(at)) return null;
+    ms = at - now;
+  }
+  return Math.min(Math.max(ms, 0), 600000);
 }
 
 export function getToken() {
@@ -89,7 +105,10 @@ export async function request(method, path, { body, json, headers: extra, signal
   } else {
     setConnection("online");
   }
-  if (!res.ok) throw new ApiError(res.status, await problemOf(res));
+  if (!res.ok) {
+    const wait = res.status === 429 || res.status === 503 ? retryAfterMs(res.headers.get("Retry-After")) : null;
+    throw new ApiError(res.status, await problemOf(res), undefined, wait);
+  }
   return res;
 }
 

@@ -70,6 +70,7 @@ function showError(err, context) {
   if (err instanceof ApiError) {
     title.textContent = (context ? `${context}: ` : "") + err.title + (err.status ? ` (${err.status})` : "");
     detail.textContent = err.detail + (err.pointer ? ` — at ${err.pointer}` : "");
+    if (err.retryAfterMs) detail.textContent += ` (the server asks to retry in ${Math.ceil(err.retryAfterMs / 1000)} s)`;
     if (err.status === 401) showTokenForm(true);
   } else {
     title.textContent = context || "Error";
@@ -452,8 +453,9 @@ function renderQueue() {
 
 let queueTimer = null;
 let queueBusy = false;
+// Refreshes the job list; returns how long the server asked to wait before the next refresh (0 if it did not).
 async function refreshQueue() {
-  if (queueBusy) return;
+  if (queueBusy) return 0;
   queueBusy = true;
   try {
     const list = await api.listJobs();
@@ -462,17 +464,20 @@ async function refreshQueue() {
     const sel = jobs.find((j) => j.id === selectedId);
     if (sel && !watcher.live) showJob(sel);
   } catch (e) {
-    // The connection indicator shows it; a toast per failed poll would drown the page.
+    // The connection indicator shows it; a toast per failed poll would drown the page. An overloaded server's
+    // Retry-After is honoured: polling harder would only add to the load.
+    return e instanceof ApiError && e.retryAfterMs ? e.retryAfterMs : 0;
   } finally {
     queueBusy = false;
   }
+  return 0;
 }
-function scheduleQueue() {
+function scheduleQueue(delay = QUEUE_POLL_MS) {
   clearTimeout(queueTimer);
   queueTimer = setTimeout(async () => {
-    await refreshQueue();
-    scheduleQueue();
-  }, QUEUE_POLL_MS);
+    const wait = await refreshQueue();
+    scheduleQueue(Math.max(QUEUE_POLL_MS, wait));
+  }, delay);
 }
 
 async function changePriority(id, input) {
@@ -615,6 +620,7 @@ class JobWatcher {
     const tick = async () => {
       if (this.id !== id) return;
       let job = null;
+      let wait = 0;
       try {
         job = await api.getJob(id);
       } catch (e) {
@@ -623,6 +629,7 @@ class JobWatcher {
           select(null);
           return;
         }
+        if (e instanceof ApiError && e.retryAfterMs) wait = e.retryAfterMs;
       }
       if (this.id !== id) return;
       if (job) {
@@ -633,7 +640,7 @@ class JobWatcher {
           return;
         }
       }
-      this.timer = setTimeout(tick, JOB_POLL_MS);
+      this.timer = setTimeout(tick, Math.max(JOB_POLL_MS, wait));
     };
     tick();
   }
@@ -828,4 +835,4 @@ document.addEventListener("visibilitychange", () => {
   if (!document.hidden) refreshQueue();
 });
 loadMaterials();
-refreshQueue().then(scheduleQueue);
+refreshQueue().then((wait) => scheduleQueue(Math.max(QUEUE_POLL_MS, wait)));

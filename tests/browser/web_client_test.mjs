@@ -241,3 +241,34 @@ test("the web client submits, follows, cancels, deletes and downloads", async (t
     assert.deepEqual(pageErrors, []);
   });
 });
+
+test("the web client honours Retry-After from an overloaded server", async () => {
+  const { retryAfterMs } = await import(path.join(repo, "clients/web/api.js"));
+  assert.equal(retryAfterMs("3"), 3000);
+  assert.equal(retryAfterMs("Wed, 21 Oct 2015 07:28:30 GMT", Date.parse("Wed, 21 Oct 2015 07:28:00 GMT")), 30000);
+  assert.equal(retryAfterMs("soon"), null);
+  assert.equal(retryAfterMs(null), null);
+  assert.equal(retryAfterMs("86400"), 600000);
+
+  // The job list answers 503 with Retry-After: 3; the page polls it every 1.5 s otherwise.
+  const seen = [];
+  const handler = (route) => {
+    seen.push(Date.now());
+    return route.fulfill({
+      status: 503,
+      headers: { "Retry-After": "3", "Content-Type": "application/problem+json" },
+      body: JSON.stringify({ type: "about:blank", title: "Service Unavailable", status: 503, detail: "busy" }),
+    });
+  };
+  await page.route(/\/v1\/jobs\?limit=/, handler);
+  try {
+    await page.waitForTimeout(7500);
+  } finally {
+    await page.unroute(/\/v1\/jobs\?limit=/, handler);
+  }
+  assert.ok(seen.length >= 2, `the page asked for the job list ${seen.length} times in 7.5 s`);
+  const gaps = seen.slice(1).map((t, i) => t - seen[i]);
+  for (const gap of gaps) assert.ok(gap >= 2500, `the page asked again after ${gap} ms, not the 3 s it was told`);
+  // Answered again, the page goes back to its own pace and shows the server online.
+  await page.locator('#connection[data-state="online"]').waitFor();
+});
