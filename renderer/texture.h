@@ -63,7 +63,7 @@ struct TextureMapping {
 
 // A std::allocator whose resize() leaves new elements default-initialised (for numbers: unwritten) instead of
 // zeroing them: for image buffers that a decoder or a filter then writes whole, where zeroing 16 MB first costs a
-// pass over memory (a fifth of a textured asset's load time).
+// pass over memory (DamagedHelmet, five 2k textures, loads 4-8 % faster without it).
 template <typename T>
 struct DefaultInitAllocator : std::allocator<T> {
   template <typename U>
