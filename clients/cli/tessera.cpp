@@ -1,5 +1,5 @@
 // tessera: the command-line tool.
-//   tessera render JOB.json|SCENE.glb -o out.png [-o out.exr] [-o part.tfilm] [--samples START:COUNT] [--region X,Y,W,H] ...
+//   tessera render JOB.json|SCENE.glb -o out.png [-o out.exr] [-o part.tfilm] [--samples START:COUNT] ...
 //   tessera merge part1.tfilm part2.tfilm ... -o out.exr|out.png|out.tfilm
 //   tessera submit|watch|fetch|list|cancel ...   against a tesserad (--url, --token)
 //

@@ -70,7 +70,8 @@ function showError(err, context) {
   if (err instanceof ApiError) {
     title.textContent = (context ? `${context}: ` : "") + err.title + (err.status ? ` (${err.status})` : "");
     detail.textContent = err.detail + (err.pointer ? ` — at ${err.pointer}` : "");
-    if (err.retryAfterMs) detail.textContent += ` (the server asks to retry in ${Math.ceil(err.retryAfterMs / 1000)} s)`;
+    if (err.retryAfterMs)
+      detail.textContent += ` (the server asks to retry in ${Math.ceil(err.retryAfterMs / 1000)} s)`;
     if (err.status === 401) showTokenForm(true);
   } else {
     title.textContent = context || "Error";
@@ -472,12 +473,10 @@ async function refreshQueue() {
   }
   return 0;
 }
-function scheduleQueue(delay = QUEUE_POLL_MS) {
+// The next refresh, after the usual interval or the longer wait the server asked for.
+function scheduleQueue(wait = 0) {
   clearTimeout(queueTimer);
-  queueTimer = setTimeout(async () => {
-    const wait = await refreshQueue();
-    scheduleQueue(Math.max(QUEUE_POLL_MS, wait));
-  }, delay);
+  queueTimer = setTimeout(async () => scheduleQueue(await refreshQueue()), Math.max(QUEUE_POLL_MS, wait));
 }
 
 async function changePriority(id, input) {
@@ -835,4 +834,4 @@ document.addEventListener("visibilitychange", () => {
   if (!document.hidden) refreshQueue();
 });
 loadMaterials();
-refreshQueue().then((wait) => scheduleQueue(Math.max(QUEUE_POLL_MS, wait)));
+refreshQueue().then(scheduleQueue);
