@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The command line, for real: `tessera render` of sample ranges (and regions) merged with `tessera merge` equals one
-# render bit for bit; bad input and bad usage exit 1 and 2; the daemon commands (tessera submit/watch/fetch/list/
-# cancel and clients/curl/*.sh) against a real tesserad on a free port with a temporary data directory.
+# render bit for bit; bad input and bad usage exit 1 and 2; tessera links no renderer and runs tessera-render for
+# those two commands; the daemon commands (tessera submit/watch/fetch/list/cancel and clients/curl/*.sh) against a
+# real tesserad on a free port with a temporary data directory.
 # usage: cli_test.sh TESSERA TESSERAD     (run by CTest)
 set -uo pipefail
 TESSERA=${1:?usage: cli_test.sh TESSERA TESSERAD}
@@ -128,6 +129,23 @@ expect 2 "watch without an id" "$TESSERA" watch
 for c in render merge submit watch fetch list cancel; do expect 0 "tessera $c -h" "$TESSERA" "$c" -h; done
 for s in submit watch fetch list cancel; do expect 0 "$s.sh -h" "$curl_dir/$s.sh" -h; done
 expect 2 "submit.sh without arguments" "$curl_dir/submit.sh"
+
+# --- two programs: tessera loads no renderer; render and merge run tessera-render from beside it --------------------
+# (The renderer's image libraries take most of a second to load: a script that submits and polls should not pay it.)
+needed=$(readelf -d "$TESSERA" | grep NEEDED)
+if grep -qiE 'embree|OpenImageIO|tinygltf' <<<"$needed"; then not_ok "tessera links the renderer's libraries"; else
+  ok "tessera links no renderer library"; fi
+[[ -x $(dirname "$TESSERA")/tessera-render ]] && ok "tessera-render is beside tessera" || not_ok "no tessera-render"
+mkdir -p alone && cp "$TESSERA" alone/tessera
+expect 1 "render without tessera-render (not beside tessera, not on the PATH) is fatal" \
+  env PATH="$tmp/alone" alone/tessera render "$job" -o x.png
+grep -q "cannot run tessera-render" "$tmp/err" && ok "the message names tessera-render" || not_ok "message: $(cat "$tmp/err")"
+mkdir -p onpath && ln -s "$(dirname "$TESSERA")/tessera-render" onpath/tessera-render
+expect 0 "render with tessera-render found on the PATH" env PATH="$tmp/onpath" alone/tessera render "$job" \
+  --width 8 --height 8 --spp 1 -q -o path.png
+png_signature path.png && ok "that render wrote a PNG" || not_ok "that render wrote no PNG"
+expect 0 "tessera-render -h" "$(dirname "$TESSERA")/tessera-render" -h
+expect 2 "tessera-render without a command" "$(dirname "$TESSERA")/tessera-render"
 
 # --- a daemon that is not there: retry (75) ----------------------------------------------------------------------
 expect 75 "an unreachable daemon is transient" "$TESSERA" list --url http://127.0.0.1:9

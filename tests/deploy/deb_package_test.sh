@@ -48,7 +48,7 @@ check $? "conffiles: /etc/tessera/tesserad.json and tesserad.env"
 
 root=$work/root
 dpkg-deb -x "$deb" "$root"
-for f in usr/bin/tesserad usr/bin/tessera; do
+for f in usr/bin/tesserad usr/bin/tessera usr/bin/tessera-render; do
   [ -x "$root/$f" ]; check $? "/$f"
 done
 for f in usr/share/tessera/web/index.html lib/systemd/system/tesserad.service etc/tessera/tesserad.json \
@@ -58,7 +58,7 @@ done
 web_src=$(cd "$src/clients/web" && find . -type f | sort)
 web_deb=$(cd "$root/usr/share/tessera/web" && find . -type f | sort)
 [ "$web_src" = "$web_deb" ]; check $? "/usr/share/tessera/web holds every file of clients/web"
-stray=$(cd "$root" && find . -type f | grep -vE '^\./(usr/bin/tessera|usr/bin/tesserad|usr/share/tessera/web/.*|lib/systemd/system/tesserad\.service|etc/tessera/tesserad\.(json|env))$')
+stray=$(cd "$root" && find . -type f | grep -vE '^\./(usr/bin/tessera|usr/bin/tessera-render|usr/bin/tesserad|usr/share/tessera/web/.*|lib/systemd/system/tesserad\.service|etc/tessera/tesserad\.(json|env))$')
 [ -z "$stray" ]; check $? "no other files in the package${stray:+: $stray}"
 cmp -s "$root/lib/systemd/system/tesserad.service" "$src/deploy/systemd/tesserad.service"; check $? "the unit is deploy/systemd/tesserad.service"
 grep -q -- '--data-dir' <<<"$("$root/usr/bin/tesserad" --help)"; check $? "the unpacked tesserad runs (--help)"

@@ -119,7 +119,11 @@ hc = re.search(r"^HEALTHCHECK .*CMD (.*)$", runtime, re.M)
 check(hc is not None and "/readyz" in hc.group(1), "Dockerfile: HEALTHCHECK on /readyz")
 check(re.search(r"^STOPSIGNAL\s+SIGTERM", runtime, re.M) is not None, "Dockerfile: STOPSIGNAL SIGTERM")
 check(re.search(r"^ENTRYPOINT\s+\[\"/usr/bin/tesserad\"\]", runtime, re.M) is not None, "Dockerfile: ENTRYPOINT tesserad")
-check("/usr/bin/tessera " in runtime or "tessera /usr/bin/" in runtime, "Dockerfile: the image has the tessera CLI")
+copy = re.search(r"^COPY --from=build (.*)$", runtime, re.M)
+copied = copy.group(1).split() if copy else []
+cli = {"/src/build/clients/cli/tessera", "/src/build/clients/cli/tessera-render"}
+check(copied[-1:] == ["/usr/bin/"] and cli <= set(copied),
+      "Dockerfile: the image has the tessera CLI and the tessera-render it runs, in /usr/bin")
 check_env(df_env, "Dockerfile")
 judge("the Dockerfile's environment", env=df_env)
 df_version = re.search(r'org.opencontainers.image.version="([^"]+)"', dockerfile).group(1)

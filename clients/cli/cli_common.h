@@ -1,0 +1,120 @@
+// What the two programs of the command-line tool share: `tessera`, the client of a daemon (submit, watch, fetch,
+// list, cancel), and `tessera-render`, the local renderer it runs for `tessera render` and `tessera merge`.
+//
+// Exit codes (render farm managers tell "try again" from "this can never work"): 0 done, 1 fatal (bad input, a
+// refused job, a failed render), 2 usage, 75 retry (transient: I/O, network, server 5xx, 429, 503).
+#pragma once
+
+#include <cctype>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <new>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace tessera::cli {
+
+constexpr int kExitOk = 0;
+constexpr int kExitFatal = 1;  // bad input: the same command will fail again
+constexpr int kExitUsage = 2;
+constexpr int kExitRetry = 75;  // EX_TEMPFAIL: a transient failure (I/O, resources, network, server overload)
+
+// A failure with the exit code it deserves; caught by run_command().
+struct Failure : std::runtime_error {
+  int code;
+  Failure(int c, const std::string& what) : std::runtime_error(what), code(c) {}
+};
+[[noreturn]] inline void fatal(const std::string& what) { throw Failure(kExitFatal, what); }
+[[noreturn]] inline void retry(const std::string& what) { throw Failure(kExitRetry, what); }
+
+inline long long parse_integer(const std::string& option, const std::string& v) {
+  size_t pos = 0;
+  long long n = 0;
+  try {
+    n = std::stoll(v, &pos);
+  } catch (const std::exception&) {
+    pos = 0;
+  }
+  if (pos != v.size() || v.empty()) throw std::invalid_argument(option + " needs an integer, not \"" + v + "\"");
+  return n;
+}
+
+inline double parse_number(const std::string& option, const std::string& v) {
+  size_t pos = 0;
+  double d = 0;
+  try {
+    d = std::stod(v, &pos);
+  } catch (const std::exception&) {
+    pos = 0;
+  }
+  if (pos != v.size() || v.empty() || !std::isfinite(d))
+    throw std::invalid_argument(option + " needs a number, not \"" + v + "\"");
+  return d;
+}
+
+inline std::vector<long long> parse_list(const std::string& option, const std::string& v, char sep, size_t count) {
+  std::vector<long long> out;
+  std::stringstream ss(v);
+  std::string item;
+  while (std::getline(ss, item, sep)) out.push_back(parse_integer(option, item));
+  if (out.size() != count)
+    throw std::invalid_argument(option + " needs " + std::to_string(count) + " integers separated by '" +
+                                std::string(1, sep) + "', not \"" + v + "\"");
+  return out;
+}
+
+inline std::string lower_extension(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+
+inline std::string read_file(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fatal("cannot open " + path.string() + ": " + std::strerror(errno));
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Writes through a temporary file renamed into place: a reader never sees half a file.
+inline void write_file_atomic(const std::string& path, const std::string& bytes) {
+  const std::string tmp = path + ".part";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) retry("cannot write " + tmp + ": " + std::strerror(errno));
+    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    if (!out) retry("cannot write " + tmp + ": " + std::strerror(errno));
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) retry("cannot rename " + tmp + " to " + path + ": " + ec.message());
+}
+
+// A program's main(): runs `command` and turns what it throws into a message on stderr and an exit code.
+template <typename Command>
+int run_command(Command&& command) {
+  try {
+    return command();
+  } catch (const Failure& f) {
+    if (f.what()[0]) std::fprintf(stderr, "tessera: %s\n", f.what());
+    return f.code;
+  } catch (const std::invalid_argument& e) {
+    std::fprintf(stderr, "tessera: %s\n", e.what());
+    return kExitUsage;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "tessera: out of memory\n");
+    return kExitRetry;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tessera: %s\n", e.what());
+    return kExitRetry;
+  }
+}
+
+}  // namespace tessera::cli
