@@ -296,6 +296,8 @@ bool keep_encoded_image(tinygltf::Image* image, const int, std::string*, std::st
 std::string decode_image(const std::vector<unsigned char>& bytes, size_t index, size_t max_pixels, bool header_only,
                          ImagePixels* out) {
   const std::string what = "image " + std::to_string(index);
+  if (bytes.size() >= 2 && bytes[0] == 0xFF && bytes[1] == 0xD8 && !jpeg_complete(bytes.data(), bytes.size()))
+    return what + " is a truncated JPEG (its data ends before the end-of-image marker)";
   if (header_only) {
     // A JPEG's header through libjpeg: OpenImageIO's open would decode every scan of a progressive one.
     if (auto header = jpeg_header(bytes.data(), bytes.size())) {

@@ -7,8 +7,12 @@
 #include <cmath>
 #include <csetjmp>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <stdexcept>
+#include <vector>
 
 #include <jpeglib.h>  // after <cstdio>: it uses FILE without including it
 
@@ -189,7 +193,50 @@ ImageHeader read_image_header(const std::string& path, size_t max_texels, int ma
   return header;
 }
 
+bool jpeg_complete(const unsigned char* bytes, size_t size) {
+  // Marker segments from after SOI: FF, fill bytes FF, the marker code, then (but for RSTn and TEM) a 16-bit length
+  // that counts itself. After a start of scan comes entropy-coded data, in which an FF is followed by 00 (a stuffed
+  // byte) or by a restart marker; any other code ends the scan (progressive files have many).
+  // Stray bytes between segments are skipped as libjpeg skips them (with a warning), not refused.
+  size_t i = 2;
+  while (i + 1 < size) {
+    if (bytes[i] != 0xFF) {
+      const void* next = std::memchr(bytes + i, 0xFF, size - i);
+      if (!next) return false;
+      i = static_cast<size_t>(static_cast<const unsigned char*>(next) - bytes);
+      continue;
+    }
+    const unsigned char code = bytes[i + 1];
+    if (code == 0xFF) {  // a fill byte
+      ++i;
+      continue;
+    }
+    if (code == 0xD9) return true;  // EOI
+    if (code == 0x00 || (code >= 0xD0 && code <= 0xD7) || code == 0x01) {
+      i += 2;  // stuffed byte, restart marker or TEM: no length
+      continue;
+    }
+    if (i + 3 >= size) return false;
+    const size_t length = (static_cast<size_t>(bytes[i + 2]) << 8) | bytes[i + 3];
+    if (length < 2) return false;
+    i += 2 + length;  // after an SOS header, the entropy-coded data: the skip above walks it
+  }
+  return false;
+}
+
 namespace {
+
+// A JPEG file that does not reach its end-of-image marker is refused: libjpeg would decode it with grey rows.
+void check_complete_jpeg(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  unsigned char magic[2] = {0, 0};
+  if (!in.read(reinterpret_cast<char*>(magic), 2) || magic[0] != 0xFF || magic[1] != 0xD8) return;
+  in.seekg(0);
+  const std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (!jpeg_complete(bytes.data(), bytes.size()))
+    throw std::runtime_error("cannot read " + file_name(path) +
+                             ": the JPEG data ends before its end-of-image marker (a truncated file?)");
+}
 
 // The pixels of an open image as `channels` floats per texel, texels `stride` floats apart (see read_image).
 void read_pixels(OIIO::ImageInput& in, const std::string& path, int channels, size_t stride, float* pixels) {
@@ -217,6 +264,7 @@ void read_pixels(OIIO::ImageInput& in, const std::string& path, int channels, si
 
 ImageData read_image(const std::string& path, int channels, size_t max_texels, int max_width) {
   auto in = open_checked(path, max_texels, max_width);
+  check_complete_jpeg(path);
   ImageData img;
   img.width = in->spec().width;
   img.height = in->spec().height;
@@ -231,6 +279,7 @@ void read_image_into(const std::string& path, int channels, size_t stride, size_
   if (channels < 1 || stride < static_cast<size_t>(channels))
     throw std::invalid_argument("read_image_into: a texel's stride is smaller than its channels");
   auto in = open_checked(path, max_texels, max_width);
+  check_complete_jpeg(path);
   read_pixels(*in, path, channels, stride, place(in->spec().width, in->spec().height));
 }
 

@@ -53,5 +53,8 @@ struct ImageHeader {
 ImageHeader read_image_header(const std::string& path, size_t max_texels = 0, int max_width = 0);
 // The header of JPEG data in memory (libjpeg's, without decoding any scan), or nothing when it is not readable JPEG.
 std::optional<ImageHeader> jpeg_header(const unsigned char* bytes, size_t size);
+// Whether JPEG data reaches its end-of-image marker. libjpeg (and so OpenImageIO) decodes a file cut short with a
+// warning only, the missing rows grey: read_image refuses such a file, and a glTF loader should too.
+bool jpeg_complete(const unsigned char* bytes, size_t size);
 
 }  // namespace tessera

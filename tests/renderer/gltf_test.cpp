@@ -679,6 +679,35 @@ TEST(GltfHostile, ACheckedSceneReadsImageHeadersOnly) {
   EXPECT_THROW(import_gltf(fixture_dir() / "garbage.gltf", "/scene/gltf", scene, check), SceneError);
 }
 
+// A JPEG cut short (libjpeg would decode it with a warning only, the missing rows grey) is refused when the scene is
+// checked and when it is imported, naming the image; the whole JPEG is taken.
+TEST(GltfHostile, TruncatedJpegsAreRefused) {
+  for (bool progressive : {false, true}) {
+    SCOPED_TRACE(progressive ? "progressive JPEG" : "baseline JPEG");
+    std::vector<unsigned char> jpeg = jpeg_rgb(40, 30, progressive);
+    for (bool cut : {false, true}) {
+      GltfBuilder b = one_triangle();
+      b.texture_png(cut ? std::vector<unsigned char>(jpeg.begin(), jpeg.end() - 20) : jpeg);
+      b.write(fixture_dir(), "cut-jpeg");
+      for (bool headers_only : {true, false}) {
+        Scene scene;
+        GltfImportOptions options;
+        options.headers_only = headers_only;
+        if (!cut) {
+          EXPECT_NO_THROW(import_gltf(fixture_dir() / "cut-jpeg.gltf", "/scene/gltf", scene, options));
+          continue;
+        }
+        try {
+          import_gltf(fixture_dir() / "cut-jpeg.gltf", "/scene/gltf", scene, options);
+          ADD_FAILURE() << "a truncated JPEG was accepted (headers only: " << headers_only << ")";
+        } catch (const SceneError& e) {
+          EXPECT_NE(std::string(e.what()).find("image 0 is a truncated JPEG"), std::string::npos) << e.what();
+        }
+      }
+    }
+  }
+}
+
 // An image that does not decode, or is larger than allowed, fails the import naming the image, whichever of the
 // images decoded at once fails.
 TEST(GltfHostile, UndecodableAndOversizedImagesAreRefused) {

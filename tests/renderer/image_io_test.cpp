@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -179,8 +180,19 @@ TEST(ImageIo, ImagesAboveTheTexelLimitAreRefused) {
   }
 }
 
+// The first `bytes` bytes of `path`, written to a file named `name`.
+std::filesystem::path truncated_copy(const std::filesystem::path& path, size_t bytes, const std::string& name) {
+  std::ifstream in(path, std::ios::binary);
+  std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_LT(bytes, data.size()) << "nothing to cut from " << path;
+  const auto cut = temp_file(name);
+  std::ofstream(cut, std::ios::binary) << data.substr(0, bytes);
+  return cut;
+}
+
 // A header read gives the size without the pixels, JPEG (baseline and progressive, through libjpeg) and others
-// alike, under the same limits and errors as a full read.
+// alike, under the same limits and errors as a full read. Without the pixels: the header of a file cut short before
+// its pixel data reads as well as the whole file's.
 TEST(ImageIo, HeadersAreReadWithoutThePixels) {
   for (bool progressive : {false, true}) {
     const auto path = temp_file(progressive ? "p.jpg" : "b.jpg");
@@ -191,21 +203,96 @@ TEST(ImageIo, HeadersAreReadWithoutThePixels) {
     std::vector<unsigned char> rgb(40 * 30 * 3, 200);
     ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, rgb.data()));
     out->close();
-    const ImageHeader h = read_image_header(path.string());
-    EXPECT_EQ(h.width, 40);
-    EXPECT_EQ(h.height, 30);
-    EXPECT_EQ(h.channels, 3);
-    EXPECT_THROW(read_image_header(path.string(), 1199), std::runtime_error);
-    EXPECT_THROW(read_image_header(path.string(), 0, 39), std::runtime_error);
+    // The start of scan marker (FF DA) and its segment: what follows is entropy-coded pixels, cut here.
+    std::ifstream in(path, std::ios::binary);
+    const std::string jpeg((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const size_t sos = jpeg.find("\xff\xda");
+    ASSERT_NE(sos, std::string::npos);
+    const size_t sos_length =
+        (static_cast<unsigned char>(jpeg[sos + 2]) << 8) | static_cast<unsigned char>(jpeg[sos + 3]);
+    const auto header_only = truncated_copy(path, sos + 2 + sos_length, progressive ? "p-cut.jpg" : "b-cut.jpg");
+    for (const auto& file : {path, header_only}) {
+      const ImageHeader h = read_image_header(file.string());
+      EXPECT_EQ(h.width, 40) << file;
+      EXPECT_EQ(h.height, 30) << file;
+      EXPECT_EQ(h.channels, 3) << file;
+      EXPECT_THROW(read_image_header(file.string(), 1199), std::runtime_error);
+      EXPECT_THROW(read_image_header(file.string(), 0, 39), std::runtime_error);
+    }
+    EXPECT_THROW(read_image(header_only.string()), std::runtime_error) << "the cut JPEG has no pixels to read";
   }
   const auto exr = write_channels("h.exr", 8, 4, 2, std::vector<float>(8 * 4 * 2, 0.5f));
-  const ImageHeader h = read_image_header(exr.string());
-  EXPECT_EQ(h.width, 8);
-  EXPECT_EQ(h.height, 4);
-  EXPECT_EQ(h.channels, 2);
+  // An EXR's header is its magic number and version, then attributes (name, type, size, value) up to a null byte;
+  // the offset table follows (OpenEXR reads it on open), then the pixels from the first offset on.
+  std::ifstream in(exr, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  size_t end = 8;
+  while (end < bytes.size() && bytes[end] != 0) {
+    end = bytes.find('\0', end) + 1;  // the name
+    end = bytes.find('\0', end) + 1;  // the type
+    ASSERT_LE(end + 4, bytes.size());
+    int32_t size = 0;
+    std::memcpy(&size, bytes.data() + end, 4);
+    end += 4 + static_cast<size_t>(size);
+  }
+  ASSERT_LE(end + 9, bytes.size());
+  uint64_t first_chunk = 0;
+  std::memcpy(&first_chunk, bytes.data() + end + 1, 8);
+  const auto exr_cut = truncated_copy(exr, first_chunk, "h-cut.exr");
+  for (const auto& file : {exr, exr_cut}) {
+    const ImageHeader h = read_image_header(file.string());
+    EXPECT_EQ(h.width, 8) << file;
+    EXPECT_EQ(h.height, 4) << file;
+    EXPECT_EQ(h.channels, 2) << file;
+  }
+  EXPECT_THROW(read_image(exr_cut.string()), std::runtime_error) << "the cut EXR has no pixels to read";
   const auto text = temp_file("text.jpg");
   std::ofstream(text) << "\xff\xd8 not really";
   EXPECT_THROW(read_image_header(text.string()), std::runtime_error);
+}
+
+// A JPEG is complete when its markers lead to the end-of-image marker: no proper prefix of a file is, the file is,
+// and so is the file with data after it (phones append a video to a photo) or with stray bytes between segments;
+// read_image refuses a cut file.
+TEST(ImageIo, TruncatedJpegsAreToldFromWholeOnes) {
+  for (bool progressive : {false, true}) {
+    SCOPED_TRACE(progressive ? "progressive" : "baseline");
+    const auto path = temp_file(progressive ? "whole-p.jpg" : "whole-b.jpg");
+    auto out = OIIO::ImageOutput::create(path.string());
+    OIIO::ImageSpec spec(24, 16, 3, OIIO::TypeDesc::UINT8);
+    if (progressive) spec.attribute("jpeg:progressive", 1);
+    ASSERT_TRUE(out->open(path.string(), spec));
+    std::vector<unsigned char> rgb(24 * 16 * 3);
+    for (size_t i = 0; i < rgb.size(); ++i) rgb[i] = static_cast<unsigned char>(i * 37);  // busy: many stuffed FFs
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, rgb.data()));
+    out->close();
+    std::ifstream in(path, std::ios::binary);
+    std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_TRUE(jpeg_complete(bytes.data(), bytes.size()));
+    size_t prefixes_taken_whole = 0;
+    for (size_t n = 0; n < bytes.size(); ++n) prefixes_taken_whole += jpeg_complete(bytes.data(), n);
+    EXPECT_EQ(prefixes_taken_whole, 0u);
+    std::vector<unsigned char> appended = bytes;
+    for (int i = 0; i < 64; ++i) appended.push_back(static_cast<unsigned char>(i % 3 ? 0xFF : i));
+    EXPECT_TRUE(jpeg_complete(appended.data(), appended.size()));
+    // Stray bytes between two segments (after the first, whose length follows its marker) are skipped, as libjpeg
+    // skips them.
+    ASSERT_EQ(bytes[2], 0xFF);
+    std::vector<unsigned char> stray = bytes;
+    stray.insert(stray.begin() + 4 + ((bytes[4] << 8) | bytes[5]), {0x00, 0x12, 0x34});
+    EXPECT_TRUE(jpeg_complete(stray.data(), stray.size()));
+    std::ofstream(temp_file("stray.jpg"), std::ios::binary)
+        .write(reinterpret_cast<const char*>(stray.data()), static_cast<std::streamsize>(stray.size()));
+    EXPECT_NO_THROW(read_image(temp_file("stray.jpg").string()));
+    const auto cut = truncated_copy(path, bytes.size() - 10, progressive ? "cut-p.jpg" : "cut-b.jpg");  // in a scan
+    try {
+      read_image(cut.string());
+      ADD_FAILURE() << "a cut JPEG was read";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("ends before its end-of-image marker"), std::string::npos) << e.what();
+    }
+    EXPECT_NO_THROW(read_image(path.string()));
+  }
 }
 
 // The message names the file but not the folder it is in (a daemon's data directory).
