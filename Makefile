@@ -1,15 +1,19 @@
 # The two commands of the README:
 #   make run    installs what is missing, builds Release, starts tesserad on 127.0.0.1:8080 (data in ./data)
 #   make test   installs what is missing, builds, runs the whole test suite
-# Other targets: build, asan (sanitizer build + tests), bench, image (podman), deb (cpack), format, clean.
+# Other targets: build, asan (sanitizer build + tests), bench, image (podman), deb (cpack, in build-deb), format, clean.
 
 BUILD ?= build
 ASAN_BUILD ?= build-asan
+DEB_BUILD ?= build-deb
+# The instruction set of $(BUILD), whose binaries run where they are built: this machine's (5-7 % faster renders than
+# the x86-64 baseline; images are bit-identical either way). `make deb` and `make image` build for any x86-64.
+ARCH ?= native
 JOBS ?= $(shell nproc)
 DATA_DIR ?= $(CURDIR)/data
 PORT ?= 8080
 
-.PHONY: run test build deps test-deps asan bench image deb format clean
+.PHONY: run test build configure deps test-deps asan bench image deb format clean
 
 deps:
 	deploy/install-deps.sh build
@@ -17,17 +21,18 @@ deps:
 test-deps:
 	deploy/install-deps.sh test
 
-$(BUILD)/build.ninja:
-	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release
+# Configuring again is quick (under a second) and takes a changed ARCH into an existing build directory.
+configure:
+	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_ARCH=$(ARCH)
 
-build: deps $(BUILD)/build.ninja
+build: deps configure
 	cmake --build $(BUILD) -j $(JOBS)
 
 run: build
 	@mkdir -p $(DATA_DIR)
 	exec $(BUILD)/server/tesserad --listen 127.0.0.1 --port $(PORT) --data-dir $(DATA_DIR)
 
-test: test-deps $(BUILD)/build.ninja
+test: test-deps configure
 	cmake --build $(BUILD) -j $(JOBS)
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) --timeout 900
 
@@ -39,7 +44,7 @@ asan: test-deps
 	  ctest --output-on-failure -j $(JOBS) -LE slow --timeout 1800
 
 bench: deps
-	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_BUILD_BENCH=ON
+	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_ARCH=$(ARCH) -DTESSERA_BUILD_BENCH=ON
 	cmake --build $(BUILD) -j $(JOBS)
 
 image:
@@ -47,11 +52,14 @@ image:
 	CONTAINERS_CONF=$(CURDIR)/deploy/podman/containers.conf deploy/podman/base-image.sh
 	CONTAINERS_CONF=$(CURDIR)/deploy/podman/containers.conf podman build --format docker -f deploy/Dockerfile -t tessera:0.1.0 .
 
-deb: build
-	cd $(BUILD) && cpack -G DEB
+# A package is installed on other machines: built for any x86-64, without the tests, in its own directory.
+deb: deps
+	cmake -S . -B $(DEB_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_ARCH= -DTESSERA_BUILD_TESTS=OFF
+	cmake --build $(DEB_BUILD) -j $(JOBS)
+	cd $(DEB_BUILD) && cpack -G DEB
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.h')
 
 clean:
-	rm -rf $(BUILD) $(ASAN_BUILD)
+	rm -rf $(BUILD) $(ASAN_BUILD) $(DEB_BUILD)
