@@ -2,7 +2,8 @@
 # The container, for real: builds deploy/Dockerfile with podman, runs the image on a random loopback port with a
 # named data volume, waits for /readyz, renders the Cornell box (64x64, 16 spp) over HTTP, fetches result.png and
 # checks it, checks the image's HEALTHCHECK, user and clean SIGTERM stop, then runs a second container on the same
-# volume with bearer tokens from a mounted file and finds the finished job and its PNG again.
+# volume with bearer tokens from a mounted file and finds the finished job and its PNG again. Before all that,
+# tessera-render in the image (built for any x86-64) and in BUILD_DIR render the same films to the bit.
 #   container_test.sh SOURCE_DIR BUILD_DIR
 # Exit 0 passed, 1 failed, 77 skipped (podman missing or unable to run a container here: the reason is printed as
 # `SKIPPED: ...`). Podman runs with deploy/podman/containers.conf (runtime runc, lowered ulimits); the base image
@@ -26,6 +27,33 @@ say "image built in $(( $(date +%s) - start ))s: $(podman image inspect --format
 [ "$(podman image inspect --format '{{.Config.User}}' "$image")" = "10001:10001" ] || fail "the image does not run as 10001"
 # Captured first: with pipefail, `grep -q` leaving early can make the writer die of SIGPIPE and fail the pipeline.
 grep -q readyz <<<"$(podman image inspect --format '{{.Config.Healthcheck}}' "$image")" || fail "the image has no HEALTHCHECK on /readyz"
+
+# --- the same film from the image's build and this build -----------------------------------------------------------
+# The image is built for any x86-64, `make test` for this processor (TESSERA_ARCH): with no multiply-adds fused, a
+# render's film is the same to the bit (what lets `tessera merge` combine parts rendered on different machines).
+mkdir -p "$work/film" && chmod 0777 "$work/film"
+cat >"$work/film/material.json" <<'EOF'
+{"kind": "material", "render": {"width": 48, "height": 16, "spp": 4, "seed": 7},
+ "materials": [{"type": "conductor", "metal": "gold", "roughness": 0.2}, {"type": "plastic", "roughness": 0.1},
+               {"type": "dielectric", "roughness": 0.05}]}
+EOF
+python3 - "$src/proto/examples/cornell.json" >"$work/film/cornell.json" <<'EOF' || fail "cannot read proto/examples/cornell.json"
+import json, sys
+job = json.load(open(sys.argv[1]))
+job.setdefault("render", {}).update(width=32, height=32, spp=4)
+json.dump(job, sys.stdout)
+EOF
+arch=$(sed -n 's/^TESSERA_ARCH:[A-Z]*=//p' "$build/CMakeCache.txt" 2>/dev/null)
+for job in material cornell; do
+  timeout 120 podman run --rm --network none --entrypoint tessera-render -v "$work/film:/film" "$image" \
+    render "/film/$job.json" -o "/film/$job-image.tfilm" --threads 2 -q >"$work/film.log" 2>&1 \
+    || { cat "$work/film.log"; fail "tessera-render in the image failed on the $job job"; }
+  timeout 120 "$build/clients/cli/tessera-render" render "$work/film/$job.json" -o "$work/film/$job-here.tfilm" \
+    --threads 2 -q >"$work/film.log" 2>&1 || { cat "$work/film.log"; fail "this build's tessera-render failed on $job"; }
+  cmp -s "$work/film/$job-image.tfilm" "$work/film/$job-here.tfilm" \
+    || fail "the $job film of the image's build differs from this build's (TESSERA_ARCH='$arch')"
+done
+say "the image's build and this one (TESSERA_ARCH='$arch') render the same films to the bit"
 
 # --- run it --------------------------------------------------------------------------------------------------------
 volume=$tag-data
