@@ -189,7 +189,7 @@ TEST_F(TextureTest, PathsStayInsideTheAssetFolder) {
 
 // A scene's materials are made side by side (each reads its own image files): each material keeps its own name and
 // textures, and of several bad materials the first in the document's order is reported, whatever the timing.
-TEST_F(TextureTest, ASceneMakesItsMaterialsSideBySide) {
+TEST_F(TextureTest, MaterialsMadeSideBySideKeepTheirOrderAndTheFirstError) {
   json materials = json::object();
   for (int i = 0; i < 6; ++i) {
     const float v = 0.1f * (i + 1);
