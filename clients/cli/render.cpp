@@ -304,9 +304,7 @@ int cmd_render(int argc, char** argv) {
   std::ifstream in(input);
   if (!in) fatal("cannot open " + input + ": " + std::strerror(errno));
   json doc;
-  std::string extension = std::filesystem::path(input).extension().string();
-  std::transform(extension.begin(), extension.end(), extension.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  const std::string extension = lower_extension(input);
   if (extension == ".glb" || extension == ".gltf") {
     // A glTF asset renders as the scene of a job that names it (its camera, lights and materials; the files it
     // refers to are read from beside it).
