@@ -180,10 +180,14 @@ TEST(ImageIo, ImagesAboveTheTexelLimitAreRefused) {
   }
 }
 
+std::string file_bytes(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
 // The first `bytes` bytes of `path`, written to a file named `name`.
 std::filesystem::path truncated_copy(const std::filesystem::path& path, size_t bytes, const std::string& name) {
-  std::ifstream in(path, std::ios::binary);
-  std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string data = file_bytes(path);
   EXPECT_LT(bytes, data.size()) << "nothing to cut from " << path;
   const auto cut = temp_file(name);
   std::ofstream(cut, std::ios::binary) << data.substr(0, bytes);
@@ -204,8 +208,7 @@ TEST(ImageIo, HeadersAreReadWithoutThePixels) {
     ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, rgb.data()));
     out->close();
     // The start of scan marker (FF DA) and its segment: what follows is entropy-coded pixels, cut here.
-    std::ifstream in(path, std::ios::binary);
-    const std::string jpeg((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string jpeg = file_bytes(path);
     const size_t sos = jpeg.find("\xff\xda");
     ASSERT_NE(sos, std::string::npos);
     const size_t sos_length =
@@ -224,8 +227,7 @@ TEST(ImageIo, HeadersAreReadWithoutThePixels) {
   const auto exr = write_channels("h.exr", 8, 4, 2, std::vector<float>(8 * 4 * 2, 0.5f));
   // An EXR's header is its magic number and version, then attributes (name, type, size, value) up to a null byte;
   // the offset table follows (OpenEXR reads it on open), then the pixels from the first offset on.
-  std::ifstream in(exr, std::ios::binary);
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes = file_bytes(exr);
   size_t end = 8;
   while (end < bytes.size() && bytes[end] != 0) {
     end = bytes.find('\0', end) + 1;  // the name
@@ -266,8 +268,8 @@ TEST(ImageIo, TruncatedJpegsAreToldFromWholeOnes) {
     for (size_t i = 0; i < rgb.size(); ++i) rgb[i] = static_cast<unsigned char>(i * 37);  // busy: many stuffed FFs
     ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, rgb.data()));
     out->close();
-    std::ifstream in(path, std::ios::binary);
-    std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string whole = file_bytes(path);
+    const std::vector<unsigned char> bytes(whole.begin(), whole.end());
     EXPECT_TRUE(jpeg_complete(bytes.data(), bytes.size()));
     size_t prefixes_taken_whole = 0;
     for (size_t n = 0; n < bytes.size(); ++n) prefixes_taken_whole += jpeg_complete(bytes.data(), n);
