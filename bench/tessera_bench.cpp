@@ -437,13 +437,12 @@ int main(int argc, char** argv) {
       rss.push_back(rs);
       rcps.push_back(rcp);
     }
-    const auto [ratio_min, ratio_max] = std::minmax_element(ratios.begin(), ratios.end());
-    const double ratio_lo = *ratio_min, ratio_hi = *ratio_max;
+    const auto [ratio_lo, ratio_hi] = std::minmax_element(ratios.begin(), ratios.end());
     const double rc = median(rcs), rb = median(rbs), rs = median(rss), rcp = median(rcps);
     const double ratio = median(ratios), ratio_packets = median(ratios_packets);
     std::printf("   Embree alone: camera %.3g (in packets of %d: %.3g), bounce %.3g, shadow %.3g rays/s; path tracer / "
                 "Embree-alone rate %.2f (%d rounds %.2f-%.2f; %.2f with camera rays in packets for both)\n",
-                rc, Accel::kPacketSize, rcp, rb, rs, ratio, rounds, ratio_lo, ratio_hi, ratio_packets);
+                rc, Accel::kPacketSize, rcp, rb, rs, ratio, rounds, *ratio_lo, *ratio_hi, ratio_packets);
     r["embree_alone"] = {{"camera", rc},          {"camera_packets", rcp}, {"bounce", rb},
                          {"shadow", rs},          {"ratio", ratio},        {"ratio_camera_packets", ratio_packets},
                          {"ratio_rounds", ratios}};
