@@ -25,7 +25,7 @@ request() {
   body_file=$(mktemp)
   if ! status=$(curl -sS -o "$body_file" -w '%{http_code}' -X "$method" ${TESSERA_AUTH[@]+"${TESSERA_AUTH[@]}"} "$@" "$TESSERA_URL$path"); then
     rm -f "$body_file"
-    echo "error: cannot reach $TESSERA_URL" >&2
+    echo "error: cannot reach $TESSERA_URL: is tesserad running? (\`make run\` in the repository starts it; TESSERA_URL names another)" >&2
     exit 1
   fi
   if [[ $status != 2* ]]; then

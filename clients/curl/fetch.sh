@@ -1,17 +1,26 @@
 #!/usr/bin/env bash
 # Downloads a finished job's results (result.png, result.exr: those the job asked for) into DIR.
+# Exits 1 when the job has no results: it failed or was cancelled, or has not finished yet (the message says which).
 set -euo pipefail
-usage() { echo "usage: $(basename "$0") JOB_ID DIR   (TESSERA_URL, default http://127.0.0.1:8080)"; }
+usage() { echo "usage: $(basename "$0") JOB_ID DIR   (TESSERA_URL, default http://127.0.0.1:8080; TESSERA_TOKEN)"; }
 if [[ ${1:-} == -h || ${1:-} == --help ]]; then usage; exit 0; fi
 if [[ $# -ne 2 ]]; then usage >&2; exit 2; fi
 source "$(dirname "$0")/common.sh"
-mkdir -p "$2"
-trap 'rm -f "$2"/.result.*.part' EXIT
-job=$(request GET "/v1/jobs/$1")
-outputs=$(python3 -c 'import json, sys; print(" ".join(json.load(sys.stdin)["outputs"]))' <<<"$job")
-for ext in $outputs; do
-  tmp="$2/.result.$ext.part"
-  request GET "/v1/jobs/$1/result.$ext" >"$tmp"
-  mv "$tmp" "$2/result.$ext"
-  echo "$2/result.$ext"
+id=$1
+dir=${2%/}
+dir=${dir:-/}
+job=$(request GET "/v1/jobs/$id")
+state=$(json_field state <<<"$job")
+case $state in
+  succeeded) ;;
+  failed | cancelled) echo "error: job $id $state: it has no results" >&2; exit 1 ;;
+  *) echo "error: job $id is $state: results exist once it has succeeded (watch.sh $id waits for it)" >&2; exit 1 ;;
+esac
+mkdir -p "$dir"
+trap 'rm -f "$dir"/.result.*.part' EXIT
+for ext in $(python3 -c 'import json, sys; print(" ".join(json.load(sys.stdin)["outputs"]))' <<<"$job"); do
+  part="$dir/.result.$ext.part"
+  request GET "/v1/jobs/$id/result.$ext" >"$part"
+  mv "$part" "$dir/result.$ext"
+  echo "$dir/result.$ext"
 done

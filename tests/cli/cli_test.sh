@@ -204,15 +204,29 @@ PY
   grep -q succeeded "$tmp/out" && ok "watch.sh printed the final state" || not_ok "watch.sh printed no final state"
   expect 0 "list.sh" "$curl_dir/list.sh"
   grep -q "$cid" "$tmp/out" && ok "list.sh shows the job" || not_ok "list.sh misses the job"
-  expect 0 "fetch.sh" "$curl_dir/fetch.sh" "$cid" curl-out
+  expect 0 "fetch.sh" "$curl_dir/fetch.sh" "$cid" curl-out/
   png_signature curl-out/result.png && ok "fetch.sh wrote a PNG" || not_ok "fetch.sh PNG has no signature"
+  grep -qx "curl-out/result.png" "$tmp/out" && ok "fetch.sh names DIR/result.png once with a slash" \
+    || not_ok "fetch.sh printed: $(cat "$tmp/out")"
   expect 0 "submit.sh a long job" "$curl_dir/submit.sh" long.json
   clong=$(cat "$tmp/out")
+  expect 1 "fetch.sh of an unfinished job fails" "$curl_dir/fetch.sh" "$clong" curl-long
+  grep -q "results exist once it has succeeded" "$tmp/err" && ok "fetch.sh says the job has not finished" \
+    || not_ok "fetch.sh of an unfinished job said: $(cat "$tmp/err")"
   expect 0 "cancel.sh" "$curl_dir/cancel.sh" "$clong"
+  expect 1 "fetch.sh of a cancelled job fails" "$curl_dir/fetch.sh" "$clong" curl-cancelled/
+  if grep -q "job $clong cancelled: it has no results" "$tmp/err" && ! grep -q "unbound" "$tmp/err"; then
+    ok "fetch.sh says the cancelled job has no results, and nothing else"
+  else
+    not_ok "fetch.sh of a cancelled job said: $(cat "$tmp/err")"
+  fi
+  [[ ! -e curl-cancelled ]] && ok "fetch.sh made no directory for a job without results" || not_ok "curl-cancelled/ made"
   expect 1 "cancel.sh of an ended job fails" "$curl_dir/cancel.sh" "$cid"
   grep -q "error: HTTP 409" "$tmp/err" && ok "cancel.sh says why" || not_ok "cancel.sh gave no reason"
   expect 1 "submit.sh of an invalid job fails" "$curl_dir/submit.sh" invalid.json
   expect 1 "watch.sh of an unknown job fails" "$curl_dir/watch.sh" 0123456789abcdef0123456789abcdef
+  TESSERA_URL=http://127.0.0.1:9 expect 1 "list.sh without a daemon fails" "$curl_dir/list.sh"
+  grep -q "is tesserad running" "$tmp/err" && ok "list.sh says how to start the daemon" || not_ok "list.sh said: $(cat "$tmp/err")"
 fi
 
 echo "$passed passed, $failed failed"
