@@ -1,7 +1,8 @@
-# The two commands of the README:
-#   make run    installs what is missing, builds Release, starts tesserad on 127.0.0.1:8080 (data in ./data)
-#   make test   installs what is missing, builds, runs the whole test suite
-# Other targets: build, asan (sanitizer build + tests), bench, image (podman), deb (cpack, in build-deb), format, clean.
+# The commands of the README (deploy/install-deps.sh, run first, installs make itself):
+#   make run    installs what is missing, builds the programs (Release), starts tesserad on 127.0.0.1:8080 (./data)
+#   make test   installs what is missing, builds everything, runs the whole test suite
+# Other targets: build (the programs), asan (sanitizer build + tests), bench, image (podman), deb (cpack, in
+# build-deb), format, clean.
 
 BUILD ?= build
 ASAN_BUILD ?= build-asan
@@ -12,6 +13,13 @@ ARCH ?= native
 JOBS ?= $(shell nproc)
 DATA_DIR ?= $(CURDIR)/data
 PORT ?= 8080
+# What running needs: the daemon and the two programs of the command line.
+PROGRAMS = tesserad tessera tessera-render
+# `make run` and `make build` leave the test suite as the build directory has it: a fresh clone is configured without
+# it (it needs GTest, which only `make test` installs, and a third of a cold build), a build directory `make test`
+# configured keeps it, so neither command reconfigures what the other set up; both build only $(PROGRAMS).
+TESTS_CONFIGURED = $(shell sed -n 's/^TESSERA_BUILD_TESTS:BOOL=//p' $(BUILD)/CMakeCache.txt 2>/dev/null)
+CMAKE_CONFIGURE = cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_ARCH=$(ARCH)
 
 .PHONY: run test build configure deps test-deps asan bench image deb format clean
 
@@ -23,16 +31,17 @@ test-deps:
 
 # Configuring again is quick (under a second) and takes a changed ARCH into an existing build directory.
 configure:
-	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_ARCH=$(ARCH)
+	$(CMAKE_CONFIGURE) -DTESSERA_BUILD_TESTS=$(or $(TESTS_CONFIGURED),OFF)
 
 build: deps configure
-	cmake --build $(BUILD) -j $(JOBS)
+	cmake --build $(BUILD) -j $(JOBS) --target $(PROGRAMS)
 
 run: build
 	@mkdir -p $(DATA_DIR)
 	exec $(BUILD)/server/tesserad --listen 127.0.0.1 --port $(PORT) --data-dir $(DATA_DIR)
 
-test: test-deps configure
+test: test-deps
+	$(CMAKE_CONFIGURE) -DTESSERA_BUILD_TESTS=ON
 	cmake --build $(BUILD) -j $(JOBS)
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) --timeout 900
 
@@ -44,8 +53,8 @@ asan: test-deps
 	  ctest --output-on-failure -j $(JOBS) -LE slow --timeout 1800
 
 bench: deps
-	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_ARCH=$(ARCH) -DTESSERA_BUILD_BENCH=ON
-	cmake --build $(BUILD) -j $(JOBS)
+	$(CMAKE_CONFIGURE) -DTESSERA_BUILD_TESTS=$(or $(TESTS_CONFIGURED),OFF) -DTESSERA_BUILD_BENCH=ON
+	cmake --build $(BUILD) -j $(JOBS) --target tessera-bench tessera-poll-load
 
 image:
 	deploy/install-deps.sh deploy

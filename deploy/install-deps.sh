@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs what tessera needs to build, run and test on Debian 12, idempotently: nothing is installed twice and a
-# machine that has everything is left alone. Usage: deploy/install-deps.sh [build|test|deploy]
-#   build   the toolchain and libraries to build tessera
+# machine that has everything is left alone. It needs only bash and apt, so it is the first command on a fresh
+# machine (make included). Runs apt-get as root, or through sudo when not root.
+# Usage: deploy/install-deps.sh [build|test|deploy]
+#   build   (the default) make, the toolchain and libraries to build and run tessera
 #   test    build + what the test suite needs, the deployment tests' tools included (below)
 #   deploy  the tools of deploy/: podman (with runc) and debootstrap to build and run the container image without a
 #           registry (deploy/podman/), systemd's systemd-analyze for the unit, dpkg-dev for `cpack -G DEB`
@@ -17,7 +19,7 @@ SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 
 packages=(
-  build-essential cmake ninja-build pkg-config git ca-certificates curl python3
+  make build-essential cmake ninja-build pkg-config git ca-certificates curl python3
   libembree-dev libopenimageio-dev openimageio-tools libcpp-httplib-dev nlohmann-json3-dev libtinygltf-dev
   libsqlite3-dev libtbb-dev libssl-dev libstb-dev libjpeg-dev
 )
@@ -38,6 +40,10 @@ for p in "${packages[@]}"; do
 done
 if [ ${#missing[@]} -gt 0 ]; then
   echo "install-deps: installing ${missing[*]}"
+  if [ -n "$SUDO" ] && ! command -v sudo >/dev/null 2>&1; then
+    echo "install-deps: installing packages needs root: run this as root, or install sudo first" >&2
+    exit 1
+  fi
   export DEBIAN_FRONTEND=noninteractive
   $SUDO apt-get update -qq
   $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
