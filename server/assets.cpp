@@ -123,7 +123,7 @@ std::string sha256_hex(std::string_view bytes) {
   return out;
 }
 
-AssetStore::AssetStore(const fs::path& data_dir) : root_(data_dir / "assets") {
+DirectoryAssetStore::DirectoryAssetStore(const fs::path& data_dir) : root_(data_dir / "assets") {
   fs::create_directories(root_);
   // Temp dirs of uploads a crash interrupted.
   std::error_code ec;
@@ -131,7 +131,7 @@ AssetStore::AssetStore(const fs::path& data_dir) : root_(data_dir / "assets") {
     if (e.path().filename().string().rfind(".tmp-", 0) == 0) fs::remove_all(e.path(), ec);
 }
 
-std::variant<StoredAsset, Problem> AssetStore::store(std::vector<UploadFile> files, const std::string& owner) {
+std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<UploadFile> files, const std::string& owner) {
   if (files.empty()) return Problem{400, "the upload holds no file", std::nullopt};
   if (files.size() > 256) return invalid("an upload holds at most 256 files");
   std::set<std::string> names;
@@ -193,8 +193,7 @@ std::variant<StoredAsset, Problem> AssetStore::store(std::vector<UploadFile> fil
         const std::string shown = "\"" + uri.substr(0, 200) + "\"";
         if (std::string why = gltf_uri_problem(uri); !why.empty()) return invalid(where + shown + " refused: " + why);
         if (uri.rfind("data:", 0) == 0) continue;
-        if (!names.count(uri) || uri == main.name)
-          return invalid(where + shown + " names no file of this upload");
+        if (!names.count(uri) || uri == main.name) return invalid(where + shown + " names no file of this upload");
       }
     }
   }
@@ -208,8 +207,7 @@ std::variant<StoredAsset, Problem> AssetStore::store(std::vector<UploadFile> fil
   }
   if (auto existing = get(info.id)) return StoredAsset{*existing, false};
 
-  const fs::path temp =
-      root_ / (".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(g_counter.fetch_add(1)));
+  const fs::path temp = root_ / (".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(g_counter.fetch_add(1)));
   std::error_code ec;
   try {
     fs::create_directories(temp);
@@ -257,7 +255,7 @@ std::variant<StoredAsset, Problem> AssetStore::store(std::vector<UploadFile> fil
   return StoredAsset{info, true};
 }
 
-std::optional<AssetInfo> AssetStore::get(const std::string& id) const {
+std::optional<AssetInfo> DirectoryAssetStore::get(const std::string& id) const {
   if (!is_asset_id(id)) return std::nullopt;
   const fs::path meta_path = root_ / id / kMetaFile;
   std::error_code ec;
@@ -276,7 +274,7 @@ std::optional<AssetInfo> AssetStore::get(const std::string& id) const {
   return info;
 }
 
-bool AssetStore::remove(const std::string& id) {
+bool DirectoryAssetStore::remove(const std::string& id) {
   if (!get(id)) return false;
   // Renamed away first, so a job never sees half an asset.
   const fs::path doomed = root_ / (".tmp-del-" + std::to_string(g_counter.fetch_add(1)));
@@ -287,10 +285,25 @@ bool AssetStore::remove(const std::string& id) {
   return true;
 }
 
-std::optional<fs::path> AssetStore::main_file(const std::string& id, const std::string& kind) const {
+std::optional<fs::path> DirectoryAssetStore::main_file(const std::string& id, const std::string& kind) const {
   auto info = get(id);
   if (!info || info->kind != kind || !is_plain_file_name(info->main)) return std::nullopt;
   return root_ / id / info->main;
+}
+
+std::function<fs::path(const std::string&, const std::string&)> asset_resolver(const AssetStore& assets) {
+  return [&assets](const std::string& ref, const std::string& pointer) -> fs::path {
+    const bool map = pointer.size() >= 4 && pointer.compare(pointer.size() - 4, 4, "/map") == 0;
+    const std::string kind = map ? "environment" : "gltf";
+    if (!is_asset_id(ref)) throw SceneError(pointer, "must be an asset id (64 hex digits) from POST /v1/assets");
+    auto path = assets.main_file(ref, kind);
+    if (!path) {
+      auto info = assets.get(ref);
+      throw SceneError(pointer, info ? "asset " + ref + " is a " + info->kind + " asset, not a " + kind + " asset"
+                                     : "no asset " + ref + " (upload it with POST /v1/assets)");
+    }
+    return *path;
+  };
 }
 
 }  // namespace tessera::server

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <variant>
@@ -19,15 +20,15 @@
 namespace tessera::server {
 
 struct UploadFile {
-  std::string name;   // plain: ^[A-Za-z0-9._-]{1,128}$, no leading dot
+  std::string name;  // plain: ^[A-Za-z0-9._-]{1,128}$, no leading dot
   std::string bytes;
 };
 
 struct AssetInfo {
-  std::string id;     // 64 lowercase hex digits
-  std::string kind;   // "gltf" | "environment"
+  std::string id;    // 64 lowercase hex digits
+  std::string kind;  // "gltf" | "environment"
   std::vector<std::string> files;
-  std::string main;   // the file a job's reference resolves to
+  std::string main;  // the file a job's reference resolves to
   uint64_t bytes = 0;
   std::string owner;  // who uploaded it first (token name; empty without tokens)
   nlohmann::json to_json() const;
@@ -42,20 +43,35 @@ bool is_plain_file_name(const std::string& name);
 bool is_asset_id(const std::string& s);
 std::string sha256_hex(std::string_view bytes);
 
+// Where assets are kept: an interface, so that every node of a daemon reaches them wherever they are.
 class AssetStore {
  public:
-  explicit AssetStore(const std::filesystem::path& data_dir);
+  virtual ~AssetStore() = default;
 
   // The asset, stored or found already stored; or why not: 4xx for the upload's fault, 507 when the disk ran out of
   // room while it was written (ENOSPC, EDQUOT, EFBIG). A refused upload leaves no file behind.
-  std::variant<StoredAsset, Problem> store(std::vector<UploadFile> files, const std::string& owner);
-  std::optional<AssetInfo> get(const std::string& id) const;
-  bool remove(const std::string& id);
-  // The main file of asset `id` when it is of `kind`.
-  std::optional<std::filesystem::path> main_file(const std::string& id, const std::string& kind) const;
+  virtual std::variant<StoredAsset, Problem> store(std::vector<UploadFile> files, const std::string& owner) = 0;
+  virtual std::optional<AssetInfo> get(const std::string& id) const = 0;
+  virtual bool remove(const std::string& id) = 0;
+  // The main file of asset `id` when it is of `kind`, as a local file the renderer can open.
+  virtual std::optional<std::filesystem::path> main_file(const std::string& id, const std::string& kind) const = 0;
+};
+
+// The assets in the data directory, <data>/assets/<id>/.
+class DirectoryAssetStore final : public AssetStore {
+ public:
+  explicit DirectoryAssetStore(const std::filesystem::path& data_dir);
+
+  std::variant<StoredAsset, Problem> store(std::vector<UploadFile> files, const std::string& owner) override;
+  std::optional<AssetInfo> get(const std::string& id) const override;
+  bool remove(const std::string& id) override;
+  std::optional<std::filesystem::path> main_file(const std::string& id, const std::string& kind) const override;
 
  private:
   std::filesystem::path root_;
 };
+
+// The asset resolver jobs use: a 64-hex asset id to its main file; anything else is a SceneError at `pointer`.
+std::function<std::filesystem::path(const std::string&, const std::string&)> asset_resolver(const AssetStore& assets);
 
 }  // namespace tessera::server

@@ -1,6 +1,8 @@
-// Server-Sent Events: what happened to jobs, kept in bounded ring buffers so a client reconnecting with
-// Last-Event-ID misses nothing still buffered. One stream per job (ids count that job's events) and one global
-// stream (ids count every event). Publishing never blocks on a watcher; watchers wait on a condition variable.
+// The event bus behind Server-Sent Events: what happened to jobs, kept so that a client reconnecting with
+// Last-Event-ID misses nothing still kept. One stream per job (ids count that job's events) and one global stream
+// (ids count every event). EventBus is the interface the daemon publishes to and streams from; EventHub keeps the
+// events of one process in memory, in bounded ring buffers. Publishing never blocks on a watcher; watchers wait on a
+// condition variable.
 #pragma once
 
 #include <condition_variable>
@@ -15,8 +17,8 @@
 namespace tessera::server {
 
 struct JobEvent {
-  uint64_t seq = 0;       // in the stream it was read from
-  std::string type;       // "state" | "progress" | "preview"
+  uint64_t seq = 0;  // in the stream it was read from
+  std::string type;  // "state" | "progress" | "preview"
   std::string job_id;
   std::string owner;      // who may see it
   std::string data;       // the JSON of the data: line
@@ -30,21 +32,35 @@ struct EventRead {
   uint64_t last_seq = 0;         // the stream's newest sequence number
 };
 
-class EventHub {
+class EventBus {
+ public:
+  virtual ~EventBus() = default;
+
+  virtual void publish(const std::string& job_id, const std::string& owner, const std::string& type,
+                       const std::string& data, bool terminal = false) = 0;
+  // Waits up to `timeout_ms` for events after `after` in the job's stream (or the global one when `job_id` is
+  // empty), and returns them.
+  virtual EventRead wait(const std::string& job_id, uint64_t after, int timeout_ms) = 0;
+  virtual uint64_t last_seq(const std::string& job_id) = 0;
+  // A deleted job's stream is dropped.
+  virtual void forget(const std::string& job_id) = 0;
+  // Wakes every watcher for good (daemon shutdown).
+  virtual void close() = 0;
+  // Streams waiting for events in this process.
+  virtual size_t watchers() const = 0;
+};
+
+class EventHub final : public EventBus {
  public:
   explicit EventHub(size_t per_job_capacity = 256, size_t global_capacity = 4096, size_t max_job_streams = 4096);
 
   void publish(const std::string& job_id, const std::string& owner, const std::string& type, const std::string& data,
-               bool terminal = false);
-  // Waits up to `timeout_ms` for events after `after` in the job's stream (or the global one when `job_id` is
-  // empty), and returns them.
-  EventRead wait(const std::string& job_id, uint64_t after, int timeout_ms);
-  uint64_t last_seq(const std::string& job_id);
-  // A deleted job's stream is dropped.
-  void forget(const std::string& job_id);
-  // Wakes every watcher for good (daemon shutdown).
-  void close();
-  size_t watchers() const;
+               bool terminal = false) override;
+  EventRead wait(const std::string& job_id, uint64_t after, int timeout_ms) override;
+  uint64_t last_seq(const std::string& job_id) override;
+  void forget(const std::string& job_id) override;
+  void close() override;
+  size_t watchers() const override;
 
  private:
   struct Stream {

@@ -37,15 +37,20 @@ struct Route {
 };
 
 constexpr const char* kJobId = "([^/]+)";  // checked by is_valid_job_id() before any use
-constexpr const char* kWebFile = "/([A-Za-z0-9_-][A-Za-z0-9._-]{0,127}\\.(?:js|mjs|css|html|svg|png|ico|json|map|webmanifest))";
+constexpr const char* kWebFile =
+    "/([A-Za-z0-9_-][A-Za-z0-9._-]{0,127}\\.(?:js|mjs|css|html|svg|png|ico|json|map|webmanifest))";
 
 std::string web_media_type(const std::string& name) {
-  static const std::map<std::string, std::string> types = {
-      {"js", "text/javascript; charset=utf-8"}, {"mjs", "text/javascript; charset=utf-8"},
-      {"css", "text/css; charset=utf-8"},       {"html", "text/html; charset=utf-8"},
-      {"svg", "image/svg+xml"},                 {"png", "image/png"},
-      {"ico", "image/x-icon"},                  {"json", "application/json"},
-      {"map", "application/json"},              {"webmanifest", "application/manifest+json"}};
+  static const std::map<std::string, std::string> types = {{"js", "text/javascript; charset=utf-8"},
+                                                           {"mjs", "text/javascript; charset=utf-8"},
+                                                           {"css", "text/css; charset=utf-8"},
+                                                           {"html", "text/html; charset=utf-8"},
+                                                           {"svg", "image/svg+xml"},
+                                                           {"png", "image/png"},
+                                                           {"ico", "image/x-icon"},
+                                                           {"json", "application/json"},
+                                                           {"map", "application/json"},
+                                                           {"webmanifest", "application/manifest+json"}};
   auto it = types.find(name.substr(name.rfind('.') + 1));
   return it == types.end() ? "application/octet-stream" : it->second;
 }
@@ -56,6 +61,7 @@ void send_json(Response& res, int status, const json& body) {
 }
 
 void send_problem(Response& res, const Problem& p) {
+  if (p.retry_after_s) res.set_header("Retry-After", std::to_string(*p.retry_after_s));
   res.status = p.status;
   res.set_content(p.to_json().dump(-1, ' ', false, json::error_handler_t::replace), kProblemMediaType);
 }
@@ -104,18 +110,6 @@ bool refused_for_storage(const ApiContext& ctx, Response& res) {
   return true;
 }
 
-// The identity of a file's current version: a preview renamed over gets a new one.
-std::optional<std::string> file_etag(const std::filesystem::path& path) {
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) return std::nullopt;
-  char buf[96];
-  std::snprintf(buf, sizeof buf, "\"%llx-%llx-%llx\"", static_cast<unsigned long long>(st.st_ino),
-                static_cast<unsigned long long>(st.st_size),
-                static_cast<unsigned long long>(st.st_mtim.tv_sec) * 1000000000ull +
-                    static_cast<unsigned long long>(st.st_mtim.tv_nsec));
-  return std::string(buf);
-}
-
 bool etag_matches(const std::string& if_none_match, const std::string& etag) {
   if (if_none_match.empty()) return false;
   if (if_none_match == "*") return true;
@@ -134,30 +128,27 @@ bool etag_matches(const std::string& if_none_match, const std::string& etag) {
   return false;
 }
 
-// Streams a file from an open handle: a file renamed over meanwhile (a fresher preview) does not mix into it.
-// With an ETag; a matching If-None-Match is answered 304.
-bool send_file(const Request& req, Response& res, const std::filesystem::path& path, const std::string& media_type) {
-  const auto etag = file_etag(path);
-  auto in = std::make_shared<std::ifstream>(path, std::ios::binary);
-  if (!*in || !etag) return false;
-  res.set_header("ETag", *etag);
-  if (etag_matches(req.get_header_value("If-None-Match"), *etag)) {
+// Streams one version of a file (a fresher preview written meanwhile does not mix into it), with its ETag; a matching
+// If-None-Match is answered 304.
+void send_file(const Request& req, Response& res, std::shared_ptr<FileReader> file, const std::string& media_type) {
+  res.set_header("ETag", file->etag());
+  if (etag_matches(req.get_header_value("If-None-Match"), file->etag())) {
     res.status = 304;
-    return true;
+    return;
   }
-  in->seekg(0, std::ios::end);
-  const auto size = static_cast<size_t>(in->tellg());
-  in->seekg(0);
   res.status = 200;
-  res.set_content_provider(size, media_type, [in](size_t offset, size_t length, httplib::DataSink& sink) {
+  res.set_content_provider(file->size(), media_type, [file](size_t offset, size_t length, httplib::DataSink& sink) {
     char buf[64 * 1024];
-    in->seekg(static_cast<std::streamoff>(offset));
-    in->read(buf, static_cast<std::streamsize>(std::min(length, sizeof buf)));
-    const std::streamsize got = in->gcount();
-    if (got <= 0) return false;
-    return sink.write(buf, static_cast<size_t>(got));
+    const size_t got = file->read(offset, buf, std::min(length, sizeof buf));
+    return got > 0 && sink.write(buf, got);
   });
-  return true;
+}
+
+// A file the job service gave, or its problem.
+void send_file_or_problem(const Request& req, Response& res, std::variant<std::unique_ptr<FileReader>, Problem> file,
+                          const std::string& media_type) {
+  if (auto* p = std::get_if<Problem>(&file)) return send_problem(res, *p);
+  send_file(req, res, std::move(std::get<std::unique_ptr<FileReader>>(file)), media_type);
 }
 
 bool is_event_stream_path(const std::string& path) {
@@ -171,42 +162,18 @@ Caller caller_of(ApiContext& ctx, const Request& req) {
   return ctx.auth.identify(req.get_header_value("Authorization"), query_token);
 }
 
-bool may_see(const Caller& caller, const JobRecord& job) {
-  return caller.admin || job.owner == caller.name;
-}
-
 // The job named by the first path capture and visible to the caller, or an answered 404 (an id of the wrong shape,
 // or another user's job, is simply unknown).
 std::optional<JobRecord> find_job(ApiContext& ctx, const Request& req, Response& res) {
-  const std::string id = req.matches[1];
-  if (!is_valid_job_id(id)) {
-    job_not_found(res);
-    return std::nullopt;
-  }
-  std::optional<JobRecord> job = ctx.store.get(id);
-  if (!job || !may_see(caller_of(ctx, req), *job)) {
-    job_not_found(res);
-    return std::nullopt;
-  }
+  std::optional<JobRecord> job = ctx.jobs.find(caller_of(ctx, req), req.matches[1]);
+  if (!job) job_not_found(res);
   return job;
-}
-
-json status_of(ApiContext& ctx, const JobRecord& job) {
-  std::optional<int> position;
-  if (job.state == JobState::kQueued) position = ctx.store.queue_position(job.id);
-  return job_status_json(job, ctx.scheduler.live_progress(job.id), position);
 }
 
 // Retry-After while a job has not ended: how long a poller should wait (the event stream needs no polling).
 void set_retry_after(Response& res, const JobRecord& job) {
   if (job.state == JobState::kQueued) res.set_header("Retry-After", "2");
   if (job.state == JobState::kRunning) res.set_header("Retry-After", "1");
-}
-
-void publish_state(ApiContext& ctx, const std::string& id) {
-  auto job = ctx.store.get(id);
-  if (!job) return;
-  ctx.events.publish(id, job->owner, "state", status_of(ctx, *job).dump(), is_terminal(job->state));
 }
 
 // ---- jobs ----------------------------------------------------------------------------------------------------
@@ -221,8 +188,8 @@ bool valid_idempotency_key(const std::string& k) {
          std::all_of(k.begin(), k.end(), [](unsigned char c) { return c > 32 && c < 127; });
 }
 
-// A multipart submission: the part "job" plus files. Files the job names (scene.gltf, scene.environment.map) are
-// stored as assets first and the names replaced by the asset ids.
+// A multipart submission: the part "job" plus files, which the job service stores as assets (the job's names for
+// them become their ids).
 std::variant<Submission, Problem> multipart_submission(ApiContext& ctx, const Request& req, const Caller& caller) {
   if (!req.has_file("job"))
     return Problem{422, "a multipart job needs a part named \"job\" holding the job document (JSON)", std::nullopt};
@@ -244,33 +211,7 @@ std::variant<Submission, Problem> multipart_submission(ApiContext& ctx, const Re
     std::sort(lines.begin(), lines.end());
     for (const std::string& l : lines) manifest += l + "\n";
   }
-  if (!files.empty() && doc.is_object() && doc.contains("scene") && doc["scene"].is_object()) {
-    json& scene = doc["scene"];
-    // The map the job names becomes an environment asset of its own; the rest is the glTF asset.
-    if (scene.contains("environment") && scene["environment"].is_object() &&
-        scene["environment"].contains("map") && scene["environment"]["map"].is_string()) {
-      const std::string map = scene["environment"]["map"];
-      auto it = std::find_if(files.begin(), files.end(), [&](const UploadFile& f) { return f.name == map; });
-      if (it != files.end()) {
-        std::vector<UploadFile> one{*it};
-        files.erase(it);
-        auto stored = ctx.assets.store(std::move(one), caller.name);
-        if (auto* p = std::get_if<Problem>(&stored)) return *p;
-        scene["environment"]["map"] = std::get<StoredAsset>(stored).info.id;
-      }
-    }
-    if (!files.empty()) {
-      const bool named = scene.contains("gltf") && scene["gltf"].is_string() &&
-                         std::any_of(files.begin(), files.end(),
-                                     [&](const UploadFile& f) { return f.name == scene["gltf"].get<std::string>(); });
-      auto stored = ctx.assets.store(std::move(files), caller.name);
-      if (auto* p = std::get_if<Problem>(&stored)) return *p;
-      const AssetInfo& info = std::get<StoredAsset>(stored).info;
-      if (named && info.kind == "gltf") scene["gltf"] = info.id;
-    }
-  } else if (!files.empty()) {
-    return Problem{422, "uploaded files need a scene job that names them", "/scene"};
-  }
+  if (auto problem = ctx.jobs.store_uploads(caller, doc, std::move(files))) return *problem;
   return Submission{std::move(doc), sha256_hex(manifest)};
 }
 
@@ -298,85 +239,17 @@ void post_job(ApiContext& ctx, const Request& req, Response& res) {
     log(LogLevel::kDebug, "job refused", {{"status", problem->status}, {"detail", problem->detail}});
     return send_problem(res, *problem);
   }
-  if (!ctx.scheduler.accepting()) return send_problem(res, 503, "the daemon is shutting down");
-
-  auto answer_existing = [&](const JobRecord& existing) {
-    if (existing.request_hash != request_hash)
-      return send_problem(res, 422, "this Idempotency-Key was used with another request body");
-    res.set_header("Location", "/v1/jobs/" + existing.id);
-    set_retry_after(res, existing);
-    send_json(res, 200, status_of(ctx, existing));
-  };
-  if (!key.empty())
-    if (auto existing = ctx.store.find_by_idempotency_key(caller.name, key)) return answer_existing(*existing);
-
-  AcceptedJob& accepted = std::get<AcceptedJob>(checked);
-  if (accepted.priority > ctx.max_user_priority && !caller.admin)
-    return send_problem(res, Problem{403,
-                                     "priority " + std::to_string(accepted.priority) + " is above " +
-                                         std::to_string(ctx.max_user_priority) + ", which needs an admin token",
-                                     "/priority"});
-  if (ctx.max_queued_per_user > 0) {
-    const auto counts = ctx.store.count_by_state(caller.name);
-    if (counts.at(JobState::kQueued) >= ctx.max_queued_per_user) {
-      res.set_header("Retry-After", "30");
-      return send_problem(res, 429,
-                          "you have " + std::to_string(counts.at(JobState::kQueued)) +
-                              " jobs queued, the most this server allows (--max-queued-per-user); retry later");
-    }
+  auto submitted =
+      ctx.jobs.submit(caller, SubmitRequest{std::move(std::get<AcceptedJob>(checked)), key, request_hash, multipart});
+  if (auto* p = std::get_if<Problem>(&submitted)) return send_problem(res, *p);
+  const Submitted& s = std::get<Submitted>(submitted);
+  res.set_header("Location", "/v1/jobs/" + s.job.id);
+  if (s.created) {
+    res.set_header("Retry-After", "1");
+    return send_json(res, 202, s.status);
   }
-  JobRecord job;
-  job.id = new_job_id();
-  job.kind = accepted.kind;
-  job.priority = accepted.priority;
-  job.created_at_ms = now_ms();
-  job.document = accepted.document.dump();
-  job.settings = accepted.settings.dump();
-  job.outputs = accepted.outputs.dump();
-  job.progress.samples_total = accepted.spp;
-  job.owner = caller.name;
-  job.warnings = json(accepted.warnings).dump();
-  job.idempotency_key = key;
-  job.request_hash = request_hash;
-  try {
-    ctx.store.create(job);
-  } catch (const std::exception& e) {
-    // The same key raced in from another connection: that request's job is this one's.
-    if (!key.empty())
-      if (auto existing = ctx.store.find_by_idempotency_key(caller.name, key)) return answer_existing(*existing);
-    // The disk filled after the --min-free-disk check: the insert was rolled back whole, so, as the check's refusal,
-    // nothing of the job exists (assets a multipart submission stored stay: whole, and found again by a retry).
-    if (const auto* se = dynamic_cast<const JobStoreError*>(&e); se && se->out_of_space()) {
-      ctx.metrics.count_job_store_error();
-      log(LogLevel::kWarn, "job refused: the job store ran out of space", {{"error", e.what()}});
-      const std::string kept = multipart ? "the job was not stored; the files uploaded with it were, whole, and a "
-                                           "retry reuses them"
-                                         : "nothing was stored";
-      return send_problem(
-          res, insufficient_storage("the data directory's disk ran out of space while the job was stored", kept));
-    }
-    throw;
-  }
-  ctx.scheduler.wake();
-  log(LogLevel::kInfo, "job queued",
-      {{"job", job.id}, {"kind", job.kind}, {"priority", job.priority}, {"owner", job.owner},
-       {"render", accepted.settings}});
-  // The job exists from here on: a store that fails as it is read back costs the answer its queue position (and the
-  // event its watchers), not a 503 whose retry, without an Idempotency-Key, would queue the job twice.
-  json status;
-  try {
-    publish_state(ctx, job.id);
-    auto stored = ctx.store.get(job.id);
-    status = status_of(ctx, stored ? *stored : job);
-  } catch (const JobStoreError& e) {
-    ctx.metrics.count_job_store_error();
-    log(LogLevel::kWarn, "job queued, but the job store failed as it was read back",
-        {{"job", job.id}, {"error", e.what()}});
-    status = job_status_json(job);
-  }
-  res.set_header("Location", "/v1/jobs/" + job.id);
-  res.set_header("Retry-After", "1");
-  send_json(res, 202, status);
+  set_retry_after(res, s.job);
+  send_json(res, 200, s.status);
 }
 
 void list_jobs(ApiContext& ctx, const Request& req, Response& res) {
@@ -389,10 +262,12 @@ void list_jobs(ApiContext& ctx, const Request& req, Response& res) {
       size_t comma = all.find(',', at);
       const std::string s = all.substr(at, comma == std::string::npos ? std::string::npos : comma - at);
       auto state = parse_job_state(s);
-      if (!state)
+      if (!state) {
+        std::string names;
+        for (JobState st : kAllJobStates) names += std::string(names.empty() ? "" : ", ") + job_state_name(st);
         return send_problem(res, 400,
-                            "state must be a comma-separated list of queued, running, paused, succeeded, failed, "
-                            "cancelled; not \"" + s.substr(0, 64) + "\"");
+                            "state must be a comma-separated list of " + names + "; not \"" + s.substr(0, 64) + "\"");
+      }
       filter.states.push_back(*state);
       if (comma == std::string::npos) break;
       at = comma + 1;
@@ -418,73 +293,39 @@ void list_jobs(ApiContext& ctx, const Request& req, Response& res) {
     if (!ok) return send_problem(res, 400, "cursor is not one this server gave out (next_cursor of a listing)");
     filter.before_seq = seq;
   }
-  if (!caller.admin) filter.owner = caller.name;
-  const int limit = filter.limit;
-  filter.limit = limit + 1;  // one more tells whether another page exists
-  std::vector<JobRecord> jobs = ctx.store.list(filter);
+  const JobPage page = ctx.jobs.list(caller, filter);
   json next = nullptr;
-  if (static_cast<int>(jobs.size()) > limit) {
-    jobs.resize(static_cast<size_t>(limit));
+  if (page.next_before_seq) {
     char buf[32];
-    std::snprintf(buf, sizeof buf, "s%llx", static_cast<unsigned long long>(jobs.back().seq));
+    std::snprintf(buf, sizeof buf, "s%llx", static_cast<unsigned long long>(*page.next_before_seq));
     next = buf;
   }
-  json out = json::array();
-  for (const JobRecord& job : jobs) out.push_back(status_of(ctx, job));
-  send_json(res, 200, {{"jobs", out}, {"next_cursor", next}});
+  send_json(res, 200, {{"jobs", page.jobs}, {"next_cursor", next}});
 }
 
 void get_preview(ApiContext& ctx, const Request& req, Response& res) {
   auto job = find_job(ctx, req, res);
   if (!job) return;
   res.set_header("Cache-Control", "no-cache");
-  if (send_file(req, res, ctx.files.path(job->id, JobFile::kPreviewPng), "image/png")) return;
-  if (!is_terminal(job->state))
-    return send_problem(
-        res, 409,
-        std::string("the job is ") + job_state_name(job->state) + "; a preview exists after its first render pass");
-  send_problem(res, 404, "this job has no preview (it ended before its first pass)");
+  send_file_or_problem(req, res, ctx.jobs.preview(*job), "image/png");
 }
 
 void get_result(ApiContext& ctx, JobFile file, const Request& req, Response& res) {
   auto job = find_job(ctx, req, res);
   if (!job) return;
-  if (job->state != JobState::kSucceeded)
-    return send_problem(
-        res, 409, std::string("the job is ") + job_state_name(job->state) + "; results exist once it has succeeded");
-  const std::string format = file == JobFile::kResultExr ? "exr" : "png";
-  const json outputs = json::parse(job->outputs, nullptr, false);
-  if (!outputs.is_array() || std::find(outputs.begin(), outputs.end(), format) == outputs.end())
-    return send_problem(res, 404, "the job did not ask for a " + format + " output");
-  if (!send_file(req, res, ctx.files.path(job->id, file), job_file_media_type(file)))
-    send_problem(res, 404, std::string("the job's ") + job_file_name(file) + " is missing from the data directory");
+  send_file_or_problem(req, res, ctx.jobs.result(*job, file), job_file_media_type(file));
 }
 
-using Action = Scheduler::Outcome (Scheduler::*)(const std::string&);
+// A job after an action: 202 while a running render winds down (within one pass), 200 once the state has changed.
+void send_taken(Response& res, const std::variant<ActionTaken, Problem>& taken, bool may_pend) {
+  if (auto* p = std::get_if<Problem>(&taken)) return send_problem(res, *p);
+  const ActionTaken& t = std::get<ActionTaken>(taken);
+  set_retry_after(res, t.job);
+  send_json(res, may_pend && t.pending ? 202 : 200, t.status);
+}
 
-void job_action(ApiContext& ctx, const Request& req, Response& res, Action action, const char* verb,
-                const char* allowed_from) {
-  auto job = find_job(ctx, req, res);
-  if (!job) return;
-  switch ((ctx.scheduler.*action)(job->id)) {
-    case Scheduler::Outcome::kDone:
-    case Scheduler::Outcome::kInProgress: {
-      auto now = ctx.store.get(job->id);
-      if (!now) return job_not_found(res);
-      // 202 while a running render winds down (within one pass), 200 once the state has changed.
-      const bool changed = now->state != JobState::kRunning;
-      set_retry_after(res, *now);
-      return send_json(res, changed ? 200 : 202, status_of(ctx, *now));
-    }
-    case Scheduler::Outcome::kConflict: {
-      auto now = ctx.store.get(job->id);
-      return send_problem(res, 409,
-                          std::string("cannot ") + verb + " a job that is " +
-                              job_state_name(now ? now->state : job->state) + "; only a job that is " + allowed_from);
-    }
-    case Scheduler::Outcome::kUnknown:
-      return job_not_found(res);
-  }
+void job_action(ApiContext& ctx, const Request& req, Response& res, JobAction action) {
+  if (auto job = find_job(ctx, req, res)) send_taken(res, ctx.jobs.act(*job, action), true);
 }
 
 void patch_job(ApiContext& ctx, const Request& req, Response& res) {
@@ -503,21 +344,7 @@ void patch_job(ApiContext& ctx, const Request& req, Response& res) {
   const json& p = body["priority"];
   if (!p.is_number_integer() || p.get<int64_t>() < -100 || p.get<int64_t>() > 100)
     return send_problem(res, Problem{422, "must be an integer from -100 to 100", "/priority"});
-  const int priority = p.get<int>();
-  const Caller caller = caller_of(ctx, req);
-  if (priority > ctx.max_user_priority && !caller.admin)
-    return send_problem(res, Problem{403,
-                                     "priority " + std::to_string(priority) + " is above " +
-                                         std::to_string(ctx.max_user_priority) + ", which needs an admin token",
-                                     "/priority"});
-  if (!ctx.store.set_priority(job->id, priority))
-    return send_problem(res, 409,
-                        std::string("the job has ended (") + job_state_name(job->state) + "); its priority is final");
-  log(LogLevel::kInfo, "job priority changed", {{"job", job->id}, {"priority", priority}});
-  publish_state(ctx, job->id);
-  auto now = ctx.store.get(job->id);
-  if (!now) return job_not_found(res);
-  send_json(res, 200, status_of(ctx, *now));
+  send_taken(res, ctx.jobs.set_priority(caller_of(ctx, req), *job, p.get<int>()), false);
 }
 
 // ---- Server-Sent Events --------------------------------------------------------------------------------------
@@ -550,72 +377,71 @@ void stream_events(ApiContext& ctx, const Request& req, Response& res, const std
   res.set_header("Cache-Control", "no-cache");
   res.set_header("X-Accel-Buffering", "no");  // proxies (nginx) must not buffer the stream
   ApiContext* c = &ctx;
-  res.set_chunked_content_provider(
-      "text/event-stream", [c, state, job_id, caller](size_t, httplib::DataSink& sink) {
-        // The answer's status is sent by now: a store that fails from here on cannot be answered 503, and nothing
-        // catches around a content provider of cpp-httplib (the exception would end the daemon). The stream ends
-        // instead; EventSource reconnects (with Last-Event-ID) and gets the 503 until the store recovers.
-        try {
-          // The current state of the job as an event whose id is the stream's newest: a reconnect with it as
-          // Last-Event-ID continues right after.
-          auto snapshot = [&]() -> bool {
-            auto now = c->store.get(job_id);
-            if (!now) {
-              sink.done();
-              return true;
-            }
-            state->after = c->events.last_seq(job_id);
-            const std::string event = sse_event(state->after, "state", status_of(*c, *now).dump());
-            if (!sink.write(event.data(), event.size())) return false;
-            if (is_terminal(now->state)) sink.done();
-            return true;
-          };
-          auto write = [&](const std::string& s) { return sink.write(s.data(), s.size()); };
-          if (!state->started) {
-            state->started = true;
-            if (!write(": connected\n\n")) return false;
-            if (!state->resume_from) {
-              if (job_id.empty()) {
-                state->after = c->events.last_seq("");
-                return true;
-              }
-              return snapshot();
-            }
-            state->after = *state->resume_from;
-            EventRead r = c->events.wait(job_id, state->after, 0);
-            if (!job_id.empty() && (r.gap || (r.events.empty() && r.last_seq < state->after))) return snapshot();
-          }
-          EventRead r = c->events.wait(job_id, state->after, c->keepalive_s * 1000);
-          if (r.closed) {
-            sink.done();
-            return true;
-          }
-          if (r.events.empty()) {
-            if (!job_id.empty() && !c->store.get(job_id)) {  // deleted meanwhile
-              sink.done();
-              return true;
-            }
-            return write(": keep-alive\n\n");
-          }
-          for (const JobEvent& e : r.events) {
-            state->after = e.seq;
-            if (!caller.admin && e.owner != caller.name) continue;
-            if (!write(sse_event(e.seq, e.type, e.data))) return false;
-            if (!job_id.empty() && e.terminal) {
-              sink.done();
-              return true;
-            }
-          }
+  res.set_chunked_content_provider("text/event-stream", [c, state, job_id, caller](size_t, httplib::DataSink& sink) {
+    // The answer's status is sent by now: a store that fails from here on cannot be answered 503, and nothing
+    // catches around a content provider of cpp-httplib (the exception would end the daemon). The stream ends
+    // instead; EventSource reconnects (with Last-Event-ID) and gets the 503 until the store recovers.
+    try {
+      // The current state of the job as an event whose id is the stream's newest: a reconnect with it as
+      // Last-Event-ID continues right after.
+      auto snapshot = [&]() -> bool {
+        auto now = c->jobs.find(caller, job_id);
+        if (!now) {
+          sink.done();
           return true;
-        } catch (const JobStoreError& e) {
-          c->metrics.count_job_store_error();
-          log(LogLevel::kWarn, "event stream ended: the job store failed", {{"job", job_id}, {"error", e.what()}});
-          return false;
-        } catch (const std::exception& e) {
-          log(LogLevel::kError, "event stream failed", {{"job", job_id}, {"error", e.what()}});
-          return false;
         }
-      });
+        state->after = c->events.last_seq(job_id);
+        const std::string event = sse_event(state->after, "state", c->jobs.status(*now).dump());
+        if (!sink.write(event.data(), event.size())) return false;
+        if (is_terminal(now->state)) sink.done();
+        return true;
+      };
+      auto write = [&](const std::string& s) { return sink.write(s.data(), s.size()); };
+      if (!state->started) {
+        state->started = true;
+        if (!write(": connected\n\n")) return false;
+        if (!state->resume_from) {
+          if (job_id.empty()) {
+            state->after = c->events.last_seq("");
+            return true;
+          }
+          return snapshot();
+        }
+        state->after = *state->resume_from;
+        EventRead r = c->events.wait(job_id, state->after, 0);
+        if (!job_id.empty() && (r.gap || (r.events.empty() && r.last_seq < state->after))) return snapshot();
+      }
+      EventRead r = c->events.wait(job_id, state->after, c->keepalive_s * 1000);
+      if (r.closed) {
+        sink.done();
+        return true;
+      }
+      if (r.events.empty()) {
+        if (!job_id.empty() && !c->jobs.find(caller, job_id)) {  // deleted meanwhile
+          sink.done();
+          return true;
+        }
+        return write(": keep-alive\n\n");
+      }
+      for (const JobEvent& e : r.events) {
+        state->after = e.seq;
+        if (!caller.admin && e.owner != caller.name) continue;
+        if (!write(sse_event(e.seq, e.type, e.data))) return false;
+        if (!job_id.empty() && e.terminal) {
+          sink.done();
+          return true;
+        }
+      }
+      return true;
+    } catch (const JobStoreError& e) {
+      c->metrics.count_job_store_error();
+      log(LogLevel::kWarn, "event stream ended: the job store failed", {{"job", job_id}, {"error", e.what()}});
+      return false;
+    } catch (const std::exception& e) {
+      log(LogLevel::kError, "event stream failed", {{"job", job_id}, {"error", e.what()}});
+      return false;
+    }
+  });
 }
 
 // ---- assets --------------------------------------------------------------------------------------------------
@@ -643,7 +469,8 @@ void post_asset(ApiContext& ctx, const Request& req, Response& res) {
     if (it == kTypes.end())
       return send_problem(res, 415,
                           "an asset is model/gltf-binary, model/gltf+json, image/vnd.radiance, image/x-exr or "
-                          "multipart/form-data, not \"" + req.get_header_value("Content-Type").substr(0, 100) + "\"");
+                          "multipart/form-data, not \"" +
+                              req.get_header_value("Content-Type").substr(0, 100) + "\"");
     std::string name = req.has_param("name") ? req.get_param_value("name") : it->second.first;
     if (name.empty()) return send_problem(res, 422, "an application/octet-stream upload needs ?name=file.ext");
     std::string ext = std::filesystem::path(name).extension().string();
@@ -672,9 +499,7 @@ void post_asset(ApiContext& ctx, const Request& req, Response& res) {
 std::vector<Route> routes(ApiContext* ctx) {
   const std::string job = std::string("/v1/jobs/") + kJobId;
   const std::string asset = "/v1/assets/([^/]+)";
-  auto action = [ctx](Action a, const char* verb, const char* from) {
-    return [=](const Request& q, Response& r) { job_action(*ctx, q, r, a, verb, from); };
-  };
+  auto action = [ctx](JobAction a) { return [=](const Request& q, Response& r) { job_action(*ctx, q, r, a); }; };
   return {
       {"POST", "/v1/jobs", "/v1/jobs", [ctx](const Request& q, Response& r) { post_job(*ctx, q, r); }},
       {"GET", "/v1/jobs", "/v1/jobs", [ctx](const Request& q, Response& r) { list_jobs(*ctx, q, r); }},
@@ -682,7 +507,7 @@ std::vector<Route> routes(ApiContext* ctx) {
        [ctx](const Request& q, Response& r) {
          if (auto j = find_job(*ctx, q, r)) {
            set_retry_after(r, *j);
-           send_json(r, 200, status_of(*ctx, *j));
+           send_json(r, 200, ctx->jobs.status(*j));
          }
        }},
       {"PATCH", "/v1/jobs/{id}", job, [ctx](const Request& q, Response& r) { patch_job(*ctx, q, r); }},
@@ -690,17 +515,13 @@ std::vector<Route> routes(ApiContext* ctx) {
        [ctx](const Request& q, Response& r) {
          auto j = find_job(*ctx, q, r);
          if (!j) return;
-         if (!remove_job(*ctx, j->id)) return job_not_found(r);
+         if (!ctx->jobs.remove(j->id)) return job_not_found(r);
          r.status = 204;
        }},
-      {"POST", "/v1/jobs/{id}/cancel", job + "/cancel",
-       action(&Scheduler::cancel, "cancel", "queued, running or paused can be cancelled")},
-      {"POST", "/v1/jobs/{id}/pause", job + "/pause",
-       action(&Scheduler::pause, "pause", "queued or running can be paused")},
-      {"POST", "/v1/jobs/{id}/resume", job + "/resume",
-       action(&Scheduler::resume, "resume", "paused can be resumed")},
-      {"POST", "/v1/jobs/{id}/requeue", job + "/requeue",
-       action(&Scheduler::requeue, "requeue", "failed or cancelled can be requeued")},
+      {"POST", "/v1/jobs/{id}/cancel", job + "/cancel", action(JobAction::kCancel)},
+      {"POST", "/v1/jobs/{id}/pause", job + "/pause", action(JobAction::kPause)},
+      {"POST", "/v1/jobs/{id}/resume", job + "/resume", action(JobAction::kResume)},
+      {"POST", "/v1/jobs/{id}/requeue", job + "/requeue", action(JobAction::kRequeue)},
       {"GET", "/v1/jobs/{id}/events", job + "/events",
        [ctx](const Request& q, Response& r) {
          if (auto j = find_job(*ctx, q, r)) stream_events(*ctx, q, r, j);
@@ -751,7 +572,7 @@ std::vector<Route> routes(ApiContext* ctx) {
          Metrics::Gauges g;
          // A failing store costs the scrape its job counts, not the scrape: the rest is what an operator needs then.
          try {
-           g.jobs = ctx->store.count_by_state();
+           g.jobs = ctx->jobs.counts();
          } catch (const JobStoreError& e) {
            g.job_store_up = false;
            ctx->metrics.count_job_store_error();
@@ -764,7 +585,10 @@ std::vector<Route> routes(ApiContext* ctx) {
          g.min_free_disk_bytes = ctx->min_free_disk_bytes;
          r.set_content(ctx->metrics.render(g), "text/plain; version=0.0.4; charset=utf-8");
        }},
-      {"GET", "/livez", "/livez", [](const Request&, Response& r) { send_json(r, 200, {{"status", "ok"}}); }},
+      {"GET", "/livez", "/livez",
+       [](const Request&, Response& r) {
+         send_json(r, 200, {{"status", "ok"}});
+       }},
       {"GET", "/readyz", "/readyz",
        [ctx](const Request&, Response& r) {
          // Ready with a nearly full disk, and with a job store that fails to record the end of a job, too: reads,
@@ -774,8 +598,8 @@ std::vector<Route> routes(ApiContext* ctx) {
          json storage = {{"available_bytes", available ? json(*available) : json(nullptr)},
                          {"min_free_disk_bytes", ctx->min_free_disk_bytes},
                          {"below_minimum", available && *available < ctx->min_free_disk_bytes},
-                         {"job_store_failing", ctx->scheduler.store_failing()}};
-         if (ctx->scheduler.accepting()) return send_json(r, 200, {{"status", "ready"}, {"storage", storage}});
+                         {"job_store_failing", ctx->jobs.store_failing()}};
+         if (ctx->jobs.accepting()) return send_json(r, 200, {{"status", "ready"}, {"storage", storage}});
          send_problem(r, 503, "not accepting jobs (starting or shutting down)");
        }},
       {"GET", "/", "/",
@@ -872,28 +696,6 @@ std::vector<RouteInfo> api_routes() {
   return out;
 }
 
-bool remove_job(ApiContext& ctx, const std::string& id, std::optional<int64_t> only_finished_before_ms) {
-  if (!ctx.scheduler.remove(id, only_finished_before_ms)) return false;
-  ctx.events.forget(id);
-  return true;
-}
-
-std::function<std::filesystem::path(const std::string&, const std::string&)> asset_resolver(const AssetStore& assets) {
-  return [&assets](const std::string& ref, const std::string& pointer) -> std::filesystem::path {
-    const bool map = pointer.size() >= 4 && pointer.compare(pointer.size() - 4, 4, "/map") == 0;
-    const std::string kind = map ? "environment" : "gltf";
-    if (!is_asset_id(ref))
-      throw SceneError(pointer, "must be an asset id (64 hex digits) from POST /v1/assets");
-    auto path = assets.main_file(ref, kind);
-    if (!path) {
-      auto info = assets.get(ref);
-      throw SceneError(pointer, info ? "asset " + ref + " is a " + info->kind + " asset, not a " + kind + " asset"
-                                     : "no asset " + ref + " (upload it with POST /v1/assets)");
-    }
-    return *path;
-  };
-}
-
 void install_api(httplib::Server& server, ApiContext& ctx) {
   auto posts = std::make_shared<std::vector<std::pair<std::regex, Handler>>>();
   for (Route& r : routes(&ctx)) {
@@ -913,36 +715,14 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
     if (r.method == "POST") posts->emplace_back(std::regex(r.pattern), r.handler);
   }
 
-  SchedulerHooks hooks;
   ApiContext* c = &ctx;
-  hooks.state_changed = [c](const std::string& id) { publish_state(*c, id); };
-  hooks.progress = [c](const std::string& id, const JobProgress& p) {
-    auto job = c->store.get(id);
-    if (!job) return;
-    json status = job_status_json(*job, p);
-    c->events.publish(id, job->owner, "progress", json{{"id", id}, {"progress", status["progress"]}}.dump());
-  };
-  hooks.preview = [c](const std::string& id, uint32_t pass) {
-    auto job = c->store.get(id);
-    if (!job) return;
-    c->events.publish(id, job->owner, "preview",
-                      json{{"id", id},
-                           {"pass", pass},
-                           {"url", "/v1/jobs/" + id + "/preview.png?pass=" + std::to_string(pass)}}
-                          .dump());
-  };
-  hooks.samples_rendered = [c](uint64_t n) { c->metrics.add_samples(n); };
-  hooks.job_ended = [c](double s) { c->metrics.observe_job_duration(s); };
-  hooks.store_write_failed = [c] { c->metrics.count_job_store_error(); };
-  ctx.scheduler.set_hooks(std::move(hooks));
 
   server.set_pre_routing_handler([posts, c](const Request& req, Response& res) {
     t_routed = nullptr;
     // CORS: only for the configured origins.
     const std::string origin = req.get_header_value("Origin");
-    const bool cors_ok =
-        !origin.empty() && std::any_of(c->cors_origins.begin(), c->cors_origins.end(),
-                                       [&](const std::string& o) { return o == origin || o == "*"; });
+    const bool cors_ok = !origin.empty() && std::any_of(c->cors_origins.begin(), c->cors_origins.end(),
+                                                        [&](const std::string& o) { return o == origin || o == "*"; });
     if (cors_ok) {
       res.set_header("Access-Control-Allow-Origin", origin);
       res.set_header("Vary", "Origin");
@@ -950,8 +730,8 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
     }
     if (req.method == "OPTIONS") {
       if (!cors_ok) {
-        send_problem(res, 403, "cross-origin requests from \"" + origin.substr(0, 200) +
-                                   "\" are not allowed (--cors-origin)");
+        send_problem(res, 403,
+                     "cross-origin requests from \"" + origin.substr(0, 200) + "\" are not allowed (--cors-origin)");
         return httplib::Server::HandlerResponse::Handled;
       }
       res.set_header("Access-Control-Allow-Methods", "GET, POST, PATCH, DELETE, OPTIONS");
@@ -1027,9 +807,8 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
   });
   // Counted before the response is written (the logger runs after it), so that a client that has its answer also
   // finds it in /metrics.
-  server.set_post_routing_handler([c](const Request& req, Response& res) {
-    c->metrics.count_request(route_label(req), res.status);
-  });
+  server.set_post_routing_handler(
+      [c](const Request& req, Response& res) { c->metrics.count_request(route_label(req), res.status); });
   // The last step of every request (the pre-routing handler resets it too).
   server.set_logger([c](const Request& req, const Response& res) {
     if (log_enabled(LogLevel::kDebug)) {

@@ -1,10 +1,12 @@
 #include "server/job_files.h"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <cerrno>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -44,6 +46,34 @@ int fsync_file(const fs::path& p) {
   throw std::system_error(error, std::generic_category(), std::string("cannot write ") + job_file_name(f));
 }
 
+// A file opened once: its entity tag from the same open file (inode, size, modification time), so that a version
+// renamed over meanwhile is neither read nor named.
+class OpenFile final : public FileReader {
+ public:
+  OpenFile(int fd, uint64_t size, std::string etag) : fd_(fd), size_(size), etag_(std::move(etag)) {}
+  ~OpenFile() override { ::close(fd_); }
+  OpenFile(const OpenFile&) = delete;
+  OpenFile& operator=(const OpenFile&) = delete;
+
+  uint64_t size() const override { return size_; }
+  const std::string& etag() const override { return etag_; }
+  size_t read(uint64_t offset, char* out, size_t length) override {
+    size_t done = 0;
+    while (done < length) {
+      const ssize_t n = ::pread(fd_, out + done, length - done, static_cast<off_t>(offset + done));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) break;
+      done += static_cast<size_t>(n);
+    }
+    return done;
+  }
+
+ private:
+  int fd_;
+  uint64_t size_;
+  std::string etag_;
+};
+
 }  // namespace
 
 const char* job_file_name(JobFile f) {
@@ -65,25 +95,30 @@ const char* job_file_media_type(JobFile f) {
   return f == JobFile::kResultExr ? "image/x-exr" : "image/png";
 }
 
-JobFiles::JobFiles(fs::path data_dir) : root_(std::move(data_dir) / "jobs") {
+DirectoryJobFiles::DirectoryJobFiles(fs::path data_dir) : root_(std::move(data_dir) / "jobs") {
   fs::create_directories(root_);
 }
 
-fs::path JobFiles::dir(const std::string& id) const {
+void DirectoryJobFiles::prepare(const std::string& id) const {
+  std::error_code ec;
+  fs::create_directories(dir(id), ec);
+}
+
+fs::path DirectoryJobFiles::dir(const std::string& id) const {
   if (!is_valid_job_id(id)) throw std::invalid_argument("not a job id");
   return root_ / id;
 }
 
-fs::path JobFiles::path(const std::string& id, JobFile f) const {
+fs::path DirectoryJobFiles::path(const std::string& id, JobFile f) const {
   return dir(id) / job_file_name(f);
 }
 
-void JobFiles::write_with(const std::string& id, JobFile f,
-                          const std::function<void(const std::string&)>& writer) const {
+void DirectoryJobFiles::write_with(const std::string& id, JobFile f,
+                                   const std::function<void(const std::string&)>& writer) const {
   publish(id, f, writer, false);
 }
 
-void JobFiles::write(const std::string& id, JobFile f, std::string_view bytes) const {
+void DirectoryJobFiles::write(const std::string& id, JobFile f, std::string_view bytes) const {
   publish(
       id, f,
       [&](const std::string& temp) {
@@ -92,12 +127,11 @@ void JobFiles::write(const std::string& id, JobFile f, std::string_view bytes) c
       true);
 }
 
-void JobFiles::publish(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer,
-                       bool writer_synced) const {
+void DirectoryJobFiles::publish(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer,
+                                bool writer_synced) const {
   const fs::path final_path = path(id, f);
   // The folder is made when the job starts rendering; if it is gone, the job was deleted: write nothing.
-  if (!fs::is_directory(final_path.parent_path()))
-    throw std::runtime_error("job " + id + " has no folder (deleted)");
+  if (!fs::is_directory(final_path.parent_path())) throw std::runtime_error("job " + id + " has no folder (deleted)");
   // "result.tmp-<pid>-<n>.exr": unique per writer, and the extension still names the format.
   const fs::path temp =
       final_path.parent_path() / (final_path.stem().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
@@ -115,7 +149,23 @@ void JobFiles::publish(const std::string& id, JobFile f, const std::function<voi
   fsync_dir(final_path.parent_path());
 }
 
-std::optional<std::string> JobFiles::read(const std::string& id, JobFile f) const {
+std::unique_ptr<FileReader> DirectoryJobFiles::open(const std::string& id, JobFile f) const {
+  const int fd = ::open(path(id, f).c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return nullptr;
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    ::close(fd);
+    return nullptr;
+  }
+  char etag[96];
+  std::snprintf(etag, sizeof etag, "\"%llx-%llx-%llx\"", static_cast<unsigned long long>(st.st_ino),
+                static_cast<unsigned long long>(st.st_size),
+                static_cast<unsigned long long>(st.st_mtim.tv_sec) * 1000000000ull +
+                    static_cast<unsigned long long>(st.st_mtim.tv_nsec));
+  return std::make_unique<OpenFile>(fd, static_cast<uint64_t>(st.st_size), etag);
+}
+
+std::optional<std::string> DirectoryJobFiles::read(const std::string& id, JobFile f) const {
   std::ifstream in(path(id, f), std::ios::binary);
   if (!in) return std::nullopt;
   std::ostringstream ss;
@@ -123,16 +173,12 @@ std::optional<std::string> JobFiles::read(const std::string& id, JobFile f) cons
   return std::move(ss).str();
 }
 
-void JobFiles::remove(const std::string& id) const {
+void DirectoryJobFiles::remove(const std::string& id) const {
   std::error_code ignored;
   fs::remove_all(dir(id), ignored);
 }
 
-}  // namespace tessera::server
-
-namespace tessera::server {
-
-void JobFiles::remove(const std::string& id, JobFile f) const {
+void DirectoryJobFiles::remove(const std::string& id, JobFile f) const {
   std::error_code ignored;
   fs::remove(path(id, f), ignored);
 }

@@ -1,10 +1,14 @@
-// The files of jobs under the data directory: <data>/jobs/<id>/{preview.png,result.png,result.exr,checkpoint.bin}. Paths are only
-// ever built from validated job ids and fixed names, so nothing a client sends can reach outside the directory.
-// Every file is written beside its final name and renamed over it, so a reader (or a crash) never sees half a file.
+// The files of jobs (preview, results, checkpoint): an interface, so that every node of a daemon can reach them
+// wherever they are kept, and its implementation in the data directory, <data>/jobs/<id>/{preview.png,result.png,
+// result.exr,checkpoint.bin}. Paths are only ever built from validated job ids and fixed names, so nothing a client
+// sends can reach outside the directory. Every file is written beside its final name and renamed over it, so a reader
+// (or a crash) never sees half a file.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -16,25 +20,60 @@ enum class JobFile { kPreviewPng, kResultPng, kResultExr, kCheckpoint };
 const char* job_file_name(JobFile f);
 const char* job_file_media_type(JobFile f);
 
+// One version of a stored file, opened for reading in pieces (an HTTP answer streams it): a version written
+// meanwhile does not mix into it.
+class FileReader {
+ public:
+  virtual ~FileReader() = default;
+  virtual uint64_t size() const = 0;
+  // The identity of this version, quoted as an HTTP entity tag: a file written again gets another.
+  virtual const std::string& etag() const = 0;
+  // Up to `length` bytes from `offset`; fewer only at the end of the file, 0 past it or on a read error.
+  virtual size_t read(uint64_t offset, char* out, size_t length) = 0;
+};
+
 class JobFiles {
  public:
-  explicit JobFiles(std::filesystem::path data_dir);
+  virtual ~JobFiles() = default;
+
+  // Makes the job's place for files, when it starts rendering. Writes never make it, so a render still winding down
+  // cannot bring back the files of a job deleted meanwhile: they throw instead.
+  virtual void prepare(const std::string& id) const = 0;
+  // Writes `bytes` atomically: on failure (a full disk: std::system_error with ENOSPC, "cannot write
+  // checkpoint.bin") the file's last version stays as it was and nothing half-written is left.
+  virtual void write(const std::string& id, JobFile f, std::string_view bytes) const = 0;
+  // Atomically publishes a file written by `writer` to the local temp path it is given (which keeps the final
+  // extension, for writers that choose the format by it), failing like write().
+  virtual void write_with(const std::string& id, JobFile f,
+                          const std::function<void(const std::string&)>& writer) const = 0;
+  // The file's bytes, or nothing when it does not exist.
+  virtual std::optional<std::string> read(const std::string& id, JobFile f) const = 0;
+  // The file's current version; null when it does not exist.
+  virtual std::unique_ptr<FileReader> open(const std::string& id, JobFile f) const = 0;
+  // Every file of the job, and its place.
+  virtual void remove(const std::string& id) const = 0;
+  virtual void remove(const std::string& id, JobFile f) const = 0;
+};
+
+// The files in the data directory (of one machine, or a volume every node mounts).
+class DirectoryJobFiles final : public JobFiles {
+ public:
+  explicit DirectoryJobFiles(std::filesystem::path data_dir);
 
   const std::filesystem::path& root() const { return root_; }
   // Throws std::invalid_argument for an id that is not a valid job id.
   std::filesystem::path dir(const std::string& id) const;
   std::filesystem::path path(const std::string& id, JobFile f) const;
 
-  // Writes `bytes` atomically (temp file, fsync, rename). On failure (a full disk: std::system_error with ENOSPC,
-  // "cannot write checkpoint.bin") the file's last version stays as it was and no temp file is left.
-  void write(const std::string& id, JobFile f, std::string_view bytes) const;
-  // Atomically publishes a file written by `writer` to the temp path it is given (which keeps the final extension,
-  // for writers that choose the format by it); fsynced before the rename, failing like write().
-  void write_with(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer) const;
-  // The file's bytes, or nothing when it does not exist.
-  std::optional<std::string> read(const std::string& id, JobFile f) const;
-  void remove(const std::string& id) const;
-  void remove(const std::string& id, JobFile f) const;
+  void prepare(const std::string& id) const override;
+  // Temp file beside the final one, fsync, rename.
+  void write(const std::string& id, JobFile f, std::string_view bytes) const override;
+  void write_with(const std::string& id, JobFile f,
+                  const std::function<void(const std::string&)>& writer) const override;
+  std::optional<std::string> read(const std::string& id, JobFile f) const override;
+  std::unique_ptr<FileReader> open(const std::string& id, JobFile f) const override;
+  void remove(const std::string& id) const override;
+  void remove(const std::string& id, JobFile f) const override;
 
  private:
   void publish(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer,

@@ -23,10 +23,12 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
   const std::string self = "/v1/jobs/" + job.id;
   json links = {{"self", self}};
   links["events"] = self + "/events";
-  if (!is_terminal(job.state)) links["cancel"] = self + "/cancel";
-  if (job.state == JobState::kQueued || job.state == JobState::kRunning) links["pause"] = self + "/pause";
-  if (job.state == JobState::kPaused) links["resume"] = self + "/resume";
-  if (job.state == JobState::kFailed || job.state == JobState::kCancelled) links["requeue"] = self + "/requeue";
+  // What the state allows, from the state table: the names, for clients' buttons, and a link for each state change.
+  json actions = json::array();
+  for (JobAction a : allowed_actions(job.state)) {
+    actions.push_back(job_action_name(a));
+    if (action_target(a)) links[job_action_name(a)] = self + "/" + job_action_name(a);
+  }
   if (job.state == JobState::kRunning || p.passes > 0) links["preview"] = self + "/preview.png";
   json outputs = json::parse(job.outputs, nullptr, false);
   if (!outputs.is_array()) outputs = json::array();
@@ -48,8 +50,7 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
       {"kind", job.kind},
       {"state", job_state_name(job.state)},
       {"priority", job.priority},
-      {"queue_position",
-       job.state == JobState::kQueued && queue_position ? json(*queue_position) : json(nullptr)},
+      {"queue_position", job.state == JobState::kQueued && queue_position ? json(*queue_position) : json(nullptr)},
       {"owner", text_or_null(job.owner)},
       {"warnings", warnings},
       {"created_at", rfc3339_ms(job.created_at_ms)},
@@ -67,6 +68,7 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
       {"error", text_or_null(job.error)},
       {"outputs", outputs},
       {"render", render},
+      {"actions", actions},
       {"links", links},
   };
 }

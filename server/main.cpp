@@ -4,19 +4,24 @@
 #include <signal.h>
 
 #include <atomic>
+#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <thread>
+#include <variant>
 
 #include "renderer/thread_pool.h"
 #include "server/assets.h"
 #include "server/auth.h"
 #include "server/config.h"
+#include "server/data_dir_lock.h"
 #include "server/events.h"
 #include "server/http_api.h"
 #include "server/job_files.h"
+#include "server/job_service.h"
 #include "server/log.h"
 #include "server/metrics.h"
 #include "server/retention.h"
@@ -48,13 +53,20 @@ int run(const Config& config) {
 
   const std::filesystem::path data_dir(config.data_dir);
   std::filesystem::create_directories(data_dir);
-  SqliteJobStore store(data_dir / "jobs.db");
-  JobFiles files(data_dir);
-  AssetStore assets(data_dir);
+  auto lock = DataDirLock::acquire(data_dir);
+  if (auto* error = std::get_if<std::string>(&lock)) {
+    log(LogLevel::kError, "cannot start: " + *error, {{"data_dir", data_dir.string()}});
+    std::fprintf(stderr, "tesserad: %s\n", error->c_str());
+    return 1;
+  }
+  // What the daemon keeps, and where: its jobs, their files, the uploaded assets, and the events streamed to clients.
+  std::unique_ptr<JobStore> store = std::make_unique<SqliteJobStore>(data_dir / "jobs.db");
+  std::unique_ptr<JobFiles> files = std::make_unique<DirectoryJobFiles>(data_dir);
+  std::unique_ptr<AssetStore> assets = std::make_unique<DirectoryAssetStore>(data_dir);
+  std::unique_ptr<EventBus> events = std::make_unique<EventHub>();
   tessera::ThreadPool pool(config.threads);
   // Loading (image decoding, mip levels, environment maps) borrows at most as many extra threads as render threads.
   tessera::limit_parallel_helpers(pool.size() - 1);
-  EventHub events;
   Metrics metrics;
 
   SchedulerOptions scheduler_options;
@@ -62,21 +74,41 @@ int run(const Config& config) {
   scheduler_options.limits.max_width = config.max_width;
   scheduler_options.limits.max_height = config.max_height;
   scheduler_options.limits.max_spp = config.max_spp;
-  scheduler_options.resolve_asset = asset_resolver(assets);
-  Scheduler scheduler(store, files, pool, scheduler_options);
+  scheduler_options.resolve_asset = asset_resolver(*assets);
+  Scheduler scheduler(*store, *files, pool, scheduler_options);
+  JobServiceOptions service_options;
+  service_options.max_user_priority = config.max_user_priority;
+  service_options.max_queued_per_user = config.max_queued_per_user;
+  JobService jobs(*store, *files, *assets, scheduler, *events, metrics, service_options);
 
   SubmissionLimits limits;
   limits.render = scheduler_options.limits;
   limits.max_work = config.max_work;
   limits.resolve_asset = scheduler_options.resolve_asset;
-  ApiContext ctx{store,  files, scheduler, assets, events, *auth, metrics, &pool, limits, config.max_body_bytes,
-                 config.max_user_priority, config.max_queued_per_user, config.cors_origins, config.keepalive_s,
-                 config.min_free_disk_bytes, data_dir};
+  ApiContext ctx{jobs,
+                 *assets,
+                 *events,
+                 *auth,
+                 metrics,
+                 &pool,
+                 limits,
+                 config.max_body_bytes,
+                 config.cors_origins,
+                 config.keepalive_s,
+                 config.min_free_disk_bytes,
+                 data_dir};
   httplib::Server http;
   // Every open event stream and keep-alive connection holds one of these threads.
   const int http_threads = config.http_threads;
   http.new_task_queue = [http_threads] { return new httplib::ThreadPool(static_cast<size_t>(http_threads)); };
   install_api(http, ctx);
+  // SO_REUSEADDR only: a restart binds at once over connections in TIME_WAIT, but a second daemon on the port of a
+  // running one fails to bind (cpp-httplib's default adds SO_REUSEPORT, with which the kernel would share the port
+  // and split the requests between the two).
+  http.set_socket_options([](socket_t sock) {
+    int yes = 1;
+    ::setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+  });
 
   int port = config.port;
   if (port == 0) {
@@ -86,14 +118,17 @@ int run(const Config& config) {
     port = 0;
   }
   if (port == 0) {
-    log(LogLevel::kError, "cannot listen", {{"listen", config.listen}, {"port", config.port}});
+    const std::string error = std::strerror(errno);
+    log(LogLevel::kError, "cannot listen", {{"listen", config.listen}, {"port", config.port}, {"error", error}});
+    std::fprintf(stderr, "tesserad: cannot listen on %s port %d: %s%s\n", config.listen.c_str(), config.port,
+                 error.c_str(),
+                 errno == EADDRINUSE ? " (another process, perhaps another tesserad, has the port)" : "");
     return 1;
   }
   scheduler.start();
   // Finished jobs older than --retain-finished go as DELETE /v1/jobs/{id} would delete them.
-  RetentionSweeper retention(
-      store, metrics, config.retain_finished_s,
-      [&ctx](const std::string& id, int64_t cutoff_ms) { return remove_job(ctx, id, cutoff_ms); });
+  RetentionSweeper retention(*store, metrics, config.retain_finished_s,
+                             [&jobs](const std::string& id, int64_t cutoff_ms) { return jobs.remove(id, cutoff_ms); });
   retention.start();
 
   std::atomic<bool> listening_done{false};
@@ -114,7 +149,7 @@ int run(const Config& config) {
           {{"signal", sig == SIGINT ? "SIGINT" : "SIGTERM"}, {"grace_s", config.grace_s}});
       scheduler.begin_drain();
       retention.stop();
-      events.close();
+      events->close();
       // stop() is a no-op until the listen loop runs; repeat until it has taken effect.
       while (!listening_done.load()) {
         http.stop();
@@ -150,7 +185,7 @@ int run(const Config& config) {
   // to the queue and resume from the checkpoints on the next start.
   retention.stop();
   scheduler.shutdown(config.grace_s);
-  events.close();
+  events->close();
   log(LogLevel::kInfo, "stopped");
   return clean ? 0 : 1;
 }

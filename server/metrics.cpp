@@ -34,12 +34,14 @@ void Metrics::count_request(const std::string& route, int status) {
   ++requests_[{route, status}];
 }
 
-void Metrics::observe_job_duration(double seconds) {
-  std::lock_guard lock(mutex_);
+bool Metrics::record_job_end(double seconds, const std::function<bool()>& record) {
+  std::lock_guard lock(durations_mutex_);
+  if (!record()) return false;
   for (size_t i = 0; i < kDurationBuckets.size(); ++i)
     if (seconds <= kDurationBuckets[i]) ++duration_buckets_[i];
   ++duration_count_;
   duration_sum_ += seconds;
+  return true;
 }
 
 std::string Metrics::render(const Gauges& g) const {
@@ -84,20 +86,23 @@ std::string Metrics::render(const Gauges& g) const {
          "(--min-free-disk; 0: never).\n"
       << "# TYPE tessera_min_free_disk_bytes gauge\n"
       << "tessera_min_free_disk_bytes " << g.min_free_disk_bytes << "\n";
+  {
+    std::lock_guard lock(durations_mutex_);
+    out << "# HELP tessera_job_duration_seconds Render time of jobs that ended (succeeded, failed or cancelled).\n"
+        << "# TYPE tessera_job_duration_seconds histogram\n";
+    for (size_t i = 0; i < kDurationBuckets.size(); ++i)
+      out << "tessera_job_duration_seconds_bucket{le=\"" << number(kDurationBuckets[i]) << "\"} "
+          << duration_buckets_[i] << "\n";
+    out << "tessera_job_duration_seconds_bucket{le=\"+Inf\"} " << duration_count_ << "\n"
+        << "tessera_job_duration_seconds_sum " << number(duration_sum_) << "\n"
+        << "tessera_job_duration_seconds_count " << duration_count_ << "\n";
+  }
   std::lock_guard lock(mutex_);
-  out << "# HELP tessera_job_duration_seconds Render time of jobs that ended (succeeded, failed or cancelled).\n"
-      << "# TYPE tessera_job_duration_seconds histogram\n";
-  for (size_t i = 0; i < kDurationBuckets.size(); ++i)
-    out << "tessera_job_duration_seconds_bucket{le=\"" << number(kDurationBuckets[i]) << "\"} "
-        << duration_buckets_[i] << "\n";
-  out << "tessera_job_duration_seconds_bucket{le=\"+Inf\"} " << duration_count_ << "\n"
-      << "tessera_job_duration_seconds_sum " << number(duration_sum_) << "\n"
-      << "tessera_job_duration_seconds_count " << duration_count_ << "\n";
   out << "# HELP tessera_http_requests_total HTTP requests answered, by route pattern and status code.\n"
       << "# TYPE tessera_http_requests_total counter\n";
   for (const auto& [key, n] : requests_)
-    out << "tessera_http_requests_total{route=\"" << label_value(key.first) << "\",code=\"" << key.second << "\"} "
-        << n << "\n";
+    out << "tessera_http_requests_total{route=\"" << label_value(key.first) << "\",code=\"" << key.second << "\"} " << n
+        << "\n";
   return out.str();
 }
 

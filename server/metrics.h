@@ -5,6 +5,7 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -18,7 +19,10 @@ class Metrics {
  public:
   void count_request(const std::string& route, int status);
   void add_samples(uint64_t pixel_samples) { samples_.fetch_add(pixel_samples, std::memory_order_relaxed); }
-  void observe_job_duration(double seconds);
+  // The end of a job and its render time in one step: `record` (the job store's state change; true when the store
+  // took it) runs under the histogram's lock, and the time is counted when it took. A scrape waits for a step under
+  // way, so once a reader can see a job ended, /metrics counts it.
+  bool record_job_end(double seconds, const std::function<bool()>& record);
   void count_expired_job() { expired_jobs_.fetch_add(1, std::memory_order_relaxed); }
   void count_job_store_error() { job_store_errors_.fetch_add(1, std::memory_order_relaxed); }
 
@@ -38,6 +42,7 @@ class Metrics {
  private:
   mutable std::mutex mutex_;
   std::map<std::pair<std::string, int>, uint64_t> requests_;
+  mutable std::mutex durations_mutex_;  // the histogram's; held across a job's end (record_job_end)
   std::array<uint64_t, kDurationBuckets.size()> duration_buckets_{};
   uint64_t duration_count_ = 0;
   double duration_sum_ = 0;

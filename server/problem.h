@@ -13,6 +13,7 @@ struct Problem {
   int status = 500;
   std::string detail;
   std::optional<std::string> pointer;
+  std::optional<int> retry_after_s = std::nullopt;  // when to ask again (429, 503): a Retry-After header
 
   // "https://tessera.dev/problems/<slug>" and a title, both chosen by the status.
   std::string type() const;

@@ -181,19 +181,15 @@ void Scheduler::dispatch_loop() {
 
 void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record) {
   const std::string& id = record.id;
-  // The job's folder exists from here on; file writes never create it (JobFiles::write_with), so a render still
-  // winding down cannot bring back the folder of a job that was deleted meanwhile.
-  {
-    std::error_code ec;
-    std::filesystem::create_directories(files_.dir(id), ec);
-  }
+  // The job's files have their place from here on; writes never make it (JobFiles::prepare), so a render still
+  // winding down cannot bring back the files of a job that was deleted meanwhile.
+  files_.prepare(id);
   notify_state(id);
   auto detach = [&] {
     std::lock_guard lock(mutex_);
     slot->session = nullptr;
   };
   double render_s = 0;
-  bool ended = false;  // reached a terminal state
   try {
     const json doc = json::parse(record.document);
     JobLoadOptions options;
@@ -276,17 +272,14 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     if (deleted) {
       log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
     } else if (interrupted && cancelled_by_client) {
-      ended = record_end(*slot, [&] { store_.transition(id, JobState::kCancelled, now_ms(), "cancelled"); });
-      if (ended) {
-        files_.remove(id, JobFile::kCheckpoint);
+      if (record_terminal(*slot, JobState::kCancelled, render_s, "cancelled"))
         log(LogLevel::kInfo, "job cancelled", {{"job", id}});
-      }
     } else if (interrupted && paused) {
-      if (record_end(*slot, [&] { store_.transition(id, JobState::kPaused, now_ms()); }))
+      if (record_end(*slot, [&] { return store_.transition(id, JobState::kPaused, now_ms()); }))
         log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", session.progress().samples_done}});
     } else if (interrupted) {
       // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
-      if (record_end(*slot, [&] { store_.transition(id, JobState::kQueued, now_ms()); }))
+      if (record_end(*slot, [&] { return store_.transition(id, JobState::kQueued, now_ms()); }))
         log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
             {{"job", id}, {"samples_done", session.progress().samples_done}});
     } else {
@@ -304,12 +297,8 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       }
       JobProgress final_progress = to_job_progress(session.progress());
       final_progress.eta_s = 0;
-      ended = record_end(*slot, [&] {
-        store_.update_progress(id, final_progress);
-        store_.transition(id, JobState::kSucceeded, now_ms(), stop_reason_name(reason));
-      });
-      if (ended) {
-        files_.remove(id, JobFile::kCheckpoint);
+      if (record_terminal(*slot, JobState::kSucceeded, render_s, stop_reason_name(reason), "",
+                          [&] { store_.update_progress(id, final_progress); })) {
         log(LogLevel::kInfo, "job succeeded",
             {{"job", id},
              {"elapsed_s", final_progress.elapsed_s},
@@ -322,22 +311,20 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     std::string message = e.what();
     if (const auto* se = dynamic_cast<const SceneError*>(&e); se && !se->pointer().empty())
       message = se->pointer() + ": " + message;
-    ended = record_failure(*slot, message);
+    record_failure(*slot, message, render_s);
   } catch (...) {
     detach();
-    ended = record_failure(*slot, "unknown error");
+    record_failure(*slot, "unknown error", render_s);
   }
   bool deleted;
   {
     std::lock_guard lock(mutex_);
     deleted = slot->delete_requested;
   }
-  if (deleted) {
+  if (deleted)
     files_.remove(id);
-  } else {
-    if (ended && hooks_.job_ended) hooks_.job_ended(render_s);
+  else
     notify_state(id);
-  }
   {
     std::lock_guard lock(mutex_);
     slot->done = true;
@@ -349,17 +336,19 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
 // to 5 s (SchedulerOptions), until the store takes it; meanwhile the job's slot stays taken (counting against
 // max_jobs, rightly: no other job could record its end either). Logged at the first failure, then at most every 10 s.
 // False when the daemon stops first: the job is then left running in the store, and requeue_running() at the next
-// start puts it back in the queue, to resume from its checkpoint (kept until its end is recorded). Anything else
-// `write` throws goes through.
-bool Scheduler::record_end(RenderSlot& slot, const std::function<void()>& write) {
+// start puts it back in the queue, to resume from its checkpoint (kept until its end is recorded). False too when
+// `write` returns false: the store's state machine refused the move (the job was deleted, or changed elsewhere), and
+// nothing may be done as if it had been made. Anything else `write` throws goes through.
+bool Scheduler::record_end(RenderSlot& slot, const std::function<bool()>& write) {
   using Clock = std::chrono::steady_clock;
   constexpr auto kLogInterval = std::chrono::seconds(10);
   std::chrono::milliseconds wait = options_.store_retry_first;
   int failures = 0;
   Clock::time_point logged_at;
+  bool taken = false;
   for (;;) {
     try {
-      write();
+      taken = write();
       break;
     } catch (const JobStoreError& e) {
       count_store_error();
@@ -386,25 +375,40 @@ bool Scheduler::record_end(RenderSlot& slot, const std::function<void()>& write)
       std::lock_guard lock(mutex_);
       slot.awaiting_store = false;
     }
-    log(LogLevel::kInfo, "the job store recovered; the end of the job is recorded",
+    log(LogLevel::kInfo, "the job store recovered; the end of the job is written",
         {{"job", slot.id}, {"failures", failures}});
   }
-  return true;
+  if (!taken)
+    log(LogLevel::kWarn, "the job store refused the end of a job: it was deleted or changed meanwhile",
+        {{"job", slot.id}});
+  return taken;
 }
 
-// Logs a job that failed (its scene, its outputs) and records it as record_end() does; false when it was not
+// Records that a job ended in `to` (succeeded, failed or cancelled) as record_end() does, its render time counted in
+// the same step (SchedulerHooks::job_ended); `before` runs first in every attempt (the final progress). Its
+// checkpoint goes once the end is recorded. False when it was not.
+bool Scheduler::record_terminal(RenderSlot& slot, JobState to, double render_s, const std::string& stop_reason,
+                                const std::string& error, const std::function<void()>& before) {
+  const bool recorded = record_end(slot, [&] {
+    if (before) before();
+    auto record = [&] { return store_.transition(slot.id, to, now_ms(), stop_reason, error); };
+    return hooks_.job_ended ? hooks_.job_ended(render_s, record) : record();
+  });
+  if (recorded) files_.remove(slot.id, JobFile::kCheckpoint);
+  return recorded;
+}
+
+// Logs a job that failed (its scene, its outputs) and records it as record_terminal() does; false when it was not
 // recorded.
-bool Scheduler::record_failure(RenderSlot& slot, const std::string& message) {
+bool Scheduler::record_failure(RenderSlot& slot, const std::string& message, double render_s) {
   log(LogLevel::kError, "job failed", {{"job", slot.id}, {"error", message}});
   try {
-    if (!record_end(slot, [&] { store_.transition(slot.id, JobState::kFailed, now_ms(), "", message); })) return false;
+    return record_terminal(slot, JobState::kFailed, render_s, "", message);
   } catch (const std::exception& e) {
     // Not a store failure (those are retried): nothing more can be done for this run.
     log(LogLevel::kError, "cannot record a failed job", {{"job", slot.id}, {"error", e.what()}});
     return false;
   }
-  files_.remove(slot.id, JobFile::kCheckpoint);
-  return true;
 }
 
 std::optional<JobProgress> Scheduler::live_progress(const std::string& id) const {
@@ -441,7 +445,8 @@ Scheduler::Outcome Scheduler::pause(const std::string& id) {
       if (it->second->session) it->second->session->stop();
       return Outcome::kInProgress;
     }
-    if (!store_.transition(id, JobState::kPaused, now_ms(), "", "", JobState::kQueued))
+    // Not rendering here (claims happen under this lock): queued, or running in a process that is gone.
+    if (!store_.transition(id, JobState::kPaused, now_ms()))
       return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
   }
   log(LogLevel::kInfo, "job paused", {{"job", id}});
@@ -465,7 +470,7 @@ Scheduler::Outcome Scheduler::requeue(const std::string& id) {
     std::lock_guard lock(mutex_);
     auto job = store_.get(id);
     if (!job) return Outcome::kUnknown;
-    if (job->state != JobState::kFailed && job->state != JobState::kCancelled) return Outcome::kConflict;
+    if (!action_allowed(JobAction::kRequeue, job->state)) return Outcome::kConflict;
     if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", job->state)) return Outcome::kConflict;
     // From scratch: nothing of the last run survives.
     for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng, JobFile::kResultPng, JobFile::kResultExr})

@@ -4,7 +4,8 @@
 // the outputs the job asked for. A job claimed with a checkpoint (the daemon stopped or died mid-render, or it was
 // paused) resumes from it; sampling being deterministic, its image is the one an uninterrupted render gives. A job
 // that throws fails alone; the daemon stays up. A store that fails while a job's end is recorded is retried until it
-// takes it (JobStoreError never fails a job): the store, not the job, is at fault.
+// takes it (JobStoreError never fails a job): the store, not the job, is at fault. An end the store's state machine
+// refuses (the job was deleted, or changed elsewhere) is not recorded, and nothing is done as if it had been.
 #pragma once
 
 #include <chrono>
@@ -42,7 +43,9 @@ struct SchedulerHooks {
   std::function<void(const std::string& id, const JobProgress& progress)> progress;
   std::function<void(const std::string& id, uint32_t pass)> preview;
   std::function<void(uint64_t pixel_samples)> samples_rendered;
-  std::function<void(double render_s)> job_ended;
+  // Records the end of a job (succeeded, failed or cancelled): runs `record`, the store's state change (true when the
+  // store took it), and counts the render time in the same step (Metrics::record_job_end). Unset: `record` alone.
+  std::function<bool(double render_s, const std::function<bool()>& record)> job_ended;
   // A write to the job store failed (a job's progress, warnings or end).
   std::function<void()> store_write_failed;
 };
@@ -91,8 +94,10 @@ class Scheduler {
   class RenderSlot;
   void dispatch_loop();
   void run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record);
-  bool record_end(RenderSlot& slot, const std::function<void()>& write);
-  bool record_failure(RenderSlot& slot, const std::string& message);
+  bool record_end(RenderSlot& slot, const std::function<bool()>& write);
+  bool record_terminal(RenderSlot& slot, JobState to, double render_s, const std::string& stop_reason,
+                       const std::string& error = "", const std::function<void()>& before = nullptr);
+  bool record_failure(RenderSlot& slot, const std::string& message, double render_s);
   void count_store_error();
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
   void notify_state(const std::string& id);

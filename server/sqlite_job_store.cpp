@@ -16,15 +16,18 @@ constexpr const char* kColumns =
     "request_hash";
 constexpr int kDocumentColumn = 22;
 
-// The SQL list of the states `to` may be reached from, as the one state machine decides.
-std::string states_allowed_into(JobState to, std::optional<JobState> only_from) {
+// States as an SQL list, 'queued','paused' (names from the enum, never client text).
+std::string sql_states(const std::vector<JobState>& states) {
   std::string out;
-  for (JobState s : kAllJobStates) {
-    if (!can_transition(s, to) || (only_from && s != *only_from)) continue;
-    if (!out.empty()) out += ",";
-    out += std::string("'") + job_state_name(s) + "'";
-  }
+  for (JobState s : states) out += (out.empty() ? "'" : ",'") + std::string(job_state_name(s)) + "'";
   return out;
+}
+
+// The SQL list of the states `to` may be reached from, as the state table decides.
+std::string states_allowed_into(JobState to, std::optional<JobState> only_from) {
+  std::vector<JobState> from = states_into(to);
+  if (only_from) std::erase_if(from, [&](JobState s) { return s != *only_from; });
+  return sql_states(from);
 }
 
 // The jobs table as of schema version 2 (paused state, owner, warnings, idempotency keys).
@@ -352,7 +355,8 @@ bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_
 
 bool SqliteJobStore::set_priority(const std::string& id, int priority) {
   std::lock_guard lock(mutex_);
-  Statement s(*this, "UPDATE jobs SET priority = ?2 WHERE id = ?1 AND state IN ('queued','running','paused')");
+  Statement s(*this, "UPDATE jobs SET priority = ?2 WHERE id = ?1 AND state IN (" +
+                         sql_states(action_states(JobAction::kPriority)) + ")");
   s.bind(1, id);
   s.bind(2, static_cast<int64_t>(priority));
   s.step();
@@ -414,11 +418,7 @@ std::vector<JobRecord> SqliteJobStore::list(const JobFilter& filter) {
   if (filter.state) states.push_back(*filter.state);
   std::string where;
   auto add = [&](const std::string& cond) { where += (where.empty() ? " WHERE " : " AND ") + cond; };
-  if (!states.empty()) {
-    std::string in;
-    for (JobState st : states) in += (in.empty() ? "'" : ",'") + std::string(job_state_name(st)) + "'";
-    add("state IN (" + in + ")");  // names from the enum, never client text
-  }
+  if (!states.empty()) add("state IN (" + sql_states(states) + ")");
   if (filter.owner) add("owner = ?2");
   if (filter.before_seq) add("seq < ?3");
   if (filter.finished_before_ms) add("finished_at < ?4");
@@ -436,10 +436,10 @@ bool SqliteJobStore::remove(const std::string& id, std::optional<int64_t> only_f
   std::lock_guard lock(mutex_);
   std::string sql = "DELETE FROM jobs WHERE id = ?1";
   if (only_finished_before_ms) {
-    std::string terminal;
+    std::vector<JobState> terminal;
     for (JobState st : kAllJobStates)
-      if (is_terminal(st)) terminal += (terminal.empty() ? "'" : ",'") + std::string(job_state_name(st)) + "'";
-    sql += " AND state IN (" + terminal + ") AND finished_at < ?2";
+      if (is_terminal(st)) terminal.push_back(st);
+    sql += " AND state IN (" + sql_states(terminal) + ") AND finished_at < ?2";
   }
   Statement s(*this, sql);
   s.bind(1, id);

@@ -154,26 +154,10 @@ export const api = {
   },
 };
 
-// Which actions a job's state allows (the daemon's state machine; its "links" say the same when present).
+// Which actions a job's state allows: the daemon says, in the status's "actions" (its state table), so the buttons
+// never disagree with what it accepts. "result": the finished images exist.
 export const TERMINAL = new Set(["succeeded", "failed", "cancelled"]);
 export function allowed(job, action) {
-  const s = job.state;
-  switch (action) {
-    case "cancel":
-      return s === "queued" || s === "running" || s === "paused";
-    case "pause":
-      return s === "queued" || s === "running";
-    case "resume":
-      return s === "paused";
-    case "requeue":
-      return s === "failed" || s === "cancelled";
-    case "priority":
-      return s === "queued" || s === "paused";
-    case "delete":
-      return true;
-    case "result":
-      return s === "succeeded";
-    default:
-      return false;
-  }
+  if (action === "result") return job.state === "succeeded";
+  return Array.isArray(job.actions) && job.actions.includes(action);
 }

@@ -33,7 +33,7 @@ TEST(FileIo, OutOfSpaceIsAFullDiskAQuotaOrAFileSizeLimit) {
 
 TEST(AssetStore, AnUploadThatRunsOutOfSpaceIs507AndLeavesNothing) {
   test::TempDir dir;
-  AssetStore assets(dir.path());
+  DirectoryAssetStore assets(dir.path());
   const fs::path root = dir.path() / "assets";
   std::variant<StoredAsset, Problem> stored;
   {

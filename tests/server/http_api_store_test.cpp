@@ -29,8 +29,8 @@ namespace {
 using nlohmann::json;
 
 // The real SQLite store, except that while `failure` is set, every read and write (`writes_only`, `reads_only`: only
-// those) fails as SQLite would: "database is locked" (kLocked), "database or disk is full" (kFull), or, for a failure that is not
-// the store's, a plain std::runtime_error (kOther).
+// those) fails as SQLite would: "database is locked" (kLocked), "database or disk is full" (kFull), or, for a failure
+// that is not the store's, a plain std::runtime_error (kOther).
 class FlakyStore final : public JobStore {
  public:
   enum class Failure { kNone, kLocked, kFull, kOther };
@@ -120,7 +120,7 @@ class ApiStoreFailure : public ::testing::Test {
     client_->set_read_timeout(20, 0);
   }
   void TearDown() override {
-    scheduler_.shutdown();  // its hooks use ctx_
+    scheduler_.shutdown();  // its hooks use jobs_
     server_.stop();
     if (listener_.joinable()) listener_.join();
   }
@@ -137,16 +137,17 @@ class ApiStoreFailure : public ::testing::Test {
   test::TempDir dir_;
   SqliteJobStore sqlite_{dir_.path() / "jobs.db"};
   FlakyStore store_{sqlite_};
-  JobFiles files_{dir_.path()};
-  AssetStore assets_{dir_.path()};
+  DirectoryJobFiles files_{dir_.path()};
+  DirectoryAssetStore assets_{dir_.path()};
   ThreadPool pool_{1};
   Scheduler scheduler_{store_, files_, pool_, SchedulerOptions{}};
   EventHub events_;
   Auth auth_;
   Metrics metrics_;
+  JobService jobs_{store_, files_, assets_, scheduler_, events_, metrics_, JobServiceOptions{}};
   // An event stream looks at the store every second (keepalive_s) while nothing happens.
-  ApiContext ctx_{store_,    files_, scheduler_, assets_, events_, auth_, metrics_,   nullptr, SubmissionLimits{},
-                  64u << 20, 100,    0,          {},      1,       0,     dir_.path()};
+  ApiContext ctx_{jobs_,     assets_, events_, auth_, metrics_,   nullptr, SubmissionLimits{},
+                  64u << 20, {},      1,       0,     dir_.path()};
   httplib::Server server_;
   int port_ = 0;
   std::thread listener_;

@@ -23,7 +23,7 @@ std::vector<std::string> names_in(const std::filesystem::path& dir) {
 
 TEST(JobFiles, AFailedWriteKeepsTheLastGoodVersion) {
   test::TempDir dir;
-  JobFiles files(dir.path());
+  DirectoryJobFiles files(dir.path());
   const std::string id = new_job_id();
   std::filesystem::create_directories(files.dir(id));
   const std::string good(1000, 'a');

@@ -36,7 +36,7 @@ TEST(JobId, RejectsEverythingElse) {
 
 TEST(JobFiles, PathsStayInsideTheDataDirectory) {
   test::TempDir dir;
-  JobFiles files(dir.path());
+  DirectoryJobFiles files(dir.path());
   const std::string id = new_job_id();
   EXPECT_EQ(files.path(id, JobFile::kResultPng), dir.path() / "jobs" / id / "result.png");
   EXPECT_THROW(files.dir("../../etc"), std::invalid_argument);
@@ -45,7 +45,7 @@ TEST(JobFiles, PathsStayInsideTheDataDirectory) {
 
 TEST(JobFiles, WritesAtomicallyAndRemoves) {
   test::TempDir dir;
-  JobFiles files(dir.path());
+  DirectoryJobFiles files(dir.path());
   const std::string id = new_job_id();
   // Writes never create the job's folder (the scheduler makes it when the job starts).
   EXPECT_THROW(files.write(id, JobFile::kPreviewPng, "orphan"), std::runtime_error);

@@ -13,6 +13,7 @@
 #include "server/scheduler.h"
 #include "server/sqlite_job_store.h"
 #include "server/submission.h"
+#include "tests/server/forwarding_store.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {
@@ -24,9 +25,9 @@ using namespace std::chrono_literals;
 // The real SQLite store, except that a transition out of running (the end of a run: succeeded, failed, cancelled,
 // paused, back to queued) throws JobStoreError while `failures_left` is above zero, as SQLITE_FULL would, and a
 // removal while `remove_failures_left` is.
-class FailingEndStore final : public JobStore {
+class FailingEndStore final : public test::ForwardingStore {
  public:
-  explicit FailingEndStore(JobStore& inner) : inner_(inner) {}
+  using ForwardingStore::ForwardingStore;
 
   std::atomic<int> failures_left{0};
   std::atomic<int> failures{0};  // transitions refused so far
@@ -41,23 +42,6 @@ class FailingEndStore final : public JobStore {
     }
     return inner_.transition(id, to, now_ms, stop_reason, error, only_from);
   }
-
-  void create(const JobRecord& job) override { inner_.create(job); }
-  std::optional<JobRecord> claim_next(int64_t now_ms) override { return inner_.claim_next(now_ms); }
-  void update_progress(const std::string& id, const JobProgress& p) override { inner_.update_progress(id, p); }
-  bool set_priority(const std::string& id, int priority) override { return inner_.set_priority(id, priority); }
-  void set_warnings(const std::string& id, const std::string& w) override { inner_.set_warnings(id, w); }
-  std::optional<int> queue_position(const std::string& id) override { return inner_.queue_position(id); }
-  std::optional<JobRecord> find_by_idempotency_key(const std::string& owner, const std::string& key) override {
-    return inner_.find_by_idempotency_key(owner, key);
-  }
-  std::map<JobState, int> count_by_state(const std::optional<std::string>& owner) override {
-    return inner_.count_by_state(owner);
-  }
-  std::optional<JobRecord> get(const std::string& id, bool with_document) override {
-    return inner_.get(id, with_document);
-  }
-  std::vector<JobRecord> list(const JobFilter& filter) override { return inner_.list(filter); }
   bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) override {
     if (remove_failures_left.load() > 0) {
       remove_failures_left.fetch_sub(1);
@@ -65,10 +49,6 @@ class FailingEndStore final : public JobStore {
     }
     return inner_.remove(id, only_finished_before_ms);
   }
-  int requeue_running() override { return inner_.requeue_running(); }
-
- private:
-  JobStore& inner_;
 };
 
 class SchedulerStoreFailure : public ::testing::Test {
@@ -113,7 +93,7 @@ class SchedulerStoreFailure : public ::testing::Test {
   test::TempDir dir_;
   SqliteJobStore sqlite_{dir_.path() / "jobs.db"};
   FailingEndStore store_{sqlite_};
-  JobFiles files_{dir_.path()};
+  DirectoryJobFiles files_{dir_.path()};
   ThreadPool pool_{2};
   std::atomic<int> store_errors_{0};
 };

@@ -1,0 +1,308 @@
+#include "server/job_service.h"
+
+#include <algorithm>
+
+#include "server/job_id.h"
+#include "server/job_json.h"
+#include "server/log.h"
+#include "server/time_format.h"
+
+namespace tessera::server {
+
+using nlohmann::json;
+
+namespace {
+
+Problem priority_needs_admin(int priority, int max_user_priority) {
+  return Problem{403,
+                 "priority " + std::to_string(priority) + " is above " + std::to_string(max_user_priority) +
+                     ", which needs an admin token",
+                 "/priority"};
+}
+
+bool may_see(const Caller& caller, const JobRecord& job) {
+  return caller.admin || job.owner == caller.name;
+}
+
+}  // namespace
+
+JobService::JobService(JobStore& store, const JobFiles& files, AssetStore& assets, Scheduler& scheduler,
+                       EventBus& events, Metrics& metrics, JobServiceOptions options)
+    : store_(store),
+      files_(files),
+      assets_(assets),
+      scheduler_(scheduler),
+      events_(events),
+      metrics_(metrics),
+      options_(options) {
+  SchedulerHooks hooks;
+  hooks.state_changed = [this](const std::string& id) { publish_state(id); };
+  hooks.progress = [this](const std::string& id, const JobProgress& p) {
+    auto job = store_.get(id);
+    if (!job) return;
+    json status = job_status_json(*job, p);
+    events_.publish(id, job->owner, "progress", json{{"id", id}, {"progress", status["progress"]}}.dump());
+  };
+  hooks.preview = [this](const std::string& id, uint32_t pass) {
+    auto job = store_.get(id);
+    if (!job) return;
+    events_.publish(
+        id, job->owner, "preview",
+        json{{"id", id}, {"pass", pass}, {"url", "/v1/jobs/" + id + "/preview.png?pass=" + std::to_string(pass)}}
+            .dump());
+  };
+  hooks.samples_rendered = [this](uint64_t n) { metrics_.add_samples(n); };
+  hooks.job_ended = [this](double render_s, const std::function<bool()>& record) {
+    return metrics_.record_job_end(render_s, record);
+  };
+  hooks.store_write_failed = [this] { metrics_.count_job_store_error(); };
+  scheduler_.set_hooks(std::move(hooks));
+}
+
+JobService::~JobService() {
+  // Its render threads call the hooks, which use this service.
+  scheduler_.shutdown();
+}
+
+// ---- submitting -------------------------------------------------------------------------------------------------
+
+std::optional<Problem> JobService::store_uploads(const Caller& caller, json& doc, std::vector<UploadFile> files) {
+  if (files.empty()) return std::nullopt;
+  if (!doc.is_object() || !doc.contains("scene") || !doc["scene"].is_object())
+    return Problem{422, "uploaded files need a scene job that names them", "/scene"};
+  json& scene = doc["scene"];
+  // The map the job names becomes an environment asset of its own; the rest is the glTF asset.
+  if (scene.contains("environment") && scene["environment"].is_object() && scene["environment"].contains("map") &&
+      scene["environment"]["map"].is_string()) {
+    const std::string map = scene["environment"]["map"];
+    auto it = std::find_if(files.begin(), files.end(), [&](const UploadFile& f) { return f.name == map; });
+    if (it != files.end()) {
+      std::vector<UploadFile> one{*it};
+      files.erase(it);
+      auto stored = assets_.store(std::move(one), caller.name);
+      if (auto* p = std::get_if<Problem>(&stored)) return *p;
+      scene["environment"]["map"] = std::get<StoredAsset>(stored).info.id;
+    }
+  }
+  if (files.empty()) return std::nullopt;
+  const bool named = scene.contains("gltf") && scene["gltf"].is_string() &&
+                     std::any_of(files.begin(), files.end(),
+                                 [&](const UploadFile& f) { return f.name == scene["gltf"].get<std::string>(); });
+  auto stored = assets_.store(std::move(files), caller.name);
+  if (auto* p = std::get_if<Problem>(&stored)) return *p;
+  const AssetInfo& info = std::get<StoredAsset>(stored).info;
+  if (named && info.kind == "gltf") scene["gltf"] = info.id;
+  return std::nullopt;
+}
+
+std::variant<Submitted, Problem> JobService::submit(const Caller& caller, SubmitRequest request) {
+  if (!scheduler_.accepting()) return Problem{503, "the daemon is shutting down", std::nullopt};
+  const std::string& key = request.idempotency_key;
+  auto existing = [&](const JobRecord& job) -> std::variant<Submitted, Problem> {
+    if (job.request_hash != request.request_hash)
+      return Problem{422, "this Idempotency-Key was used with another request body", std::nullopt};
+    return Submitted{job, status(job), false};
+  };
+  if (!key.empty())
+    if (auto job = store_.find_by_idempotency_key(caller.name, key)) return existing(*job);
+
+  const AcceptedJob& accepted = request.job;
+  if (accepted.priority > options_.max_user_priority && !caller.admin)
+    return priority_needs_admin(accepted.priority, options_.max_user_priority);
+  if (options_.max_queued_per_user > 0) {
+    const int queued = store_.count_by_state(caller.name).at(JobState::kQueued);
+    if (queued >= options_.max_queued_per_user) {
+      Problem p{429,
+                "you have " + std::to_string(queued) +
+                    " jobs queued, the most this server allows (--max-queued-per-user); retry later",
+                std::nullopt};
+      p.retry_after_s = 30;
+      return p;
+    }
+  }
+  JobRecord job;
+  job.id = new_job_id();
+  job.kind = accepted.kind;
+  job.priority = accepted.priority;
+  job.created_at_ms = now_ms();
+  job.document = accepted.document.dump();
+  job.settings = accepted.settings.dump();
+  job.outputs = accepted.outputs.dump();
+  job.progress.samples_total = accepted.spp;
+  job.owner = caller.name;
+  job.warnings = json(accepted.warnings).dump();
+  job.idempotency_key = key;
+  job.request_hash = request.request_hash;
+  try {
+    store_.create(job);
+  } catch (const std::exception& e) {
+    // The same key raced in from another connection: that request's job is this one's.
+    if (!key.empty())
+      if (auto raced = store_.find_by_idempotency_key(caller.name, key)) return existing(*raced);
+    // The disk filled after the --min-free-disk check: the insert was rolled back whole, so, as the check's refusal,
+    // nothing of the job exists (assets a multipart submission stored stay: whole, and found again by a retry).
+    if (const auto* se = dynamic_cast<const JobStoreError*>(&e); se && se->out_of_space()) {
+      metrics_.count_job_store_error();
+      log(LogLevel::kWarn, "job refused: the job store ran out of space", {{"error", e.what()}});
+      return insufficient_storage("the data directory's disk ran out of space while the job was stored",
+                                  request.files_stored ? "the job was not stored; the files uploaded with it were, "
+                                                         "whole, and a retry reuses them"
+                                                       : "nothing was stored");
+    }
+    throw;
+  }
+  scheduler_.wake();
+  log(LogLevel::kInfo, "job queued",
+      {{"job", job.id},
+       {"kind", job.kind},
+       {"priority", job.priority},
+       {"owner", job.owner},
+       {"render", accepted.settings}});
+  // The job exists from here on: a store that fails as it is read back costs the answer its queue position (and the
+  // event its watchers), not a failure whose retry, without an Idempotency-Key, would queue the job twice.
+  Submitted out{job, json(), true};
+  try {
+    publish_state(job.id);
+    if (auto stored = store_.get(job.id)) out.job = *stored;
+    out.status = status(out.job);
+  } catch (const JobStoreError& e) {
+    metrics_.count_job_store_error();
+    log(LogLevel::kWarn, "job queued, but the job store failed as it was read back",
+        {{"job", job.id}, {"error", e.what()}});
+    out.status = job_status_json(job);
+  }
+  return out;
+}
+
+// ---- reading ----------------------------------------------------------------------------------------------------
+
+std::optional<JobRecord> JobService::find(const Caller& caller, const std::string& id) {
+  if (!is_valid_job_id(id)) return std::nullopt;
+  std::optional<JobRecord> job = store_.get(id);
+  if (!job || !may_see(caller, *job)) return std::nullopt;
+  return job;
+}
+
+json JobService::status(const JobRecord& job) {
+  std::optional<int> position;
+  if (job.state == JobState::kQueued) position = store_.queue_position(job.id);
+  return job_status_json(job, scheduler_.live_progress(job.id), position);
+}
+
+JobPage JobService::list(const Caller& caller, JobFilter filter) {
+  if (!caller.admin) filter.owner = caller.name;
+  const int limit = filter.limit;
+  filter.limit = limit + 1;  // one more tells whether another page exists
+  std::vector<JobRecord> jobs = store_.list(filter);
+  JobPage page;
+  if (static_cast<int>(jobs.size()) > limit) {
+    jobs.resize(static_cast<size_t>(limit));
+    page.next_before_seq = jobs.back().seq;
+  }
+  for (const JobRecord& job : jobs) page.jobs.push_back(status(job));
+  return page;
+}
+
+std::map<JobState, int> JobService::counts() {
+  return store_.count_by_state();
+}
+
+std::variant<std::unique_ptr<FileReader>, Problem> JobService::preview(const JobRecord& job) {
+  if (auto file = files_.open(job.id, JobFile::kPreviewPng)) return file;
+  if (!is_terminal(job.state))
+    return Problem{
+        409, std::string("the job is ") + job_state_name(job.state) + "; a preview exists after its first render pass",
+        std::nullopt};
+  return Problem{404, "this job has no preview (it ended before its first pass)", std::nullopt};
+}
+
+std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobRecord& job, JobFile file) {
+  if (job.state != JobState::kSucceeded)
+    return Problem{409,
+                   std::string("the job is ") + job_state_name(job.state) + "; results exist once it has succeeded",
+                   std::nullopt};
+  const std::string format = file == JobFile::kResultExr ? "exr" : "png";
+  const json outputs = json::parse(job.outputs, nullptr, false);
+  if (!outputs.is_array() || std::find(outputs.begin(), outputs.end(), format) == outputs.end())
+    return Problem{404, "the job did not ask for a " + format + " output", std::nullopt};
+  if (auto reader = files_.open(job.id, file)) return reader;
+  return Problem{404, std::string("the job's ") + job_file_name(file) + " is missing from the data directory",
+                 std::nullopt};
+}
+
+// ---- changing ---------------------------------------------------------------------------------------------------
+
+std::variant<ActionTaken, Problem> JobService::taken(const std::string& id) {
+  auto now = store_.get(id);
+  if (!now) return Problem{404, "no such job", std::nullopt};
+  // A running render winds down within one pass before its state changes.
+  return ActionTaken{*now, status(*now), now->state == JobState::kRunning};
+}
+
+std::variant<ActionTaken, Problem> JobService::act(const JobRecord& job, JobAction action) {
+  Scheduler::Outcome outcome = Scheduler::Outcome::kConflict;
+  switch (action) {
+    case JobAction::kCancel:
+      outcome = scheduler_.cancel(job.id);
+      break;
+    case JobAction::kPause:
+      outcome = scheduler_.pause(job.id);
+      break;
+    case JobAction::kResume:
+      outcome = scheduler_.resume(job.id);
+      break;
+    case JobAction::kRequeue:
+      outcome = scheduler_.requeue(job.id);
+      break;
+    case JobAction::kPriority:
+    case JobAction::kDelete:
+      return Problem{500, std::string(job_action_name(action)) + " is not a state change", std::nullopt};
+  }
+  switch (outcome) {
+    case Scheduler::Outcome::kDone:
+    case Scheduler::Outcome::kInProgress:
+      return taken(job.id);
+    case Scheduler::Outcome::kConflict: {
+      auto now = store_.get(job.id);
+      return Problem{409, action_refusal(action, now ? now->state : job.state), std::nullopt};
+    }
+    case Scheduler::Outcome::kUnknown:
+      break;
+  }
+  return Problem{404, "no such job", std::nullopt};
+}
+
+std::variant<ActionTaken, Problem> JobService::set_priority(const Caller& caller, const JobRecord& job, int priority) {
+  if (priority > options_.max_user_priority && !caller.admin)
+    return priority_needs_admin(priority, options_.max_user_priority);
+  if (!store_.set_priority(job.id, priority)) {
+    auto now = store_.get(job.id);
+    if (!now) return Problem{404, "no such job", std::nullopt};
+    return Problem{409, action_refusal(JobAction::kPriority, now->state), std::nullopt};
+  }
+  log(LogLevel::kInfo, "job priority changed", {{"job", job.id}, {"priority", priority}});
+  publish_state(job.id);
+  return taken(job.id);
+}
+
+bool JobService::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
+  if (!scheduler_.remove(id, only_finished_before_ms)) return false;
+  events_.forget(id);
+  return true;
+}
+
+bool JobService::accepting() const {
+  return scheduler_.accepting();
+}
+
+bool JobService::store_failing() const {
+  return scheduler_.store_failing();
+}
+
+void JobService::publish_state(const std::string& id) {
+  auto job = store_.get(id);
+  if (!job) return;
+  events_.publish(id, job->owner, "state", status(*job).dump(), is_terminal(job->state));
+}
+
+}  // namespace tessera::server
