@@ -2,7 +2,7 @@
 // job list and follows the selected job over Server-Sent Events (polling when the events endpoint is missing).
 import { api, allowed, ApiError, getBlob, getToken, onConnection, setToken, TERMINAL } from "./api.js";
 import { EXAMPLES } from "./examples.js";
-import { materialForm } from "./materials.js";
+import { commonParameters, materialForm } from "./materials.js";
 
 const $ = (sel) => document.querySelector(sel);
 const STATES = ["queued", "running", "paused", "succeeded", "failed", "cancelled"];
@@ -219,11 +219,13 @@ const buildFromExample = () => structuredClone(currentExample().job);
 
 // Material models, from the daemon.
 let materialModels = [];
+let commonMaterialParameters = new Set();
 let currentMaterialForm = null;
 async function loadMaterials() {
   try {
     const catalog = await api.materials();
     materialModels = catalog.materials || [];
+    commonMaterialParameters = commonParameters(materialModels);
   } catch (e) {
     if (!(e instanceof ApiError && e.status === 401)) showError(e, "Loading the material models");
     return;
@@ -243,7 +245,7 @@ async function loadMaterials() {
 function buildMaterialForm() {
   const model = materialModels.find((m) => m.type === $("#material-type").value);
   $("#material-desc").textContent = model?.description || "";
-  currentMaterialForm = model ? materialForm(model) : null;
+  currentMaterialForm = model ? materialForm(model, commonMaterialParameters) : null;
   $("#material-params").replaceChildren(...(currentMaterialForm ? [currentMaterialForm.element] : []));
 }
 $("#material-type").addEventListener("change", buildMaterialForm);

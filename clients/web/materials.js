@@ -2,6 +2,11 @@
 // and the tightest numeric range. A reflectance (three numbers in [0, 1]) gets a colour picker, a bounded number a
 // slider with a number field, an enum a select, a boolean a checkbox, anything else (nested materials, textures) a
 // small JSON field.
+//
+// What the form shows is what renders. A parameter with a default shows it and is sent only once it was changed, so
+// that the daemon applies the same default. A parameter without one (an override such as alpha_x, which otherwise
+// follows roughness, or eta and k, which otherwise come from the named metal) is not set until its "Set" box is
+// ticked: only then is its control shown, and sent.
 
 let uid = 0;
 const nextId = (name) => `mat-${name}-${++uid}`;
@@ -18,7 +23,7 @@ function el(tag, attrs = {}, ...children) {
   return e;
 }
 
-// sRGB transfer function: colour pickers show display colours, parameters are linear.
+// sRGB transfer function (IEC 61966-2-1): colour pickers show display colours, parameters are linear.
 const toLinear = (c) => (c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4);
 const toSrgb = (l) => (l <= 0.0031308 ? 12.92 * l : 1.055 * l ** (1 / 2.4) - 0.055);
 function linearToHex(rgb) {
@@ -35,17 +40,28 @@ function hexToLinear(hex) {
 }
 
 const isRgb = (v) => Array.isArray(v) && v.length === 3 && v.every((x) => typeof x === "number");
+// A colour parameter may be one number (grey) or three.
+const asRgb = (v) => (typeof v === "number" ? [v, v, v] : isRgb(v) ? v : null);
+
+// The schema branch a control edits: a scalar or colour map is "a number (or colour), or a texture"; the form edits
+// the first branch and leaves textures to the JSON tab.
+function plainBranch(s) {
+  let b = s || {};
+  while (Array.isArray(b.anyOf) && b.anyOf.length) b = b.anyOf[0];
+  return b;
+}
 
 // What kind of control a parameter gets.
 function controlKind(p) {
   const s = p.schema || {};
+  const b = plainBranch(s);
   const def = p.default;
-  if (Array.isArray(s.enum) || Array.isArray(s.anyOf?.[0]?.enum)) return "enum";
+  if (Array.isArray(s.enum) || Array.isArray(b.enum)) return "enum";
   if (s.type === "boolean" || typeof def === "boolean") return "boolean";
   if (isRgb(def) || (def === undefined && /color|colour|albedo|radiance|emission/.test(p.name))) {
     return (p.maximum ?? Infinity) <= 1 ? "color" : "vector";
   }
-  if (typeof def === "number" || s.type === "number" || s.type === "integer") return "number";
+  if (typeof def === "number" || b.type === "number" || b.type === "integer") return "number";
   if (typeof def === "string" || s.type === "string") return "string";
   return "json";
 }
@@ -58,114 +74,218 @@ function numberAttrs(p, integer) {
   return { min: lo, max: hi, step };
 }
 
-// Builds the form rows for one material model; returns { element, value() } where value() is the material object.
-export function materialForm(model) {
-  const rows = [];
-  const getters = [];
-  for (const p of model.parameters || []) {
-    const kind = controlKind(p);
-    const id = nextId(p.name);
-    const words = p.name.replaceAll("_", " ");
-    const label = el("label", { for: id, text: words[0].toUpperCase() + words.slice(1) });
-    const hint = p.description ? el("small", { class: "hint", id: `${id}-hint`, text: p.description }) : null;
-    const described = hint ? `${id}-hint` : undefined;
-    let control;
-    let get;
-    if (kind === "enum") {
-      const values = p.schema.enum || p.schema.anyOf[0].enum;
-      control = el("select", { id, "aria-describedby": described });
-      for (const v of values) control.append(el("option", { value: v, text: v }));
-      if (p.default !== undefined) control.value = p.default;
-      get = () => control.value;
-    } else if (kind === "boolean") {
-      control = el("input", { id, type: "checkbox", "aria-describedby": described });
-      control.checked = Boolean(p.default);
-      get = () => control.checked;
-    } else if (kind === "color") {
-      const def = isRgb(p.default) ? p.default : [0, 0, 0];
-      control = el("input", { id, type: "color", value: linearToHex(def), "aria-describedby": described });
-      const readout = el("output", { for: id, class: "mono", text: def.map((v) => v.toFixed(3)).join(" ") });
-      control.addEventListener("input", () => {
-        readout.textContent = hexToLinear(control.value).map((v) => v.toFixed(3)).join(" ");
+// The value an optional number starts at when it is set: its lower bound (one above an exclusive one), else 0.
+function startValue(p, attrs) {
+  const b = plainBranch(p.schema);
+  const exclusive = p.schema?.exclusiveMinimum ?? b.exclusiveMinimum;
+  if (Number.isFinite(exclusive)) return exclusive + 1;
+  return attrs.min ?? 0;
+}
+
+// One parameter's control: { name, row, get(), set(v) }. get() is the value to send or undefined (not set, or still
+// the default); set(v) shows a value (a duplicated job's) and returns false when the control cannot show it.
+function parameterControl(p) {
+  const kind = controlKind(p);
+  const id = nextId(p.name);
+  const words = p.name.replaceAll("_", " ");
+  const label = el("label", { for: id, text: words[0].toUpperCase() + words.slice(1) });
+  const hint = p.description ? el("small", { class: "hint", id: `${id}-hint`, text: p.description }) : null;
+  const described = hint ? `${id}-hint` : undefined;
+  const hasDefault = p.default !== undefined && p.default !== null;
+
+  // read(): the control's value; show(v): puts v in it (false if it cannot); raw(): its text, to tell a change.
+  let body;
+  let read;
+  let show;
+  let raw;
+  if (kind === "enum") {
+    const values = p.schema.enum || plainBranch(p.schema).enum;
+    const control = el("select", { id, "aria-describedby": described });
+    for (const v of values) control.append(el("option", { value: v, text: v }));
+    body = control;
+    read = () => control.value;
+    show = (v) => values.includes(v) && ((control.value = v), true);
+    raw = () => control.value;
+  } else if (kind === "boolean") {
+    const control = el("input", { id, type: "checkbox", "aria-describedby": described });
+    body = control;
+    read = () => control.checked;
+    show = (v) => typeof v === "boolean" && ((control.checked = v), true);
+    raw = () => String(control.checked);
+  } else if (kind === "color") {
+    const control = el("input", { id, type: "color", "aria-describedby": described });
+    const readout = el("output", { for: id, class: "mono" });
+    const update = () => (readout.textContent = hexToLinear(control.value).map((v) => v.toFixed(3)).join(" "));
+    control.addEventListener("input", update);
+    body = el("span", { class: "color-row" }, control, readout);
+    read = () => hexToLinear(control.value);
+    show = (v) => {
+      const rgb = asRgb(v);
+      if (!rgb) return false;
+      control.value = linearToHex(rgb);
+      readout.textContent = rgb.map((x) => x.toFixed(3)).join(" ");
+      return true;
+    };
+    raw = () => control.value;
+  } else if (kind === "vector") {
+    const inputs = [0, 1, 2].map((i) =>
+      el("input", {
+        type: "number",
+        ...numberAttrs(p, false),
+        "aria-label": `${p.name} ${"RGB"[i]}`,
+        id: i === 0 ? id : undefined,
+        "aria-describedby": described,
+      }),
+    );
+    body = el("span", { class: "vector-row" }, ...inputs);
+    read = () =>
+      inputs.map((x) => {
+        if (x.value.trim() === "" || !Number.isFinite(Number(x.value))) throw new Error(`${p.name}: enter numbers`);
+        return Number(x.value);
       });
-      const wrap = el("span", { class: "color-row" }, control, readout);
-      get = () => hexToLinear(control.value);
-      rows.push(el("div", { class: "field" }, label, wrap, hint));
-      getters.push([p.name, get, p.default]);
-      continue;
-    } else if (kind === "vector") {
-      const def = isRgb(p.default) ? p.default : [0, 0, 0];
-      const inputs = def.map((v, i) =>
-        el("input", {
-          type: "number",
-          value: v,
-          ...numberAttrs(p, false),
-          "aria-label": `${p.name} ${"RGB"[i]}`,
-          id: i === 0 ? id : undefined,
-          "aria-describedby": described,
-        }),
-      );
-      const wrap = el("span", { class: "vector-row" }, ...inputs);
-      get = () => inputs.map((x) => Number(x.value));
-      rows.push(el("div", { class: "field" }, label, wrap, hint));
-      getters.push([p.name, get, p.default]);
-      continue;
-    } else if (kind === "number") {
-      const integer = p.schema?.type === "integer";
-      const attrs = numberAttrs(p, integer);
-      const def = typeof p.default === "number" ? p.default : (attrs.min ?? 0);
-      const number = el("input", { id, type: "number", value: def, ...attrs, "aria-describedby": described });
-      if (attrs.min !== undefined && attrs.max !== undefined && attrs.max - attrs.min <= 10000) {
-        const slider = el("input", {
-          type: "range",
-          value: def,
-          min: attrs.min,
-          max: attrs.max,
-          step: integer ? 1 : (attrs.max - attrs.min) / 200,
-          "aria-label": `${p.name} slider`,
-          tabindex: "-1",
-        });
-        slider.addEventListener("input", () => (number.value = Number(slider.value).toPrecision(4) * 1));
-        number.addEventListener("input", () => (slider.value = number.value));
-        rows.push(el("div", { class: "field" }, label, el("span", { class: "slider-row" }, slider, number), hint));
-      } else {
-        rows.push(el("div", { class: "field" }, label, number, hint));
-      }
-      getters.push([p.name, () => Number(number.value), p.default]);
-      continue;
-    } else if (kind === "string") {
-      control = el("input", { id, type: "text", value: p.default ?? "", "aria-describedby": described });
-      get = () => control.value || undefined;
+    show = (v) => {
+      const rgb = asRgb(v);
+      if (!rgb) return false;
+      rgb.forEach((x, i) => (inputs[i].value = x));
+      return true;
+    };
+    raw = () => inputs.map((x) => x.value).join(" ");
+  } else if (kind === "number") {
+    const integer = plainBranch(p.schema).type === "integer";
+    const attrs = numberAttrs(p, integer);
+    const number = el("input", { id, type: "number", ...attrs, "aria-describedby": described });
+    let slider = null;
+    if (attrs.min !== undefined && attrs.max !== undefined && attrs.max - attrs.min <= 10000) {
+      slider = el("input", {
+        type: "range",
+        min: attrs.min,
+        max: attrs.max,
+        step: integer ? 1 : (attrs.max - attrs.min) / 200,
+        "aria-label": `${p.name} slider`,
+        tabindex: "-1",
+      });
+      slider.addEventListener("input", () => (number.value = Number(slider.value).toPrecision(4) * 1));
+      number.addEventListener("input", () => (slider.value = number.value));
+      body = el("span", { class: "slider-row" }, slider, number);
     } else {
-      control = el("textarea", { id, rows: 2, class: "mono", spellcheck: "false", "aria-describedby": described });
-      control.value = p.default === undefined ? "" : JSON.stringify(p.default);
-      get = () => {
-        const t = control.value.trim();
-        if (!t) return undefined;
-        try {
-          return JSON.parse(t);
-        } catch {
-          throw new Error(`${p.name}: not valid JSON`);
-        }
-      };
+      body = number;
     }
-    rows.push(el("div", { class: "field" }, label, control, hint));
-    getters.push([p.name, get, p.default]);
+    read = () => {
+      const t = number.value.trim();
+      if (t === "" || !Number.isFinite(Number(t))) throw new Error(`${p.name}: enter a number`);
+      return Number(t);
+    };
+    show = (v) => {
+      if (typeof v !== "number") return false;
+      number.value = v;
+      if (slider) slider.value = v;
+      return true;
+    };
+    raw = () => number.value;
+    if (!hasDefault) show(startValue(p, attrs));
+  } else if (kind === "string") {
+    const control = el("input", { id, type: "text", "aria-describedby": described });
+    body = control;
+    read = () => control.value || undefined;
+    show = (v) => typeof v === "string" && ((control.value = v), true);
+    raw = () => control.value;
+  } else {
+    const control = el("textarea", { id, rows: 2, class: "mono", spellcheck: "false", "aria-describedby": described });
+    body = control;
+    read = () => {
+      const t = control.value.trim();
+      if (!t) return undefined;
+      try {
+        return JSON.parse(t);
+      } catch {
+        throw new Error(`${p.name}: not valid JSON`);
+      }
+    };
+    show = (v) => ((control.value = JSON.stringify(v)), true);
+    raw = () => control.value.trim();
   }
-  const element = el("div", { class: "material-params" }, ...rows);
-  if (!rows.length) element.append(el("p", { class: "muted", text: "This model has no parameters." }));
+
+  // A JSON or text field with nothing in it is unset by itself; other controls always hold a value, so a parameter
+  // without a default gets a "Set" box and its control appears only when it is ticked.
+  const emptyMeansUnset = kind === "json" || kind === "string";
+  let enabled = null;
+  if (!hasDefault && !emptyMeansUnset) {
+    enabled = el("input", { type: "checkbox", "aria-label": `Set ${p.name}`, class: "set-box" });
+    body.hidden = true;
+    enabled.addEventListener("change", () => (body.hidden = !enabled.checked));
+  } else if (hasDefault) {
+    show(p.default);
+  }
+  const initial = raw();
+  const head = enabled
+    ? el("span", { class: "set-row" }, label, el("label", { class: "set-label" }, enabled, "Set"))
+    : label;
+  const row = el("div", { class: "field", "data-param": p.name }, head, body, hint);
+  return {
+    name: p.name,
+    row,
+    get() {
+      if (enabled) return enabled.checked ? read() : undefined;
+      if (hasDefault && raw() === initial) return undefined;
+      return read();
+    },
+    set(v) {
+      if (!show(v)) return false;
+      if (enabled) {
+        enabled.checked = true;
+        body.hidden = false;
+      }
+      return true;
+    },
+  };
+}
+
+// Builds the form for one material model. `common` names the parameters every model takes (emission, normal map,
+// absorption): they go in a collapsed group after the model's own. Returns { element, value(), set(material) }:
+// value() is the material object to send, set() shows a material's values and returns false if some cannot be
+// shown (a texture in a number, an unknown key): the caller then offers the JSON tab instead.
+export function materialForm(model, common = new Set()) {
+  const own = [];
+  const shared = [];
+  const controls = new Map();
+  for (const p of model.parameters || []) {
+    const c = parameterControl(p);
+    controls.set(p.name, c);
+    (common.has(p.name) ? shared : own).push(c.row);
+  }
+  const element = el("div", { class: "material-params" }, ...own);
+  if (!own.length) element.append(el("p", { class: "muted", text: "This model has only the common parameters." }));
+  if (shared.length) {
+    const names = [...controls.keys()].filter((n) => common.has(n)).map((n) => n.replaceAll("_", " "));
+    const summary = el("summary", { text: `More: ${names.join(", ")}` });
+    element.append(el("details", { class: "more-params" }, summary, ...shared));
+  }
   return {
     element,
     value() {
       const m = { type: model.type };
-      for (const [name, get, def] of getters) {
-        const v = get();
-        if (v === undefined) continue;
-        // Optional parameters with no default (e.g. an alias) stay out unless they were set to something.
-        if (def === undefined && (v === false || (Array.isArray(v) && v.every((x) => x === 0)))) continue;
-        m[name] = v;
+      for (const [name, c] of controls) {
+        const v = c.get();
+        if (v !== undefined) m[name] = v;
       }
       return m;
     },
+    set(material) {
+      let all = true;
+      for (const [name, v] of Object.entries(material)) {
+        if (name === "type") continue;
+        const c = controls.get(name);
+        if (!c || !c.set(v)) all = false;
+        else if (common.has(name)) element.querySelector(".more-params")?.setAttribute("open", "");
+      }
+      return all;
+    },
   };
+}
+
+// The parameters every model takes.
+export function commonParameters(models) {
+  if (!models.length) return new Set();
+  const names = models.map((m) => new Set((m.parameters || []).map((p) => p.name)));
+  return new Set([...names[0]].filter((n) => names.every((s) => s.has(n))));
 }

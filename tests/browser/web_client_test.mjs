@@ -1,6 +1,7 @@
 // The web client, end to end: the real tesserad on a free port with a temporary data directory, Debian's chromium
 // driven headless by playwright-core. Submits the Cornell example, watches the preview change, cancels and deletes
-// another job, downloads the PNG, and saves a screenshot. Any failed step fails the test.
+// another job, downloads the PNG, and saves a screenshot; submits every material model from the Material tab. Any
+// failed step fails the test.
 //
 // node --test tests/browser/web_client_test.mjs   with   TESSERAD=path/to/tesserad  ARTIFACTS=dir
 //   (CTest passes both; CHROMIUM overrides /usr/bin/chromium)
@@ -240,6 +241,139 @@ test("the web client submits, follows, cancels, deletes and downloads", async (t
   await step(t, "no script errors on the page", () => {
     assert.deepEqual(pageErrors, []);
   });
+});
+
+// A job submitted through the API, followed to its end: { status, png } (png: the result's bytes when it succeeded).
+async function renderThroughApi(doc) {
+  const res = await page.request.post(`${baseUrl}/v1/jobs`, { data: doc });
+  assert.equal(res.status(), 202, `submit ${JSON.stringify(doc)}: ${await res.text()}`);
+  return finished((await res.json()).id);
+}
+async function finished(id) {
+  const deadline = Date.now() + 60000;
+  for (;;) {
+    const status = await (await page.request.get(`${baseUrl}/v1/jobs/${id}`)).json();
+    if (["succeeded", "failed", "cancelled"].includes(status.state)) {
+      if (status.state !== "succeeded") return { status, png: null };
+      return { status, png: await (await page.request.get(`${baseUrl}/v1/jobs/${id}/result.png`)).body() };
+    }
+    assert.ok(Date.now() < deadline, `job ${id} still ${status.state} after 60 s`);
+    await page.waitForTimeout(100);
+  }
+}
+// Clicks "Submit job" and returns the document the page sent and the job it made, followed to its end.
+async function submitFromForm() {
+  const [req] = await Promise.all([
+    page.waitForRequest((r) => r.method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
+    page.getByRole("button", { name: "Submit job" }).click(),
+  ]);
+  const res = await req.response();
+  const sent = JSON.parse(req.postData());
+  assert.equal(res.status(), 202, `the form's ${JSON.stringify(sent.material)} was refused: ${await res.text()}`);
+  return { sent, ...(await finished((await res.json()).id)) };
+}
+
+// The Material tab sends what it shows: every model submits with the form's defaults and renders exactly as the
+// same material with every default of GET /v1/materials written out; changing its main control (roughness where it
+// has one, else its first slider, number, colour or JSON field) sends the value shown and changes the image.
+test("every material model renders from the form as shown, with its defaults and with a changed control", async (t) => {
+  await page.goto(`${baseUrl}/`);
+  const { materials } = await (await page.request.get(`${baseUrl}/v1/materials`)).json();
+  assert.ok(materials.length >= 15, `${materials.length} models`);
+  await page.getByRole("tab", { name: "Material" }).click();
+  await page.getByLabel("Width").fill("24");
+  await page.getByLabel("Height").fill("24");
+  await page.getByLabel("Samples per pixel").fill("4");
+  const render = { width: 24, height: 24, spp: 4 };
+  const pngs = new Map();
+  for (const model of materials) {
+    await t.test(model.type, async () => {
+      await page.getByLabel("Material model").selectOption(model.type);
+      const params = page.locator("#material-params");
+      await params.locator(".material-params").waitFor();
+      const defaults = Object.fromEntries(
+        model.parameters.filter((p) => p.default != null).map((p) => [p.name, p.default]),
+      );
+      // The controls show the catalog's defaults; a parameter without one shows no value until it is set.
+      for (const p of model.parameters) {
+        const row = params.locator(`[data-param="${p.name}"]`);
+        if (p.default == null) {
+          const set = row.getByRole("checkbox", { name: `Set ${p.name}` });
+          if (await set.count()) assert.ok(!(await set.isChecked()), `${model.type}.${p.name} starts unset`);
+          continue;
+        }
+        const number = row.locator('input[type="number"]');
+        if (typeof p.default === "number" && (await number.count()) === 1)
+          assert.equal(Number(await number.inputValue()), p.default, `${model.type}.${p.name} shows its default`);
+        if (typeof p.default === "string") assert.equal(await row.locator("select").inputValue(), p.default);
+      }
+
+      const plain = await submitFromForm();
+      assert.equal(plain.status.state, "succeeded", `${model.type} with the form's defaults: ${plain.status.error}`);
+      assert.equal(plain.sent.material.type, model.type);
+      const material = { ...defaults, ...plain.sent.material };
+      const explicit = await renderThroughApi({ kind: "material", material, render });
+      assert.equal(explicit.status.state, "succeeded", explicit.status.error);
+      assert.ok(plain.png.equals(explicit.png), `${model.type}: the form renders unlike its defaults written out`);
+      pngs.set(model.type, plain.png);
+
+      // The main control, changed: roughness where the model has it, else its first slider, number, colour or JSON.
+      const [name, control] = await page.evaluate(() => {
+        const rows = [...document.querySelectorAll("#material-params .material-params > [data-param]")];
+        for (const sel of ['input[type="range"]', 'input[type="number"]', 'input[type="color"]', "textarea"]) {
+          const found = rows.filter((r) => [...r.querySelectorAll(sel)].some((x) => !x.closest("[hidden]")));
+          const row = found.find((r) => r.dataset.param === "roughness") || found[0];
+          if (row) return [row.dataset.param, sel];
+        }
+        return [null, null];
+      });
+      assert.ok(name, `${model.type}: no control to change`);
+      const row = params.locator(`[data-param="${name}"]`);
+      const input = row.locator(control).first();
+      if (control.includes("range")) {
+        const p = model.parameters.find((q) => q.name === name);
+        const [lo, hi] = [p.minimum, p.maximum];
+        await input.fill(String(defaults[name] < (lo + hi) / 2 ? lo + 0.8 * (hi - lo) : lo + 0.2 * (hi - lo)));
+      } else if (control.includes("number")) {
+        await input.fill(String(Number(await input.inputValue()) * 4 + 2));
+      } else if (control.includes("color")) {
+        await input.fill("#3366cc");
+      } else {
+        await input.fill(JSON.stringify({ type: "lambert", albedo: [0.1, 0.5, 0.9] }));
+      }
+      const changed = await submitFromForm();
+      assert.equal(changed.status.state, "succeeded", `${model.type} with ${name} changed: ${changed.status.error}`);
+      const v = changed.sent.material[name];
+      assert.ok(v !== undefined, `${model.type}: the changed ${name} was not sent`);
+      const shown = row.locator('input[type="number"]').first();
+      if (typeof v === "number") assert.equal(v, Number(await shown.inputValue()), `${name} sent as shown`);
+      assert.ok(!changed.png.equals(plain.png), `${model.type}: ${name} = ${JSON.stringify(v)} left the image alone`);
+      const again = await renderThroughApi({
+        kind: "material",
+        material: { ...defaults, ...changed.sent.material },
+        render,
+      });
+      assert.ok(changed.png.equals(again.png), `${model.type}: with ${name} changed, the form's render differs`);
+    });
+  }
+
+  await t.test("a named metal is not overridden by eta and k the form did not set", async () => {
+    await page.getByLabel("Material model").selectOption("conductor");
+    await page.locator('[data-param="metal"] select').selectOption("copper");
+    const copper = await submitFromForm();
+    assert.deepEqual(copper.sent.material, { type: "conductor", metal: "copper" });
+    assert.equal(copper.status.state, "succeeded");
+    assert.ok(!copper.png.equals(pngs.get("conductor")), "copper renders as gold");
+    // An override is sent once it is set, with the value its control shows.
+    const row = page.locator('[data-param="alpha_x"]');
+    assert.ok(await row.locator(".slider-row").isHidden(), "an unset override shows no value");
+    await row.getByRole("checkbox", { name: "Set alpha_x" }).check();
+    await row.locator('input[type="number"]').fill("0.5");
+    const set = await submitFromForm();
+    assert.deepEqual(set.sent.material, { type: "conductor", metal: "copper", alpha_x: 0.5 });
+    assert.equal(set.status.state, "succeeded");
+  });
+  assert.deepEqual(pageErrors, []);
 });
 
 test("the web client honours Retry-After from an overloaded server", async () => {
