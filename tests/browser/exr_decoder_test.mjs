@@ -1,0 +1,105 @@
+// The web client's EXR reader (clients/web/exr.js) against OpenImageIO: files written by oiiotool in every layout
+// the reader takes (HALF and FLOAT; none, RLE, ZIPS and ZIP, compressible and not, so that both the inflated and the
+// stored-as-is chunks are read; a grey image) and by tessera-render itself decode to exactly the values
+// `oiiotool --dumpdata` prints; a cut or garbled file and a compression it does not take are refused with an ExrError.
+//
+// node --test tests/browser/exr_decoder_test.mjs   with   TESSERA_RENDER=path/to/tessera-render   (CTest passes it)
+import assert from "node:assert/strict";
+import { execFileSync } from "node:child_process";
+import fs from "node:fs";
+import os from "node:os";
+import path from "node:path";
+import { after, test } from "node:test";
+import { fileURLToPath } from "node:url";
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const repo = path.resolve(here, "../..");
+const { decodeExr, ExrError } = await import(path.join(repo, "clients/web/exr.js"));
+const RENDER = process.env.TESSERA_RENDER || path.join(repo, "build/clients/cli/tessera-render");
+const tmp = fs.mkdtempSync(path.join(os.tmpdir(), "tessera-exr-"));
+after(() => fs.rmSync(tmp, { recursive: true, force: true }));
+
+const oiiotool = (...args) => execFileSync("oiiotool", args, { encoding: "utf8", maxBuffer: 64 << 20 });
+const arrayBuffer = (file) => {
+  const b = fs.readFileSync(file);
+  return b.buffer.slice(b.byteOffset, b.byteOffset + b.length);
+};
+
+// Every pixel as OpenImageIO reads it: "Pixel (x, y): r g b" lines, a grey image's one value repeated.
+function reference(file) {
+  const values = [];
+  for (const m of oiiotool("--dumpdata", file).matchAll(/Pixel \((\d+), (\d+)\):((?: \S+)+)/g)) {
+    const v = m[3].trim().split(/\s+/).map(Number);
+    values.push(...(v.length === 1 ? [v[0], v[0], v[0]] : v.slice(0, 3)));
+  }
+  return values;
+}
+
+async function agrees(file) {
+  const img = await decodeExr(arrayBuffer(file));
+  const want = reference(file);
+  assert.equal(img.rgb.length, want.length, `${path.basename(file)}: ${img.width}x${img.height}`);
+  for (let i = 0; i < want.length; ++i) {
+    // --dumpdata prints 9 decimals: as exact as a half, and within 5e-10 of a float in [0, 4].
+    if (Math.abs(img.rgb[i] - want[i]) > 1e-9 + 1e-7 * Math.abs(want[i]))
+      assert.fail(`${path.basename(file)}: value ${i} (pixel ${Math.floor(i / 3)}) is ${img.rgb[i]}, not ${want[i]}`);
+  }
+  return img;
+}
+
+for (const type of ["half", "float"]) {
+  for (const compression of ["none", "rle", "zips", "zip"]) {
+    test(`${type} ${compression}`, async () => {
+      // A gradient compresses; noise does not, and is then stored as it is. 37 x 23 spans two 16-line ZIP chunks.
+      for (const [name, pattern] of [
+        ["gradient", "fill:top=0.1,0.2,0.3:bottom=3.9,0.5,0.25"],
+        ["noise", "noise:type=uniform:min=0:max=4"],
+      ]) {
+        const file = path.join(tmp, `${name}-${type}-${compression}.exr`);
+        oiiotool("--pattern", pattern, "37x23", "3", "-d", type, "--compression", compression, "-o", file);
+        const img = await agrees(file);
+        assert.deepEqual([img.width, img.height], [37, 23]);
+      }
+    });
+  }
+}
+
+test("a grey image fills all three channels", async () => {
+  const file = path.join(tmp, "grey.exr");
+  oiiotool("--pattern", "fill:left=0.25:right=2", "9x5", "1", "-d", "half", "--compression", "zip", "-o", file);
+  const img = await agrees(file);
+  assert.deepEqual(img.channels, ["Y"]);
+});
+
+test("tessera-render's EXR, half and float", async () => {
+  assert.ok(fs.existsSync(RENDER), `no tessera-render at ${RENDER}`);
+  for (const precision of ["half", "float"]) {
+    const job = path.join(tmp, `job-${precision}.json`);
+    fs.writeFileSync(
+      job,
+      JSON.stringify({
+        kind: "material",
+        material: { type: "conductor", metal: "copper", roughness: 0.2 },
+        render: { width: 40, height: 34, spp: 2, exr_precision: precision },
+      }),
+    );
+    const out = path.join(tmp, `render-${precision}.exr`);
+    execFileSync(RENDER, ["render", job, "-o", out, "-q"]);
+    const img = await agrees(out);
+    assert.ok(img.rgb.some((v) => v > 0), "the render is not black");
+  }
+});
+
+test("a cut or garbled file and an unsupported compression are refused with a message", async () => {
+  const file = path.join(tmp, "gradient-half-zip.exr");
+  const whole = new Uint8Array(arrayBuffer(file));
+  for (const n of [0, 4, 8, 40, 300, whole.length - 200, whole.length - 1]) {
+    await assert.rejects(decodeExr(whole.slice(0, n).buffer), ExrError, `the first ${n} bytes`);
+  }
+  const garbled = whole.slice();
+  for (let i = whole.length - 120; i < whole.length - 20; ++i) garbled[i] ^= 0x5a;
+  await assert.rejects(decodeExr(garbled.buffer), ExrError, "a garbled chunk");
+  const piz = path.join(tmp, "piz.exr");
+  oiiotool("--pattern", "noise", "8x8", "3", "--compression", "piz", "-o", piz);
+  await assert.rejects(decodeExr(arrayBuffer(piz)), /piz compression is not supported/);
+});
