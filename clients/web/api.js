@@ -147,6 +147,7 @@ export const api = {
     sendJson("PATCH", `/v1/jobs/${encodeURIComponent(id)}`, { priority }),
   remove: (id) => sendJson("DELETE", `/v1/jobs/${encodeURIComponent(id)}`),
   materials: () => getJson("/v1/materials"),
+  schema: (name) => getJson(`/v1/schemas/${encodeURIComponent(name)}`),
   eventsUrl: (id) => {
     const token = getToken();
     const q = token ? `?access_token=${encodeURIComponent(token)}` : "";

@@ -2,7 +2,9 @@
 // job list and follows the selected job over Server-Sent Events (polling when the events endpoint is missing).
 import { api, allowed, ApiError, getBlob, getToken, onConnection, setToken, TERMINAL } from "./api.js";
 import { EXAMPLES } from "./examples.js";
+import { decodeExr, ExrError } from "./exr.js";
 import { commonParameters, materialForm } from "./materials.js";
+import { ImageViewer } from "./viewer.js";
 
 const $ = (sel) => document.querySelector(sel);
 const STATES = ["queued", "running", "paused", "succeeded", "failed", "cancelled"];
@@ -84,18 +86,25 @@ function showError(err, context) {
   close.addEventListener("click", () => toast.remove());
   toast.append(title, detail, close);
   toasts.append(toast);
-  while (toasts.children.length > 4) toasts.firstElementChild.remove();
-  setTimeout(() => toast.remove(), 12000);
+  while (toasts.children.length > 3) toasts.firstElementChild.remove();
+  // On a narrow screen the bar scrolls with the page: bring the error into view.
+  if (toast.getBoundingClientRect().top < 0) toast.scrollIntoView({ block: "nearest" });
+  setTimeout(() => toast.remove(), 20000);
 }
 
+// Confirmations are one line in the top bar, replaced by the next one.
+let noticeTimer = null;
 function showNotice(text) {
-  const toast = document.createElement("div");
-  toast.className = "toast notice";
-  toast.setAttribute("role", "status");
-  toast.textContent = text;
-  $("#toasts").append(toast);
-  setTimeout(() => toast.remove(), 4000);
+  const notice = $("#notice");
+  notice.textContent = text;
+  clearTimeout(noticeTimer);
+  noticeTimer = setTimeout(() => (notice.textContent = ""), 5000);
 }
+
+// The bar and its errors stay at the top; the sticky submit panel starts below them, whatever their height.
+new ResizeObserver(([entry]) => {
+  document.documentElement.style.setProperty("--top-height", `${Math.ceil(entry.borderBoxSize[0].blockSize)}px`);
+}).observe($("#top"));
 
 // ---------------------------------------------------------------------------------------------------------------
 // Connection indicator and token
@@ -126,6 +135,7 @@ $("#token-form").addEventListener("submit", (e) => {
   showNotice(getToken() ? "Token saved for this browser session." : "Token cleared.");
   refreshQueue();
   loadMaterials();
+  loadRenderSchema();
   if (selectedId) watcher.start(selectedId);
 });
 $("#token-forget").addEventListener("click", () => {
@@ -357,9 +367,12 @@ function makeRow(job) {
   idCell.append(link, kind);
 
   const stateCell = document.createElement("td");
+  stateCell.className = "col-state";
   const badge = document.createElement("span");
   badge.className = "badge";
-  stateCell.append(badge);
+  const reason = document.createElement("small");
+  reason.className = "reason";
+  stateCell.append(badge, reason);
 
   const prioCell = document.createElement("td");
   const prio = document.createElement("input");
@@ -399,18 +412,24 @@ function makeRow(job) {
   }
   actCell.append(cancel, requeue, del);
 
+  idCell.className = "col-job";
+  prioCell.className = "col-prio";
+  createdCell.classList.add("col-created");
   tr.append(idCell, stateCell, prioCell, progCell, createdCell, actCell);
   tr.addEventListener("click", (e) => {
     if (e.target.closest("button, input")) return;
     select(job.id);
   });
-  return { tr, kind, badge, prio, bar, progText, createdCell, buttons: { cancel, requeue, delete: del } };
+  return { tr, kind, badge, reason, prio, bar, progText, createdCell, buttons: { cancel, requeue, delete: del } };
 }
 
 function updateRow(r, job) {
   r.kind.textContent = job.kind;
   r.badge.textContent = job.state;
   r.badge.dataset.state = job.state;
+  // Why a job failed, in its row: the start of it, the whole of it on hover and in the job view.
+  r.reason.textContent = job.state === "failed" ? job.error || "" : "";
+  r.reason.title = r.reason.textContent;
   if (document.activeElement !== r.prio) r.prio.value = job.priority ?? 0;
   r.prio.disabled = !allowed(job, "priority");
   setProgress(r.bar, job);
@@ -452,6 +471,7 @@ function renderQueue() {
   }
   $("#queue-empty").hidden = shown.length > 0;
   $("#queue-empty").textContent = jobs.length ? `No ${filter} jobs.` : "No jobs yet. Submit one on the left.";
+  if (selectedId) updateCompareChoices();
 }
 
 let queueTimer = null;
@@ -662,42 +682,109 @@ function setLiveMode(mode) {
   el.textContent = labels[mode] || "";
 }
 
-let previewUrl = null;
+// The viewer shows the latest preview (PNG) while a job renders, then its result: the linear EXR, on which
+// exposure and the tone curve apply, or the PNG when the job has no EXR output.
+const viewer = new ImageViewer($("#viewer"));
 let previewSeq = 0;
+let resultShown = null; // the id whose result the viewer shows: later previews are older than it
+const imageCache = new Map(); // job id -> its decoded result, for the A/B comparison and reselection
+
+// A job's result as the viewer takes it: the decoded EXR, or the PNG as a bitmap (no EXR output, or one this
+// reader does not take).
+async function resultImage(job) {
+  const outputs = job.outputs || ["png", "exr"];
+  const key = job.id;
+  if (imageCache.has(key)) return imageCache.get(key);
+  const url = (ext) => `/v1/jobs/${encodeURIComponent(job.id)}/result.${ext}`;
+  let image = null;
+  if (outputs.includes("exr")) {
+    try {
+      image = await decodeExr(await (await getBlob(url("exr"))).arrayBuffer());
+    } catch (e) {
+      if (!(e instanceof ExrError) || !outputs.includes("png")) throw e;
+    }
+  }
+  image ??= await bitmapImage(await getBlob(url("png")));
+  imageCache.set(key, image);
+  while (imageCache.size > 6) imageCache.delete(imageCache.keys().next().value);
+  return image;
+}
+async function bitmapImage(blob) {
+  const bitmap = await createImageBitmap(blob);
+  return { width: bitmap.width, height: bitmap.height, bitmap };
+}
+
 async function loadPreview(id, url) {
+  if (resultShown === id) return;
   const seq = ++previewSeq;
   try {
     const blob = await getBlob(url);
-    if (seq !== previewSeq || id !== selectedId) return;
-    const objectUrl = URL.createObjectURL(blob);
-    const img = $("#preview");
-    const old = previewUrl;
-    previewUrl = objectUrl;
-    img.src = objectUrl;
-    img.dataset.pass = String(watcher.lastPass);
-    img.decode?.().catch(() => {});
+    if (seq !== previewSeq || id !== selectedId || resultShown === id) return;
+    const image = await bitmapImage(blob);
+    if (seq !== previewSeq || id !== selectedId || resultShown === id) return;
+    viewer.show(image, { keepView: true });
+    $("#viewer").dataset.pass = String(watcher.lastPass);
     $("#preview-placeholder").hidden = true;
-    $("#preview-open").disabled = false;
-    const full = $("#fullsize-image");
-    if ($("#fullsize").open) full.src = objectUrl;
-    if (old) setTimeout(() => URL.revokeObjectURL(old), 5000);
   } catch (e) {
     // 409 before the first pass, 404 when the job ended before one: nothing to show yet.
     if (!(e instanceof ApiError && (e.status === 409 || e.status === 404))) showError(e, "Preview");
   }
 }
 
+async function loadResult(job) {
+  if (resultShown === job.id) return;
+  resultShown = job.id;
+  const seq = ++previewSeq;
+  try {
+    const image = await resultImage(job);
+    if (seq !== previewSeq || job.id !== selectedId) return;
+    viewer.show(image, { keepView: true });
+    $("#viewer").dataset.pass = "final";
+    $("#preview-placeholder").hidden = true;
+  } catch (e) {
+    if (job.id === selectedId) resultShown = null;
+    showError(e, "Result image");
+  }
+}
+
+// The comparison (B) image: another finished job's result.
+function updateCompareChoices() {
+  const select = $("#compare");
+  const keep = select.value;
+  const options = [new Option("none", "")];
+  for (const j of jobs) {
+    if (j.id === selectedId || j.state !== "succeeded") continue;
+    options.push(new Option(`${shortId(j.id)} ${j.kind}`, j.id));
+  }
+  // Rebuilt only when the choices change: rebuilding closes a list the user has open.
+  const signature = options.map((o) => `${o.value} ${o.text}`).join("\n");
+  if (select.dataset.signature === signature) return;
+  select.dataset.signature = signature;
+  select.replaceChildren(...options);
+  select.value = options.some((o) => o.value === keep) ? keep : "";
+  if (select.value !== keep && keep) viewer.compare(null);
+}
+$("#compare").addEventListener("change", async (e) => {
+  const id = e.target.value;
+  const job = jobs.find((j) => j.id === id);
+  if (!job) return viewer.compare(null);
+  try {
+    const image = await resultImage(job);
+    if ($("#compare").value === id) viewer.compare(image);
+  } catch (err) {
+    showError(err, `Compare with ${shortId(id)}`);
+  }
+});
+
 function select(id) {
   if (id === selectedId) return;
   selectedId = id;
   previewSeq++;
-  if (previewUrl) URL.revokeObjectURL(previewUrl);
-  previewUrl = null;
-  const img = $("#preview");
-  img.removeAttribute("src");
-  delete img.dataset.pass;
+  resultShown = null;
+  viewer.clear();
+  delete $("#viewer").dataset.pass;
+  $("#compare").value = "";
   $("#preview-placeholder").hidden = false;
-  $("#preview-open").disabled = true;
   currentJob = null;
   for (const [rid, r] of rows) {
     r.tr.classList.toggle("selected", rid === id);
@@ -713,6 +800,7 @@ function select(id) {
   }
   $("#job-title").textContent = `Job ${shortId(id)}`;
   const known = jobs.find((j) => j.id === id);
+  updateCompareChoices();
   if (known) showJob(known);
   watcher.start(id);
 }
@@ -727,10 +815,13 @@ function stat(dl, name, value) {
 
 function showJob(job) {
   if (job.id !== selectedId) return;
+  const previous = currentJob;
   currentJob = job;
   const badge = $("#job-state");
   badge.textContent = job.state;
   badge.dataset.state = job.state;
+  $("#job-failure").hidden = job.state !== "failed";
+  $("#job-failure-text").textContent = job.error || "no reason was recorded";
   $("#job-title").textContent = `Job ${shortId(job.id)}`;
   $("#job-title").title = job.id;
   setProgress($("#job-progress"), job);
@@ -745,10 +836,11 @@ function showJob(job) {
   const p = job.progress || {};
   const r = job.render || {};
   if (r.width && r.height) {
-    // The preview frame takes the image's shape; small renders are enlarged with visible pixels.
-    $("#preview-open").style.aspectRatio = `${r.width} / ${r.height}`;
-    $("#preview").classList.toggle("pixelated", Math.max(r.width, r.height) < 400);
+    // The frame takes the image's shape.
+    $("#viewer .viewer-frame").style.aspectRatio = `${r.width} / ${r.height}`;
   }
+  if (job.id !== previous?.id) viewer.settings(r.exposure_ev ?? 0, r.tonemap ?? "clamp");
+  if (job.state === "succeeded") loadResult(job);
   const dl = $("#job-stats");
   dl.replaceChildren();
   stat(dl, "Id", job.id);
@@ -770,7 +862,6 @@ function showJob(job) {
   if (job.started_at) stat(dl, "Started", fmtTime(job.started_at));
   if (job.finished_at) stat(dl, "Finished", fmtTime(job.finished_at));
   if (job.stop_reason) stat(dl, "Stopped by", job.stop_reason.replace("_", " "));
-  if (job.error) stat(dl, "Error", job.error);
   for (const w of job.warnings || []) stat(dl, "Warning", w);
   $("#preview-caption").textContent = p.passes
     ? `Pass ${p.passes} · ${p.samples_done} spp${TERMINAL.has(job.state) ? " · final" : ""}`
@@ -811,29 +902,28 @@ async function download(ext) {
 $("#download-png").addEventListener("click", () => download("png"));
 $("#download-exr").addEventListener("click", () => download("exr"));
 
-// Full-size view
-const fullsize = $("#fullsize");
-$("#preview-open").addEventListener("click", () => {
-  if (!previewUrl) return;
-  $("#fullsize-image").src = previewUrl;
-  $("#fullsize-title").textContent = currentJob ? `Job ${shortId(currentJob.id)} — full size` : "Full size";
-  fullsize.showModal();
-});
-$("#fullsize-close").addEventListener("click", () => fullsize.close());
-fullsize.addEventListener("click", (e) => {
-  if (e.target === fullsize) fullsize.close();
-});
-$("#fullsize-zoom").addEventListener("click", (e) => {
-  const on = e.currentTarget.getAttribute("aria-pressed") !== "true";
-  e.currentTarget.setAttribute("aria-pressed", String(on));
-  fullsize.classList.toggle("actual", on);
-});
-
 // ---------------------------------------------------------------------------------------------------------------
 // Start
 
 document.addEventListener("visibilitychange", () => {
   if (!document.hidden) refreshQueue();
 });
+// The render settings' contract: the tone curves the viewer offers are the ones the daemon knows.
+let renderSchema = null;
+async function loadRenderSchema() {
+  try {
+    renderSchema = await api.schema("render.schema.json");
+  } catch (e) {
+    if (!(e instanceof ApiError && e.status === 401)) showError(e, "Loading the render settings");
+    return;
+  }
+  const tones = renderSchema.properties?.tonemap?.enum || ["clamp"];
+  const select = $("#tonemap-view");
+  const keep = select.value;
+  select.replaceChildren(...tones.map((t) => new Option(t, t)));
+  select.value = tones.includes(keep) ? keep : tones[0];
+}
+
 loadMaterials();
+loadRenderSchema();
 refreshQueue().then(scheduleQueue);

@@ -1,12 +1,13 @@
 // The web client, end to end: the real tesserad on a free port with a temporary data directory, Debian's chromium
 // driven headless by playwright-core. Submits the Cornell example, watches the preview change, cancels and deletes
-// another job, downloads the PNG, and saves a screenshot; submits every material model from the Material tab. Any
-// failed step fails the test.
+// another job, downloads the PNG, and saves a screenshot; submits every material model from the Material tab; checks
+// the image viewer against the daemon's images, a failed job's reason, errors that cover nothing and the queue at a
+// phone's width. Any failed step fails the test.
 //
 // node --test tests/browser/web_client_test.mjs   with   TESSERAD=path/to/tesserad  ARTIFACTS=dir
 //   (CTest passes both; CHROMIUM overrides /usr/bin/chromium)
 import assert from "node:assert/strict";
-import { spawn } from "node:child_process";
+import { execFileSync, spawn } from "node:child_process";
 import { createHash } from "node:crypto";
 import fs from "node:fs";
 import os from "node:os";
@@ -154,17 +155,15 @@ test("the web client submits, follows, cancels, deletes and downloads", async (t
   await step(t, "the preview changes at least twice while it renders", async () => {
     const seen = new Map(); // bytes hash -> pass
     const deadline = Date.now() + 90000;
-    let lastSrc = null;
     while (seen.size < 3 && Date.now() < deadline) {
-      const src = await page.locator("#preview").getAttribute("src");
-      if (src && src !== lastSrc) {
-        lastSrc = src;
-        const bytes = await page.evaluate(async (u) => {
-          const r = await fetch(u);
-          return Array.from(new Uint8Array(await r.arrayBuffer()));
-        }, src);
-        const hash = createHash("sha256").update(Buffer.from(bytes)).digest("hex");
-        if (!seen.has(hash)) seen.set(hash, await page.locator("#preview").getAttribute("data-pass"));
+      // What the viewer draws, and the pass it comes from.
+      const shown = await page.evaluate(() => ({
+        pass: document.querySelector("#viewer").dataset.pass,
+        image: document.querySelector("#viewer canvas").toDataURL(),
+      }));
+      if (shown.pass && shown.pass !== "final") {
+        const hash = createHash("sha256").update(shown.image).digest("hex");
+        if (!seen.has(hash)) seen.set(hash, shown.pass);
       }
       const state = await page.locator("#job-state").textContent();
       if (state === "succeeded" && seen.size < 3) break;
@@ -372,6 +371,286 @@ test("every material model renders from the form as shown, with its defaults and
     const set = await submitFromForm();
     assert.deepEqual(set.sent.material, { type: "conductor", metal: "copper", alpha_x: 0.5 });
     assert.equal(set.status.state, "succeeded");
+  });
+  assert.deepEqual(pageErrors, []);
+});
+
+// The pixels of a PNG the daemon wrote, decoded by the page as it comes (no colour conversion), and of what the
+// viewer's canvas shows: { width, height, data: RGBA bytes }.
+async function pngPixels(url) {
+  return page.evaluate(async (u) => {
+    const bitmap = await createImageBitmap(await (await fetch(u)).blob(), { colorSpaceConversion: "none" });
+    const c = new OffscreenCanvas(bitmap.width, bitmap.height);
+    const ctx = c.getContext("2d");
+    ctx.drawImage(bitmap, 0, 0);
+    return { width: c.width, height: c.height, data: [...ctx.getImageData(0, 0, c.width, c.height).data] };
+  }, url);
+}
+async function canvasPixels() {
+  return page.evaluate(() => {
+    const c = document.querySelector("#viewer canvas");
+    const d = c.getContext("2d").getImageData(0, 0, c.width, c.height);
+    return { width: c.width, height: c.height, data: [...d.data] };
+  });
+}
+const viewState = async () => {
+  const v = page.locator("#viewer");
+  const [x, y] = (await v.getAttribute("data-pan")).split(" ").map(Number);
+  return { zoom: Number(await v.getAttribute("data-zoom")), x, y };
+};
+// The largest difference, over the image, between what the canvas shows (at 1:1) and a PNG's pixels.
+function largestDifference(canvas, png, view, region = () => true) {
+  let worst = 0;
+  for (let y = 0; y < png.height; ++y) {
+    for (let x = 0; x < png.width; ++x) {
+      const cx = view.x + x;
+      if (!region(cx)) continue;
+      const c = 4 * ((view.y + y) * canvas.width + cx);
+      const p = 4 * (y * png.width + x);
+      for (let k = 0; k < 3; ++k) worst = Math.max(worst, Math.abs(canvas.data[c + k] - png.data[p + k]));
+    }
+  }
+  return worst;
+}
+// Every pixel of an EXR as OpenImageIO reads it.
+function exrReference(bytes) {
+  const file = path.join(tmp, `ref-${createHash("sha256").update(bytes).digest("hex").slice(0, 12)}.exr`);
+  fs.writeFileSync(file, bytes);
+  const text = execFileSync("oiiotool", ["--dumpdata", file], { encoding: "utf8", maxBuffer: 64 << 20 });
+  const px = new Map();
+  for (const m of text.matchAll(/Pixel \((\d+), (\d+)\): (\S+) (\S+) (\S+)/g)) {
+    px.set(`${m[1]} ${m[2]}`, m.slice(3).map(Number));
+  }
+  return px;
+}
+
+// The job view's viewer: the linear EXR drawn with the job's exposure and tone curve reproduces the daemon's PNG;
+// other settings reproduce the PNG of a job rendered with them; the readout gives the EXR's values; zoom above 1:1
+// keeps pixels whole; dragging pans; Compare shows another job to the right of the split.
+test("the viewer draws the EXR as the daemon's PNG, reads out, zooms, pans and compares", async (t) => {
+  await page.goto(`${baseUrl}/`);
+  const render = { width: 48, height: 40, spp: 16, seed: 3 };
+  const material = { type: "conductor", metal: "copper", roughness: 0.3 };
+  const submit = async (doc) => (await (await page.request.post(`${baseUrl}/v1/jobs`, { data: doc })).json()).id;
+  const bright = await submit({ kind: "material", material, render: { ...render, exposure_ev: 1.5, tonemap: "aces" } });
+  const plain = await submit({ kind: "material", material, render });
+  const other = await submit({ kind: "material", material: { type: "lambert", albedo: [0.2, 0.4, 0.8] }, render });
+  for (const id of [bright, plain, other]) assert.equal((await finished(id)).status.state, "succeeded");
+  const brightPng = await pngPixels(`${baseUrl}/v1/jobs/${bright}/result.png`);
+  const plainPng = await pngPixels(`${baseUrl}/v1/jobs/${plain}/result.png`);
+  const otherPng = await pngPixels(`${baseUrl}/v1/jobs/${other}/result.png`);
+  const exr = exrReference(await (await page.request.get(`${baseUrl}/v1/jobs/${bright}/result.exr`)).body());
+  let box; // the canvas, once the job's view shows
+
+  await t.test("at the job's own exposure and tone curve, the EXR looks as the daemon's PNG", async () => {
+    await page.locator(`#jobs tr[data-id="${bright}"] button.link`).click();
+    await page.locator('#viewer[data-source="linear"][data-pass="final"]').waitFor();
+    box = await page.locator("#viewer canvas").boundingBox();
+    assert.equal(await page.getByLabel("Exposure in stops").inputValue(), "1.5");
+    assert.equal(await page.locator("#tonemap-view").inputValue(), "aces");
+    await page.getByRole("button", { name: "1:1" }).click();
+    const view = await viewState();
+    assert.equal(view.zoom, 1);
+    const d = largestDifference(await canvasPixels(), brightPng, view);
+    assert.ok(d <= 1, `the viewer differs from the daemon's PNG by ${d} of 255`);
+  });
+
+  await t.test("other settings look as a job rendered with them", async () => {
+    await page.getByLabel("Exposure in stops").fill("0");
+    await page.getByLabel("Exposure in stops").press("Enter");
+    await page.locator("#tonemap-view").selectOption("clamp");
+    const d = largestDifference(await canvasPixels(), plainPng, await viewState());
+    assert.ok(d <= 1, `exposure 0, clamp: the viewer differs from that job's PNG by ${d} of 255`);
+  });
+
+  await t.test("the readout gives the EXR's linear values under the cursor", async () => {
+    const view = await viewState();
+    await page.mouse.move(box.x + view.x + 30.5, box.y + view.y + 17.5);
+    const text = await page.locator("#viewer .readout").textContent();
+    const m = text.match(/x (\d+), y (\d+): R (\S+) G (\S+) B (\S+)/);
+    assert.ok(m, `readout "${text}"`);
+    assert.deepEqual([m[1], m[2]], ["30", "17"]);
+    const want = exr.get("30 17");
+    for (let k = 0; k < 3; ++k) {
+      const got = Number(m[3 + k]);
+      const tolerance = 1e-3 * Math.max(1e-3, Math.abs(want[k])); // the readout has 4 significant digits
+      assert.ok(Math.abs(got - want[k]) <= tolerance, `${"RGB"[k]} ${got}, not ${want[k]}`);
+    }
+  });
+
+  await t.test("zoom above 1:1 keeps each pixel whole, and dragging pans", async () => {
+    await page.getByRole("button", { name: "Zoom in" }).click();
+    await page.getByRole("button", { name: "Zoom in" }).click();
+    const view = await viewState();
+    assert.equal(view.zoom, 4);
+    assert.match(await page.locator("#viewer .zoom").textContent(), /400%/);
+    const pixels = await canvasPixels();
+    // Image pixel (20, 12) covers 4 x 4 screen pixels, all of its PNG colour.
+    const p = 4 * (12 * plainPng.width + 20);
+    for (let dy = 0; dy < 4; ++dy) {
+      for (let dx = 0; dx < 4; ++dx) {
+        const c = 4 * ((view.y + 48 + dy) * pixels.width + view.x + 80 + dx);
+        for (let k = 0; k < 3; ++k) {
+          assert.ok(Math.abs(pixels.data[c + k] - plainPng.data[p + k]) <= 1, `screen pixel (${dx}, ${dy}) of it`);
+        }
+      }
+    }
+    // Drag by (40, 24) screen pixels: the image moves with the pointer, 10 by 6 of its pixels at 400 %.
+    const at = [box.x + box.width / 2, box.y + box.height / 2];
+    await page.mouse.move(...at);
+    const before = (await page.locator("#viewer .readout").getAttribute("data-x")) | 0;
+    const beforeY = (await page.locator("#viewer .readout").getAttribute("data-y")) | 0;
+    await page.mouse.down();
+    await page.mouse.move(at[0] + 40, at[1] + 24, { steps: 4 });
+    await page.mouse.up();
+    const moved = await viewState();
+    assert.deepEqual([moved.x - view.x, moved.y - view.y], [40, 24]);
+    await page.mouse.move(...at);
+    const readout = page.locator("#viewer .readout");
+    assert.deepEqual([Number(await readout.getAttribute("data-x")), Number(await readout.getAttribute("data-y"))],
+      [before - 10, beforeY - 6]);
+  });
+
+  await t.test("Compare shows another job to the right of the split", async () => {
+    await page.getByRole("button", { name: "1:1" }).click();
+    await page.locator("#compare").selectOption(other);
+    await page.locator('#viewer[data-compare="on"]').waitFor();
+    const view = await viewState();
+    const pixels = await canvasPixels();
+    const split = Math.round(pixels.width / 2);
+    const left = largestDifference(pixels, plainPng, view, (cx) => cx < split - 2);
+    const right = largestDifference(pixels, otherPng, view, (cx) => cx > split + 2);
+    assert.ok(left <= 1 && right <= 1, `left of the split differs by ${left}, right by ${right}`);
+    await page.mouse.move(box.x + view.x + 5.5, box.y + view.y + 5.5);
+    assert.match(await page.locator("#viewer .readout").textContent(), /A R \S+ G \S+ B \S+ · B R /);
+    await page.locator("#compare").selectOption("");
+    await page.locator('#viewer[data-compare="off"]').waitFor();
+  });
+  assert.deepEqual(pageErrors, []);
+});
+
+// A glTF whose texture has a valid PNG header and undecodable pixels: accepted (headers are checked at upload),
+// then failed when it renders. Returns the job's id.
+async function submitBrokenGltf() {
+  const png = (() => {
+    const chunk = (type, data) => {
+      const body = Buffer.concat([Buffer.from(type), data]);
+      const len = Buffer.alloc(4);
+      len.writeUInt32BE(data.length);
+      const crc = Buffer.alloc(4);
+      crc.writeUInt32BE(crc32(body));
+      return Buffer.concat([len, body, crc]);
+    };
+    const ihdr = Buffer.from([0, 0, 0, 8, 0, 0, 0, 8, 8, 2, 0, 0, 0]);
+    const signature = Buffer.from([0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a]);
+    const idat = chunk("IDAT", Buffer.from("not zlib"));
+    return Buffer.concat([signature, chunk("IHDR", ihdr), idat, chunk("IEND", Buffer.alloc(0))]);
+  })();
+  const buffer = Buffer.alloc(60);
+  [0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 1].forEach((v, i) => buffer.writeFloatLE(v, 4 * i));
+  const gltf = {
+    asset: { version: "2.0" },
+    scene: 0,
+    scenes: [{ nodes: [0] }],
+    nodes: [{ mesh: 0 }],
+    meshes: [{ primitives: [{ attributes: { POSITION: 0, TEXCOORD_0: 1 }, material: 0 }] }],
+    materials: [{ pbrMetallicRoughness: { baseColorTexture: { index: 0 } } }],
+    textures: [{ source: 0 }],
+    images: [{ uri: "broken.png" }],
+    buffers: [{ byteLength: 60, uri: `data:application/octet-stream;base64,${buffer.toString("base64")}` }],
+    bufferViews: [
+      { buffer: 0, byteOffset: 0, byteLength: 36 },
+      { buffer: 0, byteOffset: 36, byteLength: 24 },
+    ],
+    accessors: [
+      { bufferView: 0, componentType: 5126, count: 3, type: "VEC3", min: [0, 0, 0], max: [1, 1, 0] },
+      { bufferView: 1, componentType: 5126, count: 3, type: "VEC2" },
+    ],
+  };
+  const form = new FormData();
+  const job = { kind: "scene", scene: { gltf: "broken.gltf" }, render: { width: 16, height: 16, spp: 1 } };
+  form.append("job", new Blob([JSON.stringify(job)], { type: "application/json" }), "job.json");
+  form.append("file", new Blob([JSON.stringify(gltf)], { type: "model/gltf+json" }), "broken.gltf");
+  form.append("file", new Blob([png], { type: "image/png" }), "broken.png");
+  const res = await page.request.post(`${baseUrl}/v1/jobs`, { multipart: form });
+  assert.equal(res.status(), 202, await res.text());
+  return (await res.json()).id;
+}
+function crc32(bytes) {
+  let c = ~0;
+  for (const b of bytes) {
+    c ^= b;
+    for (let k = 0; k < 8; ++k) c = (c >>> 1) ^ (0xedb88320 & -(c & 1));
+  }
+  return ~c >>> 0;
+}
+// Whether two boxes overlap.
+const overlap = (a, b) => a.x < b.x + b.width && b.x < a.x + a.width && a.y < b.y + b.height && b.y < a.y + a.height;
+// Errors take their own room: no panel lies under one.
+async function assertToastCoversNothing(where) {
+  const toast = page.locator(".toast[role=alert]").last();
+  await toast.waitFor();
+  const box = await toast.boundingBox();
+  for (const panel of await page.locator("main .panel").all()) {
+    const p = await panel.boundingBox();
+    assert.ok(!overlap(box, p), `${where}: the error ${JSON.stringify(box)} covers a panel ${JSON.stringify(p)}`);
+  }
+  await toast.getByRole("button", { name: "Dismiss" }).click();
+}
+
+// A failed job says why where it is seen (its row, the top of its view); errors never cover the page; at a phone's
+// width (390 px) every row's progress and buttons are on the screen.
+test("failures are shown, errors cover nothing, and the queue fits 390 px", async (t) => {
+  await page.setViewportSize({ width: 1440, height: 1000 });
+  await page.goto(`${baseUrl}/`);
+  const failed = await submitBrokenGltf();
+  const status = (await finished(failed)).status;
+  assert.equal(status.state, "failed");
+  assert.match(status.error, /cannot be decoded/);
+
+  await t.test("the reason is in the queue row and heads the job view", async () => {
+    const row = page.locator(`#jobs tr[data-id="${failed}"]`);
+    await row.locator(".reason", { hasText: "cannot be decoded" }).waitFor();
+    assert.ok(await row.locator(".reason").isVisible());
+    await row.locator("button.link").click();
+    const failure = page.locator("#job-failure");
+    await failure.waitFor();
+    assert.match(await failure.textContent(), /Failed.*cannot be decoded/s);
+    // It comes first: above the image and the statistics.
+    const [f, v] = [await failure.boundingBox(), await page.locator("#viewer").boundingBox()];
+    assert.ok(f.y + f.height <= v.y, "the failure is above the image");
+  });
+
+  const refuse = async () => {
+    await page.getByRole("tab", { name: "JSON" }).click();
+    await page.getByLabel("Job document").fill('{"kind": "scene", "render": {"width": 0}}');
+    await page.getByRole("button", { name: "Submit job" }).click();
+  };
+  await t.test("an error covers no panel (1440 px)", async () => {
+    await refuse();
+    await assertToastCoversNothing("1440 px");
+  });
+
+  await t.test("at 390 px the queue's progress and actions fit, and errors cover nothing", async () => {
+    await page.setViewportSize({ width: 390, height: 844 });
+    await page.waitForTimeout(200);
+    const wrap = page.locator(".table-wrap");
+    const [scroll, client] = await wrap.evaluate((e) => [e.scrollWidth, e.clientWidth]);
+    assert.ok(scroll <= client, `the queue scrolls sideways: ${scroll} px in ${client}`);
+    const rows = await page.locator("#jobs tr").all();
+    assert.ok(rows.length >= 3);
+    for (const row of rows) {
+      for (const part of [row.locator(".progress"), ...(await row.locator(".actions button").all())]) {
+        const b = await part.boundingBox();
+        const what = (await part.getAttribute("class")) || "button";
+        assert.ok(b && b.x >= 0 && b.x + b.width <= 390, `a row's ${what} at ${JSON.stringify(b)}`);
+      }
+    }
+    await page.locator("#submit-form").scrollIntoViewIfNeeded();
+    await refuse();
+    await assertToastCoversNothing("390 px");
+    await page.getByRole("tab", { name: "Example" }).click();
+    await page.setViewportSize({ width: 1440, height: 1000 });
   });
   assert.deepEqual(pageErrors, []);
 });
