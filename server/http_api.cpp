@@ -10,14 +10,15 @@
 #include <regex>
 #include <set>
 
+#include "proto/contract.h"
 #include "renderer/scene_error.h"
-#include "server/contract.h"
 #include "server/job_id.h"
 #include "server/job_json.h"
 #include "server/log.h"
 #include "server/materials_catalog.h"
 #include "server/problem.h"
 #include "server/time_format.h"
+#include "server/web_files.h"
 
 namespace tessera::server {
 
@@ -194,7 +195,7 @@ std::variant<Submission, Problem> multipart_submission(ApiContext& ctx, const Re
   if (!req.has_file("job"))
     return Problem{422, "a multipart job needs a part named \"job\" holding the job document (JSON)", std::nullopt};
   const std::string job_text = req.get_file_value("job").content;
-  if (json_nesting_depth(job_text) > static_cast<size_t>(ctx.limits.max_depth))
+  if (proto::json_nesting_depth(job_text) > static_cast<size_t>(ctx.limits.max_depth))
     return Problem{422, "the document is nested deeper than " + std::to_string(ctx.limits.max_depth) + " levels", ""};
   json doc = json::parse(job_text, nullptr, false);
   if (doc.is_discarded()) return Problem{400, "the part \"job\" is not valid JSON", ""};
@@ -554,19 +555,19 @@ std::vector<Route> routes(ApiContext* ctx) {
        }},
       {"GET", "/v1/materials", "/v1/materials",
        [](const Request&, Response& r) {
-         static const json catalog = describe_materials(contract_schemas());
+         static const json catalog = describe_materials(proto::contract_schemas());
          send_json(r, 200, catalog);
        }},
       {"GET", "/v1/schemas/{name}", "/v1/schemas/([^/]+)",
        [](const Request& q, Response& r) {
          // Looked up among the compiled-in files only: a name is never a filesystem path.
          const std::string name = q.matches[1];
-         auto text = name.find('/') == std::string::npos ? contract_file("schemas/" + name) : std::nullopt;
+         auto text = name.find('/') == std::string::npos ? proto::contract_file("schemas/" + name) : std::nullopt;
          if (!text) return send_problem(r, 404, "no schema named \"" + name.substr(0, 128) + "\"");
          r.set_content(std::string(*text), "application/schema+json");
        }},
       {"GET", "/v1/openapi.json", "/v1/openapi.json",
-       [](const Request&, Response& r) { r.set_content(std::string(openapi_json()), "application/json"); }},
+       [](const Request&, Response& r) { r.set_content(std::string(proto::openapi_json()), "application/json"); }},
       {"GET", "/metrics", "/metrics",
        [ctx](const Request&, Response& r) {
          Metrics::Gauges g;

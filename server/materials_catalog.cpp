@@ -9,7 +9,7 @@ using nlohmann::json;
 namespace {
 
 // A copy of `schema` with every $ref replaced by what it names (merged with the keywords beside it).
-json inline_refs(const SchemaSet& set, const std::string& doc, const json& schema, int depth) {
+json inline_refs(const proto::SchemaSet& set, const std::string& doc, const json& schema, int depth) {
   if (depth > 16) return schema;
   if (schema.is_array()) {
     json out = json::array();
@@ -55,7 +55,7 @@ json at_or_null(const json& v, const char* pointer) {
 
 }  // namespace
 
-json describe_materials(const SchemaSet& set) {
+json describe_materials(const proto::SchemaSet& set) {
   json list = json::array();
   const std::string doc_name = "material.schema.json";
   const json* doc = set.document(doc_name);

@@ -5,12 +5,12 @@
 
 #include <nlohmann/json.hpp>
 
-#include "server/json_schema.h"
+#include "proto/json_schema.h"
 
 namespace tessera::server {
 
 // {"materials": [{"type", "title", "description", "parameters": [{"name", "description", "default", "minimum",
 // "maximum", "schema"}]}]}; the parameter schemas have their $refs resolved.
-nlohmann::json describe_materials(const SchemaSet& schemas);
+nlohmann::json describe_materials(const proto::SchemaSet& schemas);
 
 }  // namespace tessera::server

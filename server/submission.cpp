@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <cctype>
 
+#include "proto/contract.h"
 #include "renderer/job.h"
 #include "renderer/scene.h"
 #include "renderer/scene_error.h"
-#include "server/contract.h"
 
 namespace tessera::server {
 
@@ -43,7 +43,7 @@ std::variant<AcceptedJob, Problem> check_submission(std::string_view content_typ
                    std::nullopt};
   if (body.find_first_not_of(" \t\r\n") == std::string_view::npos)
     return Problem{400, "the body is empty; expected a job document (JSON)", ""};
-  if (json_nesting_depth(body) > static_cast<size_t>(limits.max_depth))
+  if (proto::json_nesting_depth(body) > static_cast<size_t>(limits.max_depth))
     return Problem{422, "the document is nested deeper than " + std::to_string(limits.max_depth) + " levels", ""};
 
   json document;
@@ -58,7 +58,7 @@ std::variant<AcceptedJob, Problem> check_submission(std::string_view content_typ
 std::variant<AcceptedJob, Problem> check_job_document(json document, const SubmissionLimits& limits) {
   AcceptedJob job;
   job.document = std::move(document);
-  if (auto error = contract_schemas().validate(job.document, "job.schema.json", limits.max_depth))
+  if (auto error = proto::contract_schemas().validate(job.document, "job.schema.json", limits.max_depth))
     return Problem{422, error->message, error->pointer};
 
   JobLoadOptions options;

@@ -30,8 +30,12 @@ struct Failure : std::runtime_error {
   int code;
   Failure(int c, const std::string& what) : std::runtime_error(what), code(c) {}
 };
-[[noreturn]] inline void fatal(const std::string& what) { throw Failure(kExitFatal, what); }
-[[noreturn]] inline void retry(const std::string& what) { throw Failure(kExitRetry, what); }
+[[noreturn]] inline void fatal(const std::string& what) {
+  throw Failure(kExitFatal, what);
+}
+[[noreturn]] inline void retry(const std::string& what) {
+  throw Failure(kExitRetry, what);
+}
 
 inline long long parse_integer(const std::string& option, const std::string& v) {
   size_t pos = 0;

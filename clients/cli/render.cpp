@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "clients/cli/cli_common.h"
+#include "proto/contract.h"
 #include "renderer/image_io.h"
 #include "renderer/job.h"
 #include "renderer/scene_error.h"
@@ -185,7 +186,8 @@ uint64_t fnv1a_file(uint64_t h, const std::filesystem::path& path) {
 void collect_assets(const json& v, std::set<std::string>* out) {
   if (v.is_object()) {
     for (const auto& [key, value] : v.items()) {
-      if ((key == "gltf" || key == "map" || key == "texture") && value.is_string()) out->insert(value.get<std::string>());
+      if ((key == "gltf" || key == "map" || key == "texture") && value.is_string())
+        out->insert(value.get<std::string>());
       collect_assets(value, out);
     }
   } else if (v.is_array()) {
@@ -241,8 +243,10 @@ void write_outputs(const std::vector<std::string>& outputs, const PartialFilm& p
     }
     if (rgb.empty()) rgb = part.film.resolve();
     try {
-      if (ext == ".exr") tessera::write_exr(out, rgb, part.width, part.height, part.exr_half);
-      else tessera::write_png(out, rgb, part.width, part.height, part.display);
+      if (ext == ".exr")
+        tessera::write_exr(out, rgb, part.width, part.height, part.exr_half);
+      else
+        tessera::write_png(out, rgb, part.width, part.height, part.display);
     } catch (const std::exception& e) {
       retry(e.what());
     }
@@ -275,8 +279,10 @@ int cmd_render(int argc, char** argv) {
       std::fputs(kRenderUsage, stdout);
       return kExitOk;
     }
-    if (a == "-o" || a == "--output") outputs.push_back(value());
-    else if (a == "--spp") overrides["spp"] = parse_integer(a, value());
+    if (a == "-o" || a == "--output")
+      outputs.push_back(value());
+    else if (a == "--spp")
+      overrides["spp"] = parse_integer(a, value());
     else if (a == "--samples") {
       auto v = parse_list(a, value(), ':', 2);
       if (v[0] < 0 || v[1] < 1 || v[0] + v[1] > (1ll << 32) - 1)
@@ -284,17 +290,28 @@ int cmd_render(int argc, char** argv) {
       samples = {v[0], v[1]};
     } else if (a == "--region") {
       region = parse_list(a, value(), ',', 4);
-    } else if (a == "--width") overrides["width"] = parse_integer(a, value());
-    else if (a == "--height") overrides["height"] = parse_integer(a, value());
-    else if (a == "--time-limit") overrides["time_limit_s"] = parse_number(a, value());
-    else if (a == "--threads") threads = static_cast<int>(parse_integer(a, value()));
-    else if (a == "--estimator") overrides["estimator"] = value();
-    else if (a == "--seed") overrides["seed"] = parse_integer(a, value());
-    else if (a == "--max-depth") overrides["max_depth"] = parse_integer(a, value());
-    else if (a == "-q" || a == "--quiet") quiet = true;
-    else if (!a.empty() && a[0] == '-') throw std::invalid_argument("unknown option " + a);
-    else if (input.empty()) input = a;
-    else throw std::invalid_argument("more than one input file");
+    } else if (a == "--width")
+      overrides["width"] = parse_integer(a, value());
+    else if (a == "--height")
+      overrides["height"] = parse_integer(a, value());
+    else if (a == "--time-limit")
+      overrides["time_limit_s"] = parse_number(a, value());
+    else if (a == "--threads")
+      threads = static_cast<int>(parse_integer(a, value()));
+    else if (a == "--estimator")
+      overrides["estimator"] = value();
+    else if (a == "--seed")
+      overrides["seed"] = parse_integer(a, value());
+    else if (a == "--max-depth")
+      overrides["max_depth"] = parse_integer(a, value());
+    else if (a == "-q" || a == "--quiet")
+      quiet = true;
+    else if (!a.empty() && a[0] == '-')
+      throw std::invalid_argument("unknown option " + a);
+    else if (input.empty())
+      input = a;
+    else
+      throw std::invalid_argument("more than one input file");
   }
   if (input.empty()) throw std::invalid_argument("render needs a job file (tessera render -h)");
   if (outputs.empty()) throw std::invalid_argument("render needs at least one -o OUTPUT (tessera render -h)");
@@ -316,14 +333,35 @@ int cmd_render(int argc, char** argv) {
       fatal(input + " is not valid JSON: " + e.what());
     }
   }
-  // A bare scene document is wrapped into a job.
-  if (doc.is_object() && !doc.contains("kind") && doc.contains("objects")) doc = json{{"kind", "scene"}, {"scene", doc}};
+  // A bare scene document is wrapped into a job; its errors are reported at pointers into the file as written.
+  std::string unwrap;
+  if (doc.is_object() && !doc.contains("kind") && doc.contains("objects")) {
+    doc = json{{"kind", "scene"}, {"scene", doc}};
+    unwrap = "/scene";
+  }
+  auto where = [&](const std::string& pointer) {
+    const std::string p = pointer.rfind(unwrap, 0) == 0 ? pointer.substr(unwrap.size()) : pointer;
+    return input + ": at " + (p.empty() ? std::string("/") : p) + ": ";
+  };
   if (doc.is_object()) {
     if (!doc.contains("render")) doc["render"] = json::object();
     if (doc["render"].is_object()) doc["render"].update(overrides);
     // A sample range is a part of the job's budget: the whole of it must be there for the settings to load.
     if (samples && doc["render"].is_object()) doc["render"]["spp"] = samples->first + samples->second;
   }
+
+  // The daemon's own check, with its messages: the contract's schema (an unknown property such as "albdo" is
+  // refused, not rendered with the default), then the renderer's checks in load_job.
+  // Asset references name files here, not asset ids: judged as the daemon judges them once a multipart submission
+  // has stored their files (whether the file opens is load_job's to say).
+  json checked = doc;
+  for (std::string_view p : tessera::proto::kAssetRefPointers) {
+    const json::json_pointer pointer{std::string(p)};
+    if (checked.is_object() && checked.contains(pointer) && checked[pointer].is_string())
+      checked[pointer] = std::string(64, '0');
+  }
+  if (auto error = tessera::proto::contract_schemas().validate(checked, "job.schema.json"))
+    fatal(where(error->pointer) + error->message);
 
   // Loading borrows at most as many extra threads as --threads allows.
   if (threads > 0) tessera::limit_parallel_helpers(threads - 1);
@@ -335,7 +373,7 @@ int cmd_render(int argc, char** argv) {
   try {
     job = tessera::load_job(doc, options);
   } catch (const tessera::SceneError& e) {
-    fatal(input + ": at " + (e.pointer().empty() ? std::string("/") : e.pointer()) + ": " + e.what());
+    fatal(where(e.pointer()) + e.what());
   }
   double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
@@ -413,8 +451,8 @@ int cmd_merge(int argc, char** argv) {
   const PartialFilm& first = parts.front();
   auto describe = [](const PartialFilm& p) {
     const auto& r = p.region;
-    return p.path + " (samples " + std::to_string(p.first_sample) + ":" + std::to_string(p.sample_count) +
-           ", region " + std::to_string(r.x) + "," + std::to_string(r.y) + "," + std::to_string(r.width) + "," +
+    return p.path + " (samples " + std::to_string(p.first_sample) + ":" + std::to_string(p.sample_count) + ", region " +
+           std::to_string(r.x) + "," + std::to_string(r.y) + "," + std::to_string(r.width) + "," +
            std::to_string(r.height) + ")";
   };
   for (const PartialFilm& p : parts) {
@@ -430,8 +468,8 @@ int cmd_merge(int argc, char** argv) {
   for (size_t i = 0; i < parts.size(); ++i) {
     for (size_t j = i + 1; j < parts.size(); ++j) {
       const PartialFilm &a = parts[i], &b = parts[j];
-      const bool samples_meet = a.first_sample < b.first_sample + b.sample_count &&
-                                b.first_sample < a.first_sample + a.sample_count;
+      const bool samples_meet =
+          a.first_sample < b.first_sample + b.sample_count && b.first_sample < a.first_sample + a.sample_count;
       const bool regions_meet = a.region.x < b.region.x + b.region.width && b.region.x < a.region.x + a.region.width &&
                                 a.region.y < b.region.y + b.region.height && b.region.y < a.region.y + a.region.height;
       if (samples_meet && regions_meet)
@@ -479,8 +517,8 @@ int cmd_merge(int argc, char** argv) {
   // Film::merge counts every part's samples; parts of different regions share a sample range.
   merged.film.set_samples(merged.sample_count);
   write_outputs(outputs, merged);
-  std::fprintf(stderr, "tessera: merged %zu parts: %dx%d, samples %u..%u\n", parts.size(), merged.width,
-               merged.height, merged.first_sample, merged.first_sample + merged.sample_count);
+  std::fprintf(stderr, "tessera: merged %zu parts: %dx%d, samples %u..%u\n", parts.size(), merged.width, merged.height,
+               merged.first_sample, merged.first_sample + merged.sample_count);
   return kExitOk;
 }
 
@@ -491,9 +529,10 @@ int main(int argc, char** argv) {
   return run_command([&] {
     if (cmd == "render") return cmd_render(argc - 2, argv + 2);
     if (cmd == "merge") return cmd_merge(argc - 2, argv + 2);
-    std::fputs("usage: tessera render ... | tessera merge ...  (tessera-render is what these two commands run; see\n"
-               "`tessera render -h` and `tessera merge -h`)\n",
-               cmd == "-h" || cmd == "--help" ? stdout : stderr);
+    std::fputs(
+        "usage: tessera render ... | tessera merge ...  (tessera-render is what these two commands run; see\n"
+        "`tessera render -h` and `tessera merge -h`)\n",
+        cmd == "-h" || cmd == "--help" ? stdout : stderr);
     return cmd == "-h" || cmd == "--help" ? kExitOk : kExitUsage;
   });
 }

@@ -70,9 +70,12 @@ Remote remote_options(std::vector<std::string>* args) {
       if (i + 1 >= args->size()) throw std::invalid_argument(a + " needs a value");
       return (*args)[++i];
     };
-    if (a == "--url") r.url = value();
-    else if (a == "--token") r.token = value();
-    else rest.push_back(a);
+    if (a == "--url")
+      r.url = value();
+    else if (a == "--token")
+      r.token = value();
+    else
+      rest.push_back(a);
   }
   while (!r.url.empty() && r.url.back() == '/') r.url.pop_back();
   if (r.url.rfind("http://", 0) != 0 && r.url.rfind("https://", 0) != 0)
@@ -91,7 +94,8 @@ Remote remote_options(std::vector<std::string>* args) {
     if (problem.contains("detail") && problem["detail"].is_string())
       message += ": " + problem["detail"].get<std::string>();
     if (problem.contains("pointer") && problem["pointer"].is_string())
-      message += " (at " + (problem["pointer"].get<std::string>().empty() ? "/" : problem["pointer"].get<std::string>()) + ")";
+      message +=
+          " (at " + (problem["pointer"].get<std::string>().empty() ? "/" : problem["pointer"].get<std::string>()) + ")";
   } else if (!res->body.empty()) {
     message += ": " + res->body.substr(0, 300);
   }
@@ -141,7 +145,9 @@ std::string url_component(const std::string& s) {
   return out;
 }
 
-bool is_terminal(const std::string& s) { return s == "succeeded" || s == "failed" || s == "cancelled"; }
+bool is_terminal(const std::string& s) {
+  return s == "succeeded" || s == "failed" || s == "cancelled";
+}
 
 std::string job_path(const std::string& id) {
   for (char c : id)
@@ -184,11 +190,16 @@ int cmd_submit(std::vector<std::string> args) {
       std::fputs(kSubmitUsage, stdout);
       return kExitOk;
     }
-    if (a == "--priority") priority = parse_integer(a, value());
-    else if (a == "--spp" || a == "--width" || a == "--height") overrides[a.substr(2)] = parse_integer(a, value());
-    else if (a == "--watch") watch = true;
-    else if (!a.empty() && a[0] == '-') throw std::invalid_argument("unknown option " + a);
-    else files.push_back(a);
+    if (a == "--priority")
+      priority = parse_integer(a, value());
+    else if (a == "--spp" || a == "--width" || a == "--height")
+      overrides[a.substr(2)] = parse_integer(a, value());
+    else if (a == "--watch")
+      watch = true;
+    else if (!a.empty() && a[0] == '-')
+      throw std::invalid_argument("unknown option " + a);
+    else
+      files.push_back(a);
   }
   if (files.empty()) throw std::invalid_argument(std::string("submit needs a job or a glTF file\n") + kSubmitUsage);
 
@@ -242,9 +253,9 @@ int cmd_submit(std::vector<std::string> args) {
     items.push_back({"job", doc.dump(), "job.json", "application/json"});
     for (const std::string& f : attachments) {
       const std::string e = lower_extension(f);
-      const std::string type = e == ".glb"    ? "model/gltf-binary"
-                               : e == ".gltf" ? "model/gltf+json"
-                               : e == ".png"  ? "image/png"
+      const std::string type = e == ".glb"                   ? "model/gltf-binary"
+                               : e == ".gltf"                ? "model/gltf+json"
+                               : e == ".png"                 ? "image/png"
                                : e == ".jpg" || e == ".jpeg" ? "image/jpeg"
                                                              : "application/octet-stream";
       items.push_back({"file", read_file(f), std::filesystem::path(f).filename().string(), type});
@@ -303,27 +314,30 @@ std::optional<json> watch_events(const Remote& remote, const std::string& id, bo
   for (int attempt = 0; attempt < 5 && !done; ++attempt) {
     httplib::Headers headers = {{"Accept", "text/event-stream"}};
     if (last_id) headers.emplace("Last-Event-ID", std::to_string(last_id));
-    auto res = client->Get(
-        (job_path(id) + "/events").c_str(), headers,
-        [&](const httplib::Response& r) {
-          status = r.status;
-          return r.status == 200;
-        },
-        [&](const char* bytes, size_t n) {
-          buffer.append(bytes, n);
-          size_t pos;
-          while ((pos = buffer.find('\n')) != std::string::npos) {
-            std::string line = buffer.substr(0, pos);
-            buffer.erase(0, pos + 1);
-            if (!line.empty() && line.back() == '\r') line.pop_back();
-            if (line.empty()) dispatch();
-            else if (line.rfind("event:", 0) == 0) event = line.substr(line[6] == ' ' ? 7 : 6);
-            else if (line.rfind("data:", 0) == 0) data += (data.empty() ? "" : "\n") + line.substr(line[5] == ' ' ? 6 : 5);
-            else if (line.rfind("id:", 0) == 0) last_id = std::strtoull(line.c_str() + 3, nullptr, 10);
-            if (done) return false;
-          }
-          return true;
-        });
+    auto res = client->Get((job_path(id) + "/events").c_str(), headers,
+                           [&](const httplib::Response& r) {
+                             status = r.status;
+                             return r.status == 200;
+                           },
+                           [&](const char* bytes, size_t n) {
+                             buffer.append(bytes, n);
+                             size_t pos;
+                             while ((pos = buffer.find('\n')) != std::string::npos) {
+                               std::string line = buffer.substr(0, pos);
+                               buffer.erase(0, pos + 1);
+                               if (!line.empty() && line.back() == '\r') line.pop_back();
+                               if (line.empty())
+                                 dispatch();
+                               else if (line.rfind("event:", 0) == 0)
+                                 event = line.substr(line[6] == ' ' ? 7 : 6);
+                               else if (line.rfind("data:", 0) == 0)
+                                 data += (data.empty() ? "" : "\n") + line.substr(line[5] == ' ' ? 6 : 5);
+                               else if (line.rfind("id:", 0) == 0)
+                                 last_id = std::strtoull(line.c_str() + 3, nullptr, 10);
+                               if (done) return false;
+                             }
+                             return true;
+                           });
     if (done) return last;
     if (status == 404 && !last) {
       *no_endpoint = true;  // a daemon without events: poll
@@ -359,12 +373,14 @@ int cmd_watch(std::vector<std::string> args) {
   bool quiet = false;
   std::vector<std::string> rest;
   for (size_t i = 0; i < args.size(); ++i) {
-    if (args[i] == "-q" || args[i] == "--quiet") quiet = true;
+    if (args[i] == "-q" || args[i] == "--quiet")
+      quiet = true;
     else if (args[i] == "--interval") {
       if (i + 1 >= args.size()) throw std::invalid_argument("--interval needs a value");
       g_poll_interval_s = parse_number("--interval", args[++i]);
       if (g_poll_interval_s <= 0) throw std::invalid_argument("--interval must be positive");
-    } else rest.push_back(args[i]);
+    } else
+      rest.push_back(args[i]);
   }
   require_args(rest, 1, 1, kWatchUsage);
   return cmd_watch_remote(remote, rest[0], quiet);
@@ -383,10 +399,14 @@ int cmd_fetch(std::vector<std::string> args) {
     const std::string& a = args[i];
     if ((a == "-d" || a == "--dir" || a == "-o" || a == "--output") && i + 1 >= args.size())
       throw std::invalid_argument(a + " needs a value");
-    if (a == "-d" || a == "--dir") dir = args[++i];
-    else if (a == "-o" || a == "--output") outputs.push_back(args[++i]);
-    else if (a != "-h" && a != "--help" && !a.empty() && a[0] == '-') throw std::invalid_argument("unknown option " + a);
-    else rest.push_back(a);
+    if (a == "-d" || a == "--dir")
+      dir = args[++i];
+    else if (a == "-o" || a == "--output")
+      outputs.push_back(args[++i]);
+    else if (a != "-h" && a != "--help" && !a.empty() && a[0] == '-')
+      throw std::invalid_argument("unknown option " + a);
+    else
+      rest.push_back(a);
   }
   require_args(rest, 1, 1, kFetchUsage);
   const std::string id = rest[0];
@@ -427,10 +447,14 @@ int cmd_list(std::vector<std::string> args) {
   for (size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
     if ((a == "--state" || a == "--limit") && i + 1 >= args.size()) throw std::invalid_argument(a + " needs a value");
-    if (a == "--state") query += std::string(query.empty() ? "?" : "&") + "state=" + url_component(args[++i]);
-    else if (a == "--limit") query += std::string(query.empty() ? "?" : "&") + "limit=" + std::to_string(parse_integer(a, args[++i]));
-    else if (a == "--json") as_json = true;
-    else rest.push_back(a);
+    if (a == "--state")
+      query += std::string(query.empty() ? "?" : "&") + "state=" + url_component(args[++i]);
+    else if (a == "--limit")
+      query += std::string(query.empty() ? "?" : "&") + "limit=" + std::to_string(parse_integer(a, args[++i]));
+    else if (a == "--json")
+      as_json = true;
+    else
+      rest.push_back(a);
   }
   require_args(rest, 0, 0, kListUsage);
   auto client = remote.client();

@@ -114,6 +114,26 @@ echo '{"kind": "scene", "scene": {"objects": [' >broken.json
 expect 1 "a job that is not JSON is fatal" "$TESSERA" render broken.json -o x.png
 echo '{"kind": "scene", "scene": {"objects": [{"shape": "sphere", "center": [0,0,0], "radius": 1, "material": "nope"}]}}' >bad.json
 expect 1 "a job naming an unknown material is fatal" "$TESSERA" render bad.json -o x.png
+# The daemon's schemas, with its messages: an unknown property is refused, not rendered with the default.
+echo '{"kind": "scene", "scene": {"objects": [{"shape": "sphere", "center": [0,0,0], "radius": 1, "material": "m"}],
+       "materials": {"m": {"type": "lambert", "albdo": 0.5}}, "camera": {"from": [0, 0, 4], "to": [0, 0, 0]}}}' >albdo.json
+expect 1 "render refuses an unknown material property" "$TESSERA" render albdo.json -o x.png -q
+grep -qF 'albdo.json: at /scene/materials/m/albdo: unknown property "albdo"' "$tmp/err" \
+  && ok "render names the property and its pointer" || not_ok "render said: $(cat "$tmp/err")"
+cp "$tmp/err" render-albdo.err
+python3 - "$job" spp_.json <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))
+j["render"]["spp_"] = 4
+json.dump(j, open(sys.argv[2], "w"))
+PY
+expect 1 "render refuses \"spp_\"" "$TESSERA" render spp_.json -o x.png -q
+grep -qF 'at /render/spp_: unknown property "spp_"' "$tmp/err" && ok "render names spp_" || not_ok "render said: $(cat "$tmp/err")"
+echo '{"objects": [{"shape": "sphere", "center": [0,0,0], "radius": -1, "material": "m"}],
+       "materials": {"m": {"type": "lambert"}}, "camera": {"from": [0, 0, 4], "to": [0, 0, 0]}}' >bare.json
+expect 1 "render refuses a bad bare scene" "$TESSERA" render bare.json -o x.png -q
+grep -qF 'bare.json: at /objects/0/radius: must be greater than 0' "$tmp/err" \
+  && ok "a bare scene's error points into the file as written" || not_ok "render said: $(cat "$tmp/err")"
 expect 1 "a region outside the image is fatal" "$TESSERA" render "$job" "${r[@]}" --samples 0:1 --region 30,0,20,10 -o x.tfilm
 
 # --- usage: 2 ----------------------------------------------------------------------------------------------------
@@ -193,6 +213,12 @@ PY
   expect 1 "cancel of an ended job is refused (409)" "$TESSERA" cancel "$id"
   grep -q "409" "$tmp/err" && ok "the refusal quotes the status" || not_ok "no status in the refusal"
   expect 1 "watch of an unknown job is fatal" "$TESSERA" watch 0123456789abcdef0123456789abcdef
+  expect 1 "submit refuses the unknown material property" "$TESSERA" submit albdo.json
+  if grep -qF 'unknown property "albdo" (at /scene/materials/m/albdo)' "$tmp/err"; then
+    ok "the daemon and tessera render give the same message and pointer"
+  else
+    not_ok "the daemon said: $(cat "$tmp/err"); tessera render: $(cat render-albdo.err)"
+  fi
   echo '{"kind": "scene", "render": {"width": 0}}' >invalid.json
   expect 1 "a refused job is fatal" "$TESSERA" submit invalid.json
   grep -q "422" "$tmp/err" && ok "the refusal shows the problem" || not_ok "no problem shown"

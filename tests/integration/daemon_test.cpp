@@ -9,8 +9,8 @@
 #include <functional>
 #include <thread>
 
+#include "proto/contract.h"
 #include "renderer/image_io.h"
-#include "server/contract.h"
 #include "tests/integration/daemon.h"
 #include "tests/server/test_util.h"
 
@@ -92,7 +92,7 @@ void expect_problem(const httplib::Result& res, int status, const std::optional<
   EXPECT_EQ(res->get_header_value("Content-Type"), "application/problem+json") << what;
   json body = json::parse(res->body, nullptr, false);
   ASSERT_TRUE(body.is_object()) << what << ": " << res->body;
-  auto e = contract_schemas().validate(body, "problem.schema.json");
+  auto e = proto::contract_schemas().validate(body, "problem.schema.json");
   EXPECT_FALSE(e) << what << ": " << body.dump();
   EXPECT_EQ(body.value("status", 0), status) << what;
   if (pointer) {
@@ -121,13 +121,13 @@ TEST_F(DaemonTest, RendersTheCornellBox) {
   json queued;
   const std::string id = submit(*client_, cornell_job(64, 16), &queued);
   ASSERT_FALSE(id.empty());
-  EXPECT_FALSE(contract_schemas().validate(queued, "job-status.schema.json"));
+  EXPECT_FALSE(proto::contract_schemas().validate(queued, "job-status.schema.json"));
 
   const json done = wait_for(*client_, id, [](const json& s) {
     return s.value("state", "") != "queued" && s.value("state", "") != "running";
   });
   ASSERT_EQ(done.value("state", ""), "succeeded") << done.dump();
-  auto e = contract_schemas().validate(done, "job-status.schema.json");
+  auto e = proto::contract_schemas().validate(done, "job-status.schema.json");
   EXPECT_FALSE(e) << e->pointer << " " << e->message;
   EXPECT_EQ(done["progress"]["samples_done"], 16);
   EXPECT_EQ(done["progress"]["fraction"], 1.0);

@@ -18,8 +18,8 @@
 #include <string_view>
 #include <thread>
 
+#include "proto/contract.h"
 #include "renderer/image_io.h"
-#include "server/contract.h"
 #include "tests/integration/daemon.h"
 #include "tests/server/test_util.h"
 
@@ -663,7 +663,8 @@ TEST_F(ServiceTest, SixtyHostileRequestsGetTheRight4xx) {
     expect_status(res, c.status, c.name);
     if (res && res->status >= 400) {
       const json p = json::parse(res->body, nullptr, false);
-      EXPECT_FALSE(contract_schemas().validate(p, "problem.schema.json")) << c.name << ": " << res->body.substr(0, 300);
+      EXPECT_FALSE(proto::contract_schemas().validate(p, "problem.schema.json"))
+          << c.name << ": " << res->body.substr(0, 300);
     }
     expect_alive(*client_, c.name);
   }

@@ -12,7 +12,7 @@
 #include <thread>
 #include <vector>
 
-#include "server/contract.h"
+#include "proto/contract.h"
 #include "tests/integration/daemon.h"
 #include "tests/server/test_util.h"
 
@@ -62,7 +62,7 @@ void expect_507(const httplib::Result& res, const std::string& what, const std::
   EXPECT_EQ(res->get_header_value("Content-Type"), "application/problem+json") << what;
   const json body = json::parse(res->body, nullptr, false);
   ASSERT_TRUE(body.is_object()) << what << ": " << res->body;
-  EXPECT_FALSE(contract_schemas().validate(body, "problem.schema.json")) << what << ": " << body.dump();
+  EXPECT_FALSE(proto::contract_schemas().validate(body, "problem.schema.json")) << what << ": " << body.dump();
   EXPECT_EQ(body.value("status", 0), 507) << what;
   EXPECT_EQ(body.value("type", ""), "https://tessera.dev/problems/insufficient-storage") << what;
   const std::string detail = body.value("detail", "");

@@ -4,12 +4,13 @@
 
 #include <set>
 
-#include "server/contract.h"
+#include "proto/contract.h"
 #include "server/http_api.h"
 #include "server/job_id.h"
 #include "server/job_json.h"
 #include "server/materials_catalog.h"
 #include "server/problem.h"
+#include "server/web_files.h"
 
 namespace tessera::server {
 namespace {
@@ -22,7 +23,7 @@ std::string lower(std::string s) {
 }
 
 TEST(Contract, RoutesAndOpenApiAgree) {
-  const json openapi = json::parse(openapi_json());
+  const json openapi = json::parse(proto::openapi_json());
   EXPECT_EQ(openapi.value("openapi", ""), "3.1.0");
   std::set<std::pair<std::string, std::string>> served, documented;
   for (const RouteInfo& r : api_routes()) served.insert({lower(r.method), r.path});
@@ -33,7 +34,7 @@ TEST(Contract, RoutesAndOpenApiAgree) {
 }
 
 TEST(Contract, OpenApiReferencesResolve) {
-  const json openapi = json::parse(openapi_json());
+  const json openapi = json::parse(proto::openapi_json());
   std::function<void(const json&)> walk = [&](const json& v) {
     if (v.is_object()) {
       for (const auto& [k, sub] : v.items()) {
@@ -45,7 +46,7 @@ TEST(Contract, OpenApiReferencesResolve) {
             const std::string file = ref.substr(0, ref.find('#'));
             ASSERT_EQ(file.rfind("schemas/", 0), 0u) << ref;
             std::string target;
-            EXPECT_NE(contract_schemas().resolve("", ref.substr(8), &target), nullptr) << ref;
+            EXPECT_NE(proto::contract_schemas().resolve("", ref.substr(8), &target), nullptr) << ref;
           }
         } else {
           walk(sub);
@@ -61,7 +62,7 @@ TEST(Contract, OpenApiReferencesResolve) {
 TEST(Contract, ProblemsMatchTheirSchema) {
   for (int status : {400, 404, 405, 409, 413, 415, 422, 500, 503, 507}) {
     Problem p{status, "something", std::string("/render/width")};
-    auto e = contract_schemas().validate(p.to_json(), "problem.schema.json");
+    auto e = proto::contract_schemas().validate(p.to_json(), "problem.schema.json");
     EXPECT_FALSE(e) << status << ": " << e->pointer << " " << e->message;
     EXPECT_FALSE(p.title().empty());
   }
@@ -79,7 +80,7 @@ TEST(Contract, JobStatusMatchesItsSchema) {
   r.outputs = R"(["png","exr"])";
   r.progress.samples_total = 16;
   json queued = job_status_json(r);
-  auto e = contract_schemas().validate(queued, "job-status.schema.json");
+  auto e = proto::contract_schemas().validate(queued, "job-status.schema.json");
   EXPECT_FALSE(e) << e->pointer << " " << e->message;
   EXPECT_EQ(queued["created_at"], "2024-05-01T10:40:00.123Z");
   EXPECT_TRUE(queued["progress"]["eta_s"].is_null());
@@ -92,14 +93,14 @@ TEST(Contract, JobStatusMatchesItsSchema) {
   r.progress.eta_s = 0;
   r.stop_reason = "samples";
   json done = job_status_json(r);
-  e = contract_schemas().validate(done, "job-status.schema.json");
+  e = proto::contract_schemas().validate(done, "job-status.schema.json");
   EXPECT_FALSE(e) << e->pointer << " " << e->message;
   EXPECT_EQ(done["links"]["result_exr"], "/v1/jobs/" + r.id + "/result.exr");
   EXPECT_EQ(done["progress"]["fraction"], 1.0);
 }
 
 TEST(Contract, MaterialCatalogComesFromTheSchema) {
-  const json catalog = describe_materials(contract_schemas());
+  const json catalog = describe_materials(proto::contract_schemas());
   std::map<std::string, json> by_type;
   for (const json& m : catalog.at("materials")) by_type[m.at("type")] = m;
   ASSERT_TRUE(by_type.count("lambert"));
@@ -117,7 +118,7 @@ TEST(Contract, MaterialCatalogComesFromTheSchema) {
   }
   EXPECT_TRUE(found);
   // Every model the schema's type enum names is described.
-  const json* material = contract_schemas().document("material.schema.json");
+  const json* material = proto::contract_schemas().document("material.schema.json");
   for (const json& t : material->at("/properties/type/enum"_json_pointer))
     EXPECT_TRUE(by_type.count(t.get<std::string>())) << t;
 }

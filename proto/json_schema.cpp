@@ -1,11 +1,11 @@
-#include "server/json_schema.h"
+#include "proto/json_schema.h"
 
 #include <algorithm>
 #include <cmath>
 #include <regex>
 #include <vector>
 
-namespace tessera::server {
+namespace tessera::proto {
 
 using nlohmann::json;
 
@@ -368,4 +368,4 @@ size_t json_nesting_depth(std::string_view text) {
   return deepest;
 }
 
-}  // namespace tessera::server
+}  // namespace tessera::proto

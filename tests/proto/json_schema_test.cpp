@@ -1,23 +1,29 @@
 // The schema validator against the real contract: valid documents pass, invalid ones fail at the right pointer.
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
 #include <set>
 
-#include "server/contract.h"
-#include "server/json_schema.h"
-#include "tests/server/test_util.h"
+#include "proto/contract.h"
+#include "proto/json_schema.h"
 
-namespace tessera::server {
+namespace tessera::proto {
 namespace {
 
 using nlohmann::json;
+
+json cornell_job() {
+  std::ifstream in(std::filesystem::path(TESSERA_SOURCE_DIR) / "proto/examples/cornell.json");
+  return json::parse(in);
+}
 
 std::optional<SchemaError> validate_job(const json& doc) {
   return contract_schemas().validate(doc, "job.schema.json");
 }
 
 TEST(JsonSchema, CornellExampleIsValid) {
-  auto e = validate_job(test::cornell_job());
+  auto e = validate_job(cornell_job());
   EXPECT_FALSE(e) << e->pointer << ": " << e->message;
 }
 
@@ -37,7 +43,7 @@ class InvalidJob : public testing::TestWithParam<Case> {};
 
 TEST_P(InvalidJob, FailsAtPointer) {
   const Case& c = GetParam();
-  json doc = test::cornell_job().patch(json::parse(c.patch));
+  json doc = cornell_job().patch(json::parse(c.patch));
   auto e = validate_job(doc);
   ASSERT_TRUE(e) << "accepted";
   EXPECT_EQ(e->pointer, c.pointer) << e->message;
@@ -94,7 +100,7 @@ INSTANTIATE_TEST_SUITE_P(Contract, InvalidJob, testing::ValuesIn(kCases),
 
 TEST(JsonSchema, AlternativesReportTheBranchThatGotFurthest) {
   // Both branches of the rgb anyOf fail; the array branch failed deeper, at the element.
-  json doc = test::cornell_job();
+  json doc = cornell_job();
   doc["scene"]["materials"]["light"]["radiance"] = json::array({1, -1, 1});
   auto e = validate_job(doc);
   ASSERT_TRUE(e);
@@ -244,5 +250,39 @@ TEST(JsonSchema, EveryReferenceResolves) {
   for (const auto& [name, schema] : contract_schemas().documents()) check_refs(contract_schemas(), name, schema);
 }
 
+// The instance pointers where a job document can hold an asset reference, found by walking the schemas from
+// job.schema.json ("*" for any key or index): they must be exactly kAssetRefPointers, which the command line and
+// the daemon's multipart submissions rely on.
+void collect_asset_refs(const std::string& doc, const json& schema, const std::string& at, int depth,
+                        std::set<std::string>* out) {
+  if (!schema.is_object() || depth > 24) return;
+  if (auto it = schema.find("$ref"); it != schema.end()) {
+    const std::string ref = it->get<std::string>();
+    if (ref.size() >= 16 && ref.compare(ref.size() - 16, 16, "/$defs/asset_ref") == 0) {
+      out->insert(at);
+    } else {
+      std::string target_doc;
+      if (const json* target = contract_schemas().resolve(doc, ref, &target_doc))
+        collect_asset_refs(target_doc, *target, at, depth + 1, out);
+    }
+  }
+  if (auto it = schema.find("properties"); it != schema.end())
+    for (const auto& [key, sub] : it->items()) collect_asset_refs(doc, sub, at + "/" + key, depth + 1, out);
+  for (const char* key : {"items", "additionalProperties"})
+    if (auto it = schema.find(key); it != schema.end()) collect_asset_refs(doc, *it, at + "/*", depth + 1, out);
+  for (const char* key : {"allOf", "anyOf", "oneOf"})
+    if (auto it = schema.find(key); it != schema.end())
+      for (const json& sub : *it) collect_asset_refs(doc, sub, at, depth + 1, out);
+  for (const char* key : {"if", "then", "else"})
+    if (auto it = schema.find(key); it != schema.end()) collect_asset_refs(doc, *it, at, depth + 1, out);
+}
+
+TEST(JsonSchema, AssetReferencesAreWhereTheContractSays) {
+  std::set<std::string> found;
+  collect_asset_refs("job.schema.json", *contract_schemas().document("job.schema.json"), "", 0, &found);
+  const std::set<std::string> listed(std::begin(kAssetRefPointers), std::end(kAssetRefPointers));
+  EXPECT_EQ(found, listed);
+}
+
 }  // namespace
-}  // namespace tessera::server
+}  // namespace tessera::proto

@@ -1,5 +1,6 @@
 // A JSON Schema (draft 2020-12) validator for the subset of keywords the contract in proto/schemas/ uses, so the
-// server judges documents by the same files it serves and a standard validator (ajv) can judge them too.
+// daemon and the command line judge documents by the same files the daemon serves, with the same messages, and a
+// standard validator (ajv) can judge them too.
 //
 // Supported: type, enum, const, required, properties, additionalProperties, propertyNames, items, minItems,
 // maxItems, minimum, maximum, exclusiveMinimum, exclusiveMaximum, minLength, maxLength, pattern, allOf, anyOf,
@@ -15,7 +16,7 @@
 
 #include <nlohmann/json.hpp>
 
-namespace tessera::server {
+namespace tessera::proto {
 
 // The first error of a document: where in the instance (RFC 6901 pointer) and what is wrong with it.
 struct SchemaError {
@@ -48,4 +49,4 @@ class SchemaSet {
 // ("[[[[...") is refused before any recursive code sees it. Malformed text is left for the parser to report.
 size_t json_nesting_depth(std::string_view text);
 
-}  // namespace tessera::server
+}  // namespace tessera::proto

@@ -1,14 +1,13 @@
-#include "server/contract.h"
+#include "proto/contract.h"
 
 #include <map>
 #include <stdexcept>
 
 namespace tessera::embedded {
 const std::map<std::string, std::string_view>& proto();
-const std::map<std::string, std::string_view>& web();
 }  // namespace tessera::embedded
 
-namespace tessera::server {
+namespace tessera::proto {
 
 const SchemaSet& contract_schemas() {
   static const SchemaSet set = [] {
@@ -36,10 +35,4 @@ std::optional<std::string_view> contract_file(const std::string& path) {
   return it->second;
 }
 
-std::optional<std::string_view> web_file(const std::string& path) {
-  auto it = embedded::web().find(path);
-  if (it == embedded::web().end()) return std::nullopt;
-  return it->second;
-}
-
-}  // namespace tessera::server
+}  // namespace tessera::proto

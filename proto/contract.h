@@ -1,0 +1,26 @@
+// The API contract (proto/: the JSON Schemas and the OpenAPI document), compiled into every program that links
+// tessera_contract: the daemon validates with, and serves, exactly these files, and the command line checks a
+// document against the same schemas before it renders it.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "proto/json_schema.h"
+
+namespace tessera::proto {
+
+// Every proto/schemas/*.schema.json, by file name.
+const SchemaSet& contract_schemas();
+// proto/openapi.json, the source of truth of the HTTP API (proto/openapi.yaml is generated from it).
+std::string_view openapi_json();
+// A file of proto/ by its relative path ("schemas/job.schema.json").
+std::optional<std::string_view> contract_file(const std::string& path);
+
+// Where a job document names an asset (scene.schema.json's asset_ref, an asset id on the daemon). A multipart
+// submission may write the name of a file sent with it there (the daemon stores the file and writes its id in its
+// place), and a job rendered by `tessera render` the name of a file beside it (read from there).
+inline constexpr std::string_view kAssetRefPointers[] = {"/scene/gltf", "/scene/environment/map"};
+
+}  // namespace tessera::proto
