@@ -1,19 +1,29 @@
-// Unbiased path tracing of the rendering equation (seed 000, 2.6; seed 003, Monte Carlo path tracing).
+// Integrators: the algorithms that estimate each pixel's measurement (seed 004, the measurement equation) from the
+// scene. An integrator renders one pass at a time, a range of sample indices for every pixel of the render's region,
+// into a film, on the render's thread pool; a registry creates them by name, as the material registry does models:
+//   path   unidirectional path tracing from the camera (seed 000, 2.6; seed 003), with a choice of estimator
+// Every integrator keeps the image a function of (seed, pixel, sample index) alone, whatever the threads or passes.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
 #include <string>
+#include <vector>
 
-#include "renderer/accel.h"
 #include "renderer/arena.h"
-#include "renderer/math.h"
+#include "renderer/camera.h"
+#include "renderer/film.h"
 #include "renderer/sampler.h"
 
 namespace tessera {
 
 class Scene;
+class ThreadPool;
 
-// How direct light is estimated at each path vertex.
+// How the path tracer estimates direct light at each path vertex.
 enum class Estimator {
   kHemisphere,  // BSDF sampling only: the hemisphere form (seed 003, 4.1.1); light is found by hitting emitters
   kArea,        // light sampling only: the area form (seed 003, 4.1.2), next-event estimation towards lights
@@ -24,9 +34,10 @@ const char* estimator_name(Estimator e);
 bool parse_estimator(const std::string& name, Estimator* out);
 
 struct IntegratorSettings {
-  Estimator estimator = Estimator::kMis;
-  int max_depth = 8;          // maximum number of scattering events along a path
-  int rr_start_depth = 3;     // Russian roulette from this many bounces on
+  std::string name = "path";              // the integrator, by its registry name
+  Estimator estimator = Estimator::kMis;  // the path tracer's
+  int max_depth = 8;                      // maximum number of scattering events along a path
+  int rr_start_depth = 3;                 // Russian roulette from this many bounces on
 };
 
 // Counts of rays traced, by kind, per thread; summed by the session.
@@ -43,18 +54,87 @@ struct RayCounters {
   uint64_t total() const { return camera + bounce + shadow; }
 };
 
-// The camera ray's closest hit when the caller has traced it already (camera rays of neighbouring pixels go to
-// Embree together, as a packet).
-struct PrimaryHit {
-  bool found = false;
-  RayHit hit;
+// A rectangle of pixels: (x, y) its top-left pixel.
+struct PixelRegion {
+  int x = 0, y = 0, width = 0, height = 0;
 };
 
-// Radiance arriving at the camera along `ray`. With `primary`, the camera ray's hit is taken from it rather than
-// traced again. `cone` is the camera ray's (Camera::pixel_cone); each bounce carries it on, widened by how much the
-// sampled lobe spreads, and textures are filtered over its footprint. A zero cone reads the finest texels.
-Rgb trace_path(const Scene& scene, const Ray& ray, const PrimaryHit* primary, PixelSampler& sampler,
-               const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters,
-               RayCone cone = RayCone());
+// The region cut into square tiles (the last row and column may be smaller): the thread pool's work items.
+struct TileGrid {
+  TileGrid() = default;
+  TileGrid(const PixelRegion& region, int tile_size);
+  size_t count() const { return static_cast<size_t>(tiles_x) * static_cast<size_t>(tiles_y); }
+  PixelRegion tile(size_t index) const;
+  PixelRegion region;
+  int tile_size = 32;
+  int tiles_x = 0, tiles_y = 0;
+};
+
+// What an integrator renders: the scene through the camera at a resolution, the pixels of a region of it, with the
+// render's seed and sample sequence, on a thread pool.
+struct IntegratorSetup {
+  std::shared_ptr<const Scene> scene;
+  Camera camera;
+  int width = 0, height = 0;
+  PixelRegion region;  // within the image
+  uint64_t seed = 0;
+  SamplerKind sampler = SamplerKind::kSobol;
+  IntegratorSettings settings;
+  int tile_size = 32;
+  ThreadPool* pool = nullptr;
+};
+
+class Integrator {
+ public:
+  explicit Integrator(IntegratorSetup setup);
+  virtual ~Integrator() = default;
+  Integrator(const Integrator&) = delete;
+  Integrator& operator=(const Integrator&) = delete;
+
+  // Adds sample indices [first_sample, first_sample + count) of every pixel of the region to `film`, without
+  // changing its sample count. Returns early, the film incomplete, once `cancel` is set.
+  virtual void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel) = 0;
+
+  // Totals since the integrator was made: rays traced, and samples dropped for being infinite, NaN or negative.
+  RayCounters rays() const;
+  uint64_t nonfinite_samples() const;
+
+ protected:
+  // Scratch state of one pool worker: its arena, and its counters, added to once per work item (the slots of
+  // different workers share cache lines, and adding per ray would make the threads fight over them).
+  struct Worker {
+    ScratchArena arena;
+    RayCounters rays;
+    uint64_t nonfinite = 0;
+  };
+  Worker& worker(int index) { return *workers_[static_cast<size_t>(index)]; }
+
+  IntegratorSetup setup_;
+  TileGrid tiles_;
+
+ private:
+  std::vector<std::unique_ptr<Worker>> workers_;  // one per pool worker
+};
+
+// Makes an integrator for `setup`; throws std::invalid_argument when it cannot render it.
+using IntegratorFactory = std::function<std::unique_ptr<Integrator>(const IntegratorSetup& setup)>;
+
+class IntegratorRegistry {
+ public:
+  // The registry with every built-in integrator.
+  static const IntegratorRegistry& builtin();
+
+  void add(const std::string& name, IntegratorFactory factory);
+  bool has(const std::string& name) const { return factories_.count(name) != 0; }
+  std::vector<std::string> names() const;
+  // The integrator setup.settings.name names; throws std::invalid_argument for a name it does not have.
+  std::unique_ptr<Integrator> create(const IntegratorSetup& setup) const;
+
+ private:
+  std::map<std::string, IntegratorFactory> factories_;
+};
+
+// Adds every integrator the renderer ships to `registry` (one line per integrator in integrators/registry.cpp).
+void register_builtin_integrators(IntegratorRegistry& registry);
 
 }  // namespace tessera

@@ -366,6 +366,17 @@ RenderSettings parse_render_settings(const json& render, const std::string& poin
   s.spp = static_cast<uint32_t>(integer("spp", 64, 1, limits.max_spp));
   s.integrator.max_depth = static_cast<int>(integer("max_depth", 8, 0, limits.max_depth));
   s.seed = static_cast<uint64_t>(integer("seed", 0, 0, (int64_t{1} << 53)));
+  if (auto it = render.find("integrator"); it != render.end()) {
+    const IntegratorRegistry& integrators = IntegratorRegistry::builtin();
+    if (!it->is_string() || !integrators.has(it->get<std::string>())) {
+      std::string names;
+      const std::vector<std::string> all = integrators.names();
+      for (size_t i = 0; i < all.size(); ++i)
+        names += (i == 0 ? "" : i + 1 == all.size() ? " or " : ", ") + ("\"" + all[i] + "\"");
+      throw SceneError(at(pointer, "integrator"), "must be " + names);
+    }
+    s.integrator.name = it->get<std::string>();
+  }
   if (auto it = render.find("estimator"); it != render.end()) {
     if (!it->is_string() || !parse_estimator(it->get<std::string>(), &s.integrator.estimator))
       throw SceneError(at(pointer, "estimator"), "must be \"mis\", \"area\" or \"hemisphere\"");

@@ -1,7 +1,7 @@
-// A progressive render: the image is cut into tiles, and each pass adds samples to every pixel with the tiles as the
-// thread pool's work items. After each pass the caller gets the progress and the film (for a preview and a
-// checkpoint). Sampling is deterministic in (seed, pixel, sample index), so the image after N samples is the same
-// whatever the thread count, the pass sizes, or a resume from a checkpoint.
+// A progressive render: each pass, the settings' integrator (integrator.h) adds samples to every pixel of the region
+// on the thread pool. After each pass the caller gets the progress and the film (for a preview and a checkpoint).
+// Sampling is deterministic in (seed, pixel, sample index), so the image after N samples is the same whatever the
+// thread count, the pass sizes, or a resume from a checkpoint.
 #pragma once
 
 #include <atomic>
@@ -26,12 +26,11 @@ struct RenderSettings {
   uint32_t spp = 64;            // samples per pixel budget
   uint32_t first_sample = 0;    // render sample indices [first_sample, first_sample + spp): a range of a larger job
   // Crop window in pixels (render only these; the film keeps the full size). Empty (w or h 0): the whole image.
-  struct Region {
-    int x = 0, y = 0, width = 0, height = 0;
-  } region;
+  using Region = PixelRegion;
+  Region region;
   uint64_t seed = 0;
   SamplerKind sampler = SamplerKind::kSobol;
-  IntegratorSettings integrator;
+  IntegratorSettings integrator;  // which integrator renders, and its settings
   double time_limit_s = 0;      // stop after the pass that crosses this; 0: none
   double noise_target = 0;      // stop when Film::relative_error() falls below; 0: none
   int tile_size = 32;
@@ -56,6 +55,7 @@ struct RenderProgress {
 
 class RenderSession {
  public:
+  // Throws std::invalid_argument when the settings' integrator does not exist or cannot render the scene.
   RenderSession(std::shared_ptr<const Scene> scene, const RenderSettings& settings, ThreadPool& pool);
 
   // Continues from a checkpoint: `film` holds the state after `passes` passes and `elapsed_s` seconds.
@@ -74,18 +74,11 @@ class RenderSession {
   const RenderProgress& progress() const { return progress_; }
 
  private:
-  void render_tile(size_t tile, int worker, uint32_t first_sample, uint32_t sample_count);
-
   std::shared_ptr<const Scene> scene_;
   RenderSettings settings_;
-  ThreadPool& pool_;
-  Camera camera_;
   Film film_;
   RenderProgress progress_;
-  int tiles_x_ = 0, tiles_y_ = 0;
-  std::vector<std::unique_ptr<ScratchArena>> arenas_;  // one per pool worker
-  std::vector<RayCounters> counters_;                  // one per pool worker
-  std::vector<uint64_t> nonfinite_;                    // one per pool worker
+  std::unique_ptr<Integrator> integrator_;
   std::atomic<bool> stop_{false};
   std::atomic<bool> cancel_{false};
 };

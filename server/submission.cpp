@@ -26,6 +26,7 @@ json render_settings_json(const RenderSettings& s) {
           {"height", s.height},
           {"spp", s.spp},
           {"max_depth", s.integrator.max_depth},
+          {"integrator", s.integrator.name},
           {"estimator", estimator_name(s.integrator.estimator)},
           {"seed", s.seed},
           {"sampler", s.sampler == SamplerKind::kSobol ? "sobol" : "independent"},

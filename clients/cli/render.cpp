@@ -40,7 +40,8 @@ const char* kRenderUsage =
     "  --width N, --height N  resolution (override render.width/height)\n"
     "  --time-limit S         stop after the pass that crosses S seconds\n"
     "  --threads N            render threads (default: all hardware threads)\n"
-    "  --estimator NAME       mis | area | hemisphere\n"
+    "  --integrator NAME      path (render.integrator)\n"
+    "  --estimator NAME       mis | area | hemisphere (the path tracer's)\n"
     "  --seed N               random seed\n"
     "  --max-depth N          maximum bounces\n"
     "  -q, --quiet            no progress bar\n"
@@ -202,6 +203,7 @@ uint64_t fingerprint(const json& doc, const tessera::RenderSettings& s, const st
                    {"height", s.height},
                    {"seed", s.seed},
                    {"sampler", static_cast<int>(s.sampler)},
+                   {"integrator", s.integrator.name},
                    {"estimator", static_cast<int>(s.integrator.estimator)},
                    {"max_depth", s.integrator.max_depth},
                    {"rr_start_depth", s.integrator.rr_start_depth}};
@@ -298,6 +300,8 @@ int cmd_render(int argc, char** argv) {
       overrides["time_limit_s"] = parse_number(a, value());
     else if (a == "--threads")
       threads = static_cast<int>(parse_integer(a, value()));
+    else if (a == "--integrator")
+      overrides["integrator"] = value();
     else if (a == "--estimator")
       overrides["estimator"] = value();
     else if (a == "--seed")

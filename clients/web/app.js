@@ -195,6 +195,7 @@ function fillRenderFields(render = {}) {
   if (render.height) $("#height").value = render.height;
   if (render.spp) $("#spp").value = render.spp;
   $("#time-limit").value = render.time_limit_s ?? "";
+  $("#integrator").value = render.integrator ?? "path";
   if (render.estimator) $("#estimator").value = render.estimator;
 }
 exampleSelect.addEventListener("change", () => fillRenderFields(currentExample().job.render));
@@ -215,6 +216,7 @@ function renderSettings(base = {}) {
   const limit = $("#time-limit").value.trim();
   if (limit) render.time_limit_s = Number(limit);
   else delete render.time_limit_s;
+  render.integrator = $("#integrator").value;
   render.estimator = $("#estimator").value;
   return render;
 }
@@ -851,6 +853,7 @@ function showJob(job) {
   stat(dl, "Elapsed", fmtSeconds(p.elapsed_s));
   if (job.state === "running") stat(dl, "ETA", fmtSeconds(p.eta_s));
   stat(dl, "Samples/s", fmtRate(p.samples_per_s));
+  if (r.integrator) stat(dl, "Integrator", r.integrator);
   if (r.estimator) stat(dl, "Estimator", r.estimator);
   if (r.max_depth !== undefined) stat(dl, "Max depth", String(r.max_depth));
   if (r.seed !== undefined) stat(dl, "Seed", String(r.seed));

@@ -43,7 +43,7 @@ cd "$tmp"
 # --- sample ranges and regions merge into exactly one render -----------------------------------------------------
 r=(--width 40 --height 32 --threads 2 -q)
 expect 0 "render all 12 samples" "$TESSERA" render "$job" "${r[@]}" --spp 12 -o all.exr -o all.png -o all.tfilm
-expect 0 "render samples 5:7" "$TESSERA" render "$job" "${r[@]}" --samples 5:7 -o b.tfilm
+expect 0 "render samples 5:7" "$TESSERA" render "$job" "${r[@]}" --samples 5:7 --integrator path -o b.tfilm
 expect 0 "render samples 0:5 of the top half" "$TESSERA" render "$job" "${r[@]}" --samples 0:5 --region 0,0,40,16 -o a1.tfilm
 expect 0 "render samples 0:5 of the bottom half" "$TESSERA" render "$job" "${r[@]}" --samples 0:5 --region 0,16,40,16 -o a2.tfilm
 expect 0 "merge three parts out of order" "$TESSERA" merge b.tfilm a2.tfilm a1.tfilm -o merged.exr -o merged.png -o merged.tfilm
@@ -134,6 +134,7 @@ echo '{"objects": [{"shape": "sphere", "center": [0,0,0], "radius": -1, "materia
 expect 1 "render refuses a bad bare scene" "$TESSERA" render bare.json -o x.png -q
 grep -qF 'bare.json: at /objects/0/radius: must be greater than 0' "$tmp/err" \
   && ok "a bare scene's error points into the file as written" || not_ok "render said: $(cat "$tmp/err")"
+expect 1 "an unknown --integrator is fatal" "$TESSERA" render "$job" "${r[@]}" --spp 1 --integrator photon_mapping -o x.png
 expect 1 "a region outside the image is fatal" "$TESSERA" render "$job" "${r[@]}" --samples 0:1 --region 30,0,20,10 -o x.tfilm
 
 # --- usage: 2 ----------------------------------------------------------------------------------------------------

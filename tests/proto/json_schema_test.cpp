@@ -58,6 +58,8 @@ const Case kCases[] = {
     {"spp_negative", R"([{"op":"replace","path":"/render/spp","value":-1}])", "/render/spp", "minimum"},
     {"huge_height", R"([{"op":"replace","path":"/render/height","value":1e300}])", "/render/height", "maximum"},
     {"bad_estimator", R"([{"op":"replace","path":"/render/estimator","value":"bdpt"}])", "/render/estimator", "enum"},
+    {"bad_integrator", R"([{"op":"add","path":"/render/integrator","value":"photon_mapping"}])", "/render/integrator",
+     "enum"},
     {"unknown_render_key", R"([{"op":"add","path":"/render/widht","value":3}])", "/render/widht",
      "additionalProperties"},
     {"missing_camera", R"([{"op":"remove","path":"/scene/camera"}])", "/scene/camera", "required"},

@@ -254,6 +254,30 @@ TEST(Session, TimeLimitAndNoiseTargetStopTheRender) {
   EXPECT_LE(noisy.film().relative_error(), 0.05);
 }
 
+// Integrators are made by name through one registry; the job's render.integrator picks one, and a name the registry
+// does not have is refused naming the field (and by a session given it directly).
+TEST(Integrators, RegistryMakesThemByNameAndTheJobNamesOne) {
+  const IntegratorRegistry& registry = IntegratorRegistry::builtin();
+  EXPECT_TRUE(registry.has("path"));
+  EXPECT_FALSE(registry.has("photon_mapping"));
+  EXPECT_EQ(parse_render_settings(json::object(), "/render", RenderLimits{}).integrator.name, "path");
+  EXPECT_EQ(parse_render_settings({{"integrator", "path"}}, "/render", RenderLimits{}).integrator.name, "path");
+  for (const json& bad : {json("photon_mapping"), json(3)}) {
+    try {
+      parse_render_settings({{"integrator", bad}}, "/render", RenderLimits{});
+      ADD_FAILURE() << "accepted " << bad;
+    } catch (const SceneError& e) {
+      EXPECT_EQ(e.pointer(), "/render/integrator");
+      EXPECT_NE(std::string(e.what()).find("\"path\""), std::string::npos) << e.what();
+    }
+  }
+  auto scene = load_scene(cornell_scene(), "/scene", SceneLoadOptions{});
+  ThreadPool pool(1);
+  RenderSettings s = settings(8, 8, 1, Estimator::kMis);
+  s.integrator.name = "photon_mapping";
+  EXPECT_THROW(RenderSession(scene, s, pool), std::invalid_argument);
+}
+
 TEST(SceneLoading, ErrorsNameTheField) {
   json scene = cornell_scene();
   auto expect_error = [&](json doc, const std::string& pointer) {

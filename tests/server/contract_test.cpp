@@ -76,7 +76,7 @@ TEST(Contract, JobStatusMatchesItsSchema) {
   r.id = new_job_id();
   r.kind = "scene";
   r.created_at_ms = 1714560000123;
-  r.settings = R"({"width":64,"height":64,"spp":16,"max_depth":8,"estimator":"mis","seed":1})";
+  r.settings = R"({"width":64,"height":64,"spp":16,"max_depth":8,"integrator":"path","estimator":"mis","seed":1})";
   r.outputs = R"(["png","exr"])";
   r.progress.samples_total = 16;
   json queued = job_status_json(r);

@@ -23,6 +23,7 @@ TEST(Submission, AcceptsTheCornellBox) {
   EXPECT_EQ(job->kind, "scene");
   EXPECT_EQ(job->spp, 256u);
   EXPECT_EQ(job->settings["width"], 512);
+  EXPECT_EQ(job->settings["integrator"], "path");
   EXPECT_EQ(job->settings["estimator"], "mis");
   EXPECT_EQ(job->settings["tonemap"], "clamp");
   EXPECT_EQ(job->outputs, json::array({"png", "exr"}));
