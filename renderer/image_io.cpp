@@ -65,6 +65,10 @@ void write_exr(const std::string& path, const std::vector<float>& rgb, int width
   OIIO::ImageSpec spec(width, height, 3, half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
   spec.attribute("compression", "zip");
   spec.attribute("Software", "tessera");
+  // No time stamp: the same image is the same file, so renders are compared with cmp. OpenImageIO stamps an EXR with
+  // the wall-clock time (OpenEXR's capDate, "YYYY:MM:DD hh:mm:ss") unless the spec has a DateTime: an empty one says
+  // "no date" and is the same in every file.
+  spec.attribute("DateTime", "");
   check_output(out.get(), out->open(path, spec), "open " + path);
   check_output(out.get(), out->write_image(OIIO::TypeDesc::FLOAT, rgb.data()), "write " + path);
   check_output(out.get(), out->close(), "close " + path);

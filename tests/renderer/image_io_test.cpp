@@ -1,8 +1,10 @@
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <thread>
 
 #include <OpenImageIO/imageio.h>
 
@@ -48,6 +50,23 @@ TEST(ImageIo, ExrRoundTripsLinearValues) {
     ASSERT_EQ(img.channels, 3);
     for (size_t i = 0; i < rgb.size(); ++i) EXPECT_NEAR(img.pixels[i], rgb[i], half ? 4e-3 : 0) << i;
   }
+}
+
+std::string file_bytes(const std::filesystem::path& path);
+
+// The same image is the same file whenever it is written: no time stamp (OpenEXR's capDate) in the header.
+TEST(ImageIo, ExrFilesCarryNoTimeStamp) {
+  const auto rgb = gradient(8, 8);
+  const auto path = temp_file("stamp.exr");
+  write_exr(path.string(), rgb, 8, 8, true);
+  auto in = OIIO::ImageInput::open(path.string());
+  ASSERT_TRUE(in);
+  EXPECT_EQ(in->spec().get_string_attribute("DateTime"), "");
+  in->close();
+  const std::string first = file_bytes(path);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));  // another second of the clock
+  write_exr(path.string(), rgb, 8, 8, true);
+  EXPECT_TRUE(file_bytes(path) == first) << "the second write differs from the first";
 }
 
 TEST(ImageIo, PngIsSrgbEncoded) {
