@@ -195,10 +195,9 @@ std::variant<Submission, Problem> multipart_submission(ApiContext& ctx, const Re
   if (!req.has_file("job"))
     return Problem{422, "a multipart job needs a part named \"job\" holding the job document (JSON)", std::nullopt};
   const std::string job_text = req.get_file_value("job").content;
-  if (proto::json_nesting_depth(job_text) > static_cast<size_t>(ctx.limits.max_depth))
-    return Problem{422, "the document is nested deeper than " + std::to_string(ctx.limits.max_depth) + " levels", ""};
-  json doc = json::parse(job_text, nullptr, false);
-  if (doc.is_discarded()) return Problem{400, "the part \"job\" is not valid JSON", ""};
+  auto parsed = parse_document(job_text, ctx.limits.max_depth);
+  if (auto* problem = std::get_if<Problem>(&parsed)) return *problem;
+  json doc = std::move(std::get<json>(parsed));
   std::vector<UploadFile> files;
   for (const auto& [name, part] : req.files) {
     if (name == "job") continue;
@@ -335,8 +334,9 @@ void patch_job(ApiContext& ctx, const Request& req, Response& res) {
   const std::string type = media_type(req.get_header_value("Content-Type"));
   if (type != "application/json" && type != "application/merge-patch+json")
     return send_problem(res, 415, "a job is patched with application/json or application/merge-patch+json");
-  json body = json::parse(req.body, nullptr, false);
-  if (body.is_discarded()) return send_problem(res, Problem{400, "the body is not valid JSON", ""});
+  auto parsed = parse_document(req.body, ctx.limits.max_depth);
+  if (auto* problem = std::get_if<Problem>(&parsed)) return send_problem(res, *problem);
+  const json body = std::move(std::get<json>(parsed));
   if (!body.is_object()) return send_problem(res, Problem{422, "must be an object like {\"priority\": 10}", ""});
   for (const auto& [k, v] : body.items())
     if (k != "priority")

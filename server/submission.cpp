@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <vector>
 
 #include "proto/contract.h"
 #include "renderer/job.h"
@@ -11,6 +12,102 @@
 namespace tessera::server {
 
 using nlohmann::json;
+
+namespace {
+
+// No key of a job document is longer than this; a longer one is refused as it is parsed, before the schema's error
+// messages and pointers would copy it.
+constexpr size_t kMaxKeyBytes = 256;
+
+// Follows a parse as SAX events to say where it failed: the JSON pointer of the value being read (the value under
+// the last key of an object, the next element of an array), or of the object holding a key that is too long.
+class ErrorLocator final : public nlohmann::json_sax<json> {
+ public:
+  std::string pointer;
+  bool key_too_long = false;
+
+  bool null() override { return value(); }
+  bool boolean(bool) override { return value(); }
+  bool number_integer(number_integer_t) override { return value(); }
+  bool number_unsigned(number_unsigned_t) override { return value(); }
+  bool number_float(number_float_t, const string_t&) override { return value(); }
+  bool string(string_t&) override { return value(); }
+  bool binary(binary_t&) override { return value(); }
+  bool start_object(std::size_t) override {
+    levels_.push_back({false, 0, ""});
+    return true;
+  }
+  bool key(string_t& k) override {
+    if (k.size() > kMaxKeyBytes) {
+      key_too_long = true;
+      levels_.pop_back();
+      locate();
+      return false;
+    }
+    levels_.back().key = k;
+    return true;
+  }
+  bool end_object() override {
+    levels_.pop_back();
+    return value();
+  }
+  bool start_array(std::size_t) override {
+    levels_.push_back({true, 0, ""});
+    return true;
+  }
+  bool end_array() override {
+    levels_.pop_back();
+    return value();
+  }
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
+    if (!key_too_long) locate();
+    return false;
+  }
+
+ private:
+  struct Level {
+    bool array;
+    size_t index;
+    std::string key;
+  };
+  bool value() {
+    if (!levels_.empty() && levels_.back().array) ++levels_.back().index;
+    return true;
+  }
+  void locate() {
+    for (const Level& l : levels_) {
+      pointer += '/';
+      pointer += l.array ? std::to_string(l.index) : json_pointer_token(l.key);
+    }
+  }
+  std::vector<Level> levels_;
+};
+
+struct KeyTooLong {};
+
+}  // namespace
+
+std::variant<json, Problem> parse_document(std::string_view text, int max_depth) {
+  if (proto::json_nesting_depth(text) > static_cast<size_t>(max_depth))
+    return Problem{422, "the document is nested deeper than " + std::to_string(max_depth) + " levels", ""};
+  std::string what;
+  try {
+    return json::parse(text, [](int, json::parse_event_t event, json& parsed) {
+      if (event == json::parse_event_t::key && parsed.get_ref<const std::string&>().size() > kMaxKeyBytes)
+        throw KeyTooLong{};
+      return true;
+    });
+  } catch (const KeyTooLong&) {
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for a number that overflows a double
+    what = e.what();
+    if (const size_t at = what.find("] "); at != std::string::npos) what.erase(0, at + 2);  // "[json.exception...] "
+  }
+  ErrorLocator where;
+  json::sax_parse(text, &where);
+  if (where.key_too_long)
+    return Problem{422, "an object has a key longer than " + std::to_string(kMaxKeyBytes) + " bytes", where.pointer};
+  return Problem{400, "the document is not valid JSON: " + what, where.pointer};
+}
 
 std::string media_type(std::string_view content_type) {
   std::string_view t = content_type.substr(0, content_type.find(';'));
@@ -44,16 +141,9 @@ std::variant<AcceptedJob, Problem> check_submission(std::string_view content_typ
                    std::nullopt};
   if (body.find_first_not_of(" \t\r\n") == std::string_view::npos)
     return Problem{400, "the body is empty; expected a job document (JSON)", ""};
-  if (proto::json_nesting_depth(body) > static_cast<size_t>(limits.max_depth))
-    return Problem{422, "the document is nested deeper than " + std::to_string(limits.max_depth) + " levels", ""};
-
-  json document;
-  try {
-    document = json::parse(body);
-  } catch (const json::parse_error& e) {
-    return Problem{400, std::string("the body is not valid JSON: ") + e.what(), ""};
-  }
-  return check_job_document(std::move(document), limits);
+  auto document = parse_document(body, limits.max_depth);
+  if (auto* problem = std::get_if<Problem>(&document)) return *problem;
+  return check_job_document(std::move(std::get<json>(document)), limits);
 }
 
 std::variant<AcceptedJob, Problem> check_job_document(json document, const SubmissionLimits& limits) {

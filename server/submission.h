@@ -35,6 +35,10 @@ struct AcceptedJob {
   std::vector<std::string> warnings;  // from loading the scene (an optional glTF extension ignored, ...)
 };
 
+// A client's JSON text as a document: nothing nested deeper than `max_depth` (422), and text that does not parse, or
+// a number beyond the range of a double (1e400), is a 400 naming the byte and the JSON pointer of the value at fault.
+std::variant<nlohmann::json, Problem> parse_document(std::string_view text, int max_depth);
+
 std::variant<AcceptedJob, Problem> check_submission(std::string_view content_type, std::string_view body,
                                                     const SubmissionLimits& limits);
 // The same for a document already parsed (a multipart submission's job part).
