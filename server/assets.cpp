@@ -97,6 +97,10 @@ json AssetInfo::to_json() const {
   return {{"id", id}, {"kind", kind}, {"files", files}, {"main", main}, {"bytes", bytes}};
 }
 
+bool AssetInfo::owned_by(const std::string& name) const {
+  return std::find(owners.begin(), owners.end(), name) != owners.end();
+}
+
 bool is_plain_file_name(const std::string& name) {
   // 1 to 128 of [A-Za-z0-9._-], not starting with a dot (so never "." or ".." or a hidden file).
   return !name.empty() && name.size() <= 128 && name[0] != '.' && std::all_of(name.begin(), name.end(), [](char c) {
@@ -152,7 +156,7 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
     if (e == ".hdr" || e == ".exr") maps.push_back(&f);
   }
   AssetInfo info;
-  info.owner = owner;
+  info.owners = {owner};
   if (scenes.size() == 1) {
     info.kind = "gltf";
     info.main = scenes[0]->name;
@@ -205,7 +209,16 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
     for (const UploadFile& f : files) manifest += f.name + "\t" + sha256_hex(f.bytes) + "\n";
     info.id = sha256_hex(manifest);
   }
-  if (auto existing = get(info.id)) return StoredAsset{*existing, false};
+  const auto known = [&]() -> std::optional<StoredAsset> {
+    std::lock_guard<std::mutex> lock(owners_mutex_);
+    auto existing = get(info.id);
+    if (!existing) return std::nullopt;
+    if (existing->owned_by(owner)) return StoredAsset{*existing, false};
+    existing->owners.push_back(owner);
+    if (!write_meta(*existing)) return std::nullopt;
+    return StoredAsset{*existing, true};
+  };
+  if (auto existing = known()) return *existing;
 
   const fs::path temp = root_ / (".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(g_counter.fetch_add(1)));
   std::error_code ec;
@@ -235,13 +248,13 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
       return invalid(info.main + ": " + what);
     }
     json meta = info.to_json();
-    meta["owner"] = owner;
+    meta["owners"] = info.owners;
     write_file(temp / kMetaFile, meta.dump());
     fs::rename(temp, root_ / info.id, ec);
     if (ec) {  // the same upload won a race, or the disk is full
       const std::error_code rename_error = ec;
       fs::remove_all(temp, ec);
-      if (auto existing = get(info.id)) return StoredAsset{*existing, false};
+      if (auto existing = known()) return *existing;
       if (is_out_of_space(rename_error)) return out_of_space(rename_error);
       return Problem{500, "cannot store the asset", std::nullopt};
     }
@@ -267,20 +280,52 @@ std::optional<AssetInfo> DirectoryAssetStore::get(const std::string& id) const {
   info.kind = meta.value("kind", "");
   info.main = meta.value("main", "");
   info.bytes = meta.value("bytes", uint64_t{0});
-  info.owner = meta.value("owner", "");
+  if (meta.contains("owners") && meta["owners"].is_array()) {
+    for (const json& o : meta["owners"])
+      if (o.is_string()) info.owners.push_back(o.get<std::string>());
+  } else if (meta.contains("owner") && meta["owner"].is_string()) {  // stored by a version with one owner
+    info.owners.push_back(meta["owner"].get<std::string>());
+  }
   if (meta.contains("files") && meta["files"].is_array())
     for (const json& f : meta["files"])
       if (f.is_string()) info.files.push_back(f.get<std::string>());
   return info;
 }
 
-bool DirectoryAssetStore::remove(const std::string& id) {
-  if (!get(id)) return false;
-  // Renamed away first, so a job never sees half an asset.
-  const fs::path doomed = root_ / (".tmp-del-" + std::to_string(g_counter.fetch_add(1)));
+bool DirectoryAssetStore::write_meta(const AssetInfo& info) {
+  json meta = info.to_json();
+  meta["owners"] = info.owners;
+  const fs::path dir = root_ / info.id;
+  const fs::path temp = dir / (std::string(kMetaFile) + ".tmp-" + std::to_string(g_counter.fetch_add(1)));
   std::error_code ec;
-  fs::rename(root_ / id, doomed, ec);
-  if (ec) return false;
+  if (write_file_synced(temp, meta.dump()) != 0) {
+    fs::remove(temp, ec);
+    return false;
+  }
+  fs::rename(temp, dir / kMetaFile, ec);
+  if (ec) fs::remove(temp, ec);
+  return !ec;
+}
+
+bool DirectoryAssetStore::remove(const std::string& id, const std::optional<std::string>& owner) {
+  const fs::path doomed = root_ / (".tmp-del-" + std::to_string(g_counter.fetch_add(1)));
+  {
+    std::lock_guard<std::mutex> lock(owners_mutex_);
+    auto info = get(id);
+    if (!info) return false;
+    if (owner) {
+      auto it = std::find(info->owners.begin(), info->owners.end(), *owner);
+      if (it == info->owners.end()) return false;
+      info->owners.erase(it);
+      if (!info->owners.empty()) return write_meta(*info);
+    }
+    // Renamed away first (and under the lock, so that no upload of the same content is given it meanwhile), so a
+    // job never sees half an asset.
+    std::error_code ec;
+    fs::rename(root_ / id, doomed, ec);
+    if (ec) return false;
+  }
+  std::error_code ec;
   fs::remove_all(doomed, ec);
   return true;
 }
@@ -291,14 +336,16 @@ std::optional<fs::path> DirectoryAssetStore::main_file(const std::string& id, co
   return root_ / id / info->main;
 }
 
-std::function<fs::path(const std::string&, const std::string&)> asset_resolver(const AssetStore& assets) {
-  return [&assets](const std::string& ref, const std::string& pointer) -> fs::path {
+std::function<fs::path(const std::string&, const std::string&)> asset_resolver(const AssetStore& assets,
+                                                                               std::optional<std::string> owner) {
+  return [&assets, owner](const std::string& ref, const std::string& pointer) -> fs::path {
     const bool map = pointer.size() >= 4 && pointer.compare(pointer.size() - 4, 4, "/map") == 0;
     const std::string kind = map ? "environment" : "gltf";
     if (!is_asset_id(ref)) throw SceneError(pointer, "must be an asset id (64 hex digits) from POST /v1/assets");
-    auto path = assets.main_file(ref, kind);
+    auto info = assets.get(ref);
+    if (info && owner && !info->owned_by(*owner)) info.reset();  // another user's asset is unknown
+    auto path = info ? assets.main_file(ref, kind) : std::nullopt;
     if (!path) {
-      auto info = assets.get(ref);
       throw SceneError(pointer, info ? "asset " + ref + " is a " + info->kind + " asset, not a " + kind + " asset"
                                      : "no asset " + ref + " (upload it with POST /v1/assets)");
     }

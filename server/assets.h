@@ -4,10 +4,13 @@
 // name (several files). Everything is checked before it is stored: file names are plain, a .glb's container is
 // consistent, a .gltf is JSON, every URI inside passes gltf_uri_problem() and names a file of the same upload (or is
 // a data: URI), and the asset loads as the renderer will load it. A directory appears whole (temp dir, rename).
+// Content addressing shares the bytes, never the visibility: an asset belongs to each user who uploaded it, and to
+// no one else (another user's asset is as unknown as one that does not exist).
 #pragma once
 
 #include <filesystem>
 #include <functional>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <variant>
@@ -30,13 +33,14 @@ struct AssetInfo {
   std::vector<std::string> files;
   std::string main;  // the file a job's reference resolves to
   uint64_t bytes = 0;
-  std::string owner;  // who uploaded it first (token name; empty without tokens)
-  nlohmann::json to_json() const;
+  std::vector<std::string> owners;  // who uploaded it (token names; "" without tokens)
+  nlohmann::json to_json() const;   // what its owners are shown (never the other owners)
+  bool owned_by(const std::string& name) const;
 };
 
 struct StoredAsset {
   AssetInfo info;
-  bool created = false;  // false: the same content was already stored
+  bool created = false;  // false: this owner had uploaded the same content before
 };
 
 bool is_plain_file_name(const std::string& name);
@@ -48,11 +52,14 @@ class AssetStore {
  public:
   virtual ~AssetStore() = default;
 
-  // The asset, stored or found already stored; or why not: 4xx for the upload's fault, 507 when the disk ran out of
-  // room while it was written (ENOSPC, EDQUOT, EFBIG). A refused upload leaves no file behind.
+  // The asset, stored or found already stored (`owner` is then added to its owners); or why not: 4xx for the
+  // upload's fault, 507 when the disk ran out of room while it was written (ENOSPC, EDQUOT, EFBIG). A refused upload
+  // leaves no file behind.
   virtual std::variant<StoredAsset, Problem> store(std::vector<UploadFile> files, const std::string& owner) = 0;
   virtual std::optional<AssetInfo> get(const std::string& id) const = 0;
-  virtual bool remove(const std::string& id) = 0;
+  // Takes `owner` off the asset's owners, and removes its files once it has none; without an owner, removes it
+  // whatever its owners (an admin). False when there was nothing to remove.
+  virtual bool remove(const std::string& id, const std::optional<std::string>& owner = std::nullopt) = 0;
   // The main file of asset `id` when it is of `kind`, as a local file the renderer can open.
   virtual std::optional<std::filesystem::path> main_file(const std::string& id, const std::string& kind) const = 0;
 };
@@ -64,14 +71,19 @@ class DirectoryAssetStore final : public AssetStore {
 
   std::variant<StoredAsset, Problem> store(std::vector<UploadFile> files, const std::string& owner) override;
   std::optional<AssetInfo> get(const std::string& id) const override;
-  bool remove(const std::string& id) override;
+  bool remove(const std::string& id, const std::optional<std::string>& owner = std::nullopt) override;
   std::optional<std::filesystem::path> main_file(const std::string& id, const std::string& kind) const override;
 
  private:
+  // Rewrites an asset's metadata (its owners) in place, atomically; false when it cannot.
+  bool write_meta(const AssetInfo& info);
   std::filesystem::path root_;
+  std::mutex owners_mutex_;  // owners are read, changed and written back under it
 };
 
-// The asset resolver jobs use: a 64-hex asset id to its main file; anything else is a SceneError at `pointer`.
-std::function<std::filesystem::path(const std::string&, const std::string&)> asset_resolver(const AssetStore& assets);
+// The asset resolver jobs use: a 64-hex asset id to its main file; anything else is a SceneError at `pointer`. With
+// an `owner`, only that user's assets resolve (another's is "no asset", as one that does not exist).
+std::function<std::filesystem::path(const std::string&, const std::string&)> asset_resolver(
+    const AssetStore& assets, std::optional<std::string> owner = std::nullopt);
 
 }  // namespace tessera::server

@@ -223,6 +223,9 @@ void post_job(ApiContext& ctx, const Request& req, Response& res) {
   if (req.has_header("Idempotency-Key") && !valid_idempotency_key(key))
     return send_problem(res, 400, "Idempotency-Key must be 1 to 255 visible ASCII characters");
 
+  // A user's job may name only the user's own assets.
+  SubmissionLimits limits = ctx.limits;
+  if (!caller.admin) limits.resolve_asset = asset_resolver(ctx.assets, caller.name);
   std::variant<AcceptedJob, Problem> checked;
   std::string request_hash;
   const bool multipart = media_type(req.get_header_value("Content-Type")) == "multipart/form-data";
@@ -230,9 +233,9 @@ void post_job(ApiContext& ctx, const Request& req, Response& res) {
     auto sub = multipart_submission(ctx, req, caller);
     if (auto* p = std::get_if<Problem>(&sub)) return send_problem(res, *p);
     request_hash = std::get<Submission>(sub).request_hash;
-    checked = check_job_document(std::move(std::get<Submission>(sub).document), ctx.limits);
+    checked = check_job_document(std::move(std::get<Submission>(sub).document), limits);
   } else {
-    checked = check_submission(req.get_header_value("Content-Type"), req.body, ctx.limits);
+    checked = check_submission(req.get_header_value("Content-Type"), req.body, limits);
     request_hash = sha256_hex(req.body);
   }
   if (auto* problem = std::get_if<Problem>(&checked)) {
@@ -447,6 +450,14 @@ void stream_events(ApiContext& ctx, const Request& req, Response& res, const std
 
 // ---- assets --------------------------------------------------------------------------------------------------
 
+// The asset named by the first path capture and visible to the caller (an uploader of it, or an admin).
+std::optional<AssetInfo> find_asset(ApiContext& ctx, const Request& req) {
+  auto info = ctx.assets.get(req.matches[1]);
+  const Caller caller = caller_of(ctx, req);
+  if (info && !caller.admin && !info->owned_by(caller.name)) return std::nullopt;
+  return info;
+}
+
 void post_asset(ApiContext& ctx, const Request& req, Response& res) {
   if (refused_for_storage(ctx, res)) return;
   const Caller caller = caller_of(ctx, req);
@@ -538,18 +549,18 @@ std::vector<Route> routes(ApiContext* ctx) {
       {"POST", "/v1/assets", "/v1/assets", [ctx](const Request& q, Response& r) { post_asset(*ctx, q, r); }},
       {"GET", "/v1/assets/{id}", asset,
        [ctx](const Request& q, Response& r) {
-         auto info = ctx->assets.get(q.matches[1]);
+         auto info = find_asset(*ctx, q);
          if (!info) return send_problem(r, 404, "no such asset");
          send_json(r, 200, info->to_json());
        }},
       {"DELETE", "/v1/assets/{id}", asset,
        [ctx](const Request& q, Response& r) {
-         auto info = ctx->assets.get(q.matches[1]);
+         auto info = find_asset(*ctx, q);
          if (!info) return send_problem(r, 404, "no such asset");
+         // A user gives up their own claim (the files go with the last one); an admin removes the asset.
          const Caller caller = caller_of(*ctx, q);
-         if (!caller.admin && info->owner != caller.name)
-           return send_problem(r, 403, "only the uploader or an admin may delete an asset");
-         if (!ctx->assets.remove(info->id)) return send_problem(r, 404, "no such asset");
+         if (!ctx->assets.remove(info->id, caller.admin ? std::nullopt : std::optional(caller.name)))
+           return send_problem(r, 404, "no such asset");
          log(LogLevel::kInfo, "asset deleted", {{"asset", info->id}});
          r.status = 204;
        }},
