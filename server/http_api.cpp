@@ -12,11 +12,13 @@
 
 #include "proto/contract.h"
 #include "renderer/scene_error.h"
+#include "server/http_transport.h"
 #include "server/job_id.h"
 #include "server/job_json.h"
 #include "server/log.h"
 #include "server/materials_catalog.h"
 #include "server/problem.h"
+#include "server/request_body.h"
 #include "server/time_format.h"
 #include "server/web_files.h"
 
@@ -152,7 +154,7 @@ void send_file_or_problem(const Request& req, Response& res, std::variant<std::u
   send_file(req, res, std::move(std::get<std::unique_ptr<FileReader>>(file)), media_type);
 }
 
-bool is_event_stream_path(const std::string& path) {
+bool is_event_stream_path(std::string_view path) {
   return path == "/v1/events" || (path.size() > 7 && path.compare(path.size() - 7, 7, "/events") == 0);
 }
 
@@ -708,8 +710,25 @@ std::vector<RouteInfo> api_routes() {
   return out;
 }
 
+bool is_event_stream_target(std::string_view target) {
+  return is_event_stream_path(target.substr(0, target.find('?')));
+}
+
 void install_api(httplib::Server& server, ApiContext& ctx) {
   auto posts = std::make_shared<std::vector<std::pair<std::regex, Handler>>>();
+  ApiContext* c = &ctx;
+  // Routes that take a body read it as it arrives, decoded, within --max-body-bytes (a chunked or compressed body
+  // too); cpp-httplib's own reading would hold all of it, inflated, before any limit applied.
+  const auto with_body = [c](Handler handler) {
+    return [c, handler = std::move(handler)](const Request& q, Response& s, const httplib::ContentReader& read) {
+      // The request object is not const inside cpp-httplib, which fills req.body and req.files the same way.
+      if (auto problem = read_body(const_cast<Request&>(q), read, c->max_body_bytes)) {
+        HttpTransport::close_after_response();
+        return send_problem(s, *problem);
+      }
+      handler(q, s);
+    };
+  };
   for (Route& r : routes(&ctx)) {
     // cpp-httplib dispatches to the first route of the method whose pattern matches, as route_label() would find.
     r.handler = [handler = std::move(r.handler), label = r.openapi_path](const Request& q, Response& s) {
@@ -719,18 +738,38 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
     if (r.method == "GET")
       server.Get(r.pattern, r.handler);
     else if (r.method == "POST")
-      server.Post(r.pattern, r.handler);
+      server.Post(r.pattern, with_body(r.handler));
     else if (r.method == "PATCH")
-      server.Patch(r.pattern, r.handler);
+      server.Patch(r.pattern, with_body(r.handler));
     else if (r.method == "DELETE")
-      server.Delete(r.pattern, r.handler);
+      server.Delete(r.pattern, with_body(r.handler));
     if (r.method == "POST") posts->emplace_back(std::regex(r.pattern), r.handler);
   }
+  // A body sent to no route is not read (on_error answers 404 or 405) and its connection closes after the answer.
+  const auto unrouted = [](const Request&, Response& s, const httplib::ContentReader&) {
+    HttpTransport::close_after_response();
+    s.status = 404;
+  };
+  server.Post(".*", unrouted).Put(".*", unrouted).Patch(".*", unrouted).Delete(".*", unrouted);
 
-  ApiContext* c = &ctx;
-
+  // Expect: 100-continue is answered with the refusal instead when the head already decides one (RFC 9110, 10.1.1).
+  server.set_expect_100_continue_handler([c](const Request& req, Response& res) {
+    auto problem = check_request_head(req, c->max_body_bytes);
+    if (!problem) return 100;
+    HttpTransport::close_after_response();
+    send_problem(res, *problem);
+    // cpp-httplib writes this answer as it is, without the length it adds to others.
+    res.set_header("Content-Length", std::to_string(res.body.size()));
+    return problem->status;
+  });
   server.set_pre_routing_handler([posts, c](const Request& req, Response& res) {
     t_routed = nullptr;
+    // An answer given here leaves the body unread: the connection closes after it.
+    const auto handled = [&req] {
+      if (has_body(req)) HttpTransport::close_after_response();
+      return httplib::Server::HandlerResponse::Handled;
+    };
+    if (body_left_unread(req)) HttpTransport::close_after_response();
     // CORS: only for the configured origins.
     const std::string origin = req.get_header_value("Origin");
     const bool cors_ok = !origin.empty() && std::any_of(c->cors_origins.begin(), c->cors_origins.end(),
@@ -740,23 +779,29 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
       res.set_header("Vary", "Origin");
       res.set_header("Access-Control-Expose-Headers", "Location, ETag, Retry-After, Allow");
     }
+    if (auto problem = check_request_head(req, c->max_body_bytes)) {
+      if (problem->status == 415) res.set_header("Accept-Encoding", "gzip, deflate, br");
+      send_problem(res, *problem);
+      HttpTransport::close_after_response();
+      return httplib::Server::HandlerResponse::Handled;
+    }
     if (req.method == "OPTIONS") {
       if (!cors_ok) {
         send_problem(res, 403,
                      "cross-origin requests from \"" + origin.substr(0, 200) + "\" are not allowed (--cors-origin)");
-        return httplib::Server::HandlerResponse::Handled;
+        return handled();
       }
       res.set_header("Access-Control-Allow-Methods", "GET, POST, PATCH, DELETE, OPTIONS");
       res.set_header("Access-Control-Allow-Headers",
                      "Authorization, Content-Type, Idempotency-Key, If-None-Match, Last-Event-ID");
       res.set_header("Access-Control-Max-Age", "600");
       res.status = 204;
-      return httplib::Server::HandlerResponse::Handled;
+      return handled();
     }
     if (c->auth.enabled() && !is_public(req) && !caller_of(*c, req).authenticated) {
       res.set_header("WWW-Authenticate", "Bearer realm=\"tessera\"");
       send_problem(res, 401, "a valid bearer token is required (Authorization: Bearer <token>)");
-      return httplib::Server::HandlerResponse::Handled;
+      return handled();
     }
     // A request with neither Content-Length nor Transfer-Encoding has an empty body (RFC 9112, 6.3), but
     // cpp-httplib 0.11 answers such a POST (`curl -X POST .../cancel`) with 400. Those are routed here instead.
@@ -771,7 +816,7 @@ void install_api(httplib::Server& server, ApiContext& ctx) {
     }
     return httplib::Server::HandlerResponse::Unhandled;
   });
-  server.set_payload_max_length(ctx.max_body_bytes);
+  server.set_payload_max_length(ctx.max_body_bytes);  // what the routes read is bounded above; this is a backstop
   // Without TCP_NODELAY, a keep-alive client waits for the delayed ACK between the header and body writes: ~25 ms
   // a request (150 status requests/s on 4 connections, measured); with it, the latency is the work.
   server.set_tcp_nodelay(true);

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "renderer/thread_pool.h"
@@ -48,6 +49,9 @@ struct RouteInfo {
   std::string path;
 };
 std::vector<RouteInfo> api_routes();
+
+// Whether a request target ("/v1/jobs/{id}/events?access_token=...") is an event stream: a long-lived response.
+bool is_event_stream_target(std::string_view target);
 
 // Registers the routes and the error, exception and logging handlers on `server`. `ctx` must outlive it.
 void install_api(httplib::Server& server, ApiContext& ctx);

@@ -1,7 +1,8 @@
 // tesserad: the tessera render daemon. See `tesserad --help` and proto/openapi.json.
-#include <httplib.h>
+#include <malloc.h>
 #include <pthread.h>
 #include <signal.h>
+#include <sys/resource.h>
 
 #include <atomic>
 #include <cerrno>
@@ -20,6 +21,7 @@
 #include "server/data_dir_lock.h"
 #include "server/events.h"
 #include "server/http_api.h"
+#include "server/http_transport.h"
 #include "server/job_files.h"
 #include "server/job_service.h"
 #include "server/log.h"
@@ -33,6 +35,10 @@ namespace {
 using namespace tessera::server;
 
 int run(const Config& config) {
+  // Blocks of 1 MiB and more (request bodies, documents parsed from them) are mapped on their own and unmapped when
+  // freed. glibc's default threshold rises with every large block freed, up to 32 MiB, after which such blocks come
+  // from the per-thread heaps and stay resident when freed: each refused 50 MB body kept about 65 MB.
+  mallopt(M_MMAP_THRESHOLD, 1 << 20);
   // SIGINT, SIGTERM and SIGHUP are taken by one thread with sigwait(); every thread created from here on inherits
   // the mask, so no render or HTTP thread is interrupted by them.
   sigset_t signals;
@@ -97,10 +103,23 @@ int run(const Config& config) {
                  config.keepalive_s,
                  config.min_free_disk_bytes,
                  data_dir};
-  httplib::Server http;
-  // Every open event stream and keep-alive connection holds one of these threads.
-  const int http_threads = config.http_threads;
-  http.new_task_queue = [http_threads] { return new httplib::ThreadPool(static_cast<size_t>(http_threads)); };
+  // Every connection holds a descriptor: the soft limit (often 1024) goes up to the hard one.
+  if (rlimit open_files{}; getrlimit(RLIMIT_NOFILE, &open_files) == 0 && open_files.rlim_cur < open_files.rlim_max) {
+    open_files.rlim_cur = open_files.rlim_max;
+    setrlimit(RLIMIT_NOFILE, &open_files);
+  }
+  TransportLimits transport;
+  transport.request_threads = config.http_threads;
+  transport.stream_threads = config.max_event_streams;
+  transport.max_connections = config.max_connections;
+  transport.max_connections_per_client = config.max_connections_per_client;
+  transport.header_timeout_s = config.header_timeout_s;
+  transport.min_rate_bytes_per_s = static_cast<double>(config.min_transfer_rate);
+  // Bodies are limited where they are decoded (--max-body-bytes); on the wire, chunk framing and compression may
+  // add to them, never this much.
+  transport.max_body_wire_bytes = 2 * static_cast<uint64_t>(config.max_body_bytes) + (64u << 10);
+  transport.is_long_lived = is_event_stream_target;
+  HttpTransport http(transport);
   install_api(http, ctx);
   // SO_REUSEADDR only: a restart binds at once over connections in TIME_WAIT, but a second daemon on the port of a
   // running one fails to bind (cpp-httplib's default adds SO_REUSEPORT, with which the kernel would share the port
@@ -110,13 +129,7 @@ int run(const Config& config) {
     ::setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
   });
 
-  int port = config.port;
-  if (port == 0) {
-    port = http.bind_to_any_port(config.listen);
-    if (port < 0) port = 0;
-  } else if (!http.bind_to_port(config.listen, port)) {
-    port = 0;
-  }
+  const int port = http.bind(config.listen, config.port).value_or(0);
   if (port == 0) {
     const std::string error = std::strerror(errno);
     log(LogLevel::kError, "cannot listen", {{"listen", config.listen}, {"port", config.port}, {"error", error}});

@@ -10,21 +10,38 @@ struct Kind {
 };
 constexpr Kind kKinds[] = {
     {400, "bad-request", "Bad request"},
+    {401, "unauthorized", "Unauthorized"},
+    {403, "forbidden", "Forbidden"},
     {404, "not-found", "Not found"},
     {405, "method-not-allowed", "Method not allowed"},
+    {408, "request-timeout", "Request timeout"},
     {409, "conflict", "Conflict with the job's state"},
     {413, "payload-too-large", "Request body too large"},
     {414, "uri-too-long", "Request URI too long"},
     {415, "unsupported-media-type", "Unsupported media type"},
     {422, "invalid-document", "Invalid document"},
+    {429, "too-many-requests", "Too many requests"},
+    {431, "header-fields-too-large", "Request header fields too large"},
     {500, "internal-error", "Internal server error"},
+    {501, "not-implemented", "Not implemented"},
     {503, "unavailable", "Service unavailable"},
     {507, "insufficient-storage", "Insufficient storage"},
 };
 const Kind& kind_of(int status) {
   for (const Kind& k : kKinds)
     if (k.status == status) return k;
-  return status < 500 ? kKinds[0] : kKinds[8];
+  return kind_of(status < 500 ? 400 : 500);
+}
+
+// What a problem quotes of a request is cut to this many bytes: a document with a 50 MB key must not be answered
+// with it (twice: in the detail and in the pointer).
+constexpr size_t kMaxQuotedBytes = 1024;
+
+std::string capped(const std::string& text) {
+  if (text.size() <= kMaxQuotedBytes) return text;
+  size_t cut = kMaxQuotedBytes;
+  while (cut > 0 && (static_cast<unsigned char>(text[cut]) & 0xC0) == 0x80) --cut;  // not inside a UTF-8 character
+  return text.substr(0, cut) + "… (" + std::to_string(text.size() - cut) + " more bytes)";
 }
 }  // namespace
 
@@ -36,8 +53,8 @@ std::string Problem::title() const {
 }
 
 nlohmann::json Problem::to_json() const {
-  nlohmann::json j = {{"type", type()}, {"title", title()}, {"status", status}, {"detail", detail}};
-  if (pointer) j["pointer"] = *pointer;
+  nlohmann::json j = {{"type", type()}, {"title", title()}, {"status", status}, {"detail", capped(detail)}};
+  if (pointer) j["pointer"] = capped(*pointer);
   return j;
 }
 

@@ -1,0 +1,620 @@
+// Hostile clients against the real daemon on loopback: bodies that do not stop (chunked, compressed), requests that
+// arrive one byte at a time, connection floods, protocol edges of RFC 9112 (Expect, Content-Length, Host,
+// pipelining), numbers beyond a double, huge keys; and the daemon's memory afterwards, read from /proc/<pid>/status.
+// Raw sockets where an HTTP library would tidy the request up. Every test is bounded in time and connections.
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <fstream>
+#include <optional>
+#include <thread>
+
+#include "proto/contract.h"
+#include "tests/integration/daemon.h"
+#include "tests/server/test_util.h"
+
+namespace tessera::server::test {
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+// ---- raw HTTP ------------------------------------------------------------------------------------------------
+
+Clock::time_point after(double seconds) {
+  return Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
+}
+
+// One TCP connection to the daemon, from a chosen loopback source address (the daemon counts connections per
+// address: 127.0.0.2 is another client than 127.0.0.1).
+class Raw {
+ public:
+  explicit Raw(int port, const char* source = "127.0.0.1") {
+    fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_in from{};
+    from.sin_family = AF_INET;
+    ::inet_pton(AF_INET, source, &from.sin_addr);
+    ::bind(fd_, reinterpret_cast<sockaddr*>(&from), sizeof from);
+    sockaddr_in to{};
+    to.sin_family = AF_INET;
+    to.sin_port = htons(static_cast<uint16_t>(port));
+    ::inet_pton(AF_INET, "127.0.0.1", &to.sin_addr);
+    connected_ = ::connect(fd_, reinterpret_cast<sockaddr*>(&to), sizeof to) == 0;
+  }
+  ~Raw() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  Raw(const Raw&) = delete;
+  Raw& operator=(const Raw&) = delete;
+
+  bool connected() const { return connected_; }
+  int fd() const { return fd_; }
+
+  // Sends all of `data`; false once the daemon stopped reading (reset, or the connection closed).
+  bool send(std::string_view data) {
+    while (!data.empty()) {
+      const ssize_t n = ::send(fd_, data.data(), data.size(), MSG_NOSIGNAL);
+      if (n <= 0) return false;
+      data.remove_prefix(static_cast<size_t>(n));
+    }
+    return true;
+  }
+
+  // Everything the daemon sends until it closes the connection or `timeout_s` passes.
+  std::string read_until_close(double timeout_s = 10) {
+    std::string out;
+    const auto deadline = after(timeout_s);
+    while (read_some(out, deadline) > 0) {
+    }
+    return out;
+  }
+
+  // One response: its head and a body of Content-Length bytes (or up to the close without one); nothing when none
+  // came in time.
+  std::optional<std::string> read_response(double timeout_s = 10) {
+    const auto deadline = after(timeout_s);
+    for (;;) {
+      if (const size_t head_end = buffer_.find("\r\n\r\n"); head_end != std::string::npos) {
+        const std::string head = buffer_.substr(0, head_end + 4);
+        std::optional<size_t> length;
+        if (const size_t at = lower(head).find("\r\ncontent-length: "); at != std::string::npos)
+          length = std::stoul(head.substr(at + 18));
+        if (length && buffer_.size() >= head_end + 4 + *length) {
+          std::string response = buffer_.substr(0, head_end + 4 + *length);
+          buffer_.erase(0, response.size());
+          return response;
+        }
+        if (!length && head.rfind("HTTP/1.1 100", 0) == 0) {
+          buffer_.erase(0, head.size());
+          return head;
+        }
+      }
+      const ssize_t n = read_some(buffer_, deadline);
+      if (n <= 0) {
+        if (n == 0 && !buffer_.empty() && buffer_.find("\r\n\r\n") != std::string::npos) {
+          std::string response;
+          response.swap(buffer_);
+          return response;  // delimited by the close
+        }
+        return std::nullopt;
+      }
+    }
+  }
+
+  // A response's head alone (an event stream's, whose body does not end).
+  std::optional<std::string> read_head(double timeout_s = 10) {
+    const auto deadline = after(timeout_s);
+    while (buffer_.find("\r\n\r\n") == std::string::npos)
+      if (read_some(buffer_, deadline) <= 0) return std::nullopt;
+    return buffer_.substr(0, buffer_.find("\r\n\r\n") + 4);
+  }
+
+  // Whether the daemon closed the connection within `timeout_s` (reading and dropping what it sent).
+  bool closed_within(double timeout_s) {
+    const auto deadline = after(timeout_s);
+    std::string sink;
+    for (;;) {
+      const ssize_t n = read_some(sink, deadline);
+      if (n == 0) return true;
+      if (n < 0) return errno != ETIMEDOUT;
+    }
+  }
+
+  static std::string lower(std::string s) {
+    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+    return s;
+  }
+
+ private:
+  // >0 bytes appended, 0 at the close, -1 on error or at the deadline (errno ETIMEDOUT).
+  ssize_t read_some(std::string& out, Clock::time_point deadline) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+    pollfd p{fd_, POLLIN, 0};
+    if (left <= 0 || ::poll(&p, 1, static_cast<int>(left)) <= 0) {
+      errno = ETIMEDOUT;
+      return -1;
+    }
+    char buf[65536];
+    const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+    if (n > 0) out.append(buf, static_cast<size_t>(n));
+    return n;
+  }
+
+  int fd_ = -1;
+  bool connected_ = false;
+  std::string buffer_;
+};
+
+int status_of(const std::optional<std::string>& response) {
+  if (!response || response->size() < 12 || response->rfind("HTTP/1.", 0) != 0) return 0;
+  return std::stoi(response->substr(9, 3));
+}
+
+std::string body_of(const std::string& response) {
+  const size_t at = response.find("\r\n\r\n");
+  return at == std::string::npos ? "" : response.substr(at + 4);
+}
+
+bool has_header(const std::string& response, const std::string& line) {
+  const std::string head = Raw::lower(response.substr(0, response.find("\r\n\r\n") + 2));
+  return head.find("\r\n" + Raw::lower(line) + "\r\n") != std::string::npos;
+}
+
+// The problem document of a response, checked against the contract's schema.
+json problem_of(const std::string& response) {
+  const json p = json::parse(body_of(response), nullptr, false);
+  EXPECT_TRUE(p.is_object()) << response.substr(0, 400);
+  if (p.is_object()) {
+    EXPECT_FALSE(proto::contract_schemas().validate(p, "problem.schema.json")) << p.dump();
+  }
+  EXPECT_TRUE(has_header(response, "Content-Type: application/problem+json")) << response.substr(0, 400);
+  return p;
+}
+
+std::string request(const std::string& method, const std::string& target, const std::string& headers,
+                    const std::string& body = "") {
+  return method + " " + target + " HTTP/1.1\r\nHost: tessera\r\n" + headers + "\r\n" + body;
+}
+
+std::string post_json(const std::string& body, const std::string& extra = "") {
+  return request("POST", "/v1/jobs",
+                 "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n" + extra,
+                 body);
+}
+
+std::string chunk(std::string_view data) {
+  char size[32];
+  std::snprintf(size, sizeof size, "%zx\r\n", data.size());
+  return size + std::string(data) + "\r\n";
+}
+
+// gzip (windowBits 31) or zlib deflate (15) of `text`.
+std::string compress(const std::string& text, int window_bits) {
+  z_stream z{};
+  deflateInit2(&z, 9, Z_DEFLATED, window_bits, 9, Z_DEFAULT_STRATEGY);
+  std::string out(deflateBound(&z, text.size()), '\0');
+  z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(text.data()));
+  z.avail_in = static_cast<uInt>(text.size());
+  z.next_out = reinterpret_cast<Bytef*>(out.data());
+  z.avail_out = static_cast<uInt>(out.size());
+  deflate(&z, Z_FINISH);
+  out.resize(z.total_out);
+  deflateEnd(&z);
+  return out;
+}
+
+// VmRSS or VmHWM of a process, in bytes.
+int64_t proc_bytes(pid_t pid, const std::string& field) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind(field + ":", 0) == 0) return std::stoll(line.substr(field.size() + 1)) * 1024;
+  return -1;
+}
+
+class HostileTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("tessera-hostile-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+  }
+  void TearDown() override {
+    daemon_.reset();
+    fs::remove_all(dir_);
+  }
+  void start(std::vector<std::string> extra) {
+    std::vector<std::string> a = {"--threads", "1", "--log-level", "warn", "--max-width", "512", "--max-height", "512"};
+    a.insert(a.end(), extra.begin(), extra.end());
+    daemon_ = std::make_unique<Daemon>(dir_, a);
+  }
+  int port() const { return daemon_->port(); }
+
+  // One request on a fresh connection from `source`; its response.
+  std::optional<std::string> exchange(const std::string& data, const char* source = "127.0.0.1",
+                                      double timeout_s = 10) {
+    Raw r(port(), source);
+    if (!r.send(data)) return std::nullopt;
+    return r.read_response(timeout_s);
+  }
+
+  fs::path dir_;
+  std::unique_ptr<Daemon> daemon_;
+};
+
+// A small job of `size` bytes, padded with spaces after its document (JSON allows them).
+std::string padded_job(size_t size) {
+  std::string text = cornell_job(16, 1).dump();
+  if (text.size() < size) text.append(size - text.size(), ' ');
+  return text;
+}
+
+// ---- bodies: chunked, compressed, and the memory they may take ---------------------------------------------------
+
+TEST_F(HostileTest, ChunkedBodiesAreHeldToTheBodyLimit) {
+  start({"--max-body-bytes", "1000000"});
+  // A job of 1.16 MB sent chunked is refused, as it would be with a Content-Length.
+  {
+    Raw r(port());
+    const std::string job = padded_job(1'160'000);
+    std::string data = request("POST", "/v1/jobs", "Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n");
+    for (size_t at = 0; at < job.size(); at += 8192) data += chunk(std::string_view(job).substr(at, 8192));
+    data += "0\r\n\r\n";
+    r.send(data);
+    const auto response = r.read_response();
+    ASSERT_EQ(status_of(response), 413) << response.value_or("no answer").substr(0, 400);
+    EXPECT_NE(problem_of(*response).value("detail", "").find("--max-body-bytes"), std::string::npos);
+    EXPECT_TRUE(has_header(*response, "Connection: close"));
+  }
+  // The same within the limit is accepted, chunked.
+  {
+    const std::string job = padded_job(900'000);
+    std::string data = request("POST", "/v1/jobs", "Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n");
+    for (size_t at = 0; at < job.size(); at += 65536) data += chunk(std::string_view(job).substr(at, 65536));
+    EXPECT_EQ(status_of(exchange(data + "0\r\n\r\n")), 202);
+  }
+  // A chunked stream that never ends is answered 413 as soon as it passes the limit, before the rest is read: after
+  // 64 MiB sent the daemon has not grown by half of that.
+  const int64_t before = proc_bytes(daemon_->pid(), "VmHWM");
+  Raw r(port());
+  r.send(request("POST", "/v1/jobs", "Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n"));
+  const std::string piece = chunk(std::string(65536, ' '));
+  for (int i = 0; i < 1024 && r.send(piece); ++i) {
+  }
+  const auto response = r.read_response();
+  EXPECT_EQ(status_of(response), 413) << response.value_or("no answer").substr(0, 400);
+  EXPECT_LT(proc_bytes(daemon_->pid(), "VmHWM") - before, 32 << 20);
+  EXPECT_EQ(status_of(exchange(request("GET", "/livez", ""))), 200);
+}
+
+TEST_F(HostileTest, CompressedBodiesAreHeldToTheBodyLimitOnceInflated) {
+  start({"--max-body-bytes", "1000000"});
+  // 200 MiB of spaces: about 200 KB of gzip, within the limit as sent.
+  const std::string bomb(200u << 20, ' ');
+  for (const auto& [coding, bits] : {std::pair{"gzip", 31}, std::pair{"deflate", 15}}) {
+    const std::string packed = compress(bomb, bits);
+    ASSERT_LT(packed.size(), 1'000'000u);
+    const int64_t before = proc_bytes(daemon_->pid(), "VmHWM");
+    const auto response =
+        exchange(post_json(packed, std::string("Content-Encoding: ") + coding + "\r\n"), "127.0.0.1", 30);
+    ASSERT_EQ(status_of(response), 413) << coding << ": " << response.value_or("no answer").substr(0, 400);
+    EXPECT_NE(problem_of(*response).value("detail", "").find("decompressed"), std::string::npos);
+    EXPECT_LT(proc_bytes(daemon_->pid(), "VmHWM") - before, 32 << 20) << coding;
+  }
+  // A compressed job within the limit is read as any other.
+  EXPECT_EQ(status_of(exchange(post_json(compress(padded_job(50'000), 31), "Content-Encoding: gzip\r\n"))), 202);
+  // Codings the daemon does not decode are refused before the body is read.
+  const auto refused = exchange(post_json(padded_job(100), "Content-Encoding: zstd\r\n"));
+  ASSERT_EQ(status_of(refused), 415);
+  EXPECT_TRUE(has_header(*refused, "Accept-Encoding: gzip, deflate, br"));
+}
+
+// Issue 27's memory ceiling: the bodies above and 50 MB documents refused one after another leave the daemon's
+// resident memory where it was, and its peak within a few times one body.
+TEST_F(HostileTest, RefusedBodiesLeaveNoMemoryBehind) {
+  start({"--max-body-bytes", "67108864"});
+  ASSERT_EQ(status_of(exchange(request("GET", "/livez", ""))), 200);
+  const int64_t idle = proc_bytes(daemon_->pid(), "VmRSS");
+  ASSERT_GT(idle, 0);
+  // A 50 MB key: the answer quotes a bounded part of it.
+  const std::string key_job = R"({"kind": "scene", ")" + std::string(50u << 20, 'k') + R"(": 1})";
+  // A 50 MB document of the wrong shape: the schema's error message names a 50 MB string value.
+  const std::string value_job = R"({"kind": "scene", "priority": ")" + std::string(50u << 20, 'v') + R"("})";
+  for (int round = 0; round < 3; ++round) {
+    for (const std::string* body : {&key_job, &value_job}) {
+      const auto response = exchange(post_json(*body), "127.0.0.1", 60);
+      ASSERT_TRUE(response) << "no answer";
+      EXPECT_TRUE(status_of(response) == 400 || status_of(response) == 422) << response->substr(0, 300);
+      EXPECT_LT(response->size(), 8192u) << "the problem quotes the document: " << response->substr(0, 300);
+    }
+    Raw chunked(port());
+    chunked.send(request("POST", "/v1/jobs", "Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n"));
+    const std::string piece = chunk(std::string(1u << 20, ' '));
+    for (int i = 0; i < 80 && chunked.send(piece); ++i) {
+    }
+    EXPECT_EQ(status_of(chunked.read_response()), 413);
+  }
+  const int64_t rss = proc_bytes(daemon_->pid(), "VmRSS"), peak = proc_bytes(daemon_->pid(), "VmHWM");
+  std::printf("idle %lld MB, after %lld MB, peak %lld MB\n", static_cast<long long>(idle >> 20),
+              static_cast<long long>(rss >> 20), static_cast<long long>(peak >> 20));
+  EXPECT_LT(rss - idle, 32 << 20) << "memory not returned after the refused bodies";
+  EXPECT_LT(peak - idle, 320 << 20) << "a 50 MB body took more than six times its size";
+}
+
+// ---- numbers, keys ---------------------------------------------------------------------------------------------
+
+TEST_F(HostileTest, NumbersBeyondADoubleAre400NamingTheField) {
+  start({});
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {R"({"kind": "scene", "render": {"width": 1e400}})", "/render/width"},
+      {R"({"kind": "material", "material": {"type": "lambert"}, "render": {"exposure_ev": -1e400}})",
+       "/render/exposure_ev"},
+      {R"({"kind": "scene", "scene": {"objects": [{"shape": "mesh", "positions": [0, 0, 0, 1e999, 0, 0]}]}})",
+       "/scene/objects/0/positions/3"},
+  };
+  for (const auto& [doc, pointer] : cases) {
+    const auto response = exchange(post_json(doc));
+    ASSERT_EQ(status_of(response), 400) << doc << ": " << response.value_or("no answer").substr(0, 400);
+    const json p = problem_of(*response);
+    EXPECT_EQ(p.value("pointer", ""), pointer) << p.dump();
+    EXPECT_NE(p.value("detail", "").find("overflow"), std::string::npos) << p.dump();
+  }
+}
+
+// ---- protocol edges (RFC 9112) ---------------------------------------------------------------------------------
+
+TEST_F(HostileTest, ExpectContinueAboveTheLimitIs413WithoutContinue) {
+  start({"--max-body-bytes", "1000000"});
+  Raw r(port());
+  r.send(request("POST", "/v1/jobs",
+                 "Content-Type: application/json\r\nContent-Length: 5000000\r\nExpect: 100-continue\r\n"));
+  const auto response = r.read_response();
+  ASSERT_EQ(status_of(response), 413) << response.value_or("no answer");
+  problem_of(*response);
+  EXPECT_TRUE(r.closed_within(5));
+  // Within the limit the client is told to go on.
+  Raw ok(port());
+  const std::string job = padded_job(1000);
+  ok.send(request("POST", "/v1/jobs",
+                  "Content-Type: application/json\r\nContent-Length: " + std::to_string(job.size()) +
+                      "\r\nExpect: 100-continue\r\n"));
+  EXPECT_EQ(status_of(ok.read_response()), 100);
+  ok.send(job);
+  EXPECT_EQ(status_of(ok.read_response()), 202);
+}
+
+TEST_F(HostileTest, AmbiguousFramingIs400AndCloses) {
+  start({});
+  const std::string job = padded_job(1000);
+  const std::string length = "Content-Length: " + std::to_string(job.size()) + "\r\n";
+  const std::string head = "POST /v1/jobs HTTP/1.1\r\nHost: a\r\nContent-Type: application/json\r\n";
+  const std::vector<std::pair<std::string, int>> cases = {
+      {head + length + "Content-Length: 5\r\n\r\n" + job, 400},
+      {head + "Content-Length: 1000, 1001\r\n\r\n" + job, 400},
+      {head + length + "Transfer-Encoding: chunked\r\n\r\n" + job, 400},
+      {"POST /v1/jobs HTTP/1.1\r\nHost: a\r\nContent-Type: application/json\r\nTransfer-Encoding: gzip, "
+       "chunked\r\n\r\n",
+       501},
+      {"GET /livez HTTP/1.1\r\n\r\n", 400},
+      {"GET /livez HTTP/1.1\r\nHost: a\r\nHost: b\r\n\r\n", 400},
+      {"TRACE /livez HTTP/1.1\r\nHost: a\r\n\r\n", 501},
+  };
+  for (const auto& [data, status] : cases) {
+    Raw r(port());
+    r.send(data);
+    const auto response = r.read_response();
+    ASSERT_EQ(status_of(response), status) << data.substr(0, 120) << "\n" << response.value_or("no answer");
+    problem_of(*response);
+    if (data.find("/v1/jobs") != std::string::npos) {
+      EXPECT_TRUE(r.closed_within(5)) << data.substr(0, 120);
+    }
+  }
+  // Identical repeated lengths are one length (RFC 9112, 6.3), and HTTP/1.0 needs no Host.
+  EXPECT_EQ(status_of(exchange(head + length + length + "\r\n" + job)), 202);
+  EXPECT_EQ(status_of(exchange("GET /livez HTTP/1.0\r\n\r\n")), 200);
+}
+
+TEST_F(HostileTest, PipelinedRequestsAreAnsweredInOrder) {
+  start({});
+  const std::string job = padded_job(300);
+  Raw r(port());
+  r.send(request("GET", "/livez", "") + post_json(job) + request("GET", "/v1/jobs?limit=1", "") +
+         request("GET", "/no/such/route", "") + request("GET", "/readyz", "Connection: close\r\n"));
+  const int expected[] = {200, 202, 200, 404, 200};
+  for (int status : expected) {
+    const auto response = r.read_response();
+    ASSERT_EQ(status_of(response), status) << response.value_or("no answer");
+  }
+  EXPECT_TRUE(r.closed_within(5));
+}
+
+TEST_F(HostileTest, ProblemsQuoteBoundedParts) {
+  start({"--max-body-bytes", "8388608"});
+  for (const std::string& doc :
+       {R"({"kind": "scene", ")" + std::string(4u << 20, 'k') + R"(": 1})",
+        R"({"kind": "scene", "render": {"estimator": ")" + std::string(4u << 20, 'e') + R"("}})",
+        R"({"kind": ")" + std::string(4u << 20, 'z') + R"("})"}) {
+    const auto response = exchange(post_json(doc));
+    ASSERT_TRUE(status_of(response) == 400 || status_of(response) == 422) << response.value_or("no answer");
+    EXPECT_LT(response->size(), 8192u) << response->substr(0, 300);
+    problem_of(*response);
+  }
+}
+
+// ---- slow clients, floods ----------------------------------------------------------------------------------------
+
+// Clients that send their headers one byte at a time hold no thread: with 8 request threads, 24 such connections
+// leave every request of another client answered at once, and each slow one gets 408 at its deadline.
+TEST_F(HostileTest, SlowHeadersStarveNobodyAndTimeOut) {
+  start({"--http-threads", "8", "--header-timeout-s", "3"});
+  std::vector<std::unique_ptr<Raw>> slow;
+  for (int i = 0; i < 24; ++i) slow.push_back(std::make_unique<Raw>(port()));
+  const std::string head = request("GET", "/v1/jobs", "X-Slow: " + std::string(64, 's') + "\r\n");
+  const auto started = Clock::now();
+  int probes_ok = 0;
+  double worst_s = 0;
+  for (size_t k = 0; k < 10; ++k) {
+    for (auto& s : slow) s->send(head.substr(k, 1));
+    const auto t = Clock::now();
+    const auto a = exchange(request("GET", "/livez", ""), "127.0.0.2", 3);
+    const auto b = exchange(request("GET", "/v1/jobs", ""), "127.0.0.2", 3);
+    worst_s = std::max(worst_s, std::chrono::duration<double>(Clock::now() - t).count());
+    probes_ok += status_of(a) == 200 && status_of(b) == 200;
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  EXPECT_EQ(probes_ok, 10) << "slowest pair of probes: " << worst_s << " s";
+  // Every slow head was cut off: 408, within the deadline and a second.
+  for (auto& s : slow) {
+    const auto response = s->read_response(5);
+    EXPECT_EQ(status_of(response), 408) << response.value_or("no answer");
+  }
+  // (Bounded, not timed: the slow heads were cut off long before they could have finished.)
+  EXPECT_LT(std::chrono::duration<double>(Clock::now() - started).count(), 3 + 5);
+}
+
+TEST_F(HostileTest, ConnectionsPerClientAreCapped) {
+  start({"--max-connections-per-client", "8"});
+  std::vector<std::unique_ptr<Raw>> held;
+  for (int i = 0; i < 8; ++i) held.push_back(std::make_unique<Raw>(port()));
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  // The ninth from the same address is told so and closed; another address is served.
+  Raw ninth(port());
+  const auto refused = ninth.read_response(5);
+  ASSERT_EQ(status_of(refused), 429) << refused.value_or("no answer");
+  EXPECT_TRUE(has_header(*refused, "Retry-After: 1"));
+  EXPECT_NE(problem_of(*refused).value("detail", "").find("--max-connections-per-client"), std::string::npos);
+  EXPECT_EQ(status_of(exchange(request("GET", "/livez", ""), "127.0.0.2")), 200);
+  // Once they close, the address is served again.
+  held.clear();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(status_of(exchange(request("GET", "/livez", ""))), 200);
+}
+
+// A burst of connections while the daemon is not accepting (stopped) waits in the listen backlog: with cpp-httplib's
+// backlog of 5, all but six would wait for SYN retransmits (1 s, 3 s, 7 s).
+TEST_F(HostileTest, ABurstOfConnectionsFitsTheBacklog) {
+  start({"--max-connections-per-client", "0"});
+  ASSERT_EQ(::kill(daemon_->pid(), SIGSTOP), 0);
+  std::vector<int> fds;
+  for (int i = 0; i < 100; ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+    sockaddr_in to{};
+    to.sin_family = AF_INET;
+    to.sin_port = htons(static_cast<uint16_t>(port()));
+    ::inet_pton(AF_INET, "127.0.0.1", &to.sin_addr);
+    ::connect(fd, reinterpret_cast<sockaddr*>(&to), sizeof to);
+    fds.push_back(fd);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  int established = 0;
+  for (int fd : fds) {
+    pollfd p{fd, POLLOUT, 0};
+    int error = 0;
+    socklen_t len = sizeof error;
+    if (::poll(&p, 1, 0) == 1 && ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &error, &len) == 0 && error == 0) ++established;
+  }
+  ::kill(daemon_->pid(), SIGCONT);
+  for (int fd : fds) ::close(fd);
+  EXPECT_EQ(established, 100);
+  EXPECT_EQ(status_of(exchange(request("GET", "/livez", ""))), 200);
+}
+
+// Event streams run on threads of their own, at most --max-event-streams: 40 open streams leave the 4 request
+// threads to status requests, and the stream beyond the limit is 503.
+TEST_F(HostileTest, EventStreamsTakeNoRequestThreads) {
+  start({"--http-threads", "4", "--max-event-streams", "40", "--max-connections-per-client", "0"});
+  std::vector<std::unique_ptr<Raw>> streams;
+  for (int i = 0; i < 40; ++i) {
+    streams.push_back(std::make_unique<Raw>(port()));
+    streams.back()->send(request("GET", "/v1/events", ""));
+  }
+  for (auto& s : streams) ASSERT_EQ(status_of(s->read_head(5)), 200);
+  double worst_s = 0;
+  int ok = 0;
+  for (int i = 0; i < 20; ++i) {
+    const auto t = Clock::now();
+    ok += status_of(exchange(request("GET", "/v1/jobs", ""), "127.0.0.2", 3)) == 200;
+    worst_s = std::max(worst_s, std::chrono::duration<double>(Clock::now() - t).count());
+  }
+  EXPECT_EQ(ok, 20) << "slowest status request: " << worst_s << " s";
+  const auto refused = exchange(request("GET", "/v1/events", ""), "127.0.0.2", 5);
+  ASSERT_EQ(status_of(refused), 503) << refused.value_or("no answer");
+  EXPECT_NE(problem_of(*refused).value("detail", "").find("--max-event-streams"), std::string::npos);
+}
+
+// ---- isolation between users -----------------------------------------------------------------------------------
+
+// The tokens of two users and an admin, written beside the data directory.
+struct Users {
+  std::string alice = "alice-token-0123456789", bob = "bob-token-0123456789", root = "root-token-0123456789";
+  fs::path write(const fs::path& dir) const {
+    const fs::path file = dir.string() + "-tokens.json";
+    std::ofstream(file) << json::array({{{"token", alice}, {"name", "alice"}, {"role", "user"}},
+                                        {{"token", bob}, {"name", "bob"}, {"role", "user"}},
+                                        {{"token", root}, {"name", "ops"}, {"role", "admin"}}});
+    return file;
+  }
+};
+
+httplib::Headers bearer(const std::string& token) {
+  return {{"Authorization", "Bearer " + token}};
+}
+
+// Content addressing shares an asset's bytes between users who upload the same file, never its visibility.
+TEST_F(HostileTest, AssetsAreIsolatedBetweenUsers) {
+  const Users users;
+  const fs::path tokens = users.write(dir_);
+  start({"--tokens", tokens.string()});
+  auto c = daemon_->client();
+  httplib::MultipartFormDataItems upload;
+  for (const auto& [name, bytes] : triangle_gltf()) upload.push_back({"file", bytes, name, "application/octet-stream"});
+  auto posted = c->Post("/v1/assets", bearer(users.alice), upload);
+  ASSERT_TRUE(posted);
+  ASSERT_EQ(posted->status, 201) << posted->body;
+  const std::string id = json::parse(posted->body)["id"];
+  const json job = {
+      {"kind", "scene"}, {"scene", {{"gltf", id}}}, {"render", {{"width", 16}, {"height", 16}, {"spp", 1}}}};
+
+  // Bob does not see it, cannot delete it, and his job cannot name it: all as for an id that does not exist.
+  auto seen = c->Get("/v1/assets/" + id, bearer(users.bob));
+  ASSERT_TRUE(seen);
+  EXPECT_EQ(seen->status, 404) << seen->body;
+  EXPECT_EQ(seen->body.find("tri.gltf"), std::string::npos);
+  EXPECT_EQ(c->Delete("/v1/assets/" + id, bearer(users.bob))->status, 404);
+  auto bobs_job = c->Post("/v1/jobs", bearer(users.bob), job.dump(), "application/json");
+  EXPECT_EQ(bobs_job->status, 422) << bobs_job->body;
+  EXPECT_NE(bobs_job->body.find("no asset"), std::string::npos) << bobs_job->body;
+  // Alice's own job may name it; the admin sees it.
+  EXPECT_EQ(c->Post("/v1/jobs", bearer(users.alice), job.dump(), "application/json")->status, 202);
+  EXPECT_EQ(c->Get("/v1/assets/" + id, bearer(users.root))->status, 200);
+
+  // Bob uploading the same bytes is told it is new to him (201, not "it exists"), and then it is his too.
+  auto again = c->Post("/v1/assets", bearer(users.bob), upload);
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->status, 201) << again->body;
+  EXPECT_EQ(json::parse(again->body)["id"], id);
+  EXPECT_EQ(c->Post("/v1/assets", bearer(users.bob), upload)->status, 200);
+  EXPECT_EQ(c->Get("/v1/assets/" + id, bearer(users.bob))->status, 200);
+  // Alice deleting it takes away only her claim: Bob's jobs still find it, Alice's no longer.
+  EXPECT_EQ(c->Delete("/v1/assets/" + id, bearer(users.alice))->status, 204);
+  EXPECT_EQ(c->Get("/v1/assets/" + id, bearer(users.alice))->status, 404);
+  EXPECT_EQ(c->Post("/v1/jobs", bearer(users.bob), job.dump(), "application/json")->status, 202);
+  EXPECT_EQ(c->Post("/v1/jobs", bearer(users.alice), job.dump(), "application/json")->status, 422);
+  // The last owner's delete removes it.
+  EXPECT_EQ(c->Delete("/v1/assets/" + id, bearer(users.bob))->status, 204);
+  EXPECT_EQ(c->Get("/v1/assets/" + id, bearer(users.root))->status, 404);
+}
+
+}  // namespace
+}  // namespace tessera::server::test
