@@ -109,17 +109,7 @@ std::variant<Submitted, Problem> JobService::submit(const Caller& caller, Submit
   const AcceptedJob& accepted = request.job;
   if (accepted.priority > options_.max_user_priority && !caller.admin)
     return priority_needs_admin(accepted.priority, options_.max_user_priority);
-  if (options_.max_queued_per_user > 0) {
-    const int queued = store_.count_by_state(caller.name).at(JobState::kQueued);
-    if (queued >= options_.max_queued_per_user) {
-      Problem p{429,
-                "you have " + std::to_string(queued) +
-                    " jobs queued, the most this server allows (--max-queued-per-user); retry later",
-                std::nullopt};
-      p.retry_after_s = 30;
-      return p;
-    }
-  }
+  if (auto full = queue_full(caller.name)) return *full;
   JobRecord job;
   job.id = new_job_id();
   job.kind = accepted.kind;
@@ -239,7 +229,23 @@ std::variant<ActionTaken, Problem> JobService::taken(const std::string& id) {
   return ActionTaken{*now, status(*now), now->state == JobState::kRunning};
 }
 
+std::optional<Problem> JobService::queue_full(const std::string& owner) {
+  if (options_.max_queued_per_user <= 0) return std::nullopt;
+  const int queued = store_.count_by_state(owner).at(JobState::kQueued);
+  if (queued < options_.max_queued_per_user) return std::nullopt;
+  Problem p{429,
+            "you have " + std::to_string(queued) +
+                " jobs queued, the most this server allows (--max-queued-per-user); retry later",
+            std::nullopt};
+  p.retry_after_s = 30;
+  return p;
+}
+
 std::variant<ActionTaken, Problem> JobService::act(const JobRecord& job, JobAction action) {
+  // Resuming a paused job or requeueing an ended one queues it: the owner's cap holds as for a new job (else pausing
+  // at the cap, submitting and resuming would queue one more).
+  if (action_target(action) == JobState::kQueued && action_allowed(action, job.state))
+    if (auto full = queue_full(job.owner)) return *full;
   Scheduler::Outcome outcome = Scheduler::Outcome::kConflict;
   switch (action) {
     case JobAction::kCancel:

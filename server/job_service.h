@@ -87,7 +87,8 @@ class JobService {
   // A finished output (kResultPng or kResultExr), or why there is none.
   std::variant<std::unique_ptr<FileReader>, Problem> result(const JobRecord& job, JobFile file);
 
-  // Cancel, pause, resume or requeue (409 with the state table's reason when the job's state does not allow it).
+  // Cancel, pause, resume or requeue (409 with the state table's reason when the job's state does not allow it; 429
+  // when resuming or requeueing would queue more of the owner's jobs than --max-queued-per-user).
   std::variant<ActionTaken, Problem> act(const JobRecord& job, JobAction action);
   std::variant<ActionTaken, Problem> set_priority(const Caller& caller, const JobRecord& job, int priority);
   // Deletes a job: its render stopped, its files and record gone, its events forgotten. With
@@ -102,6 +103,8 @@ class JobService {
 
  private:
   void publish_state(const std::string& id);
+  // 429 when `owner` has --max-queued-per-user jobs queued already.
+  std::optional<Problem> queue_full(const std::string& owner);
   std::variant<ActionTaken, Problem> taken(const std::string& id);
 
   JobStore& store_;

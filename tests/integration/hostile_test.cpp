@@ -479,6 +479,9 @@ TEST_F(HostileTest, SlowHeadersStarveNobodyAndTimeOut) {
     const auto response = s->read_response(5);
     EXPECT_EQ(status_of(response), 408) << response.value_or("no answer");
   }
+  const auto metrics = exchange(request("GET", "/metrics", ""), "127.0.0.2");
+  EXPECT_NE(body_of(metrics.value_or("")).find("\ntessera_http_timeouts_total 24\n"), std::string::npos)
+      << metrics.value_or("no answer");
   // (Bounded, not timed: the slow heads were cut off long before they could have finished.)
   EXPECT_LT(std::chrono::duration<double>(Clock::now() - started).count(), 3 + 5);
 }
@@ -495,6 +498,9 @@ TEST_F(HostileTest, ConnectionsPerClientAreCapped) {
   EXPECT_TRUE(has_header(*refused, "Retry-After: 1"));
   EXPECT_NE(problem_of(*refused).value("detail", "").find("--max-connections-per-client"), std::string::npos);
   EXPECT_EQ(status_of(exchange(request("GET", "/livez", ""), "127.0.0.2")), 200);
+  const auto metrics = exchange(request("GET", "/metrics", ""), "127.0.0.2");
+  EXPECT_NE(body_of(metrics.value_or("")).find("\ntessera_http_connections_refused_total 1\n"), std::string::npos)
+      << metrics.value_or("no answer");
   // Once they close, the address is served again.
   held.clear();
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
@@ -614,6 +620,52 @@ TEST_F(HostileTest, AssetsAreIsolatedBetweenUsers) {
   // The last owner's delete removes it.
   EXPECT_EQ(c->Delete("/v1/assets/" + id, bearer(users.bob))->status, 204);
   EXPECT_EQ(c->Get("/v1/assets/" + id, bearer(users.root))->status, 404);
+}
+
+// ---- the per-user queue cap ---------------------------------------------------------------------------------------
+
+std::string state_of(httplib::Client& c, const std::string& id) {
+  auto res = c.Get("/v1/jobs/" + id);
+  return res && res->status == 200 ? json::parse(res->body).value("state", "") : "";
+}
+
+// However a job comes to be queued (submitted, resumed, requeued), the owner's queued jobs stay within
+// --max-queued-per-user: pausing at the cap, submitting and resuming queued one more.
+TEST_F(HostileTest, TheQueueCapHoldsAtResumeAndRequeue) {
+  start({"--max-queued-per-user", "3", "--max-jobs", "1"});
+  auto c = daemon_->client();
+  const auto submit = [&] {
+    auto res = c->Post("/v1/jobs", long_cornell_job().dump(), "application/json");
+    EXPECT_TRUE(res && res->status == 202) << (res ? res->body : "no answer");
+    return res && res->status == 202 ? json::parse(res->body).value("id", "") : "";
+  };
+  const std::string running = submit();
+  for (int i = 0; i < 600 && state_of(*c, running) != "running"; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  ASSERT_EQ(state_of(*c, running), "running");
+  const std::string a = submit(), b = submit(), d = submit();
+  auto over = c->Post("/v1/jobs", long_cornell_job().dump(), "application/json");
+  ASSERT_EQ(over->status, 429) << over->body;
+
+  // Paused, a job does not count; resumed at the cap, it is refused and stays paused.
+  ASSERT_EQ(c->Post("/v1/jobs/" + a + "/pause")->status, 200);
+  submit();
+  auto resumed = c->Post("/v1/jobs/" + a + "/resume");
+  EXPECT_EQ(resumed->status, 429) << resumed->body;
+  EXPECT_EQ(resumed->get_header_value("Retry-After"), "30");
+  EXPECT_EQ(state_of(*c, a), "paused");
+  // The same for a cancelled job requeued.
+  ASSERT_EQ(c->Post("/v1/jobs/" + b + "/cancel")->status, 200);
+  submit();
+  auto requeued = c->Post("/v1/jobs/" + b + "/requeue");
+  EXPECT_EQ(requeued->status, 429) << requeued->body;
+  EXPECT_EQ(state_of(*c, b), "cancelled");
+  const json queued = json::parse(c->Get("/v1/jobs?state=queued")->body);
+  EXPECT_EQ(queued["jobs"].size(), 3u);
+  // Below the cap again, the resume is taken.
+  ASSERT_EQ(c->Post("/v1/jobs/" + d + "/cancel")->status, 200);
+  EXPECT_EQ(c->Post("/v1/jobs/" + a + "/resume")->status, 200);
+  EXPECT_EQ(state_of(*c, a), "queued");
 }
 
 }  // namespace
