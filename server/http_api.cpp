@@ -154,6 +154,26 @@ void send_file_or_problem(const Request& req, Response& res, std::variant<std::u
   send_file(req, res, std::move(std::get<std::unique_ptr<FileReader>>(file)), media_type);
 }
 
+// The job store as /readyz and /metrics both report it: failing while the end of a render waits for the store to
+// take it (a full disk, a database locked or failing), or when the store cannot be read now; the job counts when it
+// can.
+struct StoreHealth {
+  std::optional<std::map<JobState, int>> counts;
+  bool failing = false;
+};
+
+StoreHealth store_health(ApiContext& ctx) {
+  StoreHealth h;
+  try {
+    h.counts = ctx.jobs.counts();
+  } catch (const JobStoreError& e) {
+    ctx.metrics.count_job_store_error();
+    log(LogLevel::kWarn, "the job store cannot be read", {{"error", e.what()}});
+  }
+  h.failing = !h.counts || ctx.jobs.store_failing();
+  return h;
+}
+
 bool is_event_stream_path(std::string_view path) {
   return path == "/v1/events" || (path.size() > 7 && path.compare(path.size() - 7, 7, "/events") == 0);
 }
@@ -585,16 +605,18 @@ std::vector<Route> routes(ApiContext* ctx) {
        [ctx](const Request&, Response& r) {
          Metrics::Gauges g;
          // A failing store costs the scrape its job counts, not the scrape: the rest is what an operator needs then.
-         try {
-           g.jobs = ctx->jobs.counts();
-         } catch (const JobStoreError& e) {
-           g.job_store_up = false;
-           ctx->metrics.count_job_store_error();
-           log(LogLevel::kWarn, "metrics without job counts: the job store failed", {{"error", e.what()}});
-         }
+         const StoreHealth health = store_health(*ctx);
+         g.jobs = health.counts;
+         g.job_store_up = !health.failing;
          g.render_threads = ctx->pool ? ctx->pool->size() : 0;
          g.render_threads_busy = ctx->pool ? ctx->pool->busy() : 0;
          g.event_watchers = ctx->events.watchers();
+         if (ctx->transport) {
+           const TransportStats t = ctx->transport->stats();
+           g.http_connections = t.connections;
+           g.http_refused_total = t.refused_total;
+           g.http_timed_out_total = t.timed_out_total;
+         }
          g.data_dir_available_bytes = available_bytes(*ctx);
          g.min_free_disk_bytes = ctx->min_free_disk_bytes;
          r.set_content(ctx->metrics.render(g), "text/plain; version=0.0.4; charset=utf-8");
@@ -612,7 +634,7 @@ std::vector<Route> routes(ApiContext* ctx) {
          json storage = {{"available_bytes", available ? json(*available) : json(nullptr)},
                          {"min_free_disk_bytes", ctx->min_free_disk_bytes},
                          {"below_minimum", available && *available < ctx->min_free_disk_bytes},
-                         {"job_store_failing", ctx->jobs.store_failing()}};
+                         {"job_store_failing", store_health(*ctx).failing}};
          if (ctx->jobs.accepting()) return send_json(r, 200, {{"status", "ready"}, {"storage", storage}});
          send_problem(r, 503, "not accepting jobs (starting or shutting down)");
        }},

@@ -16,6 +16,7 @@
 #include "server/assets.h"
 #include "server/auth.h"
 #include "server/events.h"
+#include "server/http_transport.h"
 #include "server/job_service.h"
 #include "server/metrics.h"
 #include "server/submission.h"
@@ -41,6 +42,7 @@ struct ApiContext {
   // less than this available to the daemon; 0: never.
   uint64_t min_free_disk_bytes = 0;
   std::filesystem::path data_dir;
+  const HttpTransport* transport = nullptr;  // for the connection gauges (none when served by a plain httplib::Server)
 };
 
 // Every route the API serves, as OpenAPI names it ("/v1/jobs/{id}"), for the test that holds the two in step.

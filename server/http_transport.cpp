@@ -236,7 +236,7 @@ struct HttpTransport::Impl {
     bool logged = false;
   };
   std::unordered_map<std::string, Throttle> throttles;
-  std::atomic<int64_t> refused_total{0}, timed_out_total{0}, streams_now{0};
+  std::atomic<int64_t> refused_total{0}, timed_out_total{0};
 
   // Reactor-owned.
   std::unordered_map<int, std::unique_ptr<Connection>> waiting;
@@ -584,7 +584,6 @@ struct HttpTransport::Impl {
     const bool last = stopping || static_cast<size_t>(c->served + 1) >= server.keep_alive_max_count_;
     bool client_closes = false;
     bool ok = false;
-    if (c->long_lived) ++streams_now;
     {
       Stream stream(*this, *c);
       t_connection = c.get();
@@ -595,7 +594,6 @@ struct HttpTransport::Impl {
       }
       t_connection = nullptr;
     }
-    if (c->long_lived) --streams_now;
     ++c->served;
     if (!ok || c->failure == ReadFailure::kClosed || c->failure == ReadFailure::kTooSlow) {
       return close_connection(std::move(c));  // nothing more to say to this client
@@ -808,7 +806,6 @@ TransportStats HttpTransport::stats() const {
     std::lock_guard<std::mutex> lock(impl_->mutex);
     s.connections = impl_->connections;
   }
-  s.streams = impl_->streams_now;
   s.refused_total = impl_->refused_total;
   s.timed_out_total = impl_->timed_out_total;
   return s;

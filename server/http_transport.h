@@ -50,8 +50,7 @@ enum class ReadFailure { kNone, kTooLarge, kTooSlow, kClosed };
 
 struct TransportStats {
   int64_t connections = 0;      // open now
-  int64_t streams = 0;          // long-lived responses being sent now
-  int64_t refused_total = 0;    // connections answered 429/503 at accept and closed
+  int64_t refused_total = 0;    // answered 429/503 at accept, or as an event stream beyond the limit, and closed
   int64_t timed_out_total = 0;  // request heads or transfers that missed their deadline (408 or closed)
 };
 

@@ -120,6 +120,7 @@ int run(const Config& config) {
   transport.max_body_wire_bytes = 2 * static_cast<uint64_t>(config.max_body_bytes) + (64u << 10);
   transport.is_long_lived = is_event_stream_target;
   HttpTransport http(transport);
+  ctx.transport = &http;
   install_api(http, ctx);
   // SO_REUSEADDR only: a restart binds at once over connections in TIME_WAIT, but a second daemon on the port of a
   // running one fails to bind (cpp-httplib's default adds SO_REUSEPORT, with which the kernel would share the port

@@ -46,17 +46,18 @@ bool Metrics::record_job_end(double seconds, const std::function<bool()>& record
 
 std::string Metrics::render(const Gauges& g) const {
   std::ostringstream out;
-  out << "# HELP tessera_job_store_up Whether the job store answered this scrape (0: it failed, and the job counts "
-         "are left out).\n# TYPE tessera_job_store_up gauge\n"
+  out << "# HELP tessera_job_store_up Whether the job store works (0: it could not be read for this scrape, or the end "
+         "of a render waits for it to take a write; as /readyz's job_store_failing).\n"
+         "# TYPE tessera_job_store_up gauge\n"
       << "tessera_job_store_up " << (g.job_store_up ? 1 : 0) << "\n";
-  if (g.job_store_up) {
+  if (g.jobs) {
     // Counts the store could not give are left out rather than reported as zero.
     out << "# HELP tessera_jobs Jobs in the store by state.\n# TYPE tessera_jobs gauge\n";
-    for (const auto& [state, n] : g.jobs)
+    for (const auto& [state, n] : *g.jobs)
       out << "tessera_jobs{state=\"" << job_state_name(state) << "\"} " << n << "\n";
-    auto queued = g.jobs.find(JobState::kQueued);
+    auto queued = g.jobs->find(JobState::kQueued);
     out << "# HELP tessera_queue_length Jobs waiting to be rendered.\n# TYPE tessera_queue_length gauge\n"
-        << "tessera_queue_length " << (queued == g.jobs.end() ? 0 : queued->second) << "\n";
+        << "tessera_queue_length " << (queued == g.jobs->end() ? 0 : queued->second) << "\n";
   }
   out << "# HELP tessera_samples_rendered_total Pixel samples rendered by this process.\n"
       << "# TYPE tessera_samples_rendered_total counter\n"
@@ -69,6 +70,17 @@ std::string Metrics::render(const Gauges& g) const {
   out << "# HELP tessera_event_watchers Server-Sent Events streams waiting for events.\n"
       << "# TYPE tessera_event_watchers gauge\n"
       << "tessera_event_watchers " << g.event_watchers << "\n";
+  if (g.http_connections) {
+    out << "# HELP tessera_http_connections Open client connections.\n# TYPE tessera_http_connections gauge\n"
+        << "tessera_http_connections " << *g.http_connections << "\n";
+    out << "# HELP tessera_http_connections_refused_total Connections refused at accept: too many in all (503) or from "
+           "one address (429), or an event stream beyond --max-event-streams (503).\n"
+        << "# TYPE tessera_http_connections_refused_total counter\n"
+        << "tessera_http_connections_refused_total " << g.http_refused_total.value_or(0) << "\n";
+    out << "# HELP tessera_http_timeouts_total Request heads, bodies or responses that missed their deadline (408 or "
+           "closed).\n# TYPE tessera_http_timeouts_total counter\n"
+        << "tessera_http_timeouts_total " << g.http_timed_out_total.value_or(0) << "\n";
+  }
   out << "# HELP tessera_jobs_expired_total Finished jobs deleted by the retention sweep (--retain-finished).\n"
       << "# TYPE tessera_jobs_expired_total counter\n"
       << "tessera_jobs_expired_total " << expired_jobs_.load(std::memory_order_relaxed) << "\n";

@@ -27,11 +27,14 @@ class Metrics {
   void count_job_store_error() { job_store_errors_.fetch_add(1, std::memory_order_relaxed); }
 
   struct Gauges {
-    std::map<JobState, int> jobs;
-    bool job_store_up = true;  // false: the store failed when asked for `jobs`, which is then left out
+    std::optional<std::map<JobState, int>> jobs;  // nothing when the store could not be read (left out, not zero)
+    bool job_store_up = true;  // false: the store failed to be read, or the end of a render waits for it
     int render_threads = 0;
     int render_threads_busy = 0;
     size_t event_watchers = 0;
+    // The connection layer's, when the daemon serves through it: open connections, connections refused at accept
+    // (429, 503) and requests or transfers that missed a deadline.
+    std::optional<int64_t> http_connections, http_refused_total, http_timed_out_total;
     std::optional<uint64_t> data_dir_available_bytes;  // nothing when the filesystem cannot be asked
     uint64_t min_free_disk_bytes = 0;
   };

@@ -39,6 +39,7 @@ class FlakyStore final : public JobStore {
   std::atomic<Failure> failure{Failure::kNone};
   std::atomic<bool> writes_only{false};
   std::atomic<bool> reads_only{false};
+  std::atomic<bool> ends_only{false};  // only the end of a job (a move to succeeded, failed or cancelled) fails
   std::atomic<int> failures{0};  // calls refused so far
 
   void create(const JobRecord& job) override {
@@ -55,7 +56,7 @@ class FlakyStore final : public JobStore {
   }
   bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                   const std::string& error, std::optional<JobState> only_from) override {
-    check(true);
+    check(true, is_terminal(to));
     return inner_.transition(id, to, now_ms, stop_reason, error, only_from);
   }
   bool set_priority(const std::string& id, int priority) override {
@@ -96,9 +97,11 @@ class FlakyStore final : public JobStore {
   }
 
  private:
-  void check(bool write) {
+  void check(bool write, bool end = false) {
     const Failure f = failure.load();
-    if (f == Failure::kNone || (writes_only.load() && !write) || (reads_only.load() && write)) return;
+    if (f == Failure::kNone || (writes_only.load() && !write) || (reads_only.load() && write) ||
+        (ends_only.load() && !end))
+      return;
     failures.fetch_add(1);
     if (f == Failure::kLocked) throw JobStoreError("job store: step: database is locked", false);
     if (f == Failure::kFull) throw JobStoreError("job store: step: database or disk is full", true);
@@ -349,6 +352,35 @@ TEST_F(ApiStoreFailure, MetricsAnswerWithoutJobCountsWhileTheStoreFails) {
   ASSERT_TRUE(res);
   EXPECT_EQ(metric_value(res->body, "tessera_job_store_up"), 1);
   EXPECT_EQ(metric_value(res->body, "tessera_queue_length"), 1);
+}
+
+// /readyz and /metrics say the same of the store: while the end of a render waits for the store to take it (a full
+// disk), both say it fails, and the job counts, which can still be read, stay in the scrape.
+TEST_F(ApiStoreFailure, ReadyzAndMetricsAgreeWhileAnEndWaitsForTheStore) {
+  const auto health = [&] {
+    auto ready = client_->Get("/readyz");
+    auto metrics = client_->Get("/metrics");
+    EXPECT_TRUE(ready && metrics);
+    if (!ready || !metrics) return std::pair<int, double>{-1, -1};
+    const json storage = json::parse(ready->body)["storage"];
+    return std::pair<int, double>{storage.value("job_store_failing", false) ? 1 : 0,
+                                  metric_value(metrics->body, "tessera_job_store_up")};
+  };
+  // Only ends fail: the store reads and takes the job, and both still say it works.
+  store_.ends_only = true;
+  store_.failure = FlakyStore::Failure::kFull;
+  scheduler_.start();
+  EXPECT_EQ(health(), (std::pair<int, double>{0, 1}));
+  auto checked = check_job_document(test::cornell_job(16, 1), SubmissionLimits{});
+  ASSERT_TRUE(std::holds_alternative<Submitted>(
+      jobs_.submit(Caller{}, SubmitRequest{std::get<AcceptedJob>(checked), "", "", false})));
+  ASSERT_TRUE(test::eventually([&] { return health().first == 1; }, 60));
+  EXPECT_EQ(health(), (std::pair<int, double>{1, 0}));
+  auto metrics = client_->Get("/metrics");
+  EXPECT_NE(metrics->body.find("tessera_jobs{state=\"running\"} 1\n"), std::string::npos) << metrics->body;
+  // Recovered: both say so.
+  store_.failure = FlakyStore::Failure::kNone;
+  EXPECT_TRUE(test::eventually([&] { return health() == std::pair<int, double>{0, 1}; }, 30));
 }
 
 }  // namespace
