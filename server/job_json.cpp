@@ -25,7 +25,7 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
   links["events"] = self + "/events";
   // What the state allows, from the state table: the names, for clients' buttons, and a link for each state change.
   json actions = json::array();
-  for (JobAction a : allowed_actions(job.state)) {
+  for (JobAction a : allowed_actions(job.state, job.input_refused())) {
     actions.push_back(job_action_name(a));
     if (action_target(a)) links[job_action_name(a)] = self + "/" + job_action_name(a);
   }
@@ -43,10 +43,11 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
   json warnings = json::parse(job.warnings.empty() ? "[]" : job.warnings, nullptr, false);
   if (!warnings.is_array()) warnings = json::array();
   // "stopped" is how a render ends when the daemon stops or the job is paused; such a job is not finished and shows
-  // no stop reason.
-  const std::string stop_reason = job.stop_reason == "stopped" ? "" : job.stop_reason;
+  // no stop reason. A failed job shows its error instead (and its actions whether it may run again).
+  const std::string stop_reason = job.stop_reason == "stopped" || job.state == JobState::kFailed ? "" : job.stop_reason;
   return {
       {"id", job.id},
+      {"name", job.name},
       {"kind", job.kind},
       {"state", job_state_name(job.state)},
       {"priority", job.priority},

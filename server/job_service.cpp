@@ -1,6 +1,7 @@
 #include "server/job_service.h"
 
 #include <algorithm>
+#include <filesystem>
 
 #include "server/job_id.h"
 #include "server/job_json.h"
@@ -22,6 +23,33 @@ Problem priority_needs_admin(int priority, int max_user_priority) {
 
 bool may_see(const Caller& caller, const JobRecord& job) {
   return caller.admin || job.owner == caller.name;
+}
+
+// At most `max` bytes of `s`, cut before a UTF-8 character rather than inside one.
+std::string utf8_prefix(const std::string& s, size_t max) {
+  if (s.size() <= max) return s;
+  size_t n = max;
+  while (n > 0 && (static_cast<unsigned char>(s[n]) & 0xC0) == 0x80) --n;
+  return s.substr(0, n);
+}
+
+// What a job is called when its document does not say ("name"): the glTF file it renders as it was uploaded, else
+// the types of its materials, else its kind.
+std::string default_job_name(const json& doc, const AssetStore& assets) {
+  constexpr size_t kMaxNameBytes = 200;  // job.schema.json's maxLength for "name"
+  const json scene = doc.value("scene", json::object());
+  if (scene.is_object() && scene.contains("gltf") && scene["gltf"].is_string()) {
+    const std::string ref = scene["gltf"];
+    if (auto info = is_asset_id(ref) ? assets.get(ref) : std::nullopt) return utf8_prefix(info->main, kMaxNameBytes);
+    return utf8_prefix(std::filesystem::path(ref).filename().string(), kMaxNameBytes);
+  }
+  std::string types;
+  const json one = doc.value("material", json::object());
+  for (const json& m : doc.contains("materials") ? doc["materials"] : json::array({one}))
+    if (m.is_object() && m.contains("type") && m["type"].is_string())
+      types += (types.empty() ? "" : ", ") + m["type"].get<std::string>();
+  if (!types.empty()) return utf8_prefix(types, kMaxNameBytes);
+  return doc.value("kind", "scene");
 }
 
 }  // namespace
@@ -112,6 +140,8 @@ std::variant<Submitted, Problem> JobService::submit(const Caller& caller, Submit
   if (auto full = queue_full(caller.name)) return *full;
   JobRecord job;
   job.id = new_job_id();
+  const json& name = accepted.document.contains("name") ? accepted.document["name"] : json();
+  job.name = name.is_string() ? name.get<std::string>() : default_job_name(accepted.document, assets_);
   job.kind = accepted.kind;
   job.priority = accepted.priority;
   job.created_at_ms = now_ms();
@@ -144,6 +174,7 @@ std::variant<Submitted, Problem> JobService::submit(const Caller& caller, Submit
   scheduler_.wake();
   log(LogLevel::kInfo, "job queued",
       {{"job", job.id},
+       {"name", job.name},
        {"kind", job.kind},
        {"priority", job.priority},
        {"owner", job.owner},
@@ -270,7 +301,8 @@ std::variant<ActionTaken, Problem> JobService::act(const JobRecord& job, JobActi
       return taken(job.id);
     case Scheduler::Outcome::kConflict: {
       auto now = store_.get(job.id);
-      return Problem{409, action_refusal(action, now ? now->state : job.state), std::nullopt};
+      const JobRecord& latest = now ? *now : job;
+      return Problem{409, action_refusal(action, latest.state, latest.input_refused()), std::nullopt};
     }
     case Scheduler::Outcome::kUnknown:
       break;

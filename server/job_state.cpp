@@ -39,21 +39,22 @@ struct ActionRow {
   const char* passive;  // "only a job that is ... can <passive>"
   unsigned from;        // the states it is allowed in
   std::optional<JobState> target;
+  bool reruns;  // it runs the same document again: not for a job whose input the renderer refused
 };
 
 // What clients may ask, and where it leads. A paused running render keeps its checkpoint; resume puts it back in the
-// queue to go on from it; requeue starts a failed or cancelled job from scratch.
+// queue to go on from it; requeue starts a failed or cancelled job from scratch (not one that failed on its input).
 constexpr ActionRow kActions[] = {
     {JobAction::kCancel, "cancel", "cancel", "be cancelled",
-     bit(JobState::kQueued) | bit(JobState::kRunning) | bit(JobState::kPaused), JobState::kCancelled},
+     bit(JobState::kQueued) | bit(JobState::kRunning) | bit(JobState::kPaused), JobState::kCancelled, false},
     {JobAction::kPause, "pause", "pause", "be paused", bit(JobState::kQueued) | bit(JobState::kRunning),
-     JobState::kPaused},
-    {JobAction::kResume, "resume", "resume", "be resumed", bit(JobState::kPaused), JobState::kQueued},
+     JobState::kPaused, false},
+    {JobAction::kResume, "resume", "resume", "be resumed", bit(JobState::kPaused), JobState::kQueued, false},
     {JobAction::kRequeue, "requeue", "requeue", "be requeued", bit(JobState::kFailed) | bit(JobState::kCancelled),
-     JobState::kQueued},
+     JobState::kQueued, true},
     {JobAction::kPriority, "priority", "change the priority of", "have its priority changed",
-     bit(JobState::kQueued) | bit(JobState::kRunning) | bit(JobState::kPaused), std::nullopt},
-    {JobAction::kDelete, "delete", "delete", "be deleted", kAnyState, std::nullopt},
+     bit(JobState::kQueued) | bit(JobState::kRunning) | bit(JobState::kPaused), std::nullopt, false},
+    {JobAction::kDelete, "delete", "delete", "be deleted", kAnyState, std::nullopt, false},
 };
 
 constexpr const StateRow& row(JobState s) {
@@ -128,7 +129,8 @@ const char* job_action_name(JobAction a) {
   return row(a).name;
 }
 
-bool action_allowed(JobAction a, JobState s) {
+bool action_allowed(JobAction a, JobState s, bool input_refused) {
+  if (input_refused && s == JobState::kFailed && row(a).reruns) return false;
   return (row(a).from & bit(s)) != 0;
 }
 
@@ -136,10 +138,10 @@ std::vector<JobState> action_states(JobAction a) {
   return states_of(row(a).from);
 }
 
-std::vector<JobAction> allowed_actions(JobState s) {
+std::vector<JobAction> allowed_actions(JobState s, bool input_refused) {
   std::vector<JobAction> out;
   for (JobAction a : kAllJobActions)
-    if (action_allowed(a, s)) out.push_back(a);
+    if (action_allowed(a, s, input_refused)) out.push_back(a);
   return out;
 }
 
@@ -147,8 +149,11 @@ std::optional<JobState> action_target(JobAction a) {
   return row(a).target;
 }
 
-std::string action_refusal(JobAction a, JobState s) {
+std::string action_refusal(JobAction a, JobState s, bool input_refused) {
   const ActionRow& r = row(a);
+  if (input_refused && s == JobState::kFailed && r.reruns)
+    return std::string("cannot ") + r.verb +
+           " a job that failed on its input: the same document fails the same way; submit a corrected one";
   return std::string("cannot ") + r.verb + " a job that is " + job_state_name(s) + "; only a job that is " +
          state_list(r.from) + " can " + r.passive;
 }

@@ -27,6 +27,7 @@ struct JobProgress {
 struct JobRecord {
   int64_t seq = 0;  // submission order, set by the store; the cursor of paginated lists
   std::string id;
+  std::string name;  // what its owner calls it (the document's "name", else the file or materials it renders)
   std::string kind;  // "scene" | "material"
   JobState state = JobState::kQueued;
   int priority = 0;
@@ -43,6 +44,9 @@ struct JobRecord {
   std::string warnings;     // JSON array of strings (unsupported optional glTF extensions, ...)
   std::string idempotency_key;  // the client's Idempotency-Key, empty if none
   std::string request_hash;     // sha256 of the request the key came with
+
+  // It failed because the renderer refused its input (job_state.h): running it again would fail the same way.
+  bool input_refused() const { return state == JobState::kFailed && stop_reason == kInputRefused; }
 };
 
 struct JobFilter {

@@ -309,12 +309,13 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
   } catch (const std::exception& e) {
     detach();
     std::string message = e.what();
-    if (const auto* se = dynamic_cast<const SceneError*>(&e); se && !se->pointer().empty())
-      message = se->pointer() + ": " + message;
-    record_failure(*slot, message, render_s);
+    // The renderer refused the scene or an asset it names: the input is at fault, not this run.
+    const auto* se = dynamic_cast<const SceneError*>(&e);
+    if (se && !se->pointer().empty()) message = se->pointer() + ": " + message;
+    record_failure(*slot, message, render_s, se != nullptr);
   } catch (...) {
     detach();
-    record_failure(*slot, "unknown error", render_s);
+    record_failure(*slot, "unknown error", render_s, false);
   }
   bool deleted;
   {
@@ -398,12 +399,12 @@ bool Scheduler::record_terminal(RenderSlot& slot, JobState to, double render_s, 
   return recorded;
 }
 
-// Logs a job that failed (its scene, its outputs) and records it as record_terminal() does; false when it was not
-// recorded.
-bool Scheduler::record_failure(RenderSlot& slot, const std::string& message, double render_s) {
-  log(LogLevel::kError, "job failed", {{"job", slot.id}, {"error", message}});
+// Logs a job that failed (its scene, its outputs) and records it as record_terminal() does, with the stop reason
+// kInputRefused when its input is at fault; false when it was not recorded.
+bool Scheduler::record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused) {
+  log(LogLevel::kError, "job failed", {{"job", slot.id}, {"error", message}, {"input_refused", input_refused}});
   try {
-    return record_terminal(slot, JobState::kFailed, render_s, "", message);
+    return record_terminal(slot, JobState::kFailed, render_s, input_refused ? std::string(kInputRefused) : "", message);
   } catch (const std::exception& e) {
     // Not a store failure (those are retried): nothing more can be done for this run.
     log(LogLevel::kError, "cannot record a failed job", {{"job", slot.id}, {"error", e.what()}});
@@ -470,7 +471,7 @@ Scheduler::Outcome Scheduler::requeue(const std::string& id) {
     std::lock_guard lock(mutex_);
     auto job = store_.get(id);
     if (!job) return Outcome::kUnknown;
-    if (!action_allowed(JobAction::kRequeue, job->state)) return Outcome::kConflict;
+    if (!action_allowed(JobAction::kRequeue, job->state, job->input_refused())) return Outcome::kConflict;
     if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", job->state)) return Outcome::kConflict;
     // From scratch: nothing of the last run survives.
     for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng, JobFile::kResultPng, JobFile::kResultExr})

@@ -83,7 +83,8 @@ class Scheduler {
   Outcome pause(const std::string& id);
   // paused -> queued.
   Outcome resume(const std::string& id);
-  // failed or cancelled -> queued, from scratch (its checkpoint, preview and outputs are deleted).
+  // failed or cancelled -> queued, from scratch (its checkpoint, preview and outputs are deleted); not a job that
+  // failed on its input.
   Outcome requeue(const std::string& id);
   // Deletes a job and its files (cancelling its render first); false for an unknown id. With
   // `only_finished_before_ms` (retention), only a job that ended before that time and has no render thread left;
@@ -97,7 +98,7 @@ class Scheduler {
   bool record_end(RenderSlot& slot, const std::function<bool()>& write);
   bool record_terminal(RenderSlot& slot, JobState to, double render_s, const std::string& stop_reason,
                        const std::string& error = "", const std::function<void()>& before = nullptr);
-  bool record_failure(RenderSlot& slot, const std::string& message, double render_s);
+  bool record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused);
   void count_store_error();
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
   void notify_state(const std::string& id);

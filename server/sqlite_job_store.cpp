@@ -13,8 +13,8 @@ namespace {
 constexpr const char* kColumns =
     "id, kind, state, priority, created_at, started_at, finished_at, settings, outputs, passes, samples_done, "
     "samples_total, elapsed_s, eta_s, samples_per_s, stop_reason, error, seq, owner, warnings, idempotency_key, "
-    "request_hash";
-constexpr int kDocumentColumn = 22;
+    "request_hash, name";
+constexpr int kDocumentColumn = 23;
 
 // States as an SQL list, 'queued','paused' (names from the enum, never client text).
 std::string sql_states(const std::vector<JobState>& states) {
@@ -163,6 +163,7 @@ class SqliteJobStore::Statement {
     r.warnings = text(19);
     r.idempotency_key = text(20);
     r.request_hash = text(21);
+    r.name = text(22);
     if (with_document) r.document = text(kDocumentColumn);
     return r;
   }
@@ -260,6 +261,11 @@ void SqliteJobStore::migrate() {
       exec("CREATE UNIQUE INDEX jobs_idempotency ON jobs (owner, idempotency_key) WHERE idempotency_key IS NOT NULL");
       exec("INSERT INTO schema_version (version) VALUES (2)");
     }
+    if (version < 3) {
+      // Version 3: jobs have a name; older jobs keep an empty one.
+      exec("ALTER TABLE jobs ADD COLUMN name TEXT NOT NULL DEFAULT ''");
+      exec("INSERT INTO schema_version (version) VALUES (3)");
+    }
     exec("COMMIT");
   } catch (...) {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
@@ -271,8 +277,8 @@ void SqliteJobStore::create(const JobRecord& job) {
   std::lock_guard lock(mutex_);
   Statement s(*this,
               "INSERT INTO jobs (id, kind, state, priority, created_at, document, settings, outputs, samples_total, "
-              "owner, warnings, idempotency_key, request_hash) "
-              "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)");
+              "owner, warnings, idempotency_key, request_hash, name) "
+              "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14)");
   s.bind(1, job.id);
   s.bind(2, job.kind);
   s.bind(3, std::string(job_state_name(JobState::kQueued)));
@@ -286,6 +292,7 @@ void SqliteJobStore::create(const JobRecord& job) {
   s.bind(11, job.warnings.empty() ? std::string("[]") : job.warnings);
   s.bind_text_or_null(12, job.idempotency_key);
   s.bind_text_or_null(13, job.request_hash);
+  s.bind(14, job.name);
   s.step();
 }
 

@@ -37,7 +37,7 @@ class SqliteJobStore final : public JobStore {
   bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt) override;
   int requeue_running() override;
 
-  static constexpr int kSchemaVersion = 2;
+  static constexpr int kSchemaVersion = 3;
 
  private:
   class Statement;

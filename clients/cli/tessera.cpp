@@ -7,6 +7,7 @@
 #include <httplib.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <iostream>
 #include <optional>
@@ -156,6 +157,37 @@ std::string job_path(const std::string& id) {
   return "/v1/jobs/" + id;
 }
 
+// The job an argument names: a whole id (32 hex digits), or the start of one (the 8 digits the web client shows) that
+// exactly one of the caller's jobs has. No match, or several, is a fatal error naming the candidates.
+std::string resolve_job_id(const Remote& remote, const std::string& arg) {
+  constexpr size_t kIdLength = 32;
+  const bool hex = !arg.empty() && std::all_of(arg.begin(), arg.end(), [](unsigned char c) {
+    return std::isdigit(c) || (c >= 'a' && c <= 'f');
+  });
+  if (!hex || arg.size() >= kIdLength) {
+    job_path(arg);  // a malformed argument is a usage error
+    return arg;
+  }
+  auto client = remote.client();
+  std::vector<json> matches;
+  std::string cursor;
+  do {
+    const std::string query = "/v1/jobs?limit=1000" + (cursor.empty() ? "" : "&cursor=" + url_component(cursor));
+    const json page = expect_json(remote, client->Get(query.c_str()), "find job " + arg);
+    for (const json& j : page.value("jobs", json::array()))
+      if (j.value("id", "").rfind(arg, 0) == 0) matches.push_back(j);
+    cursor =
+        page.contains("next_cursor") && page["next_cursor"].is_string() ? page["next_cursor"].get<std::string>() : "";
+  } while (!cursor.empty());
+  if (matches.size() == 1) return matches[0].value("id", "");
+  if (matches.empty()) fatal("no job id starts with " + arg + " (tessera list shows the jobs)");
+  std::string message = "the job id prefix " + arg + " is ambiguous: " + std::to_string(matches.size()) +
+                        " jobs start with it; give more digits:";
+  for (const json& j : matches)
+    message += "\n  " + j.value("id", "") + "  " + j.value("state", "") + "  " + j.value("name", "");
+  fatal(message);
+}
+
 void require_args(const std::vector<std::string>& args, size_t lo, size_t hi, const char* usage) {
   for (const std::string& a : args)
     if (a == "-h" || a == "--help") {
@@ -228,6 +260,10 @@ int cmd_submit(std::vector<std::string> args) {
     doc["render"].update(overrides);
   }
   if (priority) doc["priority"] = *priority;
+  // A job is called by the file it was submitted from, unless its document names it.
+  if (const std::string file = std::filesystem::path(main).filename().string();
+      main != "-" && !doc.contains("name") && file.size() <= 200)
+    doc["name"] = file;
   // A .gltf names its buffers and images: take those that sit beside it along too.
   for (size_t i = 0; i < attachments.size(); ++i) {
     if (lower_extension(attachments[i]) != ".gltf") continue;
@@ -383,7 +419,7 @@ int cmd_watch(std::vector<std::string> args) {
       rest.push_back(args[i]);
   }
   require_args(rest, 1, 1, kWatchUsage);
-  return cmd_watch_remote(remote, rest[0], quiet);
+  return cmd_watch_remote(remote, resolve_job_id(remote, rest[0]), quiet);
 }
 
 const char* kFetchUsage =
@@ -409,7 +445,7 @@ int cmd_fetch(std::vector<std::string> args) {
       rest.push_back(a);
   }
   require_args(rest, 1, 1, kFetchUsage);
-  const std::string id = rest[0];
+  const std::string id = resolve_job_id(remote, rest[0]);
   for (const std::string& o : outputs)
     if (lower_extension(o) != ".png" && lower_extension(o) != ".exr")
       throw std::invalid_argument(o + ": fetch writes .png or .exr files");
@@ -437,7 +473,8 @@ int cmd_fetch(std::vector<std::string> args) {
 
 const char* kListUsage =
     "usage: tessera list [--state S] [--limit N] [--json] [--url URL] [--token T]\n"
-    "Lists jobs, newest first: id, state, priority, samples, created.\n";
+    "Lists jobs, newest first: id, state, priority, samples, created, name. Every command that takes a job ID\n"
+    "also takes the start of one that only one job has (the 8 digits the web client shows).\n";
 
 int cmd_list(std::vector<std::string> args) {
   Remote remote = remote_options(&args);
@@ -465,9 +502,9 @@ int cmd_list(std::vector<std::string> args) {
   }
   for (const json& j : list.value("jobs", json::array())) {
     const json& p = j.value("progress", json::object());
-    std::printf("%s  %-9s  %4d  %6d/%-6d spp  %s\n", j.value("id", "").c_str(), j.value("state", "").c_str(),
+    std::printf("%s  %-9s  %4d  %6d/%-6d spp  %s  %s\n", j.value("id", "").c_str(), j.value("state", "").c_str(),
                 j.value("priority", 0), p.value("samples_done", 0), p.value("samples_total", 0),
-                j.value("created_at", "").c_str());
+                j.value("created_at", "").c_str(), j.value("name", "").c_str());
   }
   return kExitOk;
 }
@@ -479,8 +516,9 @@ const char* kCancelUsage =
 int cmd_cancel(std::vector<std::string> args) {
   Remote remote = remote_options(&args);
   require_args(args, 1, 1, kCancelUsage);
+  const std::string id = resolve_job_id(remote, args[0]);
   auto client = remote.client();
-  const json job = expect_json(remote, client->Post((job_path(args[0]) + "/cancel").c_str()), "cancel");
+  const json job = expect_json(remote, client->Post((job_path(id) + "/cancel").c_str()), "cancel");
   std::printf("%s\n", job.value("state", "").c_str());
   return kExitOk;
 }

@@ -40,6 +40,8 @@ function fmtTime(iso) {
   return d.toDateString() === today.toDateString() ? time : `${d.toLocaleDateString()} ${time}`;
 }
 const shortId = (id) => id.slice(0, 8);
+// A job as people call it: its name and the 8 digits of its id that the command line takes.
+const jobLabel = (job) => (job.name ? `${job.name} (${shortId(job.id)})` : shortId(job.id));
 
 function progressText(job) {
   const p = job.progress || {};
@@ -220,7 +222,11 @@ function renderSettings(base = {}) {
   render.estimator = $("#estimator").value;
   return render;
 }
-function withCommon(doc) {
+// The job's name: the one typed in the form, else `fallback` (the example's title, the uploaded file's name; the
+// daemon names a material job after its model).
+function withCommon(doc, fallback) {
+  const name = $("#job-name").value.trim() || fallback;
+  if (name) doc.name = name;
   doc.render = renderSettings(doc.render);
   const priority = Number($("#priority").value || 0);
   if (priority) doc.priority = priority;
@@ -283,7 +289,7 @@ $("#submit-form").addEventListener("submit", async (e) => {
   let files = null;
   try {
     if (source === "example") {
-      doc = withCommon(buildFromExample());
+      doc = withCommon(buildFromExample(), currentExample().name);
     } else if (source === "material") {
       if (!currentMaterialForm) throw new Error("No material model is loaded yet");
       doc = withCommon({ kind: "material", material: currentMaterialForm.value(), outputs: ["png", "exr"] });
@@ -291,7 +297,7 @@ $("#submit-form").addEventListener("submit", async (e) => {
       files = uploadFiles();
       const main = files.find((f) => /\.glb$/i.test(f.name)) || files.find((f) => /\.gltf$/i.test(f.name));
       if (!main) throw new Error("Choose a .glb file, or a .gltf file with its buffers and images");
-      doc = withCommon({ kind: "scene", scene: { gltf: main.name }, outputs: ["png", "exr"] });
+      doc = withCommon({ kind: "scene", scene: { gltf: main.name }, outputs: ["png", "exr"] }, main.name);
     } else {
       try {
         doc = JSON.parse($("#json-doc").value);
@@ -306,7 +312,7 @@ $("#submit-form").addEventListener("submit", async (e) => {
   button.disabled = true;
   try {
     const job = files ? await api.submitMultipart(doc, files) : await api.submitJson(doc);
-    showNotice(`Job ${shortId(job.id)} queued.`);
+    showNotice(`Job ${jobLabel(job)} queued.`);
     await refreshQueue();
     select(job.id);
   } catch (err) {
@@ -357,15 +363,20 @@ function makeRow(job) {
   const tr = document.createElement("tr");
   tr.dataset.id = job.id;
   const idCell = document.createElement("td");
+  // The job's name, and under it the short id (what `tessera` commands take) and its kind.
   const link = document.createElement("button");
   link.type = "button";
-  link.className = "link mono";
-  link.textContent = shortId(job.id);
+  link.className = "link job-name";
   link.title = job.id;
-  link.setAttribute("aria-label", `Show job ${shortId(job.id)}`);
   link.addEventListener("click", () => select(job.id));
   const kind = document.createElement("span");
   kind.className = "kind";
+  const idText = document.createElement("span");
+  idText.className = "mono job-id";
+  idText.textContent = shortId(job.id);
+  kind.append(idText, document.createTextNode(" "));
+  const kindText = document.createTextNode("");
+  kind.append(kindText);
   idCell.append(link, kind);
 
   const stateCell = document.createElement("td");
@@ -422,11 +433,15 @@ function makeRow(job) {
     if (e.target.closest("button, input")) return;
     select(job.id);
   });
-  return { tr, kind, badge, reason, prio, bar, progText, createdCell, buttons: { cancel, requeue, delete: del } };
+  return {
+    tr, link, kindText, badge, reason, prio, bar, progText, createdCell, buttons: { cancel, requeue, delete: del },
+  };
 }
 
 function updateRow(r, job) {
-  r.kind.textContent = job.kind;
+  r.link.textContent = job.name || shortId(job.id);
+  r.link.setAttribute("aria-label", `Show job ${jobLabel(job)}`);
+  r.kindText.textContent = job.kind;
   r.badge.textContent = job.state;
   r.badge.dataset.state = job.state;
   // Why a job failed, in its row: the start of it, the whole of it on hover and in the job view.
@@ -756,7 +771,7 @@ function updateCompareChoices() {
   const options = [new Option("none", "")];
   for (const j of jobs) {
     if (j.id === selectedId || j.state !== "succeeded") continue;
-    options.push(new Option(`${shortId(j.id)} ${j.kind}`, j.id));
+    options.push(new Option(jobLabel(j), j.id));
   }
   // Rebuilt only when the choices change: rebuilding closes a list the user has open.
   const signature = options.map((o) => `${o.value} ${o.text}`).join("\n");
@@ -824,7 +839,7 @@ function showJob(job) {
   badge.dataset.state = job.state;
   $("#job-failure").hidden = job.state !== "failed";
   $("#job-failure-text").textContent = job.error || "no reason was recorded";
-  $("#job-title").textContent = `Job ${shortId(job.id)}`;
+  $("#job-title").textContent = `Job ${jobLabel(job)}`;
   $("#job-title").title = job.id;
   setProgress($("#job-progress"), job);
   for (const b of document.querySelectorAll("#job-body [data-action]")) {
@@ -845,6 +860,7 @@ function showJob(job) {
   if (job.state === "succeeded") loadResult(job);
   const dl = $("#job-stats");
   dl.replaceChildren();
+  if (job.name) stat(dl, "Name", job.name);
   stat(dl, "Id", job.id);
   stat(dl, "Kind", job.kind);
   if (r.width) stat(dl, "Resolution", `${r.width} × ${r.height}`);

@@ -109,6 +109,6 @@ export const MATERIAL_EXAMPLE = {
 };
 
 export const EXAMPLES = [
-  { id: "cornell", title: "Cornell box (scene)", job: CORNELL },
-  { id: "material", title: "Material preview: orange Lambert", job: MATERIAL_EXAMPLE },
+  { id: "cornell", title: "Cornell box (scene)", name: "Cornell box", job: CORNELL },
+  { id: "material", title: "Material preview: orange Lambert", name: "Orange Lambert", job: MATERIAL_EXAMPLE },
 ];

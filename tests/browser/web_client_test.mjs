@@ -147,9 +147,14 @@ test("the web client submits, follows, cancels, deletes and downloads", async (t
     await page.getByLabel("Height").fill("128");
     await page.getByLabel("Samples per pixel").fill("1024");
     await page.getByRole("button", { name: "Submit job" }).click();
-    await page.locator("#job-title", { hasText: /Job [0-9a-f]{8}/ }).waitFor();
+    await page.locator("#job-title", { hasText: /Job Cornell box \([0-9a-f]{8}\)/ }).waitFor();
     mainId = await page.locator("#job-title").getAttribute("title");
     assert.match(mainId || "", /^[0-9a-zA-Z_-]+$/);
+    // The queue calls it by the example's name, with the 8 digits of its id the command line takes.
+    const row = page.locator(`#jobs tr[data-id="${mainId}"]`);
+    await row.locator("button.link", { hasText: "Cornell box" }).waitFor();
+    assert.equal(await row.locator(".job-id").textContent(), mainId.slice(0, 8));
+    assert.equal((await (await page.request.get(`${baseUrl}/v1/jobs/${mainId}`)).json()).name, "Cornell box");
   });
 
   await step(t, "the preview changes at least twice while it renders", async () => {
@@ -177,7 +182,10 @@ test("the web client submits, follows, cancels, deletes and downloads", async (t
   await step(t, "another job is cancelled from the queue, then deleted with confirmation", async () => {
     await page.getByRole("tab", { name: "Example" }).click();
     await page.getByLabel("Example scene").selectOption("material");
+    // A name typed in the form is the job's name.
+    await page.getByLabel("Name", { exact: true }).fill("to be cancelled");
     await page.getByRole("button", { name: "Submit job" }).click();
+    await page.getByLabel("Name", { exact: true }).fill("");
     // The new job is selected; find its row (the main job still renders, so this one waits in the queue).
     await page.waitForFunction((id) => {
       const t = document.querySelector("#job-title")?.title;
@@ -186,6 +194,7 @@ test("the web client submits, follows, cancels, deletes and downloads", async (t
     const otherId = await page.locator("#job-title").getAttribute("title");
     const row = page.locator(`#jobs tr[data-id="${otherId}"]`);
     await row.waitFor();
+    await row.locator("button.link", { hasText: "to be cancelled" }).waitFor();
     const cancel = row.getByRole("button", { name: /^Cancel job/ });
     await cancel.click();
     await row.locator('.badge[data-state="cancelled"]').waitFor();
@@ -608,10 +617,15 @@ test("failures are shown, errors cover nothing, and the queue fits 390 px", asyn
   assert.equal(status.state, "failed");
   assert.match(status.error, /cannot be decoded/);
 
-  await t.test("the reason is in the queue row and heads the job view", async () => {
+  await t.test("the reason is in the queue row and heads the job view; its bad input is not offered Requeue", async () => {
     const row = page.locator(`#jobs tr[data-id="${failed}"]`);
     await row.locator(".reason", { hasText: "cannot be decoded" }).waitFor();
     assert.ok(await row.locator(".reason").isVisible());
+    // Called by the file it renders; its input is at fault, so running it again would fail the same way.
+    assert.equal(await row.locator("button.link").textContent(), "broken.gltf");
+    assert.deepEqual(status.actions, ["delete"]);
+    assert.ok(await row.getByRole("button", { name: /^Requeue job/ }).isDisabled(), "no Requeue in the row");
+    assert.ok(await row.getByRole("button", { name: /^Delete job/ }).isEnabled(), "Delete in the row");
     await row.locator("button.link").click();
     const failure = page.locator("#job-failure");
     await failure.waitFor();
@@ -619,6 +633,7 @@ test("failures are shown, errors cover nothing, and the queue fits 390 px", asyn
     // It comes first: above the image and the statistics.
     const [f, v] = [await failure.boundingBox(), await page.locator("#viewer").boundingBox()];
     assert.ok(f.y + f.height <= v.y, "the failure is above the image");
+    assert.ok(await page.locator('#job-body [data-action="requeue"]').isDisabled(), "no Requeue in the job view");
   });
 
   const refuse = async () => {

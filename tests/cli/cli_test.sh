@@ -200,7 +200,22 @@ PY
   grep -q succeeded "$tmp/out" && ok "watch printed the final state" || not_ok "watch printed no final state"
   expect 0 "tessera list" "$TESSERA" list
   grep -q "$id" "$tmp/out" && ok "list shows the job" || not_ok "list misses the job"
+  grep "$id" "$tmp/out" | grep -q "small.json" && ok "list names the job after its file" ||
+    not_ok "list gives no name: $(grep "$id" "$tmp/out")"
   expect 0 "tessera list --state succeeded --json" "$TESSERA" list --state succeeded --json
+  # A job id may be shortened to the 8 digits the web client shows, or any start that only one job has.
+  expect 0 "fetch by the 8-digit prefix of an id" "$TESSERA" fetch "${id:0:8}" -d by-prefix
+  [[ -s by-prefix/$id.png ]] && ok "the prefix named the whole id" || not_ok "no by-prefix/$id.png"
+  for i in $(seq 17); do "$TESSERA" submit small.json --spp 1 >/dev/null 2>&1; done
+  shared=$("$TESSERA" list --limit 100 | cut -c1 | sort | uniq -d | head -1)  # 18 ids, 16 first digits
+  expect 1 "an ambiguous prefix is fatal" "$TESSERA" watch "$shared"
+  if grep -q "ambiguous" "$tmp/err" && [[ $(grep -c "^  $shared[0-9a-f]\{31\} " "$tmp/err") -ge 2 ]]; then
+    ok "the ambiguous prefix lists its candidates"
+  else
+    not_ok "an ambiguous prefix said: $(cat "$tmp/err")"
+  fi
+  expect 1 "a prefix no job has is fatal" "$TESSERA" cancel 0000000
+  grep -q "no job id starts with 0000000" "$tmp/err" && ok "and says so" || not_ok "no-match said: $(cat "$tmp/err")"
   expect 0 "tessera fetch" "$TESSERA" fetch "$id" -d fetched
   png_signature "fetched/$id.png" && ok "fetch wrote a PNG" || not_ok "fetched PNG has no PNG signature"
   [[ -s fetched/$id.exr ]] && ok "fetch wrote the EXR" || not_ok "no EXR fetched"

@@ -205,6 +205,8 @@ TEST_F(ServiceTest, MultipartJobWithGltfAndBin) {
   ASSERT_EQ(res->status, 202) << res->body;
   const std::string id = json::parse(res->body)["id"];
   EXPECT_EQ(wait_for(*client_, id, ended).value("state", ""), "succeeded");
+  // A job is called by the glTF file it renders, as uploaded (its document gives no name).
+  EXPECT_EQ(get_job(*client_, id).value("name", ""), "tri.gltf");
   // The files became one asset; uploading them again as an asset gives its id.
   httplib::MultipartFormDataItems files = {items[1], items[2]};
   res = client_->Post("/v1/assets", files);
@@ -245,10 +247,53 @@ TEST_F(ServiceTest, ImagesAreCheckedByTheirHeadersAtSubmissionAndByTheirPixelsAt
   res = submit_with(std::string(png.begin(), png.end()));
   ASSERT_TRUE(res);
   ASSERT_EQ(res->status, 202) << res->body;
-  const json done = wait_for(*client_, json::parse(res->body)["id"], ended);
+  const std::string failed = json::parse(res->body)["id"];
+  const json done = wait_for(*client_, failed, ended);
   EXPECT_EQ(done.value("state", ""), "failed") << done.dump();
   EXPECT_NE(done.dump().find("image 0 cannot be decoded"), std::string::npos) << done.dump();
+  // Its input is at fault: the same document would fail the same way, so it is not offered a requeue, and one asked
+  // for is refused with the reason.
+  EXPECT_EQ(done["actions"], json({"delete"})) << done.dump();
+  EXPECT_FALSE(done["links"].contains("requeue")) << done.dump();
+  res = client_->Post("/v1/jobs/" + failed + "/requeue");
+  expect_status(res, 409, "requeue a job that failed on its input");
+  EXPECT_NE(res->body.find("failed on its input"), std::string::npos) << res->body;
+  EXPECT_EQ(get_job(*client_, failed).value("state", ""), "failed");
   EXPECT_EQ(client_->Get("/livez")->status, 200);
+}
+
+// A job has a name: the document's, else the glTF file it renders, its materials' types or its kind; shown in its
+// status and the job list, and checked like every field of the document.
+TEST_F(ServiceTest, JobsAreCalledByTheirNames) {
+  start();
+  const json render = {{"width", 8}, {"height", 8}, {"spp", 1}};
+  const std::string named = submit(*client_, {{"kind", "material"},
+                                              {"name", "Copper, rough"},
+                                              {"material", {{"type", "conductor"}, {"metal", "copper"}}},
+                                              {"render", render}});
+  const std::string one =
+      submit(*client_, {{"kind", "material"}, {"material", {{"type", "lambert"}}}, {"render", render}});
+  const std::string two =
+      submit(*client_,
+             {{"kind", "material"}, {"materials", {{{"type", "lambert"}}, {{"type", "plastic"}}}}, {"render", render}});
+  const std::string cornell = submit(*client_, cornell_job(8, 1));
+  EXPECT_EQ(get_job(*client_, named).value("name", ""), "Copper, rough");
+  EXPECT_EQ(get_job(*client_, one).value("name", ""), "lambert");
+  EXPECT_EQ(get_job(*client_, two).value("name", ""), "lambert, plastic");
+  EXPECT_EQ(get_job(*client_, cornell).value("name", ""), "scene");
+  auto list = client_->Get("/v1/jobs");
+  ASSERT_TRUE(list);
+  std::set<std::string> names;
+  const json jobs = json::parse(list->body)["jobs"];
+  for (const json& j : jobs) names.insert(j.value("name", ""));
+  EXPECT_EQ(names, (std::set<std::string>{"Copper, rough", "lambert", "lambert, plastic", "scene"}));
+  for (const json& bad : {json(""), json("tab\there"), json(std::string(201, 'x')), json(7)}) {
+    auto res =
+        client_->Post("/v1/jobs", json{{"kind", "material"}, {"name", bad}, {"material", {{"type", "lambert"}}}}.dump(),
+                      "application/json");
+    expect_status(res, 422, "name " + bad.dump());
+    EXPECT_EQ(json::parse(res->body).value("pointer", ""), "/name") << res->body;
+  }
 }
 
 TEST_F(ServiceTest, HostileUploadsAreRefusedAndTheDaemonLives) {

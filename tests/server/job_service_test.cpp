@@ -53,6 +53,19 @@ TEST(JobStateTable, RefusalsSayWhatTheStateAllows) {
   }
 }
 
+// A job that failed on its input would fail the same way again: it may be deleted, never requeued; a job that failed
+// otherwise may be requeued.
+TEST(JobStateTable, AJobThatFailedOnItsInputIsNotRequeued) {
+  EXPECT_TRUE(action_allowed(JobAction::kRequeue, JobState::kFailed));
+  EXPECT_FALSE(action_allowed(JobAction::kRequeue, JobState::kFailed, true));
+  EXPECT_EQ(allowed_actions(JobState::kFailed, true), std::vector<JobAction>{JobAction::kDelete});
+  EXPECT_EQ(action_refusal(JobAction::kRequeue, JobState::kFailed, true),
+            "cannot requeue a job that failed on its input: the same document fails the same way; submit a corrected "
+            "one");
+  // Only a failed job has failed on its input.
+  EXPECT_TRUE(action_allowed(JobAction::kRequeue, JobState::kCancelled, true));
+}
+
 class JobServiceTest : public ::testing::Test {
  protected:
   // A job stored in state `s` (the scheduler does not run: nothing renders it). Priority 100 and at most one queued
@@ -129,6 +142,24 @@ TEST_F(JobServiceTest, EveryStateOffersExactlyTheActionsItAccepts) {
       EXPECT_FALSE(sqlite_.get(job.id, false));
     }
   }
+}
+
+TEST_F(JobServiceTest, AJobThatFailedOnItsInputOffersOnlyDelete) {
+  JobRecord job = test::make_job(100, 1);
+  sqlite_.create(job);
+  ASSERT_TRUE(sqlite_.claim_next(2));
+  ASSERT_TRUE(
+      sqlite_.transition(job.id, JobState::kFailed, 3, std::string(kInputRefused), "image 0 cannot be decoded"));
+  job = sqlite_.get(job.id, false).value();
+  const json status = jobs_.status(job);
+  EXPECT_EQ(status["actions"], json({"delete"}));
+  EXPECT_FALSE(status["links"].contains("requeue"));
+  EXPECT_TRUE(status["stop_reason"].is_null());
+  const auto answer = jobs_.act(job, JobAction::kRequeue);
+  ASSERT_TRUE(std::holds_alternative<Problem>(answer));
+  EXPECT_EQ(std::get<Problem>(answer).status, 409);
+  EXPECT_EQ(std::get<Problem>(answer).detail, action_refusal(JobAction::kRequeue, JobState::kFailed, true));
+  EXPECT_EQ(sqlite_.get(job.id, false).value().state, JobState::kFailed);
 }
 
 TEST_F(JobServiceTest, AUserSeesOnlyTheirOwnJobs) {

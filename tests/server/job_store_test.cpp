@@ -64,6 +64,31 @@ TEST(SqliteJobStore, FailedJobKeepsItsError) {
   EXPECT_EQ(store.get(a.id, false)->error, "out of memory");
 }
 
+TEST(SqliteJobStore, KeepsTheJobsNameAndGivesOlderJobsAnEmptyOne) {
+  test::TempDir dir;
+  const auto file = dir.path() / "jobs.db";
+  JobRecord old_job = make_job(0, 1), named = make_job(0, 2);
+  named.name = "Cornell box, 4096 spp";
+  {
+    SqliteJobStore store(file);
+    store.create(old_job);
+  }
+  // The file as a daemon of schema version 2 left it: no name column.
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(file.c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "ALTER TABLE jobs DROP COLUMN name; DELETE FROM schema_version WHERE version = 3", nullptr,
+                         nullptr, nullptr),
+            SQLITE_OK)
+      << sqlite3_errmsg(db);
+  sqlite3_close(db);
+  SqliteJobStore store(file);
+  store.create(named);
+  EXPECT_EQ(store.get(old_job.id, false).value().name, "");
+  EXPECT_EQ(store.get(named.id, false).value().name, "Cornell box, 4096 spp");
+  EXPECT_EQ(store.claim_next(3).value().name, "");
+  EXPECT_EQ(store.list(JobFilter{}).front().name, "Cornell box, 4096 spp");
+}
+
 TEST(SqliteJobStore, RestartRequeuesRunningJobsAndKeepsTheRest) {
   test::TempDir dir;
   JobRecord done = make_job(0, 1), running = make_job(0, 2), queued = make_job(0, 3);
