@@ -34,6 +34,7 @@ void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punct
   punctual_ = punctual;
   environment_ = kNoLight;
   scene_radius_ = std::max(scene.bounds().radius(), 1e-3f);
+  scene_center_ = scene.bounds().empty() ? Vec3(0) : scene.bounds().center();
   std::vector<float> power;
   for (uint32_t m = 0; m < scene.meshes.size(); ++m) {
     const Mesh& mesh = scene.meshes[m];
@@ -81,10 +82,12 @@ void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punct
 bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u, LightSample* out) const {
   if (entries_.empty()) return false;
   float pmf = 0;
-  const Entry& e = entries_[distribution_.sample(u_select, &pmf)];
+  const uint32_t index = distribution_.sample(u_select, &pmf);
+  const Entry& e = entries_[index];
+  out->light = index;
   switch (e.kind) {
     case Kind::kTriangle: {
-      const TriangleGeometry& tri = triangles_[&e - entries_.data()];
+      const TriangleGeometry& tri = triangles_[index];
       const float area = tri.area;
       if (!(area > 0)) return false;
       const Material& mat = *tri.material;
@@ -171,16 +174,9 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       out->wi = d / out->dist;
       out->p_light = l.position;
       out->n_light = Vec3(0);
-      float falloff = 1;
-      if (l.kind == PunctualLight::Kind::kSpot) {
-        float cd = dot(-out->wi, normalize(l.direction));
-        if (cd <= l.cos_outer) return false;
-        if (cd < l.cos_inner) {
-          // glTF's KHR_lights_punctual smooth falloff between the outer and inner cone.
-          float t = (cd - l.cos_outer) / std::max(l.cos_inner - l.cos_outer, 1e-6f);
-          falloff = t * t;
-        }
-      }
+      const float falloff =
+          l.kind == PunctualLight::Kind::kSpot ? spot_falloff(l, dot(-out->wi, normalize(l.direction))) : 1.0f;
+      if (!(falloff > 0)) return false;
       out->radiance = l.intensity * (falloff / dist2);
       return true;
     }
@@ -238,6 +234,206 @@ float LightSet::pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteract
     return pmf * dist2 / (cos_light * 4 * kPi * r2);
   }
   return 0;
+}
+
+float spot_falloff(const PunctualLight& light, float cos_angle) {
+  if (cos_angle <= light.cos_outer) return 0;
+  if (cos_angle >= light.cos_inner) return 1;
+  const float t = (cos_angle - light.cos_outer) / std::max(light.cos_inner - light.cos_outer, 1e-6f);
+  return t * t;
+}
+
+namespace {
+
+// A direction on the side of `n` an emitter emits to: cosine-weighted about n, and about -n too for a two-sided
+// emitter (u.x picks the side). Returns the solid-angle density through `pdf`.
+Vec3 sample_emitted_direction(const Vec3& n, bool one_sided, Vec2 u, float* pdf) {
+  bool back = false;
+  if (!one_sided) {
+    back = u.x >= 0.5f;
+    u.x = back ? 2 * u.x - 1 : 2 * u.x;
+    u.x = std::min(u.x, 0.99999994f);
+  }
+  Vec3 local = sample_cosine_hemisphere(u);
+  *pdf = cosine_hemisphere_pdf(local.z) * (one_sided ? 1.0f : 0.5f);
+  if (back) local.z = -local.z;
+  return Frame::from_normal(n).to_world(local);
+}
+
+float emitted_direction_pdf(const Vec3& n, bool one_sided, const Vec3& dir) {
+  const float c = dot(n, dir);
+  if (one_sided) return cosine_hemisphere_pdf(c);
+  return 0.5f * cosine_hemisphere_pdf(std::abs(c));
+}
+
+}  // namespace
+
+Rgb LightEmission::emitted(const Vec3& w) const {
+  if (spot) return source * spot_falloff(*spot, dot(w, normalize(spot->direction)));
+  if (one_sided && dot(w, n) <= 0) return Rgb(0);
+  return source;
+}
+
+Vec3 LightSet::disc_origin(const Vec3& dir, Vec2 u) const {
+  const Frame f = Frame::from_normal(dir);
+  const Vec2 d = sample_concentric_disk(u) * scene_radius_;
+  // The disc touches the bounding sphere on the side the light comes from: every ray starts before the scene.
+  return scene_center_ - dir * scene_radius_ + f.s * d.x + f.t * d.y;
+}
+
+bool LightSet::sample_emission(const Scene& scene, float u_select, Vec2 u_pos, Vec2 u_dir, LightEmission* out) const {
+  if (entries_.empty()) return false;
+  float pmf = 0;
+  const uint32_t index = distribution_.sample(u_select, &pmf);
+  const Entry& e = entries_[index];
+  *out = LightEmission();
+  out->light = index;
+  switch (e.kind) {
+    case Kind::kTriangle: {
+      const TriangleGeometry& tri = triangles_[index];
+      if (!(tri.area > 0)) return false;
+      const Material& mat = *tri.material;
+      const Vec2 b = sample_uniform_triangle(u_pos);
+      ShadingPoint sp;
+      sp.p = tri.p0 + tri.e1 * b.x + tri.e2 * b.y;
+      sp.ng = tri.n;
+      sp.frame = Frame(Vec3(1, 0, 0), Vec3(0, 1, 0), tri.n);  // emission reads ng and uv only
+      if (mat.emission.texture) triangle_uv(scene.meshes[e.object], e.prim, b.x, b.y, &sp);
+      const Vec3 dir = sample_emitted_direction(tri.n, mat.emission_one_sided, u_dir, &out->pdf_dir);
+      out->ray.origin = sp.p;
+      out->ray.dir = dir;
+      out->n = tri.n;
+      out->pdf_pos = pmf / tri.area;
+      out->source = mat.emission.eval(sp);
+      out->one_sided = mat.emission_one_sided;
+      out->radiance = out->emitted(dir);
+      break;
+    }
+    case Kind::kSphere: {
+      const Sphere& s = scene.spheres[e.object];
+      const Material& mat = *scene.materials[s.material];
+      const Vec3 n = sample_uniform_sphere(u_pos);
+      ShadingPoint sp;
+      sp.p = s.center + n * s.radius;
+      sp.ng = n;
+      sp.frame = Frame::from_normal(n);
+      const Vec3 dir = sample_emitted_direction(n, mat.emission_one_sided, u_dir, &out->pdf_dir);
+      out->ray.origin = sp.p;
+      out->ray.dir = dir;
+      out->n = n;
+      out->pdf_pos = pmf / (4 * kPi * sqr(s.radius));
+      out->source = mat.emission.eval(sp);
+      out->one_sided = mat.emission_one_sided;
+      out->radiance = out->emitted(dir);
+      break;
+    }
+    case Kind::kPunctual: {
+      const PunctualLight& l = punctual_[e.object];
+      if (l.kind == PunctualLight::Kind::kDirectional) {
+        const Vec3 dir = normalize(l.direction);
+        out->ray.origin = disc_origin(dir, u_pos);
+        out->ray.dir = dir;
+        out->n = dir;
+        out->pdf_pos = pmf * disc_pdf();
+        out->pdf_dir = 1;
+        out->delta_dir = true;
+        out->infinite = true;
+        out->radiance = l.intensity;
+        break;
+      }
+      out->ray.origin = l.position;
+      out->pdf_pos = pmf;
+      out->delta_pos = true;
+      if (l.kind == PunctualLight::Kind::kSpot) {
+        // Uniform within the outer cone: the falloff is smooth, and the cone is usually narrow.
+        const Vec3 axis = normalize(l.direction);
+        out->ray.dir = Frame::from_normal(axis).to_world(sample_uniform_cone(u_dir, l.cos_outer));
+        out->pdf_dir = uniform_cone_pdf(l.cos_outer);
+        out->spot = &l;
+      } else {
+        out->ray.dir = sample_uniform_sphere(u_dir);
+        out->pdf_dir = uniform_sphere_pdf();
+      }
+      out->source = l.intensity;
+      out->radiance = out->emitted(out->ray.dir);
+      break;
+    }
+    case Kind::kEnvironment: {
+      const Environment& env = scene.environment;
+      Vec3 wi;  // towards the environment
+      float pdf_dir = 0;
+      if (env.map) {
+        Rgb le;
+        wi = env.from_map(env.map->sample(u_dir, &pdf_dir, &le));
+        out->radiance = le * env.color * env.intensity;
+      } else {
+        wi = sample_uniform_sphere(u_dir);
+        pdf_dir = uniform_sphere_pdf();
+        out->radiance = env.color * env.intensity;
+      }
+      out->ray.dir = -wi;
+      out->ray.origin = disc_origin(-wi, u_pos);
+      out->n = -wi;
+      out->pdf_pos = pmf * disc_pdf();
+      out->pdf_dir = pdf_dir;
+      out->infinite = true;
+      break;
+    }
+  }
+  return out->pdf_pos > 0 && out->pdf_dir > 0 && !is_black(out->radiance);
+}
+
+void LightSet::emission_pdf(const Scene& scene, uint32_t light, const Vec3& n, const Vec3& dir, float* pdf_pos,
+                            float* pdf_dir) const {
+  *pdf_pos = *pdf_dir = 0;
+  if (light >= entries_.size()) return;
+  const Entry& e = entries_[light];
+  const float pmf = distribution_.pmf(light);
+  switch (e.kind) {
+    case Kind::kTriangle: {
+      const TriangleGeometry& tri = triangles_[light];
+      if (!(tri.area > 0)) return;
+      *pdf_pos = pmf / tri.area;
+      *pdf_dir = emitted_direction_pdf(n, tri.material->emission_one_sided, dir);
+      return;
+    }
+    case Kind::kSphere: {
+      const Sphere& s = scene.spheres[e.object];
+      *pdf_pos = pmf / (4 * kPi * sqr(s.radius));
+      *pdf_dir = emitted_direction_pdf(n, scene.materials[s.material]->emission_one_sided, dir);
+      return;
+    }
+    case Kind::kPunctual: {
+      const PunctualLight& l = punctual_[e.object];
+      if (l.kind == PunctualLight::Kind::kDirectional) {
+        *pdf_pos = pmf * disc_pdf();
+        *pdf_dir = 0;  // a delta: no density for any given direction
+        return;
+      }
+      *pdf_pos = pmf;
+      if (l.kind == PunctualLight::Kind::kSpot)
+        *pdf_dir = dot(dir, normalize(l.direction)) > l.cos_outer ? uniform_cone_pdf(l.cos_outer) : 0.0f;
+      else
+        *pdf_dir = uniform_sphere_pdf();
+      return;
+    }
+    case Kind::kEnvironment: {
+      const Environment& env = scene.environment;
+      *pdf_pos = pmf * disc_pdf();
+      *pdf_dir = env.map ? env.map->pdf(env.to_map(-dir)) : uniform_sphere_pdf();
+      return;
+    }
+  }
+}
+
+bool LightSet::delta_position(uint32_t light) const {
+  if (light >= entries_.size() || entries_[light].kind != Kind::kPunctual) return false;
+  return punctual_[entries_[light].object].kind != PunctualLight::Kind::kDirectional;
+}
+
+bool LightSet::delta_direction(uint32_t light) const {
+  if (light >= entries_.size() || entries_[light].kind != Kind::kPunctual) return false;
+  return punctual_[entries_[light].object].kind == PunctualLight::Kind::kDirectional;
 }
 
 }  // namespace tessera
