@@ -11,6 +11,12 @@
 //   discrete probability of choosing that lobe and f is the lobe's weight divided by |cos theta_i|, so that
 //   f |cos| / pdf is the path weight; `eval` and `pdf` return 0 for delta lobes.
 // - `eta` of a sample is the relative index of refraction crossed (1 for reflection), for radiance scaling.
+// - eval and sample give the BSDF radiance transport uses (paths from the camera). Paths from the lights carry
+//   importance and use the adjoint BSDF f*(wo, wi) = f(wi, wo) (Veach 1997, 3.7.6 and 5.2), `wo` still pointing to
+//   where the path came from: eval_for and sample_for with TransportMode::kImportance. The two differ only across
+//   refraction, where the radiance form's 1/eta'^2 is not there (Veach 1997, 5.2: radiance is compressed into the
+//   denser medium, importance is not); models that refract override eval_adjoint and sample_adjoint. The correction
+//   of shading normals (Veach 1997, 5.3) depends on the geometric normal and is the integrator's.
 #pragma once
 
 #include <cstdint>
@@ -30,8 +36,15 @@ enum BsdfFlags : uint32_t {
   kBsdfOneLobe = 1u << 5,   // sample() ignores its lobe choice `uc` (the integrator then does not compute one)
 };
 
-inline bool is_delta(uint32_t flags) { return (flags & kBsdfSpecular) != 0; }
-inline bool has_non_delta(uint32_t flags) { return (flags & (kBsdfDiffuse | kBsdfGlossy)) != 0; }
+inline bool is_delta(uint32_t flags) {
+  return (flags & kBsdfSpecular) != 0;
+}
+inline bool has_non_delta(uint32_t flags) {
+  return (flags & (kBsdfDiffuse | kBsdfGlossy)) != 0;
+}
+
+// What a path carries (Veach 1997, 3.7.6): radiance, traced from the camera; or importance, traced from the lights.
+enum class TransportMode { kRadiance, kImportance };
 
 struct BsdfSample {
   Rgb f;
@@ -52,6 +65,15 @@ class Bsdf {
     *pdf_out = pdf(wo, wi);
     return eval(wo, wi);
   }
+  // The adjoint BSDF (see the conventions above); the same as eval and sample for models that do not refract.
+  virtual Rgb eval_adjoint(const Vec3& wo, const Vec3& wi) const { return eval(wo, wi); }
+  virtual std::optional<BsdfSample> sample_adjoint(const Vec3& wo, float uc, Vec2 u) const { return sample(wo, uc, u); }
+  Rgb eval_for(TransportMode mode, const Vec3& wo, const Vec3& wi) const {
+    return mode == TransportMode::kRadiance ? eval(wo, wi) : eval_adjoint(wo, wi);
+  }
+  std::optional<BsdfSample> sample_for(TransportMode mode, const Vec3& wo, float uc, Vec2 u) const {
+    return mode == TransportMode::kRadiance ? sample(wo, uc, u) : sample_adjoint(wo, uc, u);
+  }
   // Union of the lobes this BSDF has.
   virtual uint32_t flags() const = 0;
   // Albedo-like colour for the first-hit albedo AOV and for Russian roulette heuristics.
@@ -61,8 +83,14 @@ class Bsdf {
   ~Bsdf() = default;  // BSDFs live in a ScratchArena and are never destroyed through a base pointer.
 };
 
-inline float cos_theta(const Vec3& w) { return w.z; }
-inline float abs_cos_theta(const Vec3& w) { return std::abs(w.z); }
-inline bool same_hemisphere(const Vec3& a, const Vec3& b) { return a.z * b.z > 0; }
+inline float cos_theta(const Vec3& w) {
+  return w.z;
+}
+inline float abs_cos_theta(const Vec3& w) {
+  return std::abs(w.z);
+}
+inline bool same_hemisphere(const Vec3& a, const Vec3& b) {
+  return a.z * b.z > 0;
+}
 
 }  // namespace tessera

@@ -94,6 +94,17 @@ class DielectricBsdf final : public Bsdf {
     return dvis * dwm_dwi * pt / (pr + pt);
   }
 
+  // The adjoint: the radiance form's 1/eta'^2 of transmission taken out again (f*(wo, wi) = f(wi, wo)).
+  Rgb eval_adjoint(const Vec3& wo, const Vec3& wi) const override {
+    const Rgb f = eval(wo, wi);
+    return wo.z * wi.z < 0 ? f * sqr(wo.z > 0 ? eta_ : 1 / eta_) : f;
+  }
+  std::optional<BsdfSample> sample_adjoint(const Vec3& wo, float uc, Vec2 u) const override {
+    std::optional<BsdfSample> s = sample(wo, uc, u);
+    if (s && (s->flags & kBsdfTransmission)) s->f *= sqr(s->eta);
+    return s;
+  }
+
   uint32_t flags() const override {
     return kBsdfReflection | kBsdfTransmission | (smooth() ? kBsdfSpecular : kBsdfGlossy);
   }

@@ -26,20 +26,13 @@ class MixBsdf final : public Bsdf {
   }
   float pdf(const Vec3& wo, const Vec3& wi) const override { return a_->pdf(wo, wi) * (1 - w_) + b_->pdf(wo, wi) * w_; }
   std::optional<BsdfSample> sample(const Vec3& wo, float uc, Vec2 u) const override {
-    const bool pick_b = uc < w_;
-    const float weight = pick_b ? w_ : 1 - w_;
-    const float uc2 = clamp(pick_b ? uc / w_ : (uc - w_) / (1 - w_), 0.0f, 0.99999994f);
-    std::optional<BsdfSample> s = (pick_b ? b_ : a_)->sample(wo, uc2, u);
-    if (!s) return std::nullopt;
-    if (is_delta(s->flags)) {
-      s->pdf *= weight;
-      s->f *= weight;
-      return s;
-    }
-    s->f = eval(wo, s->wi);
-    s->pdf = pdf(wo, s->wi);
-    if (!(s->pdf > 0)) return std::nullopt;
-    return s;
+    return sample_mixed(TransportMode::kRadiance, wo, uc, u);
+  }
+  Rgb eval_adjoint(const Vec3& wo, const Vec3& wi) const override {
+    return a_->eval_adjoint(wo, wi) * (1 - w_) + b_->eval_adjoint(wo, wi) * w_;
+  }
+  std::optional<BsdfSample> sample_adjoint(const Vec3& wo, float uc, Vec2 u) const override {
+    return sample_mixed(TransportMode::kImportance, wo, uc, u);
   }
   uint32_t flags() const override {
     // Choosing between two parts takes the lobe sample, even when each part has one lobe.
@@ -50,6 +43,23 @@ class MixBsdf final : public Bsdf {
   Rgb albedo_hint() const override { return a_->albedo_hint() * (1 - w_) + b_->albedo_hint() * w_; }
 
  private:
+  std::optional<BsdfSample> sample_mixed(TransportMode mode, const Vec3& wo, float uc, Vec2 u) const {
+    const bool pick_b = uc < w_;
+    const float weight = pick_b ? w_ : 1 - w_;
+    const float uc2 = clamp(pick_b ? uc / w_ : (uc - w_) / (1 - w_), 0.0f, 0.99999994f);
+    std::optional<BsdfSample> s = (pick_b ? b_ : a_)->sample_for(mode, wo, uc2, u);
+    if (!s) return std::nullopt;
+    if (is_delta(s->flags)) {
+      s->pdf *= weight;
+      s->f *= weight;
+      return s;
+    }
+    s->f = eval_for(mode, wo, s->wi);
+    s->pdf = pdf(wo, s->wi);
+    if (!(s->pdf > 0)) return std::nullopt;
+    return s;
+  }
+
   const Bsdf* a_;
   const Bsdf* b_;
   float w_;

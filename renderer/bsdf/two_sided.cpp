@@ -17,16 +17,25 @@ class TwoSidedBsdf final : public Bsdf {
     return wo.z < 0 ? inner_->pdf(flip(wo), flip(wi)) : inner_->pdf(wo, wi);
   }
   std::optional<BsdfSample> sample(const Vec3& wo, float uc, Vec2 u) const override {
-    if (wo.z >= 0) return inner_->sample(wo, uc, u);
-    std::optional<BsdfSample> s = inner_->sample(flip(wo), uc, u);
-    if (s) s->wi = flip(s->wi);
-    return s;
+    return sample_flipped(TransportMode::kRadiance, wo, uc, u);
+  }
+  Rgb eval_adjoint(const Vec3& wo, const Vec3& wi) const override {
+    return wo.z < 0 ? inner_->eval_adjoint(flip(wo), flip(wi)) : inner_->eval_adjoint(wo, wi);
+  }
+  std::optional<BsdfSample> sample_adjoint(const Vec3& wo, float uc, Vec2 u) const override {
+    return sample_flipped(TransportMode::kImportance, wo, uc, u);
   }
   uint32_t flags() const override { return inner_->flags(); }
   Rgb albedo_hint() const override { return inner_->albedo_hint(); }
 
  private:
   static Vec3 flip(const Vec3& w) { return {w.x, w.y, -w.z}; }
+  std::optional<BsdfSample> sample_flipped(TransportMode mode, const Vec3& wo, float uc, Vec2 u) const {
+    if (wo.z >= 0) return inner_->sample_for(mode, wo, uc, u);
+    std::optional<BsdfSample> s = inner_->sample_for(mode, flip(wo), uc, u);
+    if (s) s->wi = flip(s->wi);
+    return s;
+  }
   const Bsdf* inner_;
 };
 

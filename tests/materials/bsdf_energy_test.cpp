@@ -133,6 +133,59 @@ TEST(Reciprocity, HoldsForEveryModelThatShouldHaveIt) {
   }
 }
 
+// The adjoint BSDF of importance transport is f with its arguments swapped (Veach 1997, 3.7.6): f*(a, b) = f(b, a)
+// for every model, whatever it does across refraction (the radiance BTDF's 1/eta'^2 is absent from the adjoint);
+// and its non-delta samples report f*. (two_sided shows the front side from both sides: across it the model is not
+// reciprocal to begin with, and its transmission pairs are left out as in the reciprocity test.)
+TEST(Adjoint, EvalIsTheBsdfWithItsArgumentsSwapped) {
+  for (const BsdfCase& c : bsdf_cases()) {
+    if (is_classic(c.material["type"])) continue;
+    BsdfInstance inst(c.material);
+    const Bsdf& bsdf = inst.bsdf();
+    const bool check_transmission = c.material["type"] != "two_sided";
+    std::mt19937_64 rng(5);
+    int transmitted = 0;
+    for (int i = 0; i < 4000; ++i) {
+      Vec3 a = direction(std::acos(1 - 2 * uniform01(rng)) * 180 / kPi, 360 * uniform01(rng));
+      Vec3 b = direction(std::acos(1 - 2 * uniform01(rng)) * 180 / kPi, 360 * uniform01(rng));
+      if (std::abs(a.z) < 0.02f || std::abs(b.z) < 0.02f) continue;
+      if (a.z * b.z < 0 && !check_transmission) continue;
+      const Rgb adjoint = bsdf.eval_for(TransportMode::kImportance, a, b);
+      const Rgb swapped = bsdf.eval(b, a);
+      for (int ch = 0; ch < 3; ++ch)
+        ASSERT_NEAR(adjoint[ch], swapped[ch], 1e-3f * std::max(1.0f, std::max(adjoint[ch], swapped[ch]))) << c.name;
+      if (a.z * b.z < 0 && !is_black(swapped)) ++transmitted;
+      // Non-delta samples of the adjoint report the adjoint's value.
+      auto s = bsdf.sample_for(TransportMode::kImportance, a, uniform01(rng), Vec2(uniform01(rng), uniform01(rng)));
+      if (s && !is_delta(s->flags)) {
+        const Rgb f = bsdf.eval_adjoint(a, s->wi);
+        for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(s->f[ch], f[ch], 1e-3f * std::max(1.0f, f[ch])) << c.name;
+      }
+    }
+    if (c.transmissive && c.material["type"] == "dielectric") {
+      EXPECT_GT(transmitted, 100) << c.name;
+    }
+  }
+}
+
+TEST(Adjoint, SmoothDielectricTransmitsImportanceWithoutTheEtaSquaredFactor) {
+  // Through a lossless smooth interface the importance weights are R and 1 - R with no 1/eta'^2: a light path's
+  // throughput across glass is not scaled the way radiance is.
+  for (float ior : {1.33f, 1.5f}) {
+    BsdfInstance inst(json{{"type", "dielectric"}, {"ior", ior}});
+    for (float theta : {0.0f, 40.0f, 150.0f}) {
+      const Vec3 wo = direction(theta, 10);
+      std::mt19937_64 rng(9);
+      for (int i = 0; i < 200; ++i) {
+        auto s = inst.bsdf().sample_for(TransportMode::kImportance, wo, uniform01(rng),
+                                        Vec2(uniform01(rng), uniform01(rng)));
+        ASSERT_TRUE(s.has_value());
+        EXPECT_NEAR(s->f.x * std::abs(s->wi.z) / s->pdf, 1.0, 1e-5) << "ior " << ior << " theta " << theta;
+      }
+    }
+  }
+}
+
 // Seed 000, 2.5.4: the Phong and Blinn-Phong models as first written (with 1/(N.Psi)) are "not energy conserving"
 // and do "not satisfy Helmholtz's reciprocity"; the modified, normalised forms are both.
 TEST(ClassicShadingModels, BreakReciprocityAndEnergyWhileModifiedFormsKeepThem) {
