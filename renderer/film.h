@@ -39,6 +39,22 @@ class Film {
     float l = luminance(radiance);
     sum_lum2_[i] += l * l;
   }
+  // Adds `value` to the radiance sums of pixel (x, y) while other threads may add to the same pixel: a light path's
+  // contribution lands wherever it projects (Veach 1997, 10.3.4), not in a pixel a thread owns. Each 128-bit sum is
+  // added as two 64-bit atomic additions, the carry of the low word into the high one: integer additions in any
+  // order and interleaving end in the same bits, so a film of splats is the same whatever the threads. Splats do not
+  // count as samples and leave the squared-luminance sums (the noise estimate's) alone.
+  void splat(int x, int y, const Rgb& value) {
+    size_t i = index(x, y);
+    for (int c = 0; c < 3; ++c) atomic_add(sum_[3 * i + static_cast<size_t>(c)], to_fixed(value[c]));
+  }
+  // add_sample on a film that other threads splat onto at the same time: the radiance sums added as splat() adds
+  // them; the squared luminance as add_sample does (only the calling thread adds samples to this pixel).
+  void add_sample_shared(int x, int y, const Rgb& radiance) {
+    splat(x, y, radiance);
+    float l = luminance(radiance);
+    sum_lum2_[index(x, y)] += l * l;
+  }
   // Mean radiance of a pixel.
   Rgb pixel(int x, int y) const {
     size_t i = index(x, y);
@@ -81,7 +97,18 @@ class Film {
   }
 
  private:
-  size_t index(int x, int y) const { return static_cast<size_t>(y) * static_cast<size_t>(width_) + static_cast<size_t>(x); }
+  static void atomic_add(FixedSum& sum, FixedSum value) {
+    // Little-endian: the low word first. Sums are non-negative and below 2^127, the words' wrap-around is exact.
+    static_assert(sizeof(FixedSum) == 2 * sizeof(uint64_t));
+    uint64_t* words = reinterpret_cast<uint64_t*>(&sum);
+    const uint64_t lo = static_cast<uint64_t>(value), hi = static_cast<uint64_t>(value >> 64);
+    const uint64_t before = __atomic_fetch_add(&words[0], lo, __ATOMIC_RELAXED);
+    const uint64_t carry = before + lo < before ? 1 : 0;
+    if (hi + carry != 0) __atomic_fetch_add(&words[1], hi + carry, __ATOMIC_RELAXED);
+  }
+  size_t index(int x, int y) const {
+    return static_cast<size_t>(y) * static_cast<size_t>(width_) + static_cast<size_t>(x);
+  }
   int width_ = 0, height_ = 0;
   uint32_t samples_ = 0;
   std::vector<FixedSum> sum_;

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <random>
+#include <thread>
 
 #include "renderer/film.h"
 
@@ -58,6 +59,41 @@ TEST(Film, StateRoundTripsExactlyAndRefusesAnotherSize) {
   EXPECT_FALSE(smaller.read_state(state));
   EXPECT_FALSE(copy.read_state(state.substr(1)));
   EXPECT_TRUE(copy.sums() == film.sums());  // unchanged by the refused read
+}
+
+TEST(Film, SplatsFromManyThreadsGiveTheBitsOfOneThread) {
+  // Values large enough that the low 64-bit words overflow many times (1e6 is about 2^60 in units of 2^-40), and
+  // small ones that carry nothing: the sums must not depend on the order, interleaving or thread of the splats.
+  const int w = 3, h = 2;
+  std::vector<std::pair<int, Rgb>> splats;
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<float> big(1e5f, 3e6f), small(0, 1e-3f);
+  for (int i = 0; i < 20000; ++i)
+    splats.push_back({static_cast<int>(rng() % (w * h)), Rgb(big(rng), small(rng), i % 7 == 0 ? 1e25f : small(rng))});
+  Film serial(w, h);
+  for (const auto& [p, v] : splats) serial.splat(p % w, p / w, v);
+  Film shared(w, h);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 8; ++t)
+    threads.emplace_back([&, t] {
+      // Each thread adds every 8th splat, backwards: another order and interleaving every run.
+      for (size_t i = splats.size(); i-- > 0;)
+        if (static_cast<int>(i % 8) == t) shared.splat(splats[i].first % w, splats[i].first / w, splats[i].second);
+    });
+  for (std::thread& t : threads) t.join();
+  EXPECT_TRUE(serial.sums() == shared.sums());
+  // And the sums are the exact integer sums.
+  FixedSum expected = 0;
+  for (const auto& [p, v] : splats)
+    if (p == 4) expected += Film::to_fixed(v.x);
+  EXPECT_TRUE(shared.sums()[3 * 4] == expected);
+  EXPECT_GT(static_cast<double>(expected), 0x1p64);
+  // add_sample_shared adds the same radiance sums as add_sample, and the squared luminance.
+  Film a(w, h), b(w, h);
+  a.add_sample(1, 1, Rgb(0.5f, 2, 7));
+  b.add_sample_shared(1, 1, Rgb(0.5f, 2, 7));
+  EXPECT_TRUE(a.sums() == b.sums());
+  EXPECT_EQ(a.sums_lum2(), b.sums_lum2());
 }
 
 }  // namespace
