@@ -21,10 +21,11 @@ if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 packages=(
   make build-essential cmake ninja-build pkg-config git ca-certificates curl python3
   libembree-dev libopenimageio-dev openimageio-tools libcpp-httplib-dev nlohmann-json3-dev libtinygltf-dev
-  libsqlite3-dev libtbb-dev libssl-dev libstb-dev libjpeg-dev
+  libsqlite3-dev libpq-dev libtbb-dev libssl-dev libstb-dev libjpeg-dev
 )
 if [ "$mode" = "test" ]; then
-  packages+=(libgtest-dev libgmock-dev libbenchmark-dev chromium prometheus)
+  # postgresql: the server the job-store tests start their throw-away clusters with (initdb, pg_ctl).
+  packages+=(libgtest-dev libgmock-dev libbenchmark-dev chromium prometheus postgresql)
   # Node.js: any working node and npm will do (machines often have a newer one than Debian's, which Debian's npm
   # package would conflict with); Debian's only when there is none.
   if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then packages+=(nodejs npm); fi

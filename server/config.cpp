@@ -143,7 +143,8 @@ namespace {
 // A setting read into `field` by `parse`, whose error says what is wrong with the value.
 template <typename T>
 std::function<std::string(Config&, const std::string&)> parsed(T Config::*field,
-                                                               std::optional<T> (*parse)(std::string_view, std::string*)) {
+                                                               std::optional<T> (*parse)(std::string_view,
+                                                                                         std::string*)) {
   return [=](Config& c, const std::string& v) -> std::string {
     std::string error;
     const std::optional<T> value = parse(v, &error);
@@ -168,6 +169,16 @@ const std::vector<Option>& options() {
          c.data_dir = v;
          return "";
        }},
+      {"--store", "TESSERA_STORE", "STORE",
+       "where jobs are kept: sqlite (in the data dir; the default) or postgresql://user:pass@host/db, shared",
+       [](Config& c, const std::string& v) -> std::string {
+         if (v != "sqlite" && !is_postgres_store(v))
+           return "must be sqlite or a PostgreSQL URI (postgresql://user:password@host:port/database)";
+         c.store = v;
+         return "";
+       }},
+      {"--node", "TESSERA_NODE", "NAME", "this daemon's name in a shared store (default: the host name)",
+       text(&Config::node)},
       {"--threads", "TESSERA_THREADS", "N", "render threads (default 0: every hardware thread)",
        integer(&Config::threads, 0, 4096)},
       {"--max-jobs", "TESSERA_MAX_JOBS", "N", "jobs rendering at once, sharing the threads (default 1)",
@@ -241,6 +252,10 @@ const std::vector<Option>& options() {
 }
 
 }  // namespace
+
+bool is_postgres_store(std::string_view store) {
+  return store.starts_with("postgresql://") || store.starts_with("postgres://");
+}
 
 std::string config_usage() {
   std::string out =

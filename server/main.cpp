@@ -3,6 +3,7 @@
 #include <pthread.h>
 #include <signal.h>
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <cerrno>
@@ -26,6 +27,7 @@
 #include "server/job_service.h"
 #include "server/log.h"
 #include "server/metrics.h"
+#include "server/postgres_job_store.h"
 #include "server/retention.h"
 #include "server/scheduler.h"
 #include "server/sqlite_job_store.h"
@@ -66,7 +68,27 @@ int run(const Config& config) {
     return 1;
   }
   // What the daemon keeps, and where: its jobs, their files, the uploaded assets, and the events streamed to clients.
-  std::unique_ptr<JobStore> store = std::make_unique<SqliteJobStore>(data_dir / "jobs.db");
+  // The jobs in SQLite are this daemon's alone; in PostgreSQL they are shared by every daemon given the same database,
+  // each claiming under its node name.
+  std::unique_ptr<JobStore> store;
+  if (is_postgres_store(config.store)) {
+    std::string node = config.node;
+    if (node.empty()) {
+      char host[256] = {};
+      gethostname(host, sizeof host - 1);
+      node = host;
+    }
+    try {
+      store = std::make_unique<PostgresJobStore>(config.store, node);
+    } catch (const JobStoreError& e) {
+      log(LogLevel::kError, "cannot start: the job store cannot be opened", {{"error", e.what()}});
+      std::fprintf(stderr, "tesserad: %s\n", e.what());
+      return 1;
+    }
+    log(LogLevel::kInfo, "jobs are kept in PostgreSQL", {{"node", node}});
+  } else {
+    store = std::make_unique<SqliteJobStore>(data_dir / "jobs.db");
+  }
   std::unique_ptr<JobFiles> files = std::make_unique<DirectoryJobFiles>(data_dir);
   std::unique_ptr<AssetStore> assets = std::make_unique<DirectoryAssetStore>(data_dir);
   std::unique_ptr<EventBus> events = std::make_unique<EventHub>();

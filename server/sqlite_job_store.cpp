@@ -5,30 +5,11 @@
 #include <cerrno>
 
 #include "server/file_io.h"
+#include "server/job_store_sql.h"
 
 namespace tessera::server {
 
 namespace {
-
-constexpr const char* kColumns =
-    "id, kind, state, priority, created_at, started_at, finished_at, settings, outputs, passes, samples_done, "
-    "samples_total, elapsed_s, eta_s, samples_per_s, stop_reason, error, seq, owner, warnings, idempotency_key, "
-    "request_hash, name";
-constexpr int kDocumentColumn = 23;
-
-// States as an SQL list, 'queued','paused' (names from the enum, never client text).
-std::string sql_states(const std::vector<JobState>& states) {
-  std::string out;
-  for (JobState s : states) out += (out.empty() ? "'" : ",'") + std::string(job_state_name(s)) + "'";
-  return out;
-}
-
-// The SQL list of the states `to` may be reached from, as the state table decides.
-std::string states_allowed_into(JobState to, std::optional<JobState> only_from) {
-  std::vector<JobState> from = states_into(to);
-  if (only_from) std::erase_if(from, [&](JobState s) { return s != *only_from; });
-  return sql_states(from);
-}
 
 // The jobs table as of schema version 2 (paused state, owner, warnings, idempotency keys).
 constexpr const char* kJobsTableV2 = R"sql(
@@ -138,35 +119,7 @@ class SqliteJobStore::Statement {
              : std::string();
   }
 
-  // Reads the columns of kColumns (and the document after them when asked).
-  JobRecord record(bool with_document) const {
-    JobRecord r;
-    r.id = text(0);
-    r.kind = text(1);
-    r.state = parse_job_state(text(2)).value_or(JobState::kFailed);
-    r.priority = static_cast<int>(int64(3));
-    r.created_at_ms = int64(4);
-    if (!is_null(5)) r.started_at_ms = int64(5);
-    if (!is_null(6)) r.finished_at_ms = int64(6);
-    r.settings = text(7);
-    r.outputs = text(8);
-    r.progress.passes = static_cast<uint32_t>(int64(9));
-    r.progress.samples_done = static_cast<uint32_t>(int64(10));
-    r.progress.samples_total = static_cast<uint32_t>(int64(11));
-    r.progress.elapsed_s = real(12);
-    if (!is_null(13)) r.progress.eta_s = real(13);
-    r.progress.samples_per_s = real(14);
-    r.stop_reason = text(15);
-    r.error = text(16);
-    r.seq = int64(17);
-    r.owner = text(18);
-    r.warnings = text(19);
-    r.idempotency_key = text(20);
-    r.request_hash = text(21);
-    r.name = text(22);
-    if (with_document) r.document = text(kDocumentColumn);
-    return r;
-  }
+  JobRecord record(bool with_document) const { return read_job_record(*this, with_document); }
 
  private:
   void check(int rc) {
@@ -303,7 +256,7 @@ std::optional<JobRecord> SqliteJobStore::claim_next(int64_t now_ms) {
                                  "elapsed_s = 0, eta_s = NULL, samples_per_s = 0 "
                                  "WHERE seq = (SELECT seq FROM jobs WHERE state = 'queued' "
                                  "ORDER BY priority DESC, seq LIMIT 1) RETURNING ") +
-                         kColumns + ", document");
+                         kJobColumns + ", document");
   s.bind(1, now_ms);
   if (!s.step()) return std::nullopt;
   JobRecord r = s.record(true);
@@ -330,7 +283,7 @@ void SqliteJobStore::update_progress(const std::string& id, const JobProgress& p
 bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                                 const std::string& error, std::optional<JobState> only_from) {
   std::lock_guard lock(mutex_);
-  const std::string from_states = states_allowed_into(to, only_from);
+  const std::string from_states = sql_states_into(to, only_from);
   if (from_states.empty()) return false;
   std::string sql;
   if (to == JobState::kQueued) {
@@ -363,7 +316,7 @@ bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_
 bool SqliteJobStore::set_priority(const std::string& id, int priority) {
   std::lock_guard lock(mutex_);
   Statement s(*this, "UPDATE jobs SET priority = ?2 WHERE id = ?1 AND state IN (" +
-                         sql_states(action_states(JobAction::kPriority)) + ")");
+                         sql_state_list(action_states(JobAction::kPriority)) + ")");
   s.bind(1, id);
   s.bind(2, static_cast<int64_t>(priority));
   s.step();
@@ -391,7 +344,7 @@ std::optional<int> SqliteJobStore::queue_position(const std::string& id) {
 
 std::optional<JobRecord> SqliteJobStore::find_by_idempotency_key(const std::string& owner, const std::string& key) {
   std::lock_guard lock(mutex_);
-  Statement s(*this, std::string("SELECT ") + kColumns + " FROM jobs WHERE owner = ?1 AND idempotency_key = ?2");
+  Statement s(*this, std::string("SELECT ") + kJobColumns + " FROM jobs WHERE owner = ?1 AND idempotency_key = ?2");
   s.bind(1, owner);
   s.bind(2, key);
   if (!s.step()) return std::nullopt;
@@ -413,7 +366,7 @@ std::map<JobState, int> SqliteJobStore::count_by_state(const std::optional<std::
 std::optional<JobRecord> SqliteJobStore::get(const std::string& id, bool with_document) {
   std::lock_guard lock(mutex_);
   Statement s(*this,
-              std::string("SELECT ") + kColumns + (with_document ? ", document" : "") + " FROM jobs WHERE id = ?1");
+              std::string("SELECT ") + kJobColumns + (with_document ? ", document" : "") + " FROM jobs WHERE id = ?1");
   s.bind(1, id);
   if (!s.step()) return std::nullopt;
   return s.record(with_document);
@@ -425,11 +378,11 @@ std::vector<JobRecord> SqliteJobStore::list(const JobFilter& filter) {
   if (filter.state) states.push_back(*filter.state);
   std::string where;
   auto add = [&](const std::string& cond) { where += (where.empty() ? " WHERE " : " AND ") + cond; };
-  if (!states.empty()) add("state IN (" + sql_states(states) + ")");
+  if (!states.empty()) add("state IN (" + sql_state_list(states) + ")");
   if (filter.owner) add("owner = ?2");
   if (filter.before_seq) add("seq < ?3");
   if (filter.finished_before_ms) add("finished_at < ?4");
-  Statement s(*this, std::string("SELECT ") + kColumns + " FROM jobs" + where + " ORDER BY seq DESC LIMIT ?1");
+  Statement s(*this, std::string("SELECT ") + kJobColumns + " FROM jobs" + where + " ORDER BY seq DESC LIMIT ?1");
   s.bind(1, static_cast<int64_t>(filter.limit));
   if (filter.owner) s.bind(2, *filter.owner);
   if (filter.before_seq) s.bind(3, *filter.before_seq);
@@ -442,12 +395,7 @@ std::vector<JobRecord> SqliteJobStore::list(const JobFilter& filter) {
 bool SqliteJobStore::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
   std::lock_guard lock(mutex_);
   std::string sql = "DELETE FROM jobs WHERE id = ?1";
-  if (only_finished_before_ms) {
-    std::vector<JobState> terminal;
-    for (JobState st : kAllJobStates)
-      if (is_terminal(st)) terminal.push_back(st);
-    sql += " AND state IN (" + sql_states(terminal) + ") AND finished_at < ?2";
-  }
+  if (only_finished_before_ms) sql += " AND state IN (" + sql_terminal_states() + ") AND finished_at < ?2";
   Statement s(*this, sql);
   s.bind(1, id);
   if (only_finished_before_ms) s.bind(2, *only_finished_before_ms);

@@ -37,6 +37,18 @@ TEST(Config, EnvironmentThenFlags) {
   EXPECT_EQ(r.config->max_spp, 128u);
 }
 
+TEST(Config, TheStoreIsSqliteOrAPostgresUri) {
+  EXPECT_EQ(parse({}).config->store, "sqlite");
+  auto pg = parse({"--store", "postgresql://tessera@db/tessera", "--node", "render-1"});
+  ASSERT_TRUE(pg.config) << pg.error;
+  EXPECT_EQ(pg.config->store, "postgresql://tessera@db/tessera");
+  EXPECT_EQ(pg.config->node, "render-1");
+  EXPECT_TRUE(parse({}, {{"TESSERA_STORE", "postgres:///tessera?host=/run/postgresql"}}).config);
+  auto wrong = parse({"--store", "mysql://db/tessera"});
+  EXPECT_FALSE(wrong.config);
+  EXPECT_NE(wrong.error.find("--store must be sqlite or a PostgreSQL URI"), std::string::npos) << wrong.error;
+}
+
 TEST(Config, Errors) {
   EXPECT_FALSE(parse({"--port", "70000"}).config);
   EXPECT_FALSE(parse({"--port", "80x"}).config);

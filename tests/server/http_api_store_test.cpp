@@ -40,7 +40,7 @@ class FlakyStore final : public JobStore {
   std::atomic<bool> writes_only{false};
   std::atomic<bool> reads_only{false};
   std::atomic<bool> ends_only{false};  // only the end of a job (a move to succeeded, failed or cancelled) fails
-  std::atomic<int> failures{0};  // calls refused so far
+  std::atomic<int> failures{0};        // calls refused so far
 
   void create(const JobRecord& job) override {
     check(true);

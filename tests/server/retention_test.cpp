@@ -93,37 +93,6 @@ TEST(Retention, SweepPagesThroughManyJobsAndEndsWhenSomeCannotGo) {
   EXPECT_TRUE(store.list(JobFilter{}).empty());
 }
 
-TEST(Retention, StoreRemovesOnlyAJobStillEndedBeforeTheCutoff) {
-  test::TempDir dir;
-  SqliteJobStore sqlite(dir.path() / "jobs.db");
-  JobStore& store = sqlite;  // the interface's default arguments
-  JobRecord queued = make_job(0, 0);
-  store.create(queued);
-  EXPECT_FALSE(store.remove(queued.id, 1000000));
-  const std::string failed = ended_job(store, JobState::kFailed, 500);
-  EXPECT_FALSE(store.remove(failed, 500));  // ended at the cutoff, not before
-  // Requeued between the sweep's listing and its removal: kept.
-  ASSERT_TRUE(store.transition(failed, JobState::kQueued, 600));
-  EXPECT_FALSE(store.remove(failed, 1000000));
-  EXPECT_TRUE(store.get(failed));
-  // Without a cutoff, as DELETE /v1/jobs/{id}: anything goes.
-  EXPECT_TRUE(store.remove(queued.id));
-  EXPECT_TRUE(store.remove(failed));
-}
-
-TEST(Retention, ListsByFinishTime) {
-  test::TempDir dir;
-  SqliteJobStore sqlite(dir.path() / "jobs.db");
-  JobStore& store = sqlite;  // the interface's default arguments
-  const std::string a = ended_job(store, JobState::kSucceeded, 100);
-  ended_job(store, JobState::kSucceeded, 300);
-  JobFilter filter;
-  filter.finished_before_ms = 200;
-  const auto jobs = store.list(filter);
-  ASSERT_EQ(jobs.size(), 1u);
-  EXPECT_EQ(jobs[0].id, a);
-}
-
 TEST(Retention, StopsPromptlyAndDoesNothingWhenDisabled) {
   test::TempDir dir;
   SqliteJobStore sqlite(dir.path() / "jobs.db");

@@ -1,0 +1,351 @@
+#include "server/postgres_job_store.h"
+
+#include <libpq-fe.h>
+
+#include <charconv>
+#include <cstdlib>
+
+#include "server/job_store_sql.h"
+
+namespace tessera::server {
+
+namespace {
+
+// pg_advisory_lock's key for the migrations: "tessera\0" in ASCII, a number no other program is likely to pick.
+constexpr const char* kMigrationLock = "8387236830409277696";
+
+// Version 1: the jobs table of SqliteJobStore's version 3, with the node that claimed a running job.
+constexpr const char* kMigration1 = R"sql(
+  CREATE TABLE tessera_jobs (
+    seq BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,  -- submission order: first come, first served
+    id TEXT NOT NULL UNIQUE,
+    kind TEXT NOT NULL,
+    state TEXT NOT NULL CHECK (state IN ('queued','running','paused','succeeded','failed','cancelled')),
+    priority INTEGER NOT NULL DEFAULT 0,
+    created_at BIGINT NOT NULL,
+    started_at BIGINT,
+    finished_at BIGINT,
+    document TEXT NOT NULL,
+    settings TEXT NOT NULL,
+    outputs TEXT NOT NULL,
+    passes BIGINT NOT NULL DEFAULT 0,
+    samples_done BIGINT NOT NULL DEFAULT 0,
+    samples_total BIGINT NOT NULL DEFAULT 0,
+    elapsed_s DOUBLE PRECISION NOT NULL DEFAULT 0,
+    eta_s DOUBLE PRECISION,
+    samples_per_s DOUBLE PRECISION NOT NULL DEFAULT 0,
+    stop_reason TEXT,
+    error TEXT,
+    owner TEXT NOT NULL DEFAULT '',
+    warnings TEXT NOT NULL DEFAULT '[]',
+    idempotency_key TEXT,
+    request_hash TEXT,
+    name TEXT NOT NULL DEFAULT '',
+    node TEXT  -- the daemon rendering it, while it runs
+  );
+  CREATE INDEX tessera_jobs_queue ON tessera_jobs (state, priority DESC, seq);
+  CREATE INDEX tessera_jobs_owner ON tessera_jobs (owner, seq);
+  CREATE UNIQUE INDEX tessera_jobs_idempotency ON tessera_jobs (owner, idempotency_key)
+    WHERE idempotency_key IS NOT NULL;
+)sql";
+
+std::string to_text(int64_t v) {
+  return std::to_string(v);
+}
+
+// The shortest text that reads back as the same double (PostgreSQL parses it exactly).
+std::string to_text(double v) {
+  char buf[64];
+  auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
+  return ec == std::errc() ? std::string(buf, end) : "0";
+}
+
+std::optional<std::string> text_or_null(const std::string& v) {
+  return v.empty() ? std::nullopt : std::optional<std::string>(v);
+}
+
+}  // namespace
+
+// A result of one statement, freed with the object; read as read_job_record() reads a row (the current one).
+class PostgresJobStore::Result {
+ public:
+  explicit Result(PGresult* r) : r_(r) {}
+  ~Result() { PQclear(r_); }
+  Result(Result&& o) noexcept : r_(o.r_), row_(o.row_) { o.r_ = nullptr; }
+  Result(const Result&) = delete;
+  Result& operator=(const Result&) = delete;
+
+  int rows() const { return PQntuples(r_); }
+  // The number of rows an UPDATE or DELETE changed.
+  int affected() const { return std::atoi(PQcmdTuples(r_)); }
+  Result& at(int row) {
+    row_ = row;
+    return *this;
+  }
+  bool is_null(int col) const { return PQgetisnull(r_, row_, col); }
+  std::string text(int col) const {
+    return std::string(PQgetvalue(r_, row_, col), static_cast<size_t>(PQgetlength(r_, row_, col)));
+  }
+  int64_t int64(int col) const { return std::strtoll(PQgetvalue(r_, row_, col), nullptr, 10); }
+  double real(int col) const {
+    const char* p = PQgetvalue(r_, row_, col);
+    double v = 0;
+    std::from_chars(p, p + PQgetlength(r_, row_, col), v);
+    return v;
+  }
+  JobRecord record(bool with_document) const { return read_job_record(*this, with_document); }
+
+ private:
+  PGresult* r_;
+  int row_ = 0;
+};
+
+PostgresJobStore::PostgresJobStore(const std::string& conninfo, std::string node)
+    : conninfo_(conninfo), node_(std::move(node)) {
+  std::lock_guard lock(mutex_);
+  connect_locked();
+  migrate();
+}
+
+PostgresJobStore::~PostgresJobStore() {
+  PQfinish(conn_);
+}
+
+const std::vector<const char*>& PostgresJobStore::migrations() {
+  static const std::vector<const char*> kMigrations = {kMigration1};
+  return kMigrations;
+}
+
+void PostgresJobStore::connect_locked() {
+  if (conn_ && PQstatus(conn_) == CONNECTION_OK) return;
+  PQfinish(conn_);
+  conn_ = PQconnectdb(conninfo_.c_str());
+  if (!conn_) throw JobStoreError("job store: cannot connect to PostgreSQL: out of memory", false);
+  if (PQstatus(conn_) != CONNECTION_OK) {
+    std::string msg = PQerrorMessage(conn_);
+    while (!msg.empty() && msg.back() == '\n') msg.pop_back();
+    PQfinish(conn_);
+    conn_ = nullptr;
+    throw JobStoreError("job store: cannot connect to PostgreSQL: " + msg, false);
+  }
+  // Notices (a table that exists already) are not news for the log.
+  PQsetNoticeProcessor(
+      conn_, [](void*, const char*) {}, nullptr);
+}
+
+PostgresJobStore::Result PostgresJobStore::exec(const std::string& sql, const Params& params) {
+  connect_locked();
+  std::vector<const char*> values;
+  values.reserve(params.size());
+  for (const auto& p : params) values.push_back(p ? p->c_str() : nullptr);
+  PGresult* r = params.empty() ? PQexec(conn_, sql.c_str())
+                               : PQexecParams(conn_, sql.c_str(), static_cast<int>(values.size()), nullptr,
+                                              values.data(), nullptr, nullptr, 0);
+  Result result(r);
+  const ExecStatusType status = r ? PQresultStatus(r) : PGRES_FATAL_ERROR;
+  if (status == PGRES_COMMAND_OK || status == PGRES_TUPLES_OK) return result;
+  std::string msg = r ? PQresultErrorMessage(r) : PQerrorMessage(conn_);
+  while (!msg.empty() && msg.back() == '\n') msg.pop_back();
+  // Class 53, insufficient resources: 53100 is a full disk.
+  const char* state = r ? PQresultErrorField(r, PG_DIAG_SQLSTATE) : nullptr;
+  const std::string_view sqlstate = state ? state : "";
+  const bool full = sqlstate == "53100";
+  // A connection that broke (libpq's own error, with no SQLSTATE: the server went away, which libpq does not always
+  // note in its status), or that the server ends (class 08, connection exception; 57, an operator's shutdown) is
+  // opened again at the next call.
+  if (PQstatus(conn_) != CONNECTION_OK || sqlstate.empty() || sqlstate.starts_with("08") ||
+      sqlstate.starts_with("57")) {
+    PQfinish(conn_);
+    conn_ = nullptr;
+  }
+  throw JobStoreError("job store: " + msg, full);
+}
+
+void PostgresJobStore::migrate() {
+  // One daemon at a time: the others wait here, then find the schema up to date.
+  exec(std::string("SELECT pg_advisory_lock(") + kMigrationLock + ")");
+  try {
+    exec("CREATE TABLE IF NOT EXISTS tessera_schema_version (version INTEGER NOT NULL)");
+    Result r = exec("SELECT COALESCE(MAX(version), 0) FROM tessera_schema_version");
+    const int version = static_cast<int>(r.int64(0));
+    if (version > schema_version())
+      throw JobStoreError("job store: the database has schema version " + std::to_string(version) +
+                              ", newer than this daemon's " + std::to_string(schema_version()),
+                          false);
+    for (int v = version + 1; v <= schema_version(); ++v) {
+      exec("BEGIN");
+      try {
+        exec(migrations()[v - 1]);
+        exec("INSERT INTO tessera_schema_version (version) VALUES (" + std::to_string(v) + ")");
+        exec("COMMIT");
+      } catch (...) {
+        if (conn_) PQclear(PQexec(conn_, "ROLLBACK"));
+        throw;
+      }
+    }
+  } catch (...) {
+    if (conn_) PQclear(PQexec(conn_, (std::string("SELECT pg_advisory_unlock(") + kMigrationLock + ")").c_str()));
+    throw;
+  }
+  exec(std::string("SELECT pg_advisory_unlock(") + kMigrationLock + ")");
+}
+
+void PostgresJobStore::create(const JobRecord& job) {
+  std::lock_guard lock(mutex_);
+  exec(
+      "INSERT INTO tessera_jobs (id, kind, state, priority, created_at, document, settings, outputs, samples_total, "
+      "owner, warnings, idempotency_key, request_hash, name) "
+      "VALUES ($1, $2, 'queued', $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13)",
+      {job.id, job.kind, to_text(static_cast<int64_t>(job.priority)), to_text(job.created_at_ms), job.document,
+       job.settings, job.outputs, to_text(static_cast<int64_t>(job.progress.samples_total)), job.owner,
+       job.warnings.empty() ? std::string("[]") : job.warnings, text_or_null(job.idempotency_key),
+       text_or_null(job.request_hash), job.name});
+}
+
+std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms) {
+  std::lock_guard lock(mutex_);
+  // The row is locked as it is chosen; rows other daemons are claiming are skipped, not waited for.
+  Result r = exec(std::string("UPDATE tessera_jobs SET state = 'running', started_at = $1, node = $2, passes = 0, "
+                              "samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0 "
+                              "WHERE seq = (SELECT seq FROM tessera_jobs WHERE state = 'queued' "
+                              "ORDER BY priority DESC, seq LIMIT 1 FOR UPDATE SKIP LOCKED) RETURNING ") +
+                      kJobColumns + ", document",
+                  {to_text(now_ms), node_});
+  if (r.rows() == 0) return std::nullopt;
+  return r.record(true);
+}
+
+void PostgresJobStore::update_progress(const std::string& id, const JobProgress& p) {
+  std::lock_guard lock(mutex_);
+  exec(
+      "UPDATE tessera_jobs SET passes = $2, samples_done = $3, samples_total = $4, elapsed_s = $5, eta_s = $6, "
+      "samples_per_s = $7 WHERE id = $1 AND state = 'running'",
+      {id, to_text(static_cast<int64_t>(p.passes)), to_text(static_cast<int64_t>(p.samples_done)),
+       to_text(static_cast<int64_t>(p.samples_total)), to_text(p.elapsed_s),
+       p.eta_s ? std::optional<std::string>(to_text(*p.eta_s)) : std::nullopt, to_text(p.samples_per_s)});
+}
+
+bool PostgresJobStore::transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
+                                  const std::string& error, std::optional<JobState> only_from) {
+  const std::string from_states = sql_states_into(to, only_from);
+  if (from_states.empty()) return false;
+  const std::string where = " WHERE id = $1 AND state IN (" + from_states + ")";
+  std::lock_guard lock(mutex_);
+  if (to == JobState::kQueued)
+    return exec(
+               "UPDATE tessera_jobs SET state = 'queued', node = NULL, started_at = NULL, finished_at = NULL, "
+               "stop_reason = NULL, error = NULL, passes = 0, samples_done = 0, elapsed_s = 0, eta_s = NULL, "
+               "samples_per_s = 0" +
+                   where,
+               {id})
+               .affected() > 0;
+  if (to == JobState::kRunning)
+    return exec("UPDATE tessera_jobs SET state = 'running', node = $3, started_at = $2" + where,
+                {id, to_text(now_ms), node_})
+               .affected() > 0;
+  if (to == JobState::kPaused)
+    return exec("UPDATE tessera_jobs SET state = 'paused', node = NULL, eta_s = NULL" + where, {id}).affected() > 0;
+  return exec(
+             "UPDATE tessera_jobs SET state = $3, node = NULL, finished_at = $2, stop_reason = $4, error = $5, "
+             "eta_s = CASE WHEN $3 = 'succeeded' THEN 0 ELSE eta_s END" +
+                 where,
+             {id, to_text(now_ms), std::string(job_state_name(to)), text_or_null(stop_reason), text_or_null(error)})
+             .affected() > 0;
+}
+
+bool PostgresJobStore::set_priority(const std::string& id, int priority) {
+  std::lock_guard lock(mutex_);
+  return exec("UPDATE tessera_jobs SET priority = $2 WHERE id = $1 AND state IN (" +
+                  sql_state_list(action_states(JobAction::kPriority)) + ")",
+              {id, to_text(static_cast<int64_t>(priority))})
+             .affected() > 0;
+}
+
+void PostgresJobStore::set_warnings(const std::string& id, const std::string& warnings_json) {
+  std::lock_guard lock(mutex_);
+  exec("UPDATE tessera_jobs SET warnings = $2 WHERE id = $1", {id, warnings_json});
+}
+
+std::optional<int> PostgresJobStore::queue_position(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  Result r = exec(
+      "SELECT 1 + (SELECT COUNT(*) FROM tessera_jobs o WHERE o.state = 'queued' AND "
+      "(o.priority > j.priority OR (o.priority = j.priority AND o.seq < j.seq))) "
+      "FROM tessera_jobs j WHERE j.id = $1 AND j.state = 'queued'",
+      {id});
+  if (r.rows() == 0) return std::nullopt;
+  return static_cast<int>(r.int64(0));
+}
+
+std::optional<JobRecord> PostgresJobStore::find_by_idempotency_key(const std::string& owner, const std::string& key) {
+  std::lock_guard lock(mutex_);
+  Result r = exec(std::string("SELECT ") + kJobColumns + " FROM tessera_jobs WHERE owner = $1 AND idempotency_key = $2",
+                  {owner, key});
+  if (r.rows() == 0) return std::nullopt;
+  return r.record(false);
+}
+
+std::map<JobState, int> PostgresJobStore::count_by_state(const std::optional<std::string>& owner) {
+  std::lock_guard lock(mutex_);
+  Result r = owner ? exec("SELECT state, COUNT(*) FROM tessera_jobs WHERE owner = $1 GROUP BY state", {*owner})
+                   : exec("SELECT state, COUNT(*) FROM tessera_jobs GROUP BY state");
+  std::map<JobState, int> out;
+  for (JobState st : kAllJobStates) out[st] = 0;
+  for (int i = 0; i < r.rows(); ++i)
+    if (auto st = parse_job_state(r.at(i).text(0))) out[*st] = static_cast<int>(r.int64(1));
+  return out;
+}
+
+std::optional<JobRecord> PostgresJobStore::get(const std::string& id, bool with_document) {
+  std::lock_guard lock(mutex_);
+  Result r = exec(
+      std::string("SELECT ") + kJobColumns + (with_document ? ", document" : "") + " FROM tessera_jobs WHERE id = $1",
+      {id});
+  if (r.rows() == 0) return std::nullopt;
+  return r.record(with_document);
+}
+
+std::vector<JobRecord> PostgresJobStore::list(const JobFilter& filter) {
+  std::vector<JobState> states = filter.states;
+  if (filter.state) states.push_back(*filter.state);
+  std::string where;
+  Params params{to_text(static_cast<int64_t>(filter.limit))};
+  auto add = [&](const std::string& cond) { where += (where.empty() ? " WHERE " : " AND ") + cond; };
+  auto param = [&](std::string value) {
+    params.push_back(std::move(value));
+    std::string placeholder = "$";
+    placeholder += std::to_string(params.size());
+    return placeholder;
+  };
+  if (!states.empty()) add("state IN (" + sql_state_list(states) + ")");
+  if (filter.owner) add("owner = " + param(*filter.owner));
+  if (filter.before_seq) add("seq < " + param(to_text(*filter.before_seq)));
+  if (filter.finished_before_ms) add("finished_at < " + param(to_text(*filter.finished_before_ms)));
+  std::lock_guard lock(mutex_);
+  Result r =
+      exec(std::string("SELECT ") + kJobColumns + " FROM tessera_jobs" + where + " ORDER BY seq DESC LIMIT $1", params);
+  std::vector<JobRecord> out;
+  for (int i = 0; i < r.rows(); ++i) out.push_back(r.at(i).record(false));
+  return out;
+}
+
+bool PostgresJobStore::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
+  std::lock_guard lock(mutex_);
+  if (only_finished_before_ms)
+    return exec("DELETE FROM tessera_jobs WHERE id = $1 AND state IN (" + sql_terminal_states() +
+                    ") AND finished_at < $2",
+                {id, to_text(*only_finished_before_ms)})
+               .affected() > 0;
+  return exec("DELETE FROM tessera_jobs WHERE id = $1", {id}).affected() > 0;
+}
+
+int PostgresJobStore::requeue_running() {
+  std::lock_guard lock(mutex_);
+  return exec(
+             "UPDATE tessera_jobs SET state = 'queued', node = NULL, started_at = NULL, passes = 0, samples_done = 0, "
+             "elapsed_s = 0, eta_s = NULL, samples_per_s = 0 WHERE state = 'running' AND node = $1",
+             {node_})
+      .affected();
+}
+
+}  // namespace tessera::server

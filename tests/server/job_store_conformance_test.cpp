@@ -1,0 +1,389 @@
+// What every JobStore does, whatever keeps the jobs: one typed suite run against the SQLite store (a file in a
+// temporary directory) and the PostgreSQL store (a fresh database in a throw-away server, postgres_cluster.h). Claim
+// order (priority, then first come), every move of the state table and no other, a refused move that writes nothing,
+// concurrent claims, progress, lists, removal, idempotency keys, counts per owner, a restart.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <thread>
+
+#include "server/job_state.h"
+#include "server/postgres_job_store.h"
+#include "server/sqlite_job_store.h"
+#include "tests/server/postgres_cluster.h"
+#include "tests/server/test_util.h"
+
+namespace tessera::server {
+namespace {
+
+using test::make_job;
+
+struct SqliteBackend {
+  test::TempDir dir;
+  // Every store opened on one backend shares its jobs (a second daemon, or the same one restarted).
+  std::unique_ptr<JobStore> open(const std::string& /*node*/ = "node-a") {
+    return std::make_unique<SqliteJobStore>(dir.path() / "jobs.db");
+  }
+};
+
+struct PostgresBackend {
+  std::string uri = test::PostgresCluster::shared().create_database();
+  std::unique_ptr<JobStore> open(const std::string& node = "node-a") {
+    return std::make_unique<PostgresJobStore>(uri, node);
+  }
+};
+
+template <typename Backend>
+class JobStoreConformance : public ::testing::Test {
+ protected:
+  Backend backend;
+  std::unique_ptr<JobStore> owned = backend.open();
+  JobStore& store = *owned;
+
+  // A new job of `owner`, driven into `state` (which claims it when it must run: nothing else may be queued).
+  JobRecord job_in(JobState state, const std::string& owner = "") {
+    JobRecord j = make_job(0, 1);
+    j.owner = owner;
+    store.create(j);
+    switch (state) {
+      case JobState::kQueued:
+        break;
+      case JobState::kPaused:
+        EXPECT_TRUE(store.transition(j.id, JobState::kPaused, 2));
+        break;
+      case JobState::kRunning:
+      case JobState::kSucceeded:
+      case JobState::kFailed:
+      case JobState::kCancelled: {
+        auto claimed = store.claim_next(2);
+        EXPECT_TRUE(claimed && claimed->id == j.id);
+        if (state != JobState::kRunning) {
+          EXPECT_TRUE(store.transition(j.id, state, 3, "samples", ""));
+        }
+        break;
+      }
+    }
+    EXPECT_EQ(store.get(j.id, false)->state, state);
+    return j;
+  }
+};
+
+using Backends = ::testing::Types<SqliteBackend, PostgresBackend>;
+class BackendNames {
+ public:
+  template <typename T>
+  static std::string GetName(int) {
+    return std::is_same_v<T, SqliteBackend> ? "Sqlite" : "Postgres";
+  }
+};
+TYPED_TEST_SUITE(JobStoreConformance, Backends, BackendNames);
+
+TYPED_TEST(JobStoreConformance, ClaimsByPriorityThenFirstCome) {
+  JobStore& store = this->store;
+  JobRecord a = make_job(0, 1), b = make_job(5, 2), c = make_job(0, 3), d = make_job(5, 4);
+  for (const JobRecord* j : {&a, &b, &c, &d}) store.create(*j);
+  std::vector<std::string> order;
+  while (auto j = store.claim_next(100)) {
+    EXPECT_EQ(j->state, JobState::kRunning);
+    EXPECT_EQ(j->started_at_ms, 100);
+    EXPECT_EQ(j->document, R"({"kind":"scene"})");  // a claim brings the document to render
+    order.push_back(j->id);
+  }
+  EXPECT_EQ(order, (std::vector<std::string>{b.id, d.id, a.id, c.id}));
+}
+
+// Every (from, to) pair: the store makes exactly the moves can_transition() allows, and a refused one changes nothing.
+TYPED_TEST(JobStoreConformance, MakesEveryMoveTheStateTableAllowsAndNoOther) {
+  JobStore& store = this->store;
+  for (JobState from : kAllJobStates) {
+    for (JobState to : kAllJobStates) {
+      SCOPED_TRACE(std::string(job_state_name(from)) + " -> " + job_state_name(to));
+      const JobRecord j = this->job_in(from);
+      const bool allowed = can_transition(from, to);
+      EXPECT_EQ(store.transition(j.id, to, 50, "reason", ""), allowed);
+      EXPECT_EQ(store.get(j.id, false)->state, allowed ? to : from);
+      store.remove(j.id);
+      // Only from a named state: refused from any other.
+      for (JobState only : kAllJobStates) {
+        if (only == from || !allowed) continue;
+        const JobRecord k = this->job_in(from);
+        EXPECT_FALSE(store.transition(k.id, to, 50, "", "", only)) << "only from " << job_state_name(only);
+        EXPECT_EQ(store.get(k.id, false)->state, from);
+        store.remove(k.id);
+      }
+    }
+  }
+  EXPECT_FALSE(store.transition(new_job_id(), JobState::kCancelled, 1, "", ""));  // unknown id
+}
+
+// A node that finished a render whose job was cancelled meanwhile (through another node, or another request) must
+// not write its end over the cancellation.
+TYPED_TEST(JobStoreConformance, AnEndRefusedAfterACancelWritesNothing) {
+  JobStore& store = this->store;
+  const JobRecord j = this->job_in(JobState::kRunning);
+  ASSERT_TRUE(store.transition(j.id, JobState::kCancelled, 10, "cancelled", ""));
+  EXPECT_FALSE(store.transition(j.id, JobState::kSucceeded, 20, "samples", ""));
+  EXPECT_FALSE(store.transition(j.id, JobState::kFailed, 20, "", "boom"));
+  EXPECT_FALSE(store.transition(j.id, JobState::kPaused, 20));
+  const auto got = store.get(j.id, false);
+  EXPECT_EQ(got->state, JobState::kCancelled);
+  EXPECT_EQ(got->stop_reason, "cancelled");
+  EXPECT_EQ(got->finished_at_ms, 10);
+  EXPECT_EQ(got->error, "");
+}
+
+TYPED_TEST(JobStoreConformance, AnEndIsStampedAndARequeueStartsOver) {
+  JobStore& store = this->store;
+  const JobRecord j = this->job_in(JobState::kRunning);
+  JobProgress p;
+  p.passes = 3;
+  p.samples_done = 7;
+  p.samples_total = 16;
+  p.elapsed_s = 0.1;  // not a binary fraction: read back exactly all the same
+  p.eta_s = 2.5e-7;
+  p.samples_per_s = 1234.5678;
+  store.update_progress(j.id, p);
+  auto got = store.get(j.id, false);
+  EXPECT_EQ(got->progress.passes, 3u);
+  EXPECT_EQ(got->progress.samples_done, 7u);
+  EXPECT_EQ(got->progress.elapsed_s, 0.1);
+  EXPECT_EQ(got->progress.eta_s, 2.5e-7);
+  EXPECT_EQ(got->progress.samples_per_s, 1234.5678);
+  EXPECT_TRUE(got->document.empty());  // not asked for
+  EXPECT_TRUE(store.transition(j.id, JobState::kFailed, 9, "", "out of memory"));
+  got = store.get(j.id, true);
+  EXPECT_EQ(got->finished_at_ms, 9);
+  EXPECT_EQ(got->error, "out of memory");
+  EXPECT_EQ(got->document, R"({"kind":"scene"})");
+  store.update_progress(j.id, JobProgress{});  // only a running job's progress is written
+  EXPECT_EQ(store.get(j.id, false)->progress.samples_done, 7u);
+
+  EXPECT_TRUE(store.transition(j.id, JobState::kQueued, 10));
+  got = store.get(j.id, false);
+  EXPECT_EQ(got->state, JobState::kQueued);
+  EXPECT_FALSE(got->started_at_ms);
+  EXPECT_FALSE(got->finished_at_ms);
+  EXPECT_EQ(got->error, "");
+  EXPECT_EQ(got->stop_reason, "");
+  EXPECT_EQ(got->progress.samples_done, 0u);
+  EXPECT_EQ(got->progress.samples_total, 16u);
+  EXPECT_EQ(store.queue_position(j.id), 1);
+}
+
+TYPED_TEST(JobStoreConformance, ASucceededJobKeepsItsStopReasonAndAZeroEta) {
+  JobStore& store = this->store;
+  const JobRecord j = this->job_in(JobState::kRunning);
+  JobProgress p;
+  p.eta_s = 3;
+  store.update_progress(j.id, p);
+  ASSERT_TRUE(store.transition(j.id, JobState::kSucceeded, 9, "time", ""));
+  const auto got = store.get(j.id, false);
+  EXPECT_EQ(got->stop_reason, "time");
+  EXPECT_EQ(got->progress.eta_s, 0.0);
+  EXPECT_EQ(got->finished_at_ms, 9);
+}
+
+// Two daemons (two connections) claiming at once from one queue: every job is claimed exactly once.
+TYPED_TEST(JobStoreConformance, ConcurrentClaimsTakeEachJobOnce) {
+  constexpr int kJobs = 60;
+  std::set<std::string> ids;
+  for (int i = 0; i < kJobs; ++i) {
+    JobRecord j = make_job(i % 3, i);
+    this->store.create(j);
+    ids.insert(j.id);
+  }
+  std::unique_ptr<JobStore> other = this->backend.open("node-b");
+  std::mutex mutex;
+  std::vector<std::string> claimed;
+  auto claimer = [&](JobStore& s) {
+    while (auto j = s.claim_next(5)) {
+      std::lock_guard lock(mutex);
+      claimed.push_back(j->id);
+    }
+  };
+  std::thread a([&] { claimer(this->store); });
+  std::thread b([&] { claimer(*other); });
+  a.join();
+  b.join();
+  EXPECT_EQ(claimed.size(), static_cast<size_t>(kJobs));
+  EXPECT_EQ(std::set<std::string>(claimed.begin(), claimed.end()), ids);
+}
+
+TYPED_TEST(JobStoreConformance, QueuePositionFollowsPriorityAndPriorityChangesOnlyWhileNotEnded) {
+  JobStore& store = this->store;
+  JobRecord a = make_job(0, 1), b = make_job(0, 2), c = make_job(0, 3);
+  for (const JobRecord* j : {&a, &b, &c}) store.create(*j);
+  EXPECT_EQ(store.queue_position(a.id), 1);
+  EXPECT_EQ(store.queue_position(c.id), 3);
+  EXPECT_TRUE(store.set_priority(c.id, 10));
+  EXPECT_EQ(store.queue_position(c.id), 1);
+  EXPECT_EQ(store.queue_position(a.id), 2);
+  EXPECT_EQ(store.claim_next(5)->id, c.id);
+  EXPECT_FALSE(store.queue_position(c.id));  // not queued
+  EXPECT_EQ(store.set_priority(c.id, 3), action_allowed(JobAction::kPriority, JobState::kRunning));
+  ASSERT_TRUE(store.transition(c.id, JobState::kSucceeded, 6, "samples", ""));
+  EXPECT_FALSE(store.set_priority(c.id, 7));  // ended
+  EXPECT_FALSE(store.set_priority(new_job_id(), 7));
+}
+
+TYPED_TEST(JobStoreConformance, ListsNewestFirstWithFiltersAndACursor) {
+  JobStore& store = this->store;
+  std::vector<JobRecord> jobs;
+  for (int i = 0; i < 5; ++i) {
+    jobs.push_back(make_job(i % 2, i));
+    jobs.back().owner = i < 3 ? "ann" : "bob";
+    store.create(jobs.back());
+  }
+  store.claim_next(10);  // jobs[1] (priority 1, first)
+  auto all = store.list({});
+  ASSERT_EQ(all.size(), 5u);
+  EXPECT_EQ(all.front().id, jobs[4].id);
+  EXPECT_EQ(all.back().id, jobs[0].id);
+  JobFilter running;
+  running.state = JobState::kRunning;
+  auto r = store.list(running);
+  ASSERT_EQ(r.size(), 1u);
+  EXPECT_EQ(r[0].id, jobs[1].id);
+  JobFilter two;
+  two.limit = 2;
+  EXPECT_EQ(store.list(two).size(), 2u);
+  JobFilter ann;
+  ann.owner = "ann";
+  ann.states = {JobState::kQueued};
+  ann.before_seq = all[2].seq;  // jobs[2]: only those before it
+  auto older = store.list(ann);
+  ASSERT_EQ(older.size(), 1u);
+  EXPECT_EQ(older[0].id, jobs[0].id);
+}
+
+TYPED_TEST(JobStoreConformance, ListsByFinishTimeAndRemovesOnlyAJobStillEndedBeforeTheCutoff) {
+  JobStore& store = this->store;
+  const JobRecord queued = this->job_in(JobState::kQueued);
+  EXPECT_FALSE(store.remove(queued.id, 1000000));
+  const JobRecord failed = make_job(0, 1);
+  store.create(failed);
+  ASSERT_TRUE(store.transition(failed.id, JobState::kCancelled, 500, "cancelled", ""));
+  JobFilter filter;
+  filter.finished_before_ms = 501;
+  ASSERT_EQ(store.list(filter).size(), 1u);
+  filter.finished_before_ms = 500;
+  EXPECT_TRUE(store.list(filter).empty());
+  EXPECT_FALSE(store.remove(failed.id, 500));  // ended at the cutoff, not before
+  // Requeued between the sweep's listing and its removal: kept.
+  ASSERT_TRUE(store.transition(failed.id, JobState::kQueued, 600));
+  EXPECT_FALSE(store.remove(failed.id, 1000000));
+  EXPECT_TRUE(store.get(failed.id, false));
+  // Without a cutoff, as DELETE /v1/jobs/{id}: anything goes.
+  EXPECT_TRUE(store.remove(queued.id));
+  EXPECT_TRUE(store.remove(failed.id));
+  EXPECT_FALSE(store.remove(failed.id));
+  EXPECT_FALSE(store.get(failed.id, false));
+}
+
+TYPED_TEST(JobStoreConformance, ADuplicateIdIsAStoreErrorNotOutOfSpace) {
+  JobStore& store = this->store;
+  JobRecord a = make_job(0, 1);
+  store.create(a);
+  try {
+    store.create(a);
+    ADD_FAILURE() << "a duplicate id was stored";
+  } catch (const JobStoreError& e) {
+    EXPECT_FALSE(e.out_of_space()) << e.what();
+  }
+  EXPECT_EQ(store.list({}).size(), 1u);
+}
+
+TYPED_TEST(JobStoreConformance, IdempotencyKeysArePerOwner) {
+  JobStore& store = this->store;
+  JobRecord a = make_job(0, 1);
+  a.owner = "ann";
+  a.idempotency_key = "k1";
+  a.request_hash = "h1";
+  store.create(a);
+  auto found = store.find_by_idempotency_key("ann", "k1");
+  ASSERT_TRUE(found);
+  EXPECT_EQ(found->id, a.id);
+  EXPECT_EQ(found->request_hash, "h1");
+  EXPECT_FALSE(store.find_by_idempotency_key("bob", "k1"));
+  JobRecord again = make_job(0, 2);
+  again.owner = "ann";
+  again.idempotency_key = "k1";
+  EXPECT_THROW(store.create(again), JobStoreError);
+  JobRecord bobs = again;
+  bobs.id = new_job_id();
+  bobs.owner = "bob";
+  store.create(bobs);  // another owner's key of the same text
+  EXPECT_EQ(store.find_by_idempotency_key("bob", "k1")->id, bobs.id);
+  // Jobs without a key never collide.
+  JobRecord n1 = make_job(0, 3), n2 = make_job(0, 4);
+  store.create(n1);
+  store.create(n2);
+}
+
+// The per-user queue cap reads these counts (JobService::queue_full): one owner's, or everyone's.
+TYPED_TEST(JobStoreConformance, CountsJobsByStateAndOwner) {
+  JobStore& store = this->store;
+  this->job_in(JobState::kSucceeded, "ann");
+  this->job_in(JobState::kRunning, "ann");
+  this->job_in(JobState::kQueued, "ann");
+  this->job_in(JobState::kQueued, "bob");
+  this->job_in(JobState::kPaused, "bob");
+  const auto ann = store.count_by_state(std::string("ann"));
+  EXPECT_EQ(ann.at(JobState::kQueued), 1);
+  EXPECT_EQ(ann.at(JobState::kRunning), 1);
+  EXPECT_EQ(ann.at(JobState::kSucceeded), 1);
+  EXPECT_EQ(ann.at(JobState::kPaused), 0);
+  const auto all = store.count_by_state(std::nullopt);
+  EXPECT_EQ(all.at(JobState::kQueued), 2);
+  EXPECT_EQ(all.at(JobState::kPaused), 1);
+  EXPECT_EQ(all.at(JobState::kCancelled), 0);
+  EXPECT_EQ(all.size(), std::size(kAllJobStates));
+  EXPECT_EQ(store.count_by_state(std::string("carol")).at(JobState::kQueued), 0);
+}
+
+TYPED_TEST(JobStoreConformance, KeepsNamesAndWarnings) {
+  JobStore& store = this->store;
+  JobRecord j = make_job(0, 1);
+  j.name = "Cornell box, 4096 spp";
+  store.create(j);
+  EXPECT_EQ(store.get(j.id, false)->name, "Cornell box, 4096 spp");
+  EXPECT_EQ(store.list({}).front().name, "Cornell box, 4096 spp");
+  EXPECT_EQ(store.claim_next(2)->name, "Cornell box, 4096 spp");
+  EXPECT_EQ(store.get(j.id, false)->warnings, "[]");
+  store.set_warnings(j.id, R"(["KHR_materials_sheen is not supported"])");
+  EXPECT_EQ(store.get(j.id, false)->warnings, R"(["KHR_materials_sheen is not supported"])");
+}
+
+TYPED_TEST(JobStoreConformance, ARestartRequeuesItsRunningJobsAndKeepsTheRest) {
+  JobRecord done = make_job(0, 1), running = make_job(0, 2), queued = make_job(0, 3);
+  {
+    std::unique_ptr<JobStore> first = this->backend.open();
+    first->create(done);
+    first->create(running);
+    first->create(queued);
+    ASSERT_EQ(first->claim_next(5)->id, done.id);
+    ASSERT_TRUE(first->transition(done.id, JobState::kSucceeded, 6, "samples", ""));
+    ASSERT_EQ(first->claim_next(7)->id, running.id);
+    JobProgress p;
+    p.passes = 2;
+    p.samples_done = 3;
+    first->update_progress(running.id, p);
+  }  // the process "dies" with one job running
+  std::unique_ptr<JobStore> store = this->backend.open();
+  EXPECT_EQ(store->requeue_running(), 1);
+  auto r = store->get(running.id, false);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->state, JobState::kQueued);
+  EXPECT_EQ(r->progress.samples_done, 0u);  // the progress starts over (the render resumes from its checkpoint)
+  EXPECT_FALSE(r->started_at_ms);
+  EXPECT_EQ(store->get(done.id, false)->state, JobState::kSucceeded);
+  // The requeued job keeps its place: submitted before `queued`, it is claimed first.
+  EXPECT_EQ(store->claim_next(8)->id, running.id);
+  EXPECT_EQ(store->claim_next(8)->id, queued.id);
+}
+
+}  // namespace
+}  // namespace tessera::server
