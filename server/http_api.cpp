@@ -341,6 +341,17 @@ void get_result(ApiContext& ctx, JobFile file, const Request& req, Response& res
   send_file_or_problem(req, res, ctx.jobs.result(*job, file), job_file_media_type(file));
 }
 
+// The job's log as text; empty before it has one (a job that has not started rendering).
+void get_log(ApiContext& ctx, const Request& req, Response& res) {
+  auto job = find_job(ctx, req, res);
+  if (!job) return;
+  res.set_header("Cache-Control", "no-cache");
+  const char* type = job_file_media_type(JobFile::kLog);
+  if (auto file = ctx.jobs.job_log(*job)) return send_file(req, res, std::move(file), type);
+  res.status = 200;
+  res.set_content("", type);
+}
+
 // A job after an action: 202 while a running render winds down (within one pass), 200 once the state has changed.
 void send_taken(Response& res, const std::variant<ActionTaken, Problem>& taken, bool may_pend) {
   if (auto* p = std::get_if<Problem>(&taken)) return send_problem(res, *p);
@@ -560,6 +571,7 @@ std::vector<Route> routes(ApiContext* ctx) {
        [ctx](const Request& q, Response& r) {
          if (auto j = find_job(*ctx, q, r)) stream_events(*ctx, q, r, j);
        }},
+      {"GET", "/v1/jobs/{id}/log", job + "/log", [ctx](const Request& q, Response& r) { get_log(*ctx, q, r); }},
       {"GET", "/v1/jobs/{id}/preview.png", job + "/preview\\.png",
        [ctx](const Request& q, Response& r) { get_preview(*ctx, q, r); }},
       {"GET", "/v1/jobs/{id}/result.png", job + "/result\\.png",

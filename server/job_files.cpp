@@ -86,12 +86,15 @@ const char* job_file_name(JobFile f) {
       return "result.exr";
     case JobFile::kCheckpoint:
       return "checkpoint.bin";
+    case JobFile::kLog:
+      return "log.txt";
   }
   return "preview.png";
 }
 
 const char* job_file_media_type(JobFile f) {
   if (f == JobFile::kCheckpoint) return "application/octet-stream";
+  if (f == JobFile::kLog) return "text/plain; charset=utf-8";
   return f == JobFile::kResultExr ? "image/x-exr" : "image/png";
 }
 

@@ -1,8 +1,8 @@
-// The files of jobs (preview, results, checkpoint): an interface, so that every node of a daemon can reach them
+// The files of jobs (preview, results, checkpoint, log): an interface, so that every node of a daemon can reach them
 // wherever they are kept, and its implementation in the data directory, <data>/jobs/<id>/{preview.png,result.png,
-// result.exr,checkpoint.bin}. Paths are only ever built from validated job ids and fixed names, so nothing a client
-// sends can reach outside the directory. Every file is written beside its final name and renamed over it, so a reader
-// (or a crash) never sees half a file.
+// result.exr,checkpoint.bin,log.txt}. Paths are only ever built from validated job ids and fixed names, so nothing a
+// client sends can reach outside the directory. Every file is written beside its final name and renamed over it, so a
+// reader (or a crash) never sees half a file.
 #pragma once
 
 #include <cstdint>
@@ -16,7 +16,7 @@
 
 namespace tessera::server {
 
-enum class JobFile { kPreviewPng, kResultPng, kResultExr, kCheckpoint };
+enum class JobFile { kPreviewPng, kResultPng, kResultExr, kCheckpoint, kLog };
 const char* job_file_name(JobFile f);
 const char* job_file_media_type(JobFile f);
 

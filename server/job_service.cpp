@@ -237,6 +237,10 @@ std::variant<std::unique_ptr<FileReader>, Problem> JobService::preview(const Job
   return Problem{404, "this job has no preview (it ended before its first pass)", std::nullopt};
 }
 
+std::unique_ptr<FileReader> JobService::job_log(const JobRecord& job) {
+  return files_.open(job.id, JobFile::kLog);
+}
+
 std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobRecord& job, JobFile file) {
   if (job.state != JobState::kSucceeded)
     return Problem{409,

@@ -1,6 +1,8 @@
 #include "server/scheduler.h"
 
 #include <algorithm>
+#include <chrono>
+#include <cstdio>
 
 #include <nlohmann/json.hpp>
 
@@ -33,6 +35,30 @@ class Scheduler::RenderSlot {
 
 namespace {
 
+// printf into a std::string, for the lines of a job's log.
+template <typename... Args>
+std::string printf_string(const char* pattern, Args... args) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf, pattern, args...);
+  return buf;
+}
+
+// Why a render that completed stopped, as its log says it.
+std::string stop_explained(StopReason r) {
+  switch (r) {
+    case StopReason::kSamples:
+      return "its samples-per-pixel budget was reached";
+    case StopReason::kTimeLimit:
+      return "its time limit was reached";
+    case StopReason::kNoiseTarget:
+      return "its noise target was reached";
+    case StopReason::kStopped:
+    case StopReason::kCancelled:
+      break;
+  }
+  return stop_reason_name(r);
+}
+
 JobProgress to_job_progress(const RenderProgress& p) {
   JobProgress jp;
   jp.passes = p.pass;
@@ -47,7 +73,7 @@ JobProgress to_job_progress(const RenderProgress& p) {
 }  // namespace
 
 Scheduler::Scheduler(JobStore& store, const JobFiles& files, ThreadPool& pool, SchedulerOptions options)
-    : store_(store), files_(files), pool_(pool), options_(std::move(options)) {}
+    : store_(store), files_(files), log_(files), pool_(pool), options_(std::move(options)) {}
 
 Scheduler::~Scheduler() {
   shutdown();
@@ -195,7 +221,12 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     JobLoadOptions options;
     options.limits = options_.limits;
     options.scene.resolve_asset = options_.resolve_asset;
+    log_.add(id, "loading the scene");
+    const auto load_start = std::chrono::steady_clock::now();
     const RenderJob job = load_job(doc, options);
+    log_.add(id, printf_string("scene loaded in %.3f s",
+                               std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count()));
+    for (const std::string& w : job.scene->warnings) log_.add(id, "warning: " + w);
     if (!job.scene->warnings.empty()) {
       try {
         store_.set_warnings(id, json(job.scene->warnings).dump());
@@ -211,12 +242,18 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       if (auto cp = decode_checkpoint(*bytes, job.settings.width, job.settings.height, settings_hash)) {
         log(LogLevel::kInfo, "job resumed from its checkpoint",
             {{"job", id}, {"samples_done", cp->film.samples()}, {"passes", cp->passes}});
+        log_.add(id, printf_string("resuming from its checkpoint: %u spp in %u passes",
+                                   static_cast<unsigned>(cp->film.samples()), static_cast<unsigned>(cp->passes)));
         session.restore(std::move(cp->film), cp->passes, cp->elapsed_s);
       } else {
         log(LogLevel::kWarn, "checkpoint unusable; the render starts over", {{"job", id}});
+        log_.add(id, "warning: its checkpoint is unusable (damaged, or of other settings); the render starts over");
       }
     }
     log(LogLevel::kInfo, "job started", {{"job", id}, {"samples_done", session.progress().samples_done}});
+    log_.add(id, printf_string("rendering %dx%d, %u spp, integrator %s, on %d threads", job.settings.width,
+                               job.settings.height, static_cast<unsigned>(job.settings.spp),
+                               job.settings.integrator.name.c_str(), pool_.size()));
     {
       std::lock_guard lock(mutex_);
       slot->session = &session;
@@ -241,6 +278,9 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
           std::lock_guard lock(mutex_);
           slot->progress = jp;
         }
+        log_.add(id, printf_string("pass %u: %u/%u spp, %.2f s, %.3g samples/s", static_cast<unsigned>(p.pass),
+                                   static_cast<unsigned>(p.samples_done), static_cast<unsigned>(p.samples_total),
+                                   p.elapsed_s, p.samples_per_s));
         store_.update_progress(id, jp);
         if (hooks_.progress) hooks_.progress(id, jp);
         if (hooks_.preview) hooks_.preview(id, p.pass);
@@ -272,13 +312,19 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     if (deleted) {
       log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
     } else if (interrupted && cancelled_by_client) {
+      log_.add(
+          id, printf_string("cancelled by a client at %u spp", static_cast<unsigned>(session.progress().samples_done)));
       if (record_terminal(*slot, JobState::kCancelled, render_s, "cancelled"))
         log(LogLevel::kInfo, "job cancelled", {{"job", id}});
     } else if (interrupted && paused) {
+      log_.add(id, printf_string("paused by a client at %u spp; its checkpoint is kept",
+                                 static_cast<unsigned>(session.progress().samples_done)));
       if (record_end(*slot, [&] { return store_.transition(id, JobState::kPaused, now_ms()); }))
         log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", session.progress().samples_done}});
     } else if (interrupted) {
       // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
+      log_.add(id, printf_string("the daemon is stopping: back in the queue at %u spp, to resume from its checkpoint",
+                                 static_cast<unsigned>(session.progress().samples_done)));
       if (record_end(*slot, [&] { return store_.transition(id, JobState::kQueued, now_ms()); }))
         log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
             {{"job", id}, {"samples_done", session.progress().samples_done}});
@@ -297,6 +343,13 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       }
       JobProgress final_progress = to_job_progress(session.progress());
       final_progress.eta_s = 0;
+      std::string written;
+      if (job.want_png) written += " result.png";
+      if (job.want_exr) written += " result.exr";
+      log_.add(id,
+               printf_string("succeeded: %s after %.2f s, %u spp in %u passes; wrote%s", stop_explained(reason).c_str(),
+                             final_progress.elapsed_s, static_cast<unsigned>(final_progress.samples_done),
+                             static_cast<unsigned>(final_progress.passes), written.c_str()));
       if (record_terminal(*slot, JobState::kSucceeded, render_s, stop_reason_name(reason), "",
                           [&] { store_.update_progress(id, final_progress); })) {
         log(LogLevel::kInfo, "job succeeded",
@@ -403,6 +456,8 @@ bool Scheduler::record_terminal(RenderSlot& slot, JobState to, double render_s, 
 // kInputRefused when its input is at fault; false when it was not recorded.
 bool Scheduler::record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused) {
   log(LogLevel::kError, "job failed", {{"job", slot.id}, {"error", message}, {"input_refused", input_refused}});
+  log_.add(slot.id,
+           "failed: " + message + (input_refused ? " (its input is at fault: it would fail the same way again)" : ""));
   try {
     return record_terminal(slot, JobState::kFailed, render_s, input_refused ? std::string(kInputRefused) : "", message);
   } catch (const std::exception& e) {
@@ -433,6 +488,7 @@ Scheduler::Outcome Scheduler::cancel(const std::string& id) {
   }
   files_.remove(id, JobFile::kCheckpoint);
   log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+  log_.add(id, "cancelled by a client");
   notify_state(id);
   return Outcome::kDone;
 }
@@ -451,6 +507,7 @@ Scheduler::Outcome Scheduler::pause(const std::string& id) {
       return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
   }
   log(LogLevel::kInfo, "job paused", {{"job", id}});
+  log_.add(id, "paused by a client");
   notify_state(id);
   return Outcome::kDone;
 }
@@ -459,6 +516,7 @@ Scheduler::Outcome Scheduler::resume(const std::string& id) {
   if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", JobState::kPaused))
     return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
   log(LogLevel::kInfo, "job resumed", {{"job", id}});
+  log_.add(id, "resumed by a client: back in the queue");
   notify_state(id);
   wake();
   return Outcome::kDone;
@@ -478,6 +536,7 @@ Scheduler::Outcome Scheduler::requeue(const std::string& id) {
       files_.remove(id, f);
   }
   log(LogLevel::kInfo, "job requeued", {{"job", id}});
+  log_.add(id, "requeued by a client: the render starts over");
   notify_state(id);
   wake();
   return Outcome::kDone;

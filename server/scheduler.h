@@ -21,6 +21,7 @@
 #include "renderer/scene_loader.h"
 #include "renderer/thread_pool.h"
 #include "server/job_files.h"
+#include "server/job_log.h"
 #include "server/job_store.h"
 
 namespace tessera::server {
@@ -105,6 +106,7 @@ class Scheduler {
 
   JobStore& store_;
   const JobFiles& files_;
+  JobLog log_;  // each job's own log, among its files
   ThreadPool& pool_;
   SchedulerOptions options_;
   SchedulerHooks hooks_;

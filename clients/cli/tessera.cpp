@@ -35,6 +35,7 @@ const char* kUsage =
     "  fetch ID [-d DIR] [-o FILE...]       download a finished job's results\n"
     "  list [--state S] [--limit N] [--json]\n"
     "  cancel ID\n"
+    "  log ID                               print a job's log (loading, warnings, passes, how it ended)\n"
     "\n"
     "`tessera COMMAND -h` describes a command.\n"
     "exit codes: 0 done, 1 fatal (bad input, refused or failed job), 2 usage, 75 transient failure (retry)\n";
@@ -523,6 +524,22 @@ int cmd_cancel(std::vector<std::string> args) {
   return kExitOk;
 }
 
+const char* kLogUsage =
+    "usage: tessera log ID [--url URL] [--token T]\n"
+    "Prints a job's log: how long loading took, its warnings, each pass, how and why it ended (empty until the job\n"
+    "starts rendering).\n";
+
+int cmd_log(std::vector<std::string> args) {
+  Remote remote = remote_options(&args);
+  require_args(args, 1, 1, kLogUsage);
+  const std::string id = resolve_job_id(remote, args[0]);
+  auto client = remote.client();
+  auto res = client->Get((job_path(id) + "/log").c_str());
+  if (!res || res->status != 200) http_failure(remote, res, "log");
+  std::fwrite(res->body.data(), 1, res->body.size(), stdout);
+  return kExitOk;
+}
+
 // Runs tessera-render (beside this program, else on the PATH) with this command line: it does not return unless
 // the program cannot be run.
 int run_local(char** argv) {
@@ -558,6 +575,7 @@ int main(int argc, char** argv) {
     if (cmd == "fetch") return cmd_fetch(args);
     if (cmd == "list") return cmd_list(args);
     if (cmd == "cancel") return cmd_cancel(args);
+    if (cmd == "log") return cmd_log(args);
     if (cmd == "-h" || cmd == "--help" || cmd == "help") {
       std::fputs(kUsage, stdout);
       return kExitOk;

@@ -142,6 +142,8 @@ export const api = {
     const res = await request("POST", "/v1/jobs", { body: form });
     return res.json();
   },
+  // The job's log (text): loading, warnings, passes, how it ended.
+  jobLog: async (id) => (await request("GET", `/v1/jobs/${encodeURIComponent(id)}/log`)).text(),
   action: (id, action) => sendJson("POST", `/v1/jobs/${encodeURIComponent(id)}/${action}`),
   setPriority: (id, priority) =>
     sendJson("PATCH", `/v1/jobs/${encodeURIComponent(id)}`, { priority }),

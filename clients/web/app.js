@@ -810,6 +810,8 @@ function select(id) {
   $("#job-empty").hidden = Boolean(id);
   $("#job-body").hidden = !id;
   $("#job-state").hidden = !id;
+  $("#job-log").textContent = "";
+  jobLog.id = null;
   if (!id) {
     watcher.stop();
     $("#job-title").textContent = "Job";
@@ -858,6 +860,7 @@ function showJob(job) {
   }
   if (job.id !== previous?.id) viewer.settings(r.exposure_ev ?? 0, r.tonemap ?? "clamp");
   if (job.state === "succeeded") loadResult(job);
+  refreshLog(job);
   const dl = $("#job-stats");
   dl.replaceChildren();
   if (job.name) stat(dl, "Name", job.name);
@@ -895,6 +898,35 @@ function showJob(job) {
     const row = rows.get(job.id);
     if (row) updateRow(row, jobs[i]);
   }
+}
+
+// The job's log, fetched when the job is selected, when its state or pass changes (at most every 2 s while it
+// renders) and once it has ended; kept scrolled to the end unless the reader scrolled up.
+const LOG_INTERVAL_MS = 2000;
+const jobLog = { id: null, key: "", at: 0, timer: null };
+function refreshLog(job) {
+  const key = `${job.state} ${job.progress?.passes ?? 0}`;
+  if (jobLog.id === job.id && jobLog.key === key) return;
+  const fresh = jobLog.id !== job.id;
+  jobLog.id = job.id;
+  jobLog.key = key;
+  clearTimeout(jobLog.timer);
+  const wait = fresh || TERMINAL.has(job.state) ? 0 : Math.max(0, jobLog.at + LOG_INTERVAL_MS - Date.now());
+  jobLog.timer = setTimeout(async () => {
+    jobLog.at = Date.now();
+    const id = job.id;
+    const pre = $("#job-log");
+    try {
+      const text = await api.jobLog(id);
+      if (id !== selectedId) return;
+      const atEnd = pre.scrollTop + pre.clientHeight >= pre.scrollHeight - 4;
+      pre.textContent = text || "Nothing yet: the log starts when the job starts rendering.";
+      if (atEnd || fresh) pre.scrollTop = pre.scrollHeight;
+      pre.dataset.state = job.state;
+    } catch (e) {
+      if (!(e instanceof ApiError && e.status === 404)) showError(e, "Job log");
+    }
+  }, wait);
 }
 
 async function download(ext) {

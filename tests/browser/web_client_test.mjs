@@ -223,6 +223,9 @@ test("the web client submits, follows, cancels, deletes and downloads", async (t
     const bytes = fs.readFileSync(file);
     assert.deepEqual([...bytes.subarray(0, 8)], [0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a], "PNG signature");
     assert.match(download.suggestedFilename(), /\.png$/);
+    // The job view shows its log, to its end.
+    await page.locator("#job-log", { hasText: "succeeded: its samples-per-pixel budget was reached" }).waitFor();
+    assert.match(await page.locator("#job-log").textContent(), /scene loaded in [\d.]+ s[\s\S]*pass 1: /);
   });
 
   await step(t, "a refused document shows the problem's title and detail", async () => {

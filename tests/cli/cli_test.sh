@@ -147,7 +147,7 @@ expect 2 "a bad --region" "$TESSERA" render "$job" -o x.png --region 1,2,3
 expect 2 "an unknown output format" "$TESSERA" render "$job" -o x.gif
 expect 2 "merge without outputs" "$TESSERA" merge a.tfilm
 expect 2 "watch without an id" "$TESSERA" watch
-for c in render merge submit watch fetch list cancel; do expect 0 "tessera $c -h" "$TESSERA" "$c" -h; done
+for c in render merge submit watch fetch list cancel log; do expect 0 "tessera $c -h" "$TESSERA" "$c" -h; done
 for s in submit watch fetch list cancel; do expect 0 "$s.sh -h" "$curl_dir/$s.sh" -h; done
 expect 2 "submit.sh without arguments" "$curl_dir/submit.sh"
 
@@ -203,6 +203,9 @@ PY
   grep "$id" "$tmp/out" | grep -q "small.json" && ok "list names the job after its file" ||
     not_ok "list gives no name: $(grep "$id" "$tmp/out")"
   expect 0 "tessera list --state succeeded --json" "$TESSERA" list --state succeeded --json
+  expect 0 "tessera log" "$TESSERA" log "${id:0:8}"
+  grep -q "succeeded: its samples-per-pixel budget was reached" "$tmp/out" && grep -q "pass 1: " "$tmp/out" &&
+    ok "log tells the passes and why the render ended" || not_ok "tessera log printed: $(cat "$tmp/out")"
   # A job id may be shortened to the 8 digits the web client shows, or any start that only one job has.
   expect 0 "fetch by the 8-digit prefix of an id" "$TESSERA" fetch "${id:0:8}" -d by-prefix
   [[ -s by-prefix/$id.png ]] && ok "the prefix named the whole id" || not_ok "no by-prefix/$id.png"

@@ -259,7 +259,49 @@ TEST_F(ServiceTest, ImagesAreCheckedByTheirHeadersAtSubmissionAndByTheirPixelsAt
   expect_status(res, 409, "requeue a job that failed on its input");
   EXPECT_NE(res->body.find("failed on its input"), std::string::npos) << res->body;
   EXPECT_EQ(get_job(*client_, failed).value("state", ""), "failed");
+  // Its log says why.
+  auto log = client_->Get("/v1/jobs/" + failed + "/log");
+  ASSERT_TRUE(log);
+  EXPECT_NE(log->body.find("failed: "), std::string::npos) << log->body;
+  EXPECT_NE(log->body.find("image 0 cannot be decoded"), std::string::npos) << log->body;
+  EXPECT_NE(log->body.find("(its input is at fault"), std::string::npos) << log->body;
   EXPECT_EQ(client_->Get("/livez")->status, 200);
+}
+
+// A job's log tells what its renders did: loading, each pass, how and why it ended, the client's actions; empty
+// before it starts; it goes with the job.
+TEST_F(ServiceTest, AJobsLogTellsWhatItsRendersDid) {
+  start(args({"--max-jobs", "1"}));
+  const std::string blocker = submit(*client_, long_cornell_job());
+  const std::string done = submit(*client_, cornell_job(16, 4));
+  auto log_of = [&](const std::string& id) {
+    auto res = client_->Get("/v1/jobs/" + id + "/log");
+    EXPECT_TRUE(res && res->status == 200) << (res ? res->body : "no answer");
+    if (res) {
+      EXPECT_EQ(res->get_header_value("Content-Type"), "text/plain; charset=utf-8");
+    }
+    return res ? res->body : "";
+  };
+  EXPECT_EQ(log_of(done), "");  // queued behind the blocker: nothing yet
+  wait_for(*client_, blocker, [](const json& s) { return s["progress"]["passes"].get<int>() >= 1; });
+  auto cancel = client_->Post("/v1/jobs/" + blocker + "/cancel");
+  ASSERT_TRUE(cancel && (cancel->status == 202 || cancel->status == 200)) << (cancel ? cancel->body : "no answer");
+  EXPECT_EQ(wait_for(*client_, done, ended).value("state", ""), "succeeded");
+  const std::string text = log_of(done);
+  for (const char* line :
+       {"Z  loading the scene\n", "Z  scene loaded in ", "Z  rendering 16x16, 4 spp, integrator path",
+        "Z  pass 1: ", "/4 spp, ", "Z  succeeded: its samples-per-pixel budget was reached after ", "4 spp in ",
+        "; wrote result.png result.exr\n"})
+    EXPECT_NE(text.find(line), std::string::npos) << line << " in:\n" << text;
+  EXPECT_EQ(text.rfind("20", 0), 0u) << text;  // every line starts with its time
+  const std::string cancelled = log_of(blocker);
+  EXPECT_NE(cancelled.find("pass 1: "), std::string::npos) << cancelled;
+  EXPECT_NE(cancelled.find("cancelled by a client at "), std::string::npos) << cancelled;
+  expect_status(client_->Post("/v1/jobs/" + blocker + "/requeue"), 200, "requeue");
+  EXPECT_NE(log_of(blocker).find("requeued by a client"), std::string::npos);
+  client_->Post("/v1/jobs/" + blocker + "/cancel");
+  expect_status(client_->Delete("/v1/jobs/" + done), 204, "delete");
+  expect_status(client_->Get("/v1/jobs/" + done + "/log"), 404, "the log of a deleted job");
 }
 
 // A job has a name: the document's, else the glTF file it renders, its materials' types or its kind; shown in its
@@ -517,6 +559,8 @@ TEST_F(ServiceTest, TokensIsolateUsersAdminsSeeAllCorsOnlyForConfiguredOrigins) 
   const std::string a = submit(*client_, long_cornell_job(), bearer(alice));
   EXPECT_EQ(get_job(*client_, a, bearer(alice))["owner"], "alice");
   expect_status(client_->Get("/v1/jobs/" + a, bearer(bob)), 404, "bob reads alice's job");
+  expect_status(client_->Get("/v1/jobs/" + a + "/log", bearer(bob)), 404, "bob reads alice's log");
+  EXPECT_EQ(client_->Get("/v1/jobs/" + a + "/log", bearer(alice))->status, 200);
   expect_status(client_->Post("/v1/jobs/" + a + "/cancel", bearer(bob)), 404, "bob cancels alice's job");
   expect_status(client_->Delete("/v1/jobs/" + a, bearer(bob)), 404, "bob deletes alice's job");
   EXPECT_TRUE(json::parse(client_->Get("/v1/jobs", bearer(bob))->body)["jobs"].empty());
