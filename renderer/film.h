@@ -1,5 +1,5 @@
-// The film: per-pixel sums of linear radiance samples (the measurement equation's estimate for each pixel,
-// seed 004, with a box pixel filter), plus what the noise estimate needs.
+// The film: per-pixel sums of linear radiance samples (each pixel's estimate of the measurement equation, Dutré, Bala
+// & Bekaert, Advanced Global Illumination, 2nd ed., §2.8, with a box pixel filter), plus what the noise estimate needs.
 //
 // Radiance sums are kept in 128-bit fixed point (units of 2^-40). Integer addition is associative, so a pixel's sum
 // does not depend on the order its samples were added in: films of disjoint sample ranges merge into exactly the

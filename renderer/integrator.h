@@ -1,7 +1,8 @@
-// Integrators: the algorithms that estimate each pixel's measurement (seed 004, the measurement equation) from the
-// scene. An integrator renders one pass at a time, a range of sample indices for every pixel of the render's region,
-// into a film, on the render's thread pool; a registry creates them by name, as the material registry does models:
-//   path   unidirectional path tracing from the camera (seed 000, 2.6; seed 003), with a choice of estimator
+// Integrators: the algorithms that estimate each pixel's measurement (the measurement equation of Dutré, Bala &
+// Bekaert, Advanced Global Illumination, 2nd ed., §2.8) from the scene. An integrator renders one pass at a time, a
+// range of sample indices for every pixel of the render's region, into a film, on the render's thread pool; a registry
+// creates them by name, as the material registry does models:
+//   path   unidirectional path tracing from the camera (Kajiya 1986; Dutré et al., §2.6), with a choice of estimator
 // Every integrator keeps the image a function of (seed, pixel, sample index) alone, whatever the threads or passes.
 #pragma once
 
@@ -25,8 +26,8 @@ class ThreadPool;
 
 // How the path tracer estimates direct light at each path vertex.
 enum class Estimator {
-  kHemisphere,  // BSDF sampling only: the hemisphere form (seed 003, 4.1.1); light is found by hitting emitters
-  kArea,        // light sampling only: the area form (seed 003, 4.1.2), next-event estimation towards lights
+  kHemisphere,  // BSDF sampling only: the hemisphere form (Dutré et al., §4.1.1); light is found by hitting emitters
+  kArea,        // light sampling only: the area form (Dutré et al., §4.1.2), next-event estimation towards lights
   kMis,         // both, weighted by the power heuristic (Veach 1997)
 };
 

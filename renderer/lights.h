@@ -1,6 +1,6 @@
-// Light sampling for next-event estimation (seed 000, 2.6: the area form of the rendering equation, and the direct
-// illumination it isolates): emissive triangles and spheres, point and directional lights, and the environment,
-// chosen in proportion to their emitted power.
+// Light sampling for next-event estimation (Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed., §2.6: the
+// area form of the rendering equation, and the direct illumination it isolates): emissive triangles and spheres, point
+// and directional lights, and the environment, chosen in proportion to their emitted power.
 #pragma once
 
 #include <cstdint>

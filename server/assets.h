@@ -1,4 +1,4 @@
-// Uploaded assets (issue 4): a glTF 2.0 asset (.glb, or a .gltf with its buffers and images) or an equirectangular
+// Uploaded assets: a glTF 2.0 asset (.glb, or a .gltf with its buffers and images) or an equirectangular
 // .hdr/.exr environment map, stored content-addressed under <data>/assets/<id>/ and referenced by jobs by id.
 // The id is the sha256 of the file (one file) or of a canonical manifest of (file name, sha256) pairs, sorted by
 // name (several files). Everything is checked before it is stored: file names are plain, a .glb's container is

@@ -197,7 +197,8 @@ void SqliteJobStore::migrate() {
     if (version < 1) {
       exec(kJobsTableV2);
     } else if (version < 2) {
-      // Version 1 lacked the paused state (a CHECK constraint: the table is rebuilt) and the columns of issue 5.
+      // Version 1 lacked the paused state (a CHECK constraint: the table is rebuilt) and the owner, warnings and
+      // idempotency-key columns.
       exec("ALTER TABLE jobs RENAME TO jobs_v1");
       exec("DROP INDEX IF EXISTS jobs_queue");
       exec(kJobsTableV2);

@@ -1,4 +1,5 @@
-// The BSDF interface (seed 000, 2.5: the BRDF f_r(x, Psi -> Theta), extended to transmission).
+// The BSDF interface: the BRDF f_r(x, Psi -> Theta) of Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed.,
+// §2.5, extended to transmission.
 //
 // Conventions, shared by every model:
 // - Directions are unit vectors in the local shading frame: +z is the shading normal of the surface as modelled

@@ -1,11 +1,12 @@
-// Cook-Torrance microfacet reflection (seed 000, 2.5.4 "Cook-Torrance model"; Cook & Torrance 1982), in the form
+// Cook-Torrance microfacet reflection (Cook & Torrance 1982; Dutré, Bala & Bekaert, Advanced
+// Global Illumination, 2nd ed., §2.5.4 "Cook-Torrance model"), in the form
 //   f = kd/pi + ks F(wo.h) D(h) G(wo, wi) / (4 |N.wi| |N.wo|)                         (Walter 2007, eq. 20)
-// with D Beckmann (the seed's) or GGX, isotropic or anisotropic along the tangent, G the seed's V-cavity term or
+// with D Beckmann (Dutré et al.'s) or GGX, isotropic or anisotropic along the tangent, G the V-cavity term or
 // height-correlated Smith masking, and F the dielectric Fresnel of "ior" or a conductor's (microfacet.h).
 //
-// Where the seed differs: its f = F/pi * D G / ((N.Psi)(N.Theta)) + k_d uses a D without the 1/pi of the
+// Where Dutré et al. differ: their f = F/pi * D G / ((N.Psi)(N.Theta)) + k_d uses a D without the 1/pi of the
 // projected-area normalisation (microfacet.h) and a factor 1 where the Jacobian of the half-vector mapping,
-// d(omega_h)/d(omega_i) = 1/(4 |o.h|) (Walter 2007, eq. 14), gives 1/4; with the normalised D used here the seed's
+// d(omega_h)/d(omega_i) = 1/(4 |o.h|) (Walter 2007, eq. 14), gives 1/4; with the normalised D used here their
 // expression would reflect 4 times too much. Sampling: visible normals of D (V-cavity or Smith) for the
 // specular lobe, cosine for the diffuse one, chosen by the luminances of kd and ks. kd + ks <= 1 per channel keeps
 // the albedo at most 1.

@@ -1,11 +1,13 @@
 // Dielectric interfaces (glass, water): smooth and rough reflection + refraction, and thin panes.
 //
-// Smooth (seed 003, "BSDF: BTDF + BRDF"): f_r = F / |cos| delta(reflect), f_t = (1 - F) / |cos| delta(refract),
+// Smooth (Pharr, Jakob & Humphreys, Physically Based Rendering, 3rd ed., §8.2.4):
+//   f_r = F / |cos| delta(reflect),  f_t = (1 - F) / |cos| delta(refract),
 // F the exact unpolarised Fresnel reflectance (fresnel.h) with total internal reflection past the critical angle,
-// directions by the law of reflection and Snell's law (seed 000, 2.5.3). Radiance crossing the interface changes
-// by the square of the ratio of indices (seed 000, 2.5.3 "Reciprocity for transparent surfaces": the ray density
-// changes by (eta_2/eta_1)^2), so the radiance BTDF carries 1/eta'^2 with eta' = eta_(wi side) / eta_(wo side),
-// and BsdfSample::eta = eta' lets the integrator take that factor out of Russian roulette.
+// directions by the law of reflection and Snell's law (Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed.,
+// §2.5.3). Radiance crossing the interface changes by the square of the ratio of indices (Dutré et al., §2.5.3
+// "Reciprocity for transparent surfaces": the ray density changes by (eta_2/eta_1)^2), so the radiance BTDF carries
+// 1/eta'^2 with eta' = eta_(wi side) / eta_(wo side), and BsdfSample::eta = eta' lets the integrator take that factor
+// out of Russian roulette.
 //
 // Rough (Walter et al. 2007, "Microfacet Models for Refraction through Rough Surfaces"): reflection by eq. 20 and
 // transmission by eq. 21, with Walter's i = wi, o = wo and eta_i, eta_o the indices on their sides,

@@ -9,7 +9,7 @@ void fresnel_dielectric_polarized(float cos_theta_i, float eta, float* r_s, floa
     cos_theta_i = -cos_theta_i;
   }
   cos_theta_i = std::min(cos_theta_i, 1.0f);
-  // Snell's law for the transmitted angle (seed 000, 2.5.3).
+  // Snell's law for the transmitted angle (Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed., §2.5.3).
   float sin2_theta_i = 1 - cos_theta_i * cos_theta_i;
   float sin2_theta_t = sin2_theta_i / (eta * eta);
   if (sin2_theta_t >= 1) {  // total internal reflection
@@ -17,8 +17,9 @@ void fresnel_dielectric_polarized(float cos_theta_i, float eta, float* r_s, floa
     return;
   }
   float cos_theta_t = safe_sqrt(1 - sin2_theta_t);
-  // Seed 003, "Fresnel Equation": R_s = |(n1 cos_i - n2 cos_t) / (n1 cos_i + n2 cos_t)|^2,
-  // R_p = |(n1 cos_t - n2 cos_i) / (n1 cos_t + n2 cos_i)|^2, with n1 = 1, n2 = eta.
+  // The Fresnel equations (Dutré et al., §2.5.3; Pharr, Jakob & Humphreys, PBR 3rd ed., §8.2.1), n1 = 1, n2 = eta:
+  //   R_s = |(n1 cos_i - n2 cos_t) / (n1 cos_i + n2 cos_t)|^2,
+  //   R_p = |(n1 cos_t - n2 cos_i) / (n1 cos_t + n2 cos_i)|^2.
   float rs = (cos_theta_i - eta * cos_theta_t) / (cos_theta_i + eta * cos_theta_t);
   float rp = (cos_theta_t - eta * cos_theta_i) / (cos_theta_t + eta * cos_theta_i);
   *r_s = rs * rs;
@@ -56,7 +57,8 @@ Rgb fresnel_conductor(float cos_theta_i, const Rgb& eta, const Rgb& k) {
 }
 
 bool refract(const Vec3& wi, const Vec3& n, float eta, Vec3* wt) {
-  // Seed 000, 2.5.3: T = -(eta_1/eta_2) Psi + N ((eta_1/eta_2)(N.Psi) - sqrt(1 - (eta_1/eta_2)^2 (1 - (N.Psi)^2))).
+  // Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed., §2.5.3:
+  //   T = -(eta_1/eta_2) Psi + N ((eta_1/eta_2)(N.Psi) - sqrt(1 - (eta_1/eta_2)^2 (1 - (N.Psi)^2))).
   float cos_i = dot(n, wi);
   float r = 1 / eta;
   float sin2_t = r * r * std::max(0.0f, 1 - cos_i * cos_i);

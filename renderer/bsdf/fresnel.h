@@ -1,12 +1,13 @@
-// Fresnel reflectance and the laws of reflection and refraction (seed 000, 2.5.3 "Specular Refraction" and
-// "Fresnel Equations"; seed 003, "Fresnel Equation").
+// Fresnel reflectance and the laws of reflection and refraction (Dutré, Bala & Bekaert, Advanced Global
+// Illumination, 2nd ed., §2.5.3 "Specular Refraction" and "Fresnel Equations"; Pharr, Jakob & Humphreys, Physically
+// Based Rendering, 3rd ed., §8.2.1 "Fresnel Reflectance").
 #pragma once
 
 #include "renderer/math.h"
 
 namespace tessera {
 
-// Unpolarised reflectance of a smooth dielectric interface, F = (R_s + R_p) / 2 (seed 003, "Fresnel Equation").
+// Unpolarised reflectance of a smooth dielectric interface, F = (R_s + R_p) / 2 (Pharr et al., §8.2.1).
 // `cos_theta_i` is the cosine of the incident angle measured on the side the light comes from (its sign tells the
 // side: > 0 outside, < 0 inside), `eta` = eta_inside / eta_outside. Returns 1 under total internal reflection.
 float fresnel_dielectric(float cos_theta_i, float eta);
@@ -37,14 +38,14 @@ inline float f0_from_ior(float ior) {
   return sqr((ior - 1) / (ior + 1));
 }
 
-// Mirror reflection about the normal +z of the local frame: R = 2 (N.Psi) N - Psi (seed 000, 2.5.3).
+// Mirror reflection about the normal +z of the local frame: R = 2 (N.Psi) N - Psi (Dutré et al., §2.5.3).
 inline Vec3 reflect_local(const Vec3& w) {
   return {-w.x, -w.y, w.z};
 }
 
 // Refraction of `wi` (pointing away from the surface) through a surface with normal `n` on wi's side, with
-// relative index `eta` = eta_t / eta_i (Snell: eta_i sin(theta_i) = eta_t sin(theta_t), seed 000, 2.5.3 eq. for T).
-// Returns false under total internal reflection.
+// relative index `eta` = eta_t / eta_i (Snell: eta_i sin(theta_i) = eta_t sin(theta_t), Dutré et al., §2.5.3, eq. for
+// T). Returns false under total internal reflection.
 bool refract(const Vec3& wi, const Vec3& n, float eta, Vec3* wt);
 
 // Hemispherical average of the dielectric Fresnel reflectance, 2 \int_0^1 F(mu) mu dmu, by numerical quadrature

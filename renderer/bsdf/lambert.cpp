@@ -1,4 +1,5 @@
-// Lambert's ideal diffuse reflector (seed 000, 2.5.3): f_r = rho / pi, sampled by cos(theta) / pi.
+// Lambert's ideal diffuse reflector, f_r = rho / pi (Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed.,
+// §2.5.3), sampled by cos(theta) / pi.
 #include "renderer/material.h"
 #include "renderer/sampling.h"
 

@@ -127,9 +127,9 @@ float MicrofacetDistribution::g1(const Vec3& w, const Vec3& m) const {
 
 float MicrofacetDistribution::g(const Vec3& wo, const Vec3& wi, const Vec3& m) const {
   if (masking == MaskingType::kVCavity) {
-    // Seed 000, 2.5.4 (Cook & Torrance 1982): G = min(1, 2 (N.H)(N.Theta)/(Theta.H), 2 (N.H)(N.Psi)/(Theta.H)),
-    // written with each direction's own dot product, which is the same for reflection and extends to
-    // transmission.
+    // Cook & Torrance 1982 (Dutré et al., Advanced Global Illumination, 2nd ed., §2.5.4):
+    //   G = min(1, 2 (N.H)(N.Theta)/(Theta.H), 2 (N.H)(N.Psi)/(Theta.H)),
+    // written with each direction's own dot product, which is the same for reflection and extends to transmission.
     return std::min(vcavity_g1(wo, m), vcavity_g1(wi, m));
   }
   if (dot(wo, m) * wo.z <= 0 || dot(wi, m) * wi.z <= 0) return 0;

@@ -1,14 +1,14 @@
-// Microfacet distributions for rough reflection and transmission: Beckmann (seed 000, 2.5.4, "Cook-Torrance
-// model") and GGX / Trowbridge-Reitz (Walter et al. 2007), isotropic or anisotropic along the shading frame's
-// tangent (+x of the local frame), with Smith masking (Heitz 2014, "Understanding the Masking-Shadowing Function")
-// or the seed's V-cavity term (Cook & Torrance 1982), and sampling of the visible normals (Heitz & d'Eon 2014;
-// Heitz 2018, "Sampling the GGX Distribution of Visible Normals").
+// Microfacet distributions for rough reflection and transmission: Beckmann (Cook & Torrance 1982; Dutré, Bala &
+// Bekaert, Advanced Global Illumination, 2nd ed., §2.5.4 "Cook-Torrance model") and GGX / Trowbridge-Reitz (Walter et
+// al. 2007), isotropic or anisotropic along the shading frame's tangent (+x of the local frame), with Smith masking
+// (Heitz 2014, "Understanding the Masking-Shadowing Function") or the V-cavity term (Cook & Torrance 1982), and
+// sampling of the visible normals (Heitz & d'Eon 2014; Heitz 2018, "Sampling the GGX Distribution of Visible Normals").
 //
 // Normalisation: D integrates to one over the projected solid angle, \int D(m) cos(theta_m) dm = 1 (Walter 2007,
-// eq. 4). The seed's Beckmann D(theta_h) = exp(-(tan/m)^2) / (m^2 cos^4) lacks the 1/pi of that normalisation; the
-// seed's Cook-Torrance expression F/pi * D G / ((N.Psi)(N.Theta)) carries the 1/pi outside D instead and uses 1
-// where the derivation from the half-vector Jacobian gives 1/4 (Walter 2007, eq. 20): tessera uses
-// f = D G F / (4 |cos theta_i| |cos theta_o|).
+// eq. 4). Dutré et al.'s Beckmann D(theta_h) = exp(-(tan/m)^2) / (m^2 cos^4) lacks the 1/pi of that normalisation;
+// their Cook-Torrance expression F/pi * D G / ((N.Psi)(N.Theta)) carries the 1/pi outside D instead and uses 1 where
+// the derivation from the half-vector Jacobian gives 1/4 (Walter 2007, eq. 20). tessera uses
+//   f = D G F / (4 |cos theta_i| |cos theta_o|).
 #pragma once
 
 #include "renderer/math.h"
@@ -34,7 +34,7 @@ struct MicrofacetDistribution {
   // Masking of direction w by the microsurface seen around normal m.
   float g1(const Vec3& w, const Vec3& m) const;
   // Masking-shadowing of the pair (wo, wi) around m: height-correlated Smith, 1 / (1 + Lambda(o) + Lambda(i))
-  // (Heitz 2014, eq. 99), or the seed's V-cavity min(1, 2 (N.H)(N.Theta)/(Theta.H), 2 (N.H)(N.Psi)/(Theta.H)).
+  // (Heitz 2014, eq. 99), or Cook & Torrance's V-cavity min(1, 2 (N.H)(N.Theta)/(Theta.H), 2 (N.H)(N.Psi)/(Theta.H)).
   float g(const Vec3& wo, const Vec3& wi, const Vec3& m) const;
 
   // Density of the normals visible from w, D_w(m) = G1(w, m) max(0, w.m) D(m) / |cos theta_w| (Heitz 2014,

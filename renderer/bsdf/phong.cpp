@@ -1,19 +1,19 @@
-// Phong and Blinn-Phong (seed 000, 2.5.4 "Shading Models").
+// Phong and Blinn-Phong (Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed., §2.5.4 "Shading Models").
 //
 // `phong`, `blinn_phong`: the energy-normalised, reciprocal ("modified") forms, usable for rendering:
 //   Phong:       f = kd/pi + ks (n+2)/(2 pi) cos^n(alpha), alpha the angle between wi and the mirror direction of
 //                wo (Lafortune & Willems 1994, "Using the modified Phong reflectance model for physically based
 //                rendering", eq. 6);
-//   Blinn-Phong: f = kd/pi + ks c(n) (N.H)^n (seed 000, 2.5.4 "Modified Blinn-Phong model", with the diffuse term
+//   Blinn-Phong: f = kd/pi + ks c(n) (N.H)^n (Dutré et al., §2.5.4 "Modified Blinn-Phong model", with the diffuse term
 //                written as kd/pi and a normalisation c(n) chosen so that ks = 1 reflects everything at normal
 //                incidence; see blinn_normalisation()).
 // With kd + ks <= 1 (checked per channel for constants; textured values have ks clamped to 1 - kd) both conserve
 // energy: each lobe's directional albedo is at most 1 and largest at normal incidence.
 //
-// `phong_classic`, `blinn_phong_classic`: the seed's original forms, kept for comparison and teaching,
+// `phong_classic`, `blinn_phong_classic`: the original forms (Dutré et al., §2.5.4), kept for comparison and teaching,
 //   f = kd/pi + ks (R.Theta)^n / (N.Psi)   and   f = kd/pi + ks (N.H)^n / (N.Psi)
 // with Psi = wi (towards the light). The 1/(N.Psi) makes them non-reciprocal and lets their albedo exceed 1
-// (seed 000: "It is not energy conserving, it does not satisfy Helmholtz's reciprocity"); the seed's constant
+// (Dutré et al.: "It is not energy conserving, it does not satisfy Helmholtz's reciprocity"); their constant
 // diffuse k_d is written kd/pi here so that kd is a reflectance in every model.
 //
 // Sampling: a diffuse (cosine) lobe and the specular lobe, chosen in proportion to the luminances of kd and ks;

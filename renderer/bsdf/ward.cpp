@@ -1,4 +1,5 @@
-// Ward's anisotropic model (seed 000, 2.5.4 "Empirical Models"; Ward 1992), isotropic when alpha_x = alpha_y:
+// Ward's anisotropic model (Ward 1992; Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed., §2.5.4),
+// isotropic when alpha_x = alpha_y:
 //   f = rho_d/pi + rho_s exp(-tan^2(theta_h) (cos^2(phi_h)/ax^2 + sin^2(phi_h)/ay^2))
 //                  / (4 pi ax ay sqrt(cos(theta_i) cos(theta_o)))                        ("normalisation": "ward")
 // evaluated in the numerically robust form of Walter 2005 ("Notes on the Ward BRDF", eq. 4). Its albedo grows

@@ -1,6 +1,7 @@
-// The path tracer (`path`): unbiased path tracing of the rendering equation from the camera (seed 000, 2.6; seed 003,
-// Monte Carlo path tracing), with direct light estimated by BSDF sampling, light sampling, or both weighted by
-// multiple importance sampling (Veach 1997, ch. 9), and Russian roulette.
+// The path tracer (`path`): unbiased path tracing of the rendering equation from the camera (Kajiya 1986, "The
+// Rendering Equation"; Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed., §2.6 and ch. 5), with direct light
+// estimated by BSDF sampling, light sampling, or both weighted by multiple importance sampling (Veach 1997, ch. 9), and
+// Russian roulette.
 #include "renderer/integrator.h"
 #include "renderer/scene.h"
 #include "renderer/thread_pool.h"

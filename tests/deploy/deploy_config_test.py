@@ -86,7 +86,7 @@ def check_env(names, where):
         if name in known_env:
             continue
         if name in pending_env:
-            notes.append(f"{where} sets {name}, which this tesserad does not read yet (issue 5)")
+            notes.append(f"{where} sets {name}, which this tesserad does not read yet")
             continue
         check(False, f"{where}: {name} is a variable tesserad reads")
 

@@ -320,7 +320,7 @@ TEST_F(HostileTest, CompressedBodiesAreHeldToTheBodyLimitOnceInflated) {
   EXPECT_TRUE(has_header(*refused, "Accept-Encoding: gzip, deflate, br"));
 }
 
-// Issue 27's memory ceiling: the bodies above and 50 MB documents refused one after another leave the daemon's
+// A memory ceiling: the bodies above and 50 MB documents refused one after another leave the daemon's
 // resident memory where it was, and its peak within a few times one body.
 TEST_F(HostileTest, RefusedBodiesLeaveNoMemoryBehind) {
   start({"--max-body-bytes", "67108864"});

@@ -1,4 +1,4 @@
-// Issue 4 (assets) and issue 5 (the job service) over real HTTP: uploads and hostile uploads, multipart jobs,
+// Assets and the job service over real HTTP: uploads and hostile uploads, multipart jobs,
 // Server-Sent Events with replay, priorities and pause/resume/requeue, idempotency, ETags, pagination, tokens and
 // CORS, limits, metrics checked by promtool, SIGTERM drain, a SIGKILL crash loop whose resumed renders must be
 // bit-identical to uninterrupted ones, and bounded loopback load. Correctness only: no timing assertions.

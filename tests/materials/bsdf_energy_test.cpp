@@ -1,6 +1,7 @@
 // Energy and reciprocity of every model: directional albedo <= 1.01 at 10 incident directions, R + T = 1 for a
-// lossless smooth dielectric, f(wo, wi) = f(wi, wo) where the model should be reciprocal, and the seed's classic
-// Phong / Blinn-Phong shown to break both while the modified forms keep them.
+// lossless smooth dielectric, f(wo, wi) = f(wi, wo) where the model should be reciprocal, and the classic
+// Phong / Blinn-Phong (Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed., §2.5.4) shown to break both while
+// the modified forms keep them.
 #include <cstdio>
 
 #include <gtest/gtest.h>
@@ -186,7 +187,7 @@ TEST(Adjoint, SmoothDielectricTransmitsImportanceWithoutTheEtaSquaredFactor) {
   }
 }
 
-// Seed 000, 2.5.4: the Phong and Blinn-Phong models as first written (with 1/(N.Psi)) are "not energy conserving"
+// Dutré et al., §2.5.4: the Phong and Blinn-Phong models as first written (with 1/(N.Psi)) are "not energy conserving"
 // and do "not satisfy Helmholtz's reciprocity"; the modified, normalised forms are both.
 TEST(ClassicShadingModels, BreakReciprocityAndEnergyWhileModifiedFormsKeepThem) {
   for (const std::string& base : {std::string("phong"), std::string("blinn_phong")}) {

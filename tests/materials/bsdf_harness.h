@@ -30,7 +30,8 @@ void PrintTo(const BsdfCase& c, std::ostream* os);
 const std::vector<BsdfCase>& bsdf_cases();
 // Model types with no non-delta lobe to test statistically (tested by their own tests).
 const std::vector<std::string>& delta_only_types();
-// Model types that are deliberately not energy conserving or reciprocal (the seed's classic forms).
+// Model types that are deliberately not energy conserving or reciprocal (the classic Phong forms, Dutré et al.,
+// Advanced Global Illumination, 2nd ed., §2.5.4).
 bool is_classic(const std::string& type);
 
 // Incident directions (wo) for a case: near-normal, 35 and 65 degrees, grazing (87 degrees) and from the back side

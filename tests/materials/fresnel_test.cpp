@@ -1,4 +1,5 @@
-// Fresnel reflectance against closed forms (seed 003, "Fresnel Equation"; seed 000, 2.5.3).
+// Fresnel reflectance against closed forms (Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed.,
+// §2.5.3 "Fresnel Equations"; Pharr, Jakob & Humphreys, Physically Based Rendering, 3rd ed., §8.2.1).
 #include <complex>
 
 #include <gtest/gtest.h>

@@ -52,7 +52,8 @@ json cornell_scene() {
 }
 
 // Inside a closed sphere whose surface has albedo rho and emits Le, the radiance is Le / (1 - rho) everywhere
-// (the Neumann series of the rendering equation, seed 000 2.6, summed in closed form): 0.5 / (1 - 0.5) = 1.
+// (the Neumann series of the rendering equation, Dutré et al., Advanced Global Illumination, 2nd ed., §2.6, summed in
+// closed form): 0.5 / (1 - 0.5) = 1.
 TEST(Transport, ClosedEmittingSphereHasRadianceOne) {
   json scene = {
       {"materials", {{"shell", {{"type", "lambert"}, {"albedo", 0.5}, {"emission", 0.5}}}}},
