@@ -5,6 +5,8 @@
 #include <regex>
 #include <vector>
 
+#include "proto/did_you_mean.h"
+
 namespace tessera::proto {
 
 using nlohmann::json;
@@ -72,55 +74,87 @@ std::string article_type(const std::string& type) {
   return type;
 }
 
-std::string number_text(double d) {
-  return json(d).dump();
+// A bound as the schema wrote it, an integer without a decimal point ("at least 1", not "at least 1.0").
+std::string number_text(const json& bound) {
+  if (bound.is_number_float()) {
+    const double d = bound.get<double>();
+    if (std::isfinite(d) && d == std::floor(d) && std::fabs(d) < 9007199254740992.0)  // 2^53: exact as an integer
+      return std::to_string(static_cast<long long>(d));
+  }
+  return bound.dump();
 }
 
+using Errors = std::vector<SchemaError>;
+
+Errors fail(const std::string& at, std::string message, const char* keyword) {
+  return Errors{SchemaError{at, std::move(message), keyword}};
+}
+
+// Checks an instance against a schema. The errors come in document order: only the first (`max_errors` 1), or up to
+// `max_errors` of them, in which case the members of an object and the items of an array are all checked (an error
+// in one does not hide those of the others) and a failed alternative of anyOf/oneOf reports the errors of the branch
+// that got furthest.
 class Validator {
  public:
-  Validator(const SchemaSet& set, int max_depth) : set_(set), max_depth_(max_depth) {}
+  Validator(const SchemaSet& set, int max_depth, size_t max_errors)
+      : set_(set), max_depth_(max_depth), max_errors_(std::max<size_t>(1, max_errors)) {}
 
-  std::optional<SchemaError> check(const json& schema, const std::string& doc, const json& v, const std::string& at,
-                                   int schema_depth) {
-    if (schema_depth > kMaxSchemaDepth) return SchemaError{at, "schema nesting too deep (a $ref cycle?)", "$ref"};
+  Errors check(const json& schema, const std::string& doc, const json& v, const std::string& at, int schema_depth) {
+    if (schema_depth > kMaxSchemaDepth) return fail(at, "schema nesting too deep (a $ref cycle?)", "$ref");
     if (pointer_depth(at) > static_cast<size_t>(max_depth_))
-      return SchemaError{at, "nested too deeply (limit " + std::to_string(max_depth_) + ")", "depth"};
+      return fail(at, "nested too deeply (limit " + std::to_string(max_depth_) + ")", "depth");
     if (schema.is_boolean()) {
-      if (schema.get<bool>()) return std::nullopt;
-      return SchemaError{at, "is not allowed here", "false"};
+      if (schema.get<bool>()) return {};
+      return fail(at, "is not allowed here", "false");
     }
-    if (!schema.is_object()) return std::nullopt;
+    if (!schema.is_object()) return {};
 
     if (auto it = schema.find("$ref"); it != schema.end() && it->is_string()) {
       std::string target_doc;
       const json* target = set_.resolve(doc, it->get<std::string>(), &target_doc);
-      if (!target) return SchemaError{at, "schema error: cannot resolve " + it->get<std::string>(), "$ref"};
-      if (auto e = check(*target, target_doc, v, at, schema_depth + 1)) return e;
+      if (!target) return fail(at, "schema error: cannot resolve " + it->get<std::string>(), "$ref");
+      if (Errors e = check(*target, target_doc, v, at, schema_depth + 1); !e.empty()) return e;
     }
-    if (auto e = check_type(schema, v, at)) return e;
+    if (auto e = check_type(schema, v, at)) return {*e};
     if (auto it = schema.find("const"); it != schema.end() && v != *it)
-      return SchemaError{at, "must be " + it->dump(), "const"};
+      return fail(at, "must be " + it->dump(), "const");
     if (auto it = schema.find("enum"); it != schema.end() && it->is_array()) {
       bool found = false;
-      for (const json& option : *it) found = found || option == v;
-      if (!found) return SchemaError{at, "must be one of " + enum_text(*it), "enum"};
+      std::vector<std::string> names;
+      for (const json& option : *it) {
+        found = found || option == v;
+        if (option.is_string()) names.push_back(option.get<std::string>());
+      }
+      if (!found)
+        return fail(
+            at, "must be one of " + enum_text(*it) + (v.is_string() ? did_you_mean(v.get<std::string>(), names) : ""),
+            "enum");
     }
     if (v.is_number()) {
-      if (auto e = check_number(schema, v.get<double>(), at)) return e;
+      if (auto e = check_number(schema, v.get<double>(), at)) return {*e};
     }
     if (v.is_string()) {
-      if (auto e = check_string(schema, v.get<std::string>(), at)) return e;
+      if (auto e = check_string(schema, v.get<std::string>(), at)) return {*e};
     }
     if (v.is_object()) {
-      if (auto e = check_object(schema, doc, v, at, schema_depth)) return e;
+      if (Errors e = check_object(schema, doc, v, at, schema_depth); !e.empty()) return e;
     }
     if (v.is_array()) {
-      if (auto e = check_array(schema, doc, v, at, schema_depth)) return e;
+      if (Errors e = check_array(schema, doc, v, at, schema_depth); !e.empty()) return e;
     }
     return check_combinators(schema, doc, v, at, schema_depth);
   }
 
  private:
+  // Adds `more` to `errors`; true when no more are wanted.
+  bool add(Errors* errors, Errors&& more) const {
+    for (SchemaError& e : more) {
+      if (errors->size() >= max_errors_) break;
+      errors->push_back(std::move(e));
+    }
+    return errors->size() >= max_errors_;
+  }
+
   static std::string enum_text(const json& options) {
     std::string out;
     for (size_t i = 0; i < options.size(); ++i) {
@@ -154,23 +188,24 @@ class Validator {
       if (it == schema.end() || !it->is_number()) return std::nullopt;
       return it->get<double>();
     };
+    auto text = [&](const char* key) { return number_text(schema.at(key)); };
     if (auto b = bound("minimum"); b && !(d >= *b))
-      return SchemaError{at, "must be at least " + number_text(*b), "minimum"};
+      return SchemaError{at, "must be at least " + text("minimum"), "minimum"};
     if (auto b = bound("maximum"); b && !(d <= *b))
-      return SchemaError{at, "must be at most " + number_text(*b), "maximum"};
+      return SchemaError{at, "must be at most " + text("maximum"), "maximum"};
     if (auto b = bound("exclusiveMinimum"); b && !(d > *b))
-      return SchemaError{at, "must be greater than " + number_text(*b), "exclusiveMinimum"};
+      return SchemaError{at, "must be greater than " + text("exclusiveMinimum"), "exclusiveMinimum"};
     if (auto b = bound("exclusiveMaximum"); b && !(d < *b))
-      return SchemaError{at, "must be less than " + number_text(*b), "exclusiveMaximum"};
+      return SchemaError{at, "must be less than " + text("exclusiveMaximum"), "exclusiveMaximum"};
     return std::nullopt;
   }
 
   std::optional<SchemaError> check_string(const json& schema, const std::string& s, const std::string& at) {
     const size_t n = code_points(s);
     if (auto it = schema.find("minLength"); it != schema.end() && it->is_number() && n < it->get<double>())
-      return SchemaError{at, "must have at least " + it->dump() + " characters", "minLength"};
+      return SchemaError{at, "must have at least " + number_text(*it) + " characters", "minLength"};
     if (auto it = schema.find("maxLength"); it != schema.end() && it->is_number() && n > it->get<double>())
-      return SchemaError{at, "must have at most " + it->dump() + " characters", "maxLength"};
+      return SchemaError{at, "must have at most " + number_text(*it) + " characters", "maxLength"};
     if (auto it = schema.find("pattern"); it != schema.end() && it->is_string()) {
       // ECMAScript syntax, as the JSON Schema specification asks; unanchored like every validator.
       const std::regex re(it->get<std::string>(), std::regex::ECMAScript);
@@ -179,13 +214,15 @@ class Validator {
     return std::nullopt;
   }
 
-  std::optional<SchemaError> check_object(const json& schema, const std::string& doc, const json& v,
-                                          const std::string& at, int schema_depth) {
+  Errors check_object(const json& schema, const std::string& doc, const json& v, const std::string& at,
+                      int schema_depth) {
+    Errors errors;
     if (auto it = schema.find("required"); it != schema.end() && it->is_array()) {
       for (const json& key : *it) {
-        if (key.is_string() && !v.contains(key.get<std::string>()))
-          return SchemaError{child(at, key.get<std::string>()), "\"" + key.get<std::string>() + "\" is required",
-                             "required"};
+        if (key.is_string() && !v.contains(key.get<std::string>()) &&
+            add(&errors,
+                fail(child(at, key.get<std::string>()), "\"" + key.get<std::string>() + "\" is required", "required")))
+          return errors;
       }
     }
     const json* properties = nullptr;
@@ -197,105 +234,121 @@ class Validator {
     for (const auto& [key, value] : v.items()) {
       const std::string p = child(at, key);
       if (names) {
-        if (auto e = check(*names, doc, json(key), p, schema_depth + 1)) {
-          e->message = "property name \"" + key + "\" " + e->message;
-          e->pointer = p;
-          return e;
+        if (Errors e = check(*names, doc, json(key), p, schema_depth + 1); !e.empty()) {
+          e.front().message = "property name \"" + key + "\" " + e.front().message;
+          e.front().pointer = p;
+          e.resize(1);
+          if (add(&errors, std::move(e))) return errors;
+          continue;
         }
       }
       if (properties) {
         if (auto pit = properties->find(key); pit != properties->end()) {
-          if (auto e = check(*pit, doc, value, p, schema_depth + 1)) return e;
+          if (add(&errors, check(*pit, doc, value, p, schema_depth + 1))) return errors;
           continue;
         }
       }
       if (additional) {
-        if (additional->is_boolean() && !additional->get<bool>())
-          return SchemaError{p, "unknown property \"" + key + "\"", "additionalProperties"};
-        if (auto e = check(*additional, doc, value, p, schema_depth + 1)) return e;
+        if (additional->is_boolean() && !additional->get<bool>()) {
+          std::vector<std::string> known;
+          if (properties)
+            for (const auto& [name, unused] : properties->items()) known.push_back(name);
+          if (add(&errors,
+                  fail(p, "unknown property \"" + key + "\"" + did_you_mean(key, known), "additionalProperties")))
+            return errors;
+          continue;
+        }
+        if (add(&errors, check(*additional, doc, value, p, schema_depth + 1))) return errors;
       }
     }
-    return std::nullopt;
+    return errors;
   }
 
-  std::optional<SchemaError> check_array(const json& schema, const std::string& doc, const json& v,
-                                         const std::string& at, int schema_depth) {
+  Errors check_array(const json& schema, const std::string& doc, const json& v, const std::string& at,
+                     int schema_depth) {
     if (auto it = schema.find("minItems"); it != schema.end() && it->is_number() && v.size() < it->get<double>())
-      return SchemaError{at, "must have at least " + it->dump() + " items", "minItems"};
+      return fail(at, "must have at least " + number_text(*it) + " items", "minItems");
     if (auto it = schema.find("maxItems"); it != schema.end() && it->is_number() && v.size() > it->get<double>())
-      return SchemaError{at, "must have at most " + it->dump() + " items", "maxItems"};
+      return fail(at, "must have at most " + number_text(*it) + " items", "maxItems");
+    Errors errors;
     if (auto it = schema.find("items"); it != schema.end()) {
       for (size_t i = 0; i < v.size(); ++i)
-        if (auto e = check(*it, doc, v[i], child(at, i), schema_depth + 1)) return e;
+        if (add(&errors, check(*it, doc, v[i], child(at, i), schema_depth + 1))) return errors;
     }
-    return std::nullopt;
+    return errors;
   }
 
-  // Of the errors of failed alternatives, the one that says most: the deepest in the instance (the branch that got
-  // furthest), preferring a branch whose type matched. When every branch failed on its type at the same place,
-  // one message lists what would have been accepted.
-  static SchemaError most_specific(const std::vector<SchemaError>& errors) {
-    const SchemaError* best = &errors.front();
+  // Of the failed alternatives (each with its errors, first first), the errors of the one that says most: the branch
+  // whose first error is the deepest in the instance (it got furthest), preferring one whose type matched. When
+  // every branch failed on its type at the same place, one message lists what would have been accepted.
+  static Errors most_specific(std::vector<Errors>& branches) {
+    size_t best = 0;
     bool all_type = true;
-    for (const SchemaError& e : errors) {
-      all_type = all_type && e.keyword == "type" && e.pointer == errors.front().pointer;
-      const size_t d = pointer_depth(e.pointer), bd = pointer_depth(best->pointer);
-      if (d > bd || (d == bd && best->keyword == "type" && e.keyword != "type")) best = &e;
+    const SchemaError& front = branches.front().front();
+    for (size_t i = 0; i < branches.size(); ++i) {
+      const SchemaError& e = branches[i].front();
+      const SchemaError& b = branches[best].front();
+      all_type = all_type && e.keyword == "type" && e.pointer == front.pointer;
+      const size_t d = pointer_depth(e.pointer), bd = pointer_depth(b.pointer);
+      if (d > bd || (d == bd && b.keyword == "type" && e.keyword != "type")) best = i;
     }
-    if (all_type && errors.size() > 1) {
+    if (all_type && branches.size() > 1) {
       std::vector<std::string> expected;
-      for (const SchemaError& e : errors) {
-        std::string m = e.message.substr(e.message.rfind("must be ", 0) == 0 ? 8 : 0);
+      for (const Errors& branch : branches) {
+        const std::string& message = branch.front().message;
+        std::string m = message.substr(message.rfind("must be ", 0) == 0 ? 8 : 0);
         if (std::find(expected.begin(), expected.end(), m) == expected.end()) expected.push_back(m);
       }
       std::string msg = "must be ";
       for (size_t i = 0; i < expected.size(); ++i) msg += (i > 0 ? " or " : "") + expected[i];
-      return SchemaError{errors.front().pointer, msg, "type"};
+      return fail(front.pointer, msg, "type");
     }
-    return *best;
+    return std::move(branches[best]);
   }
 
-  std::optional<SchemaError> check_combinators(const json& schema, const std::string& doc, const json& v,
-                                               const std::string& at, int schema_depth) {
+  Errors check_combinators(const json& schema, const std::string& doc, const json& v, const std::string& at,
+                           int schema_depth) {
+    Errors errors;
     if (auto it = schema.find("allOf"); it != schema.end() && it->is_array()) {
       for (const json& sub : *it)
-        if (auto e = check(sub, doc, v, at, schema_depth + 1)) return e;
+        if (add(&errors, check(sub, doc, v, at, schema_depth + 1))) return errors;
+      if (!errors.empty()) return errors;
     }
     if (auto it = schema.find("anyOf"); it != schema.end() && it->is_array() && !it->empty()) {
-      std::vector<SchemaError> errors;
+      std::vector<Errors> failed;
       for (const json& sub : *it) {
-        auto e = check(sub, doc, v, at, schema_depth + 1);
-        if (!e) {
-          errors.clear();
+        Errors e = check(sub, doc, v, at, schema_depth + 1);
+        if (e.empty()) {
+          failed.clear();
           break;
         }
-        errors.push_back(*e);
+        failed.push_back(std::move(e));
       }
-      if (!errors.empty()) return most_specific(errors);
+      if (!failed.empty()) return most_specific(failed);
     }
     if (auto it = schema.find("oneOf"); it != schema.end() && it->is_array() && !it->empty()) {
-      std::vector<SchemaError> errors;
+      std::vector<Errors> failed;
       int passed = 0;
       for (const json& sub : *it) {
-        if (auto e = check(sub, doc, v, at, schema_depth + 1))
-          errors.push_back(*e);
+        if (Errors e = check(sub, doc, v, at, schema_depth + 1); !e.empty())
+          failed.push_back(std::move(e));
         else
           ++passed;
       }
-      if (passed == 0) return most_specific(errors);
-      if (passed > 1) return SchemaError{at, "matches more than one alternative", "oneOf"};
+      if (passed == 0) return most_specific(failed);
+      if (passed > 1) return fail(at, "matches more than one alternative", "oneOf");
     }
     if (auto it = schema.find("if"); it != schema.end()) {
-      const bool matched = !check(*it, doc, v, at, schema_depth + 1);
+      const bool matched = check(*it, doc, v, at, schema_depth + 1).empty();
       const char* branch = matched ? "then" : "else";
-      if (auto b = schema.find(branch); b != schema.end())
-        if (auto e = check(*b, doc, v, at, schema_depth + 1)) return e;
+      if (auto b = schema.find(branch); b != schema.end()) return check(*b, doc, v, at, schema_depth + 1);
     }
-    return std::nullopt;
+    return {};
   }
 
   const SchemaSet& set_;
   int max_depth_;
+  size_t max_errors_;
 };
 
 }  // namespace
@@ -330,9 +383,16 @@ const json* SchemaSet::resolve(const std::string& base, const std::string& ref, 
 }
 
 std::optional<SchemaError> SchemaSet::validate(const json& instance, const std::string& name, int max_depth) const {
+  std::vector<SchemaError> errors = validate_all(instance, name, max_depth, 1);
+  if (errors.empty()) return std::nullopt;
+  return std::move(errors.front());
+}
+
+std::vector<SchemaError> SchemaSet::validate_all(const json& instance, const std::string& name, int max_depth,
+                                                 size_t max_errors) const {
   const json* schema = document(name);
-  if (!schema) return SchemaError{"", "no schema named " + name, "$ref"};
-  Validator validator(*this, max_depth);
+  if (!schema) return {SchemaError{"", "no schema named " + name, "$ref"}};
+  Validator validator(*this, max_depth, max_errors);
   return validator.check(*schema, name, instance, "", 0);
 }
 

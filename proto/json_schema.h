@@ -13,12 +13,13 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
 namespace tessera::proto {
 
-// The first error of a document: where in the instance (RFC 6901 pointer) and what is wrong with it.
+// An error of a document: where in the instance (RFC 6901 pointer) and what is wrong with it.
 struct SchemaError {
   std::string pointer;
   std::string message;
@@ -36,6 +37,10 @@ class SchemaSet {
   // Instances nested deeper than `max_depth` are refused rather than walked (the walk is recursive).
   std::optional<SchemaError> validate(const nlohmann::json& instance, const std::string& name,
                                       int max_depth = 64) const;
+  // Every error (up to `max_errors`), in document order: each member and item is checked whatever its siblings
+  // hold, so a user sees all the mistakes of a document at once. The first is the one validate() returns.
+  std::vector<SchemaError> validate_all(const nlohmann::json& instance, const std::string& name, int max_depth = 64,
+                                        size_t max_errors = 20) const;
 
   // Resolves a "$ref" found in document `base`. Returns nullptr when it names nothing; `*target_doc` receives the
   // name of the document the result lives in (for the references inside it).

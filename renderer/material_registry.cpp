@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <initializer_list>
 
+#include "proto/did_you_mean.h"
 #include "renderer/material.h"
 #include "renderer/scene_error.h"
 
@@ -32,8 +33,12 @@ std::unique_ptr<Material> MaterialRegistry::create(const nlohmann::json& params,
   if (type_it == params.end() || !type_it->is_string())
     throw SceneError(pointer + "/type", "a material needs a \"type\" naming its model");
   auto it = factories_.find(type_it->get<std::string>());
-  if (it == factories_.end())
-    throw SceneError(pointer + "/type", "unknown material type \"" + type_it->get<std::string>() + "\"");
+  if (it == factories_.end()) {
+    std::vector<std::string> known;
+    for (const auto& [name, factory] : factories_) known.push_back(name);
+    throw SceneError(pointer + "/type", "unknown material type \"" + type_it->get<std::string>() + "\"" +
+                                            proto::did_you_mean(type_it->get<std::string>(), known));
+  }
   std::unique_ptr<Material> material = it->second(params, pointer, ctx);
   // Textures (and nested materials) are objects; numbers, colours and names are not.
   material->reads_textures = std::any_of(params.begin(), params.end(), [](const nlohmann::json& v) {

@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "proto/did_you_mean.h"
 #include "renderer/gltf_loader.h"
 #include "renderer/scene_error.h"
 #include "renderer/thread_pool.h"
@@ -74,8 +75,12 @@ uint32_t material_index(const json& obj, const std::string& pointer, const std::
   const json& m = require(obj, "material", pointer);
   if (!m.is_string()) throw SceneError(at(pointer, "material"), "must be the name of a material");
   auto it = names.find(m.get<std::string>());
-  if (it == names.end())
-    throw SceneError(at(pointer, "material"), "unknown material \"" + m.get<std::string>() + "\"");
+  if (it == names.end()) {
+    std::vector<std::string> known;
+    for (const auto& [name, index] : names) known.push_back(name);
+    throw SceneError(at(pointer, "material"), "unknown material \"" + m.get<std::string>() + "\"" +
+                                                  proto::did_you_mean(m.get<std::string>(), known));
+  }
   return it->second;
 }
 

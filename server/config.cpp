@@ -11,6 +11,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "proto/did_you_mean.h"
+
 namespace tessera::server {
 
 namespace {
@@ -269,6 +271,7 @@ std::string config_usage() {
     out += left + o.help + "  [" + o.env + "]\n";
   }
   out += "  -h, --help                this text\n";
+  out += "  --version                 print the version\n";
   return out;
 }
 
@@ -356,6 +359,10 @@ ConfigResult parse_config(int argc, const char* const* argv, const GetEnv& geten
       result.help = true;
       return result;
     }
+    if (arg == "--version") {
+      result.version = true;
+      return result;
+    }
     std::string value;
     bool has_value = false;
     if (size_t eq = arg.find('='); arg.rfind("--", 0) == 0 && eq != std::string::npos) {
@@ -365,7 +372,9 @@ ConfigResult parse_config(int argc, const char* const* argv, const GetEnv& geten
     }
     const Option* option = find_option(arg);
     if (!option) {
-      result.error = "unknown option " + arg;
+      std::vector<std::string_view> flags = {"--help", "--version"};
+      for (const Option& o : options()) flags.push_back(o.flag);
+      result.error = "unknown option " + arg + proto::did_you_mean(arg, flags);
       return result;
     }
     if (!has_value) {

@@ -55,6 +55,7 @@ struct ConfigResult {
   std::optional<Config> config;  // nothing: print `error` (or the usage when `help`) and exit
   std::string error;
   bool help = false;
+  bool version = false;  // --version: print it and exit
 };
 
 // "268435456", "512MiB", "2GiB", "1G" (K, M, G, T, P: powers of 1000, with "B" too; KiB ... PiB: of 1024). Nothing

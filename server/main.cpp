@@ -234,6 +234,10 @@ int main(int argc, char** argv) {
     std::fputs(config_usage().c_str(), stdout);
     return 0;
   }
+  if (parsed.version) {
+    std::printf("tesserad %s\n", TESSERA_VERSION);
+    return 0;
+  }
   if (!parsed.config) {
     std::fprintf(stderr, "tesserad: %s\n\n%s", parsed.error.c_str(), config_usage().c_str());
     return 2;

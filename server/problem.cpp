@@ -55,6 +55,10 @@ std::string Problem::title() const {
 nlohmann::json Problem::to_json() const {
   nlohmann::json j = {{"type", type()}, {"title", title()}, {"status", status}, {"detail", capped(detail)}};
   if (pointer) j["pointer"] = capped(*pointer);
+  if (errors.size() > 1) {
+    j["errors"] = nlohmann::json::array();
+    for (const auto& [at, what] : errors) j["errors"].push_back({{"pointer", capped(at)}, {"detail", capped(what)}});
+  }
   return j;
 }
 

@@ -4,6 +4,8 @@
 
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -14,6 +16,9 @@ struct Problem {
   std::string detail;
   std::optional<std::string> pointer;
   std::optional<int> retry_after_s = std::nullopt;  // when to ask again (429, 503): a Retry-After header
+  // Every error of a refused document, as (pointer, detail), when it has more than one: the first is `detail` and
+  // `pointer`; the answer lists them all in "errors".
+  std::vector<std::pair<std::string, std::string>> errors = {};
 
   // "https://tessera.dev/problems/<slug>" and a title, both chosen by the status.
   std::string type() const;

@@ -149,8 +149,12 @@ std::variant<AcceptedJob, Problem> check_submission(std::string_view content_typ
 std::variant<AcceptedJob, Problem> check_job_document(json document, const SubmissionLimits& limits) {
   AcceptedJob job;
   job.document = std::move(document);
-  if (auto error = proto::contract_schemas().validate(job.document, "job.schema.json", limits.max_depth))
-    return Problem{422, error->message, error->pointer};
+  if (const auto errors = proto::contract_schemas().validate_all(job.document, "job.schema.json", limits.max_depth);
+      !errors.empty()) {
+    Problem problem{422, errors.front().message, errors.front().pointer};
+    for (const proto::SchemaError& e : errors) problem.errors.emplace_back(e.pointer, e.message);
+    return problem;
+  }
 
   JobLoadOptions options;
   options.scene.build = false;  // names, indices and assets are checked; no BVH is built at submission

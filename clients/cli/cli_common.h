@@ -5,6 +5,8 @@
 // refused job, a failed render), 2 usage, 75 retry (transient: I/O, network, server 5xx, 429, 503).
 #pragma once
 
+#include <unistd.h>
+
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -12,11 +14,17 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <new>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "proto/did_you_mean.h"
 
 namespace tessera::cli {
 
@@ -35,6 +43,23 @@ struct Failure : std::runtime_error {
 }
 [[noreturn]] inline void retry(const std::string& what) {
   throw Failure(kExitRetry, what);
+}
+
+// A usage error for an option the command does not know, with the closest one it does.
+[[noreturn]] inline void unknown_option(const std::string& option, std::initializer_list<std::string_view> known) {
+  throw std::invalid_argument("unknown option " + option + proto::did_you_mean(option, known));
+}
+
+// A JSON document read from `name`: malformed text is fatal, with the line and column where it broke.
+inline nlohmann::json parse_json(const std::string& text, const std::string& name) {
+  try {
+    return nlohmann::json::parse(text);
+  } catch (const nlohmann::json::exception& e) {  // parse_error; out_of_range for a number beyond a double
+    std::string what = e.what();
+    if (const size_t at = what.find("] "); what.rfind("[json.exception", 0) == 0 && at != std::string::npos)
+      what.erase(0, at + 2);
+    fatal(name + " is not valid JSON: " + what);
+  }
 }
 
 inline long long parse_integer(const std::string& option, const std::string& v) {
@@ -99,6 +124,24 @@ inline void write_file_atomic(const std::string& path, const std::string& bytes)
   std::error_code ec;
   std::filesystem::rename(tmp, path, ec);
   if (ec) retry("cannot rename " + tmp + " to " + path + ": " + ec.message());
+}
+
+// Refuses an output that cannot be written, before the work that would fill it (a render of an hour must not end
+// in "cannot write"): a missing directory, a directory in the file's place, or a file or directory without write
+// permission is bad input (1), where a write that fails later (a full disk) is transient (75). The directory must be
+// writable even when the file exists: results are written beside it and renamed into place.
+inline void check_writable(const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path file(path);
+  if (fs::is_directory(file, ec)) fatal("cannot write " + path + ": it is a directory");
+  const fs::path dir = file.parent_path().empty() ? fs::path(".") : file.parent_path();
+  if (!fs::exists(dir, ec)) fatal("cannot write " + path + ": there is no directory " + dir.string());
+  if (!fs::is_directory(dir, ec)) fatal("cannot write " + path + ": " + dir.string() + " is not a directory");
+  if (::access(dir.c_str(), W_OK | X_OK) != 0)
+    fatal("cannot write " + path + ": directory " + dir.string() + ": " + std::strerror(errno));
+  if (fs::exists(file, ec) && ::access(file.c_str(), W_OK) != 0)
+    fatal("cannot write " + path + ": " + std::strerror(errno));
 }
 
 // A program's main(): runs `command` and turns what it throws into a message on stderr and an exit code.

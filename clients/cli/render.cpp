@@ -255,12 +255,14 @@ void write_outputs(const std::vector<std::string>& outputs, const PartialFilm& p
   }
 }
 
-void check_output_names(const std::vector<std::string>& outputs) {
+// Usage errors (an unknown format) first, then whether every output can be written: all before any work.
+void check_outputs(const std::vector<std::string>& outputs) {
   for (const std::string& out : outputs) {
     const std::string ext = lower_extension(out);
     if (ext != ".png" && ext != ".exr" && ext != ".tfilm")
       throw std::invalid_argument(out + ": unknown output format (use .png, .exr or .tfilm)");
   }
+  for (const std::string& out : outputs) check_writable(out);
 }
 
 int cmd_render(int argc, char** argv) {
@@ -311,7 +313,8 @@ int cmd_render(int argc, char** argv) {
     else if (a == "-q" || a == "--quiet")
       quiet = true;
     else if (!a.empty() && a[0] == '-')
-      throw std::invalid_argument("unknown option " + a);
+      unknown_option(a, {"--output", "--spp", "--samples", "--region", "--width", "--height", "--time-limit",
+                         "--threads", "--integrator", "--estimator", "--seed", "--max-depth", "--quiet", "--help"});
     else if (input.empty())
       input = a;
     else
@@ -319,23 +322,18 @@ int cmd_render(int argc, char** argv) {
   }
   if (input.empty()) throw std::invalid_argument("render needs a job file (tessera render -h)");
   if (outputs.empty()) throw std::invalid_argument("render needs at least one -o OUTPUT (tessera render -h)");
-  check_output_names(outputs);
   if (samples && overrides.contains("spp")) throw std::invalid_argument("--samples and --spp exclude each other");
+  check_outputs(outputs);
 
-  std::ifstream in(input);
-  if (!in) fatal("cannot open " + input + ": " + std::strerror(errno));
   json doc;
   const std::string extension = lower_extension(input);
   if (extension == ".glb" || extension == ".gltf") {
+    if (!std::ifstream(input)) fatal("cannot open " + input + ": " + std::strerror(errno));
     // A glTF asset renders as the scene of a job that names it (its camera, lights and materials; the files it
     // refers to are read from beside it).
     doc = json{{"kind", "scene"}, {"scene", {{"gltf", std::filesystem::path(input).filename().string()}}}};
   } else {
-    try {
-      doc = json::parse(in);
-    } catch (const json::parse_error& e) {
-      fatal(input + " is not valid JSON: " + e.what());
-    }
+    doc = parse_json(read_file(input), input);
   }
   // A bare scene document is wrapped into a job; its errors are reported at pointers into the file as written.
   std::string unwrap;
@@ -364,8 +362,13 @@ int cmd_render(int argc, char** argv) {
     if (checked.is_object() && checked.contains(pointer) && checked[pointer].is_string())
       checked[pointer] = std::string(64, '0');
   }
-  if (auto error = tessera::proto::contract_schemas().validate(checked, "job.schema.json"))
-    fatal(where(error->pointer) + error->message);
+  if (const auto errors = tessera::proto::contract_schemas().validate_all(checked, "job.schema.json");
+      !errors.empty()) {
+    std::string message;
+    for (const tessera::proto::SchemaError& e : errors)
+      message += (message.empty() ? "" : "\ntessera: ") + where(e.pointer) + e.message;
+    fatal(message);
+  }
 
   // Loading borrows at most as many extra threads as --threads allows.
   if (threads > 0) tessera::limit_parallel_helpers(threads - 1);
@@ -441,14 +444,14 @@ int cmd_merge(int argc, char** argv) {
       if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
       outputs.push_back(argv[++i]);
     } else if (!a.empty() && a[0] == '-') {
-      throw std::invalid_argument("unknown option " + a);
+      unknown_option(a, {"--output", "--help"});
     } else {
       inputs.push_back(a);
     }
   }
   if (inputs.empty()) throw std::invalid_argument("merge needs partial films (tessera merge -h)");
   if (outputs.empty()) throw std::invalid_argument("merge needs at least one -o OUTPUT (tessera merge -h)");
-  check_output_names(outputs);
+  check_outputs(outputs);
 
   std::vector<PartialFilm> parts;
   for (const std::string& path : inputs) parts.push_back(decode_film(path));

@@ -37,7 +37,7 @@ const char* kUsage =
     "  cancel ID\n"
     "  log ID                               print a job's log (loading, warnings, passes, how it ended)\n"
     "\n"
-    "`tessera COMMAND -h` describes a command.\n"
+    "`tessera COMMAND -h` describes a command; `tessera --version` prints the version.\n"
     "exit codes: 0 done, 1 fatal (bad input, refused or failed job), 2 usage, 75 transient failure (retry)\n";
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -88,16 +88,28 @@ Remote remote_options(std::vector<std::string>* args) {
 
 // Turns a failed exchange into a Failure: no answer or 5xx/429/503 is transient (75), any other 4xx fatal (1).
 [[noreturn]] void http_failure(const Remote& remote, const httplib::Result& res, const std::string& what) {
-  if (!res) retry(what + ": cannot reach " + remote.url + " (" + httplib::to_string(res.error()) + ")");
+  if (!res)
+    retry(what + ": cannot reach " + remote.url + " (" + httplib::to_string(res.error()) +
+          "): is tesserad running? (`make run` in the repository starts it; --url or TESSERA_URL names another)");
   std::string message = what + ": HTTP " + std::to_string(res->status);
   const json problem = json::parse(res->body, nullptr, false);
   if (problem.is_object()) {
     if (problem.contains("title") && problem["title"].is_string()) message += " " + problem["title"].get<std::string>();
     if (problem.contains("detail") && problem["detail"].is_string())
       message += ": " + problem["detail"].get<std::string>();
-    if (problem.contains("pointer") && problem["pointer"].is_string())
-      message +=
-          " (at " + (problem["pointer"].get<std::string>().empty() ? "/" : problem["pointer"].get<std::string>()) + ")";
+    auto at = [](const json& pointer) {
+      return pointer.is_string()
+                 ? " (at " + (pointer.get<std::string>().empty() ? "/" : pointer.get<std::string>()) + ")"
+                 : std::string();
+    };
+    if (problem.contains("pointer")) message += at(problem["pointer"]);
+    // A document with several errors: the first is the detail above, the others follow, one a line.
+    if (problem.contains("errors") && problem["errors"].is_array())
+      for (size_t i = 1; i < problem["errors"].size(); ++i) {
+        const json& e = problem["errors"][i];
+        if (e.is_object() && e.contains("detail") && e["detail"].is_string())
+          message += "\ntessera: " + what + ": " + e["detail"].get<std::string>() + at(e.value("pointer", json()));
+      }
   } else if (!res->body.empty()) {
     message += ": " + res->body.substr(0, 300);
   }
@@ -189,12 +201,17 @@ std::string resolve_job_id(const Remote& remote, const std::string& arg) {
   fatal(message);
 }
 
-void require_args(const std::vector<std::string>& args, size_t lo, size_t hi, const char* usage) {
+// The positional arguments of a command, between lo and hi of them; what looks like an option is one the command
+// does not know (its own options, `known`, were taken out before).
+void require_args(const std::vector<std::string>& args, size_t lo, size_t hi, const char* usage,
+                  std::initializer_list<std::string_view> known = {}) {
   for (const std::string& a : args)
     if (a == "-h" || a == "--help") {
       std::fputs(usage, stdout);
       throw Failure(kExitOk, "");
     }
+  for (const std::string& a : args)
+    if (a.size() > 1 && a[0] == '-') unknown_option(a, known);
   if (args.size() < lo || args.size() > hi) throw std::invalid_argument(std::string("wrong arguments\n") + usage);
 }
 
@@ -230,7 +247,7 @@ int cmd_submit(std::vector<std::string> args) {
     else if (a == "--watch")
       watch = true;
     else if (!a.empty() && a[0] == '-')
-      throw std::invalid_argument("unknown option " + a);
+      unknown_option(a, {"--priority", "--spp", "--width", "--height", "--watch", "--url", "--token", "--help"});
     else
       files.push_back(a);
   }
@@ -245,8 +262,8 @@ int cmd_submit(std::vector<std::string> args) {
     attachments = files;
   } else {
     const std::string text = main == "-" ? std::string(std::istreambuf_iterator<char>(std::cin), {}) : read_file(main);
-    doc = json::parse(text, nullptr, false);
-    if (doc.is_discarded() || !doc.is_object()) fatal(main + " is not a JSON object");
+    doc = parse_json(text, main == "-" ? "the standard input" : main);
+    if (!doc.is_object()) fatal(main + " is not a JSON object (a job document is {\"kind\": ...})");
     attachments.assign(files.begin() + 1, files.end());
     // A scene that names a glTF file beside the job document takes it along.
     if (attachments.empty() && main != "-" && doc.contains("scene") && doc["scene"].is_object() &&
@@ -419,7 +436,7 @@ int cmd_watch(std::vector<std::string> args) {
     } else
       rest.push_back(args[i]);
   }
-  require_args(rest, 1, 1, kWatchUsage);
+  require_args(rest, 1, 1, kWatchUsage, {"--interval", "--quiet", "--url", "--token", "--help"});
   return cmd_watch_remote(remote, resolve_job_id(remote, rest[0]), quiet);
 }
 
@@ -441,7 +458,7 @@ int cmd_fetch(std::vector<std::string> args) {
     else if (a == "-o" || a == "--output")
       outputs.push_back(args[++i]);
     else if (a != "-h" && a != "--help" && !a.empty() && a[0] == '-')
-      throw std::invalid_argument("unknown option " + a);
+      unknown_option(a, {"--dir", "--output", "--url", "--token", "--help"});
     else
       rest.push_back(a);
   }
@@ -450,6 +467,7 @@ int cmd_fetch(std::vector<std::string> args) {
   for (const std::string& o : outputs)
     if (lower_extension(o) != ".png" && lower_extension(o) != ".exr")
       throw std::invalid_argument(o + ": fetch writes .png or .exr files");
+  for (const std::string& o : outputs) check_writable(o);
   auto client = remote.client();
   const json job = expect_json(remote, client->Get(job_path(id).c_str()), "fetch");
   const std::string state = job.value("state", "");
@@ -458,9 +476,12 @@ int cmd_fetch(std::vector<std::string> args) {
     retry("job " + id + " is " + state + ": results exist once it has succeeded");
   }
   if (outputs.empty()) {
-    std::filesystem::create_directories(dir);
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) fatal("cannot make the directory " + dir + ": " + ec.message());
     for (const json& o : job.value("outputs", json::array()))
       if (o.is_string()) outputs.push_back((std::filesystem::path(dir) / (id + "." + o.get<std::string>())).string());
+    for (const std::string& o : outputs) check_writable(o);
   }
   for (const std::string& out : outputs) {
     const std::string ext = lower_extension(out).substr(1);
@@ -494,7 +515,7 @@ int cmd_list(std::vector<std::string> args) {
     else
       rest.push_back(a);
   }
-  require_args(rest, 0, 0, kListUsage);
+  require_args(rest, 0, 0, kListUsage, {"--state", "--limit", "--json", "--url", "--token", "--help"});
   auto client = remote.client();
   const json list = expect_json(remote, client->Get(("/v1/jobs" + query).c_str()), "list");
   if (as_json) {
@@ -512,15 +533,21 @@ int cmd_list(std::vector<std::string> args) {
 
 const char* kCancelUsage =
     "usage: tessera cancel ID [--url URL] [--token T]\n"
-    "Cancels a queued or running job and prints its state (1 when it had already ended).\n";
+    "Cancels a queued or running job and prints its state: cancelled, or cancelling while a running job stops at\n"
+    "the end of its sample pass (exit 1 when it had already ended).\n";
 
 int cmd_cancel(std::vector<std::string> args) {
   Remote remote = remote_options(&args);
-  require_args(args, 1, 1, kCancelUsage);
+  require_args(args, 1, 1, kCancelUsage, {"--url", "--token", "--help"});
   const std::string id = resolve_job_id(remote, args[0]);
   auto client = remote.client();
-  const json job = expect_json(remote, client->Post((job_path(id) + "/cancel").c_str()), "cancel");
-  std::printf("%s\n", job.value("state", "").c_str());
+  const httplib::Result res = client->Post((job_path(id) + "/cancel").c_str());
+  const json job = expect_json(remote, res, "cancel");
+  // 202: the job is rendering and stops at its next sample pass; it reads "cancelled" once it has.
+  if (res->status == 202)
+    std::printf("cancelling (the render stops within a pass; `tessera watch %s` follows it)\n", args[0].c_str());
+  else
+    std::printf("%s\n", job.value("state", "").c_str());
   return kExitOk;
 }
 
@@ -567,6 +594,10 @@ int main(int argc, char** argv) {
     return kExitUsage;
   }
   const std::string cmd = argv[1];
+  if (cmd == "--version" || cmd == "-V") {
+    std::printf("tessera %s\n", TESSERA_VERSION);
+    return kExitOk;
+  }
   if (cmd == "render" || cmd == "merge") return run_local(argv);
   std::vector<std::string> args(argv + 2, argv + argc);
   return run_command([&] {
@@ -580,7 +611,9 @@ int main(int argc, char** argv) {
       std::fputs(kUsage, stdout);
       return kExitOk;
     }
-    std::fprintf(stderr, "tessera: unknown command '%s'\n\n%s", cmd.c_str(), kUsage);
+    const std::string suggestion =
+        tessera::proto::did_you_mean(cmd, {"render", "merge", "submit", "watch", "fetch", "list", "cancel", "--help"});
+    std::fprintf(stderr, "tessera: unknown command '%s'%s\n\n%s", cmd.c_str(), suggestion.c_str(), kUsage);
     return kExitUsage;
   });
 }

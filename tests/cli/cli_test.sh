@@ -134,6 +134,50 @@ echo '{"objects": [{"shape": "sphere", "center": [0,0,0], "radius": -1, "materia
 expect 1 "render refuses a bad bare scene" "$TESSERA" render bare.json -o x.png -q
 grep -qF 'bare.json: at /objects/0/radius: must be greater than 0' "$tmp/err" \
   && ok "a bare scene's error points into the file as written" || not_ok "render said: $(cat "$tmp/err")"
+# Outputs are checked before anything is rendered: a path that cannot be written is bad input (1), said at once.
+expect 1 "an output in a missing directory is refused before rendering" "$TESSERA" render "$job" "${r[@]}" --spp 4 \
+  -o first.png -o /nonexistent/out.png
+if grep -qF "cannot write /nonexistent/out.png: there is no directory /nonexistent" "$tmp/err" \
+  && ! grep -qF " spp in " "$tmp/err" && [[ ! -e first.png ]]; then
+  ok "the refusal names the missing directory, and nothing was rendered or written"
+else
+  not_ok "render of an unwritable output said: $(cat "$tmp/err")"
+fi
+mkdir -p dir.png
+expect 1 "an output that is a directory is refused" "$TESSERA" render "$job" "${r[@]}" --spp 1 -o dir.png
+grep -qF "cannot write dir.png: it is a directory" "$tmp/err" && ok "the refusal says it is a directory" \
+  || not_ok "render said: $(cat "$tmp/err")"
+expect 1 "an output below a file is refused" "$TESSERA" render "$job" "${r[@]}" --spp 1 -o all.png/x.exr
+grep -qF "all.png is not a directory" "$tmp/err" && ok "the refusal says all.png is not a directory" \
+  || not_ok "render said: $(cat "$tmp/err")"
+expect 1 "merge refuses an unwritable output" "$TESSERA" merge a.tfilm b.tfilm -o /nonexistent/merged.exr
+# Messages that help: every schema error at once, integer limits as integers, the closest known name.
+echo '{"kind": "scene", "render": {"spp": 0, "width": 1.5},
+       "scene": {"objects": [{"shape": "sphere", "center": [0,0,0], "radius": 1, "material": "m"}],
+                 "materials": {"m": {"type": "lambert", "albdo": 0.5}, "n": {"type": "lamber"}},
+                 "camera": {"from": [0, 0, 4], "to": [0, 0, 0]}}}' >many.json
+expect 1 "render refuses a job with four errors" "$TESSERA" render many.json -o x.png -q
+cp "$tmp/err" render-many.err
+for line in 'at /render/spp: must be at least 1' 'at /render/width: must be an integer' \
+  'at /scene/materials/m/albdo: unknown property "albdo" (did you mean "albedo"?)' \
+  'at /scene/materials/n/type: must be one of "lambert", '; do
+  grep -qF "many.json: $line" "$tmp/err" && ok "render says: $line" || not_ok "render did not say '$line': $(cat "$tmp/err")"
+done
+grep -q 'at least 1\.0' "$tmp/err" && not_ok "an integer limit printed as a float" || ok "integer limits print as integers"
+grep -qF '(did you mean "lambert"?)' "$tmp/err" && ok "an unknown material type suggests the closest" \
+  || not_ok "no suggestion for lamber: $(cat "$tmp/err")"
+echo '{"kind": "scene", "scene": {"objects": [{"shape": "sphere", "center": [0,0,0], "radius": 1, "material": "mirror"}],
+       "materials": {"mirorr": {"type": "conductor"}}, "camera": {"from": [0, 0, 4], "to": [0, 0, 0]}}}' >mirror.json
+expect 1 "render refuses a misspelt material name" "$TESSERA" render mirror.json -o x.png -q
+grep -qF 'unknown material "mirror" (did you mean "mirorr"?)' "$tmp/err" && ok "the material name is suggested" \
+  || not_ok "render said: $(cat "$tmp/err")"
+printf '{"kind": "scene",\n "render": {"spp": 4,}}\n' >comma.json
+expect 1 "render of broken JSON is fatal" "$TESSERA" render comma.json -o x.png -q
+grep -qF "comma.json is not valid JSON: parse error at line 2, column 22" "$tmp/err" && ok "render gives line and column" \
+  || not_ok "render said: $(cat "$tmp/err")"
+expect 1 "submit of broken JSON is fatal before any request" "$TESSERA" submit comma.json --url http://127.0.0.1:9
+grep -qF "comma.json is not valid JSON: parse error at line 2, column 22" "$tmp/err" && ok "submit gives line and column" \
+  || not_ok "submit said: $(cat "$tmp/err")"
 expect 1 "an unknown --integrator is fatal" "$TESSERA" render "$job" "${r[@]}" --spp 1 --integrator photon_mapping -o x.png
 expect 1 "a region outside the image is fatal" "$TESSERA" render "$job" "${r[@]}" --samples 0:1 --region 30,0,20,10 -o x.tfilm
 
@@ -142,6 +186,25 @@ expect 2 "no command" "$TESSERA"
 expect 2 "an unknown command" "$TESSERA" frobnicate
 expect 2 "render without outputs" "$TESSERA" render "$job"
 expect 2 "an unknown option" "$TESSERA" render "$job" -o x.png --bogus
+grep -q "did you mean" "$tmp/err" && not_ok "a far-off option got a suggestion: $(cat "$tmp/err")" \
+  || ok "nothing is suggested for a name like no option"
+expect 2 "a misspelt option" "$TESSERA" render "$job" -o x.png --widht 8
+grep -qF 'unknown option --widht (did you mean "--width"?)' "$tmp/err" && ok "render suggests --width" \
+  || not_ok "render said: $(cat "$tmp/err")"
+expect 2 "a misspelt list option" "$TESSERA" list --stat running
+grep -qF 'unknown option --stat (did you mean "--state"?)' "$tmp/err" && ok "list suggests --state" \
+  || not_ok "list said: $(cat "$tmp/err")"
+expect 2 "a misspelt command" "$TESSERA" sumbit x.json
+grep -qF "unknown command 'sumbit' (did you mean \"submit\"?)" "$tmp/err" && ok "tessera suggests submit" \
+  || not_ok "tessera said: $(cat "$tmp/err")"
+expect 0 "tessera --version" "$TESSERA" --version
+grep -qE '^tessera [0-9]+\.[0-9]+\.[0-9]+$' "$tmp/out" && ok "tessera prints its version" || not_ok "tessera --version: $(cat "$tmp/out")"
+expect 0 "tesserad --version" "$TESSERAD" --version
+grep -qE '^tesserad [0-9]+\.[0-9]+\.[0-9]+$' "$tmp/out" && ok "tesserad prints its version" \
+  || not_ok "tesserad --version: $(cat "$tmp/out")"
+expect 2 "a misspelt tesserad option" "$TESSERAD" --prot 8080
+grep -qF 'unknown option --prot (did you mean "--port"?)' "$tmp/err" && ok "tesserad suggests --port" \
+  || not_ok "tesserad said: $(cat "$tmp/err")"
 expect 2 "a bad --samples" "$TESSERA" render "$job" -o x.png --samples 3
 expect 2 "a bad --region" "$TESSERA" render "$job" -o x.png --region 1,2,3
 expect 2 "an unknown output format" "$TESSERA" render "$job" -o x.gif
@@ -170,6 +233,8 @@ expect 2 "tessera-render without a command" "$(dirname "$TESSERA")/tessera-rende
 
 # --- a daemon that is not there: retry (75) ----------------------------------------------------------------------
 expect 75 "an unreachable daemon is transient" "$TESSERA" list --url http://127.0.0.1:9
+grep -qF "is tesserad running? (\`make run\` in the repository starts it" "$tmp/err" && ok "tessera says how to start it" \
+  || not_ok "tessera said: $(cat "$tmp/err")"
 expect 2 "a --url that is not http is usage" "$TESSERA" list --url ftp://x
 
 # --- against a real tesserad -------------------------------------------------------------------------------------
@@ -222,21 +287,39 @@ PY
   expect 0 "tessera fetch" "$TESSERA" fetch "$id" -d fetched
   png_signature "fetched/$id.png" && ok "fetch wrote a PNG" || not_ok "fetched PNG has no PNG signature"
   [[ -s fetched/$id.exr ]] && ok "fetch wrote the EXR" || not_ok "no EXR fetched"
+  expect 1 "fetch refuses an unwritable output before downloading" "$TESSERA" fetch "$id" -o /nonexistent/x.png
+  grep -qF "cannot write /nonexistent/x.png" "$tmp/err" && ok "fetch names the output" \
+    || not_ok "fetch said: $(cat "$tmp/err")"
+  expect 1 "fetch refuses a -d that cannot be made" "$TESSERA" fetch "$id" -d all.png/sub
   expect 0 "tessera submit --watch" "$TESSERA" submit small.json --spp 4 --watch
   expect 0 "tessera submit a long job" "$TESSERA" submit long.json
   long=$(cat "$tmp/out")
   expect 75 "fetch before the job finished is transient" "$TESSERA" fetch "$long" -d fetched
-  expect 0 "tessera cancel" "$TESSERA" cancel "$long"
+  # A running job is cancelled at the end of its pass: cancel says so rather than "running".
+  for _ in $(seq 100); do
+    "$TESSERA" list --state running | grep -q "$long" && break
+    sleep 0.1
+  done
+  expect 0 "tessera cancel of a running job" "$TESSERA" cancel "$long"
+  grep -q "^cancelling" "$tmp/out" && ok "cancel says the running job is cancelling" || not_ok "cancel printed: $(cat "$tmp/out")"
   expect 1 "watch a cancelled job exits 1" "$TESSERA" watch "$long"
   expect 1 "fetch of a cancelled job is fatal" "$TESSERA" fetch "$long" -d fetched
   expect 1 "cancel of an ended job is refused (409)" "$TESSERA" cancel "$id"
   grep -q "409" "$tmp/err" && ok "the refusal quotes the status" || not_ok "no status in the refusal"
   expect 1 "watch of an unknown job is fatal" "$TESSERA" watch 0123456789abcdef0123456789abcdef
   expect 1 "submit refuses the unknown material property" "$TESSERA" submit albdo.json
-  if grep -qF 'unknown property "albdo" (at /scene/materials/m/albdo)' "$tmp/err"; then
+  if grep -qF 'unknown property "albdo" (did you mean "albedo"?) (at /scene/materials/m/albdo)' "$tmp/err"; then
     ok "the daemon and tessera render give the same message and pointer"
   else
     not_ok "the daemon said: $(cat "$tmp/err"); tessera render: $(cat render-albdo.err)"
+  fi
+  expect 1 "submit refuses a job with four errors" "$TESSERA" submit many.json
+  if [[ $(grep -c "^tessera: submit: " "$tmp/err") == 4 ]] && grep -qF 'must be at least 1 (at /render/spp)' "$tmp/err" \
+    && grep -qF 'must be an integer (at /render/width)' "$tmp/err" \
+    && grep -qF '(did you mean "lambert"?) (at /scene/materials/n/type)' "$tmp/err"; then
+    ok "submit shows the daemon's four errors, as render does"
+  else
+    not_ok "submit said: $(cat "$tmp/err"); render: $(cat render-many.err)"
   fi
   echo '{"kind": "scene", "render": {"width": 0}}' >invalid.json
   expect 1 "a refused job is fatal" "$TESSERA" submit invalid.json

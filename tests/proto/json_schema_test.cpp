@@ -6,6 +6,7 @@
 #include <set>
 
 #include "proto/contract.h"
+#include "proto/did_you_mean.h"
 #include "proto/json_schema.h"
 
 namespace tessera::proto {
@@ -284,6 +285,76 @@ TEST(JsonSchema, AssetReferencesAreWhereTheContractSays) {
   collect_asset_refs("job.schema.json", *contract_schemas().document("job.schema.json"), "", 0, &found);
   const std::set<std::string> listed(std::begin(kAssetRefPointers), std::end(kAssetRefPointers));
   EXPECT_EQ(found, listed);
+}
+
+TEST(JsonSchema, ValidateAllReportsEveryErrorInDocumentOrder) {
+  json doc = cornell_job();
+  doc["render"]["spp"] = 0;
+  doc["render"]["width"] = 1.5;
+  doc["scene"]["materials"]["light"]["albdo"] = 0.5;
+  doc["scene"]["objects"][0]["material"] = 7;
+  const auto errors = contract_schemas().validate_all(doc, "job.schema.json");
+  std::vector<std::string> pointers;
+  for (const SchemaError& e : errors) pointers.push_back(e.pointer);
+  EXPECT_EQ(pointers, (std::vector<std::string>{"/render/spp", "/render/width", "/scene/materials/light/albdo",
+                                                "/scene/objects/0/material"}));
+  // The first of them is the one error validate() reports.
+  auto first = validate_job(doc);
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->pointer, "/render/spp");
+  EXPECT_TRUE(contract_schemas().validate_all(cornell_job(), "job.schema.json").empty());
+  // At most max_errors of them.
+  EXPECT_EQ(contract_schemas().validate_all(doc, "job.schema.json", 64, 2).size(), 2u);
+}
+
+TEST(JsonSchema, ValidateAllKeepsOnlyTheBranchThatGotFurthest) {
+  // A colour is a number or an array of three: the failed number branch adds nothing to the array's two errors.
+  json doc = cornell_job();
+  doc["scene"]["materials"]["light"]["radiance"] = json::array({-1, 1, -1});
+  const auto errors = contract_schemas().validate_all(doc, "job.schema.json");
+  ASSERT_EQ(errors.size(), 2u);
+  EXPECT_EQ(errors[0].pointer, "/scene/materials/light/radiance/0");
+  EXPECT_EQ(errors[1].pointer, "/scene/materials/light/radiance/2");
+}
+
+TEST(JsonSchema, IntegerLimitsPrintAsIntegers) {
+  json doc = cornell_job();
+  doc["render"]["spp"] = 0;
+  auto e = validate_job(doc);
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e->message, "must be at least 1");
+  SchemaSet set;
+  set.add("n.json", json::parse(R"({"minimum": 0.5, "exclusiveMaximum": 2.0})"));
+  EXPECT_EQ(set.validate(json(0.25), "n.json")->message, "must be at least 0.5");
+  EXPECT_EQ(set.validate(json(3), "n.json")->message, "must be less than 2");
+}
+
+TEST(JsonSchema, UnknownNamesSuggestTheClosestKnownOne) {
+  json doc = cornell_job();
+  doc["scene"]["materials"]["white"]["albdo"] = 0.5;
+  auto e = validate_job(doc);
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e->message, "unknown property \"albdo\" (did you mean \"albedo\"?)");
+  doc = cornell_job();
+  doc["render"]["estimator"] = "mist";
+  e = validate_job(doc);
+  ASSERT_TRUE(e);
+  EXPECT_NE(e->message.find("(did you mean \"mis\"?)"), std::string::npos) << e->message;
+}
+
+TEST(DidYouMean, SuggestsOnlyCloseNames) {
+  EXPECT_EQ(edit_distance("albdo", "albedo"), 1u);
+  EXPECT_EQ(edit_distance("mirorr", "mirror"), 1u);  // a transposition is one edit
+  EXPECT_EQ(edit_distance("Lambert", "lambert"), 0u);
+  EXPECT_EQ(edit_distance("", "abc"), 3u);
+  const std::vector<std::string> names = {"albedo", "alpha", "emission"};
+  EXPECT_EQ(did_you_mean("albdo", names), " (did you mean \"albedo\"?)");
+  EXPECT_EQ(did_you_mean("emision", names), " (did you mean \"emission\"?)");
+  EXPECT_EQ(did_you_mean("x", names), "");
+  EXPECT_EQ(did_you_mean("roughness", names), "");
+  EXPECT_EQ(did_you_mean("albedo", names), "");  // a known name is not unknown
+  EXPECT_EQ(did_you_mean("--widht", {"--width", "--height"}), " (did you mean \"--width\"?)");
+  EXPECT_EQ(did_you_mean(std::string(100, 'a'), names), "");
 }
 
 }  // namespace
