@@ -1,6 +1,7 @@
 // Lights as the start of light paths: sampled emitted rays carry, on average, the closed-form power each light
-// emits (the flux of seed 002, 4.1.5: radiance integrated over the emitting points and the directions they emit
-// to, with the cosine), and the densities reported afterwards for a ray are those it was sampled with.
+// emits (the radiant flux of Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed., §4.1.5: radiance
+// integrated over the emitting points and the directions they emit to, with the cosine), and the densities reported
+// afterwards for a ray are those it was sampled with.
 #include <gtest/gtest.h>
 
 #include "renderer/sampler.h"
