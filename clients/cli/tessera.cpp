@@ -558,7 +558,7 @@ const char* kLogUsage =
 
 int cmd_log(std::vector<std::string> args) {
   Remote remote = remote_options(&args);
-  require_args(args, 1, 1, kLogUsage);
+  require_args(args, 1, 1, kLogUsage, {"--url", "--token", "--help"});
   const std::string id = resolve_job_id(remote, args[0]);
   auto client = remote.client();
   auto res = client->Get((job_path(id) + "/log").c_str());
@@ -611,8 +611,8 @@ int main(int argc, char** argv) {
       std::fputs(kUsage, stdout);
       return kExitOk;
     }
-    const std::string suggestion =
-        tessera::proto::did_you_mean(cmd, {"render", "merge", "submit", "watch", "fetch", "list", "cancel", "--help"});
+    const std::string suggestion = tessera::proto::did_you_mean(
+        cmd, {"render", "merge", "submit", "watch", "fetch", "list", "cancel", "log", "--help"});
     std::fprintf(stderr, "tessera: unknown command '%s'%s\n\n%s", cmd.c_str(), suggestion.c_str(), kUsage);
     return kExitUsage;
   });
