@@ -18,12 +18,12 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <cstdlib>
-#include <new>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <functional>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -41,12 +41,24 @@ void* counted_alloc(std::size_t n) {
   throw std::bad_alloc();
 }
 
-void* operator new(std::size_t n) { return counted_alloc(n); }
-void* operator new[](std::size_t n) { return counted_alloc(n); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void* operator new(std::size_t n) {
+  return counted_alloc(n);
+}
+void* operator new[](std::size_t n) {
+  return counted_alloc(n);
+}
+void operator delete(void* p) noexcept {
+  std::free(p);
+}
+void operator delete[](void* p) noexcept {
+  std::free(p);
+}
+void operator delete(void* p, std::size_t) noexcept {
+  std::free(p);
+}
+void operator delete[](void* p, std::size_t) noexcept {
+  std::free(p);
+}
 
 namespace {
 
@@ -54,7 +66,9 @@ using namespace tessera;
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
 
-double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
 
 size_t current_rss_bytes() {
   std::ifstream statm("/proc/self/statm");
@@ -133,7 +147,8 @@ std::shared_ptr<Scene> million_scene() {
   scene->materials.push_back(reg.create({{"type", "emission"}, {"radiance", {20, 20, 20}}}, "/", {}));
   scene->material_names = {"diffuse", "light"};
   for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) scene->meshes.push_back(sphere_mesh(Vec3(i * 2.5f - 3.75f, 1, j * 2.5f - 3.75f), 1, 128, 256, 0));
+    for (int j = 0; j < 4; ++j)
+      scene->meshes.push_back(sphere_mesh(Vec3(i * 2.5f - 3.75f, 1, j * 2.5f - 3.75f), 1, 128, 256, 0));
   Mesh floor;
   floor.positions = {Vec3(-20, 0, -20), Vec3(20, 0, -20), Vec3(20, 0, 20), Vec3(-20, 0, 20)};
   floor.indices = {0, 2, 1, 0, 3, 2};
@@ -170,15 +185,21 @@ std::shared_ptr<Scene> glossy_env_scene(int w) {
   auto glossy = [&](json params, json fallback) { return reg.has(params["type"]) ? params : fallback; };
   json scene_doc = {
       {"materials",
-       {{"gold", glossy({{"type", "conductor"}, {"metal", "gold"}, {"roughness", 0.2}}, {{"type", "lambert"}, {"albedo", {0.8, 0.6, 0.2}}})},
-        {"plastic", glossy({{"type", "plastic"}, {"albedo", {0.1, 0.3, 0.8}}, {"roughness", 0.1}}, {{"type", "lambert"}, {"albedo", {0.1, 0.3, 0.8}}})},
-        {"rough", glossy({{"type", "cook_torrance"}, {"distribution", "ggx"}, {"roughness", 0.4}}, {{"type", "lambert"}, {"albedo", 0.7}})},
+       {{"gold", glossy({{"type", "conductor"}, {"metal", "gold"}, {"roughness", 0.2}},
+                        {{"type", "lambert"}, {"albedo", {0.8, 0.6, 0.2}}})},
+        {"plastic", glossy({{"type", "plastic"}, {"albedo", {0.1, 0.3, 0.8}}, {"roughness", 0.1}},
+                           {{"type", "lambert"}, {"albedo", {0.1, 0.3, 0.8}}})},
+        {"rough", glossy({{"type", "cook_torrance"}, {"distribution", "ggx"}, {"roughness", 0.4}},
+                         {{"type", "lambert"}, {"albedo", 0.7}})},
         {"floor", {{"type", "lambert"}, {"albedo", 0.5}}}}},
       {"objects", json::array({{{"shape", "sphere"}, {"center", {-2.2, 1, 0}}, {"radius", 1}, {"material", "gold"}},
                                {{"shape", "sphere"}, {"center", {0, 1, 0}}, {"radius", 1}, {"material", "plastic"}},
                                {{"shape", "sphere"}, {"center", {2.2, 1, 0}}, {"radius", 1}, {"material", "rough"}},
-                               {{"shape", "rectangle"}, {"corner", {-10, 0, 10}}, {"edge1", {20, 0, 0}},
-                                {"edge2", {0, 0, -20}}, {"material", "floor"}}})},
+                               {{"shape", "rectangle"},
+                                {"corner", {-10, 0, 10}},
+                                {"edge1", {20, 0, 0}},
+                                {"edge2", {0, 0, -20}},
+                                {"material", "floor"}}})},
       {"camera", {{"from", {0, 2.5, 7}}, {"to", {0, 0.8, 0}}, {"fov_deg", 40}}},
   };
   SceneLoadOptions opts;
@@ -236,9 +257,8 @@ double timed_rate(size_t count, ThreadPool& pool, const Trace& trace) {
   auto start = Clock::now();
   int repeats = 0;
   do {
-    pool.parallel_for(chunks, [&](size_t c, int worker) {
-      hits[worker] += trace(c * chunk, std::min(count, (c + 1) * chunk));
-    });
+    pool.parallel_for(
+        chunks, [&](size_t c, int worker) { hits[worker] += trace(c * chunk, std::min(count, (c + 1) * chunk)); });
     ++repeats;
   } while (seconds_since(start) < 0.5);
   return static_cast<double>(count) * repeats / seconds_since(start);
@@ -278,9 +298,9 @@ double raw_packet_rate(const Scene& scene, const std::vector<Ray>& rays, ThreadP
 // Heap allocations after the first pass of a render (the first pass warms up per-thread arenas).
 struct AllocationCount {
   uint64_t allocations = 0;
-  uint32_t passes = 0;       // passes after the first
-  uint64_t samples = 0;      // pixel samples in those passes
-  uint64_t rays = 0;         // rays in those passes
+  uint32_t passes = 0;   // passes after the first
+  uint64_t samples = 0;  // pixel samples in those passes
+  uint64_t rays = 0;     // rays in those passes
 };
 
 std::vector<float> render_image(std::shared_ptr<const Scene> scene, RenderSettings s, ThreadPool& pool,
@@ -303,8 +323,8 @@ std::vector<float> render_image(std::shared_ptr<const Scene> scene, RenderSettin
   if (allocs) {
     allocs->allocations = g_allocations.load() - allocs_at_first;
     allocs->passes = end.pass - at_first.pass;
-    allocs->samples = static_cast<uint64_t>(end.samples_done - at_first.samples_done) *
-                      static_cast<uint64_t>(s.width) * static_cast<uint64_t>(s.height);
+    allocs->samples = static_cast<uint64_t>(end.samples_done - at_first.samples_done) * static_cast<uint64_t>(s.width) *
+                      static_cast<uint64_t>(s.height);
     allocs->rays = end.rays.total() - at_first.rays.total();
   }
   if (progress) *progress = end;
@@ -333,25 +353,31 @@ int main(int argc, char** argv) {
   int threads = 0, env_width = 512;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
-    if (a == "--quick") quick = true;
-    else if (a == "--scene" && i + 1 < argc) only = argv[++i];
-    else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
-    else if (a == "--json" && i + 1 < argc) json_path = argv[++i];
+    if (a == "--quick")
+      quick = true;
+    else if (a == "--scene" && i + 1 < argc)
+      only = argv[++i];
+    else if (a == "--threads" && i + 1 < argc)
+      threads = std::atoi(argv[++i]);
+    else if (a == "--json" && i + 1 < argc)
+      json_path = argv[++i];
     else if (a == "--env-width" && i + 1 < argc && std::atoi(argv[i + 1]) >= 2 && std::atoi(argv[i + 1]) <= 16384)
       env_width = std::atoi(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: tessera-bench [--quick] [--scene cornell|helmet|million|glossy_env] [--threads N] "
-                           "[--env-width 2..16384] [--json FILE]\n");
+      std::fprintf(stderr,
+                   "usage: tessera-bench [--quick] [--scene cornell|helmet|million|glossy_env] [--threads N] "
+                   "[--env-width 2..16384] [--json FILE]\n");
       return 2;
     }
   }
   enable_flush_to_zero();
   std::vector<BenchScene> scenes = {
-      {"cornell", "Cornell box, 512x512, Lambert, one area light", [] { return load_job_file("proto/examples/cornell.json"); },
-       base_settings(512, 512, 8)},
+      {"cornell", "Cornell box, 512x512, Lambert, one area light",
+       [] { return load_job_file("proto/examples/cornell.json"); }, base_settings(512, 512, 8)},
       {"helmet", "DamagedHelmet.glb (textured glTF), 512x512, white environment",
        [] { return gltf_scene("../shared/scenes/damagedhelmet/DamagedHelmet.glb"); }, base_settings(512, 512, 8)},
-      {"million", "16 spheres x 65,536 triangles + floor, area light, 512x512", million_scene, base_settings(512, 512, 6)},
+      {"million", "16 spheres x 65,536 triangles + floor, area light, 512x512", million_scene,
+       base_settings(512, 512, 6)},
       {"glossy_env",
        "glossy spheres under an HDR sky (" + std::to_string(env_width) + "x" + std::to_string(env_width / 2) +
            ") with a sun, 512x512",
@@ -382,8 +408,8 @@ int main(int argc, char** argv) {
     r["bvh_s"] = scene->build_seconds();
     r["triangles"] = tris;
     r["bytes_per_triangle"] = tris ? double(rss_after - rss_before) / tris : 0.0;
-    std::printf("   load %.3f s (BVH and lights %.3f s), %zu triangles, %.0f bytes/triangle (resident growth)\n", load_s,
-                scene->build_seconds(), tris, tris ? double(rss_after - rss_before) / tris : 0.0);
+    std::printf("   load %.3f s (BVH and lights %.3f s), %zu triangles, %.0f bytes/triangle (resident growth)\n",
+                load_s, scene->build_seconds(), tris, tris ? double(rss_after - rss_before) / tris : 0.0);
 
     // Throughput at all threads and at one.
     RenderProgress p;
@@ -400,13 +426,16 @@ int main(int argc, char** argv) {
                 p.rays.shadow / p.elapsed_s);
     std::printf("   1 thread %.3g samples/s; %d threads %.3g samples/s: parallel efficiency %.2f\n", p1.samples_per_s,
                 pool.size(), p.samples_per_s, efficiency);
-    std::printf("   heap allocations after the first pass: %llu in %u passes (%.3g samples, %.3g rays): %.2g per pass, "
-                "%.2g per million rays\n",
-                static_cast<unsigned long long>(allocs.allocations), allocs.passes, double(allocs.samples),
-                double(allocs.rays), allocs.passes ? double(allocs.allocations) / allocs.passes : 0.0,
-                allocs.rays ? 1e6 * double(allocs.allocations) / double(allocs.rays) : 0.0);
-    r["heap_allocations"] = {{"allocations", allocs.allocations}, {"passes", allocs.passes},
-                             {"samples", allocs.samples}, {"rays", allocs.rays}};
+    std::printf(
+        "   heap allocations after the first pass: %llu in %u passes (%.3g samples, %.3g rays): %.2g per pass, "
+        "%.2g per million rays\n",
+        static_cast<unsigned long long>(allocs.allocations), allocs.passes, double(allocs.samples), double(allocs.rays),
+        allocs.passes ? double(allocs.allocations) / allocs.passes : 0.0,
+        allocs.rays ? 1e6 * double(allocs.allocations) / double(allocs.rays) : 0.0);
+    r["heap_allocations"] = {{"allocations", allocs.allocations},
+                             {"passes", allocs.passes},
+                             {"samples", allocs.samples},
+                             {"rays", allocs.rays}};
     r["first_preview_s"] = first_preview;
     r["samples_per_s"] = p.samples_per_s;
     r["rays_per_s"] = ray_rate;
@@ -440,9 +469,10 @@ int main(int argc, char** argv) {
     const auto [ratio_lo, ratio_hi] = std::minmax_element(ratios.begin(), ratios.end());
     const double rc = median(rcs), rb = median(rbs), rs = median(rss), rcp = median(rcps);
     const double ratio = median(ratios), ratio_packets = median(ratios_packets);
-    std::printf("   Embree alone: camera %.3g (in packets of %d: %.3g), bounce %.3g, shadow %.3g rays/s; path tracer / "
-                "Embree-alone rate %.2f (%d rounds %.2f-%.2f; %.2f with camera rays in packets for both)\n",
-                rc, Accel::kPacketSize, rcp, rb, rs, ratio, rounds, *ratio_lo, *ratio_hi, ratio_packets);
+    std::printf(
+        "   Embree alone: camera %.3g (in packets of %d: %.3g), bounce %.3g, shadow %.3g rays/s; path tracer / "
+        "Embree-alone rate %.2f (%d rounds %.2f-%.2f; %.2f with camera rays in packets for both)\n",
+        rc, Accel::kPacketSize, rcp, rb, rs, ratio, rounds, *ratio_lo, *ratio_hi, ratio_packets);
     r["embree_alone"] = {{"camera", rc},          {"camera_packets", rcp}, {"bounce", rb},
                          {"shadow", rs},          {"ratio", ratio},        {"ratio_camera_packets", ratio_packets},
                          {"ratio_rounds", ratios}};
@@ -482,9 +512,13 @@ int main(int argc, char** argv) {
       std::vector<float> img = render_image(scene, b, pool, &bp);
       double e = rmse(img, reference);
       double eff = 1.0 / (e * e * bp.elapsed_s);
-      std::printf("   budget %5.2f s: %5u spp in %.2f s, RMSE %.5f, efficiency 1/(MSE*s) %.4g\n", budget, bp.samples_done,
-                  bp.elapsed_s, e, eff);
-      conv.push_back({{"budget_s", budget}, {"spp", bp.samples_done}, {"seconds", bp.elapsed_s}, {"rmse", e}, {"efficiency", eff}});
+      std::printf("   budget %5.2f s: %5u spp in %.2f s, RMSE %.5f, efficiency 1/(MSE*s) %.4g\n", budget,
+                  bp.samples_done, bp.elapsed_s, e, eff);
+      conv.push_back({{"budget_s", budget},
+                      {"spp", bp.samples_done},
+                      {"seconds", bp.elapsed_s},
+                      {"rmse", e},
+                      {"efficiency", eff}});
     }
     r["convergence"] = conv;
     r["peak_rss_bytes"] = peak_rss_bytes();

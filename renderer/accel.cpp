@@ -32,8 +32,9 @@ RTCDevice shared_device() {
 
 void check(RTCDevice device, const char* what) {
   RTCError err = rtcGetDeviceError(device);
-  if (err != RTC_ERROR_NONE) throw std::runtime_error(std::string("Embree: ") + what + " failed (error " +
-                                                      std::to_string(static_cast<int>(err)) + ")");
+  if (err != RTC_ERROR_NONE)
+    throw std::runtime_error(std::string("Embree: ") + what + " failed (error " +
+                             std::to_string(static_cast<int>(err)) + ")");
 }
 
 struct GeometryRef {
@@ -67,9 +68,14 @@ void alpha_filter(const RTCFilterFunctionNArguments* args) {
     } else {
       // Blend: keep the hit with probability alpha, decided by a hash of the ray and the hit, so the decision is
       // deterministic (the same ray always sees the same surface) yet uncorrelated between rays.
-      const float key[8] = {RTCRayN_org_x(args->ray, args->N, i), RTCRayN_org_y(args->ray, args->N, i),
-                            RTCRayN_org_z(args->ray, args->N, i), RTCRayN_dir_x(args->ray, args->N, i),
-                            RTCRayN_dir_y(args->ray, args->N, i), RTCRayN_dir_z(args->ray, args->N, i), b1, b2};
+      const float key[8] = {RTCRayN_org_x(args->ray, args->N, i),
+                            RTCRayN_org_y(args->ray, args->N, i),
+                            RTCRayN_org_z(args->ray, args->N, i),
+                            RTCRayN_dir_x(args->ray, args->N, i),
+                            RTCRayN_dir_y(args->ray, args->N, i),
+                            RTCRayN_dir_z(args->ray, args->N, i),
+                            b1,
+                            b2};
       uint64_t h = prim;
       for (float f : key) {
         uint32_t bits;
@@ -94,8 +100,8 @@ uint32_t attach_mesh(RTCDevice device, RTCScene scene, const Mesh& mesh, const M
   }
   // Shared buffers: Embree reads our arrays in place. Vertex buffers need 4 bytes readable past the last vertex
   // (Embree loads 16 bytes at a time), which Scene::finalize guarantees by reserving capacity.
-  rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh.positions.data(), 0,
-                             sizeof(Vec3), mesh.positions.size());
+  rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh.positions.data(), 0, sizeof(Vec3),
+                             mesh.positions.size());
   rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, mesh.indices.data(), 0,
                              3 * sizeof(uint32_t), mesh.triangle_count());
   rtcCommitGeometry(geom);
@@ -115,8 +121,8 @@ struct Accel::Impl {
   RTCScene scene = nullptr;
   std::vector<GeometryRef> refs;  // by Embree geometry id in the top scene
   std::vector<RTCScene> group_scenes;
-  std::vector<std::vector<GeometryRef>> group_refs;  // by geometry id within each group scene
-  std::vector<uint32_t> instance_group;              // by instance index
+  std::vector<std::vector<GeometryRef>> group_refs;        // by geometry id within each group scene
+  std::vector<uint32_t> instance_group;                    // by instance index
   std::vector<std::unique_ptr<AlphaUserData>> alpha_data;  // filter-function user data, alive with the scenes
   void release() {
     if (scene) rtcReleaseScene(scene);
@@ -146,7 +152,8 @@ void Accel::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& sp
 
   for (uint32_t m = 0; m < meshes.size(); ++m) {
     if (meshes[m].indices.empty() || meshes[m].prototype) continue;
-    set_ref(impl_->refs, attach_mesh(device, impl_->scene, meshes[m], materials[meshes[m].material], impl_->alpha_data), {false, m});
+    set_ref(impl_->refs, attach_mesh(device, impl_->scene, meshes[m], materials[meshes[m].material], impl_->alpha_data),
+            {false, m});
     check(device, "triangle geometry");
   }
   for (uint32_t s = 0; s < spheres.size(); ++s) {

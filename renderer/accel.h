@@ -23,7 +23,7 @@ struct RayHit {
   uint32_t geom_id = 0;
   uint32_t prim_id = 0;
   bool is_sphere = false;
-  uint32_t object = 0;  // index into Scene::meshes or Scene::spheres
+  uint32_t object = 0;              // index into Scene::meshes or Scene::spheres
   uint32_t instance = kNoInstance;  // index into Scene::instances for instanced geometry
 };
 

@@ -90,8 +90,10 @@ std::shared_ptr<EnvironmentMap> EnvironmentMap::load(const std::string& path) {
 
 Rgb EnvironmentMap::texel(int x, int y) const {
   // Lookups ask for at most one texel past either edge; the modulo (an integer division) is for anything else.
-  if (x < 0) x += width_;
-  else if (x >= width_) x -= width_;
+  if (x < 0)
+    x += width_;
+  else if (x >= width_)
+    x -= width_;
   if (x < 0 || x >= width_) x = ((x % width_) + width_) % width_;
   y = clamp(y, 0, height_ - 1);
   return distribution_.cell(x, y).value;

@@ -47,7 +47,8 @@ double Film::relative_error() const {
   size_t count = 0;
   for (size_t i = 0; i < pixel_count(); ++i) {
     double mean = (0.2126 * static_cast<double>(sum_[3 * i]) + 0.7152 * static_cast<double>(sum_[3 * i + 1]) +
-                   0.0722 * static_cast<double>(sum_[3 * i + 2])) / (kFixedScale * n);
+                   0.0722 * static_cast<double>(sum_[3 * i + 2])) /
+                  (kFixedScale * n);
     double var = (sum_lum2_[i] / n - mean * mean) * n / (n - 1);  // unbiased sample variance
     if (var < 0) var = 0;
     var_sum += var / n;  // variance of the pixel mean

@@ -21,15 +21,16 @@ namespace {
 
 // Extensions whose meaning tessera renders (or, for KHR_materials_variants-like metadata, safely ignores).
 const std::set<std::string> kSupportedExtensions = {
-    "KHR_lights_punctual",         "KHR_materials_emissive_strength", "KHR_materials_ior",
-    "KHR_materials_transmission",  "KHR_materials_volume",            "KHR_materials_specular",
-    "KHR_materials_clearcoat",     "KHR_materials_sheen",             "KHR_texture_transform",
-    "KHR_mesh_quantization",       "KHR_materials_unlit",
+    "KHR_lights_punctual",   "KHR_materials_emissive_strength", "KHR_materials_ior",       "KHR_materials_transmission",
+    "KHR_materials_volume",  "KHR_materials_specular",          "KHR_materials_clearcoat", "KHR_materials_sheen",
+    "KHR_texture_transform", "KHR_mesh_quantization",           "KHR_materials_unlit",
 };
 
 using Mat4 = std::array<double, 16>;  // column-major, as glTF stores matrices
 
-Mat4 identity() { return {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}; }
+Mat4 identity() {
+  return {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+}
 
 Mat4 multiply(const Mat4& a, const Mat4& b) {
   Mat4 r{};
@@ -78,8 +79,7 @@ Vec3 apply_vector(const Mat4& m, const Vec3& v) {
               static_cast<float>(m[2] * v.x + m[6] * v.y + m[10] * v.z));
 }
 double det3(const Mat4& m) {
-  return m[0] * (m[5] * m[10] - m[9] * m[6]) - m[4] * (m[1] * m[10] - m[9] * m[2]) +
-         m[8] * (m[1] * m[6] - m[5] * m[2]);
+  return m[0] * (m[5] * m[10] - m[9] * m[6]) - m[4] * (m[1] * m[10] - m[9] * m[2]) + m[8] * (m[1] * m[6] - m[5] * m[2]);
 }
 // Inverse transpose of the upper 3x3 (for normals), as a Mat4 without translation.
 Mat4 normal_matrix(const Mat4& m) {
@@ -131,12 +131,23 @@ class AccessorReader {
     read(acc, index, [&](size_t i, int, const unsigned char* p) {
       uint32_t v;
       switch (acc.componentType) {
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: v = *p; break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t s; std::memcpy(&s, p, 2); v = s; break; }
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: std::memcpy(&v, p, 4); break;
-        default: fail(index, "indices must be unsigned integers");
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+          v = *p;
+          break;
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+          uint16_t s;
+          std::memcpy(&s, p, 2);
+          v = s;
+          break;
+        }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+          std::memcpy(&v, p, 4);
+          break;
+        default:
+          fail(index, "indices must be unsigned integers");
       }
-      if (v >= vertex_count) fail(index, "index " + std::to_string(v) + " is beyond the " + std::to_string(vertex_count) + " vertices");
+      if (v >= vertex_count)
+        fail(index, "index " + std::to_string(v) + " is beyond the " + std::to_string(vertex_count) + " vertices");
       out[i] = v;
     });
     return out;
@@ -158,16 +169,35 @@ class AccessorReader {
 
   static float to_float(const tinygltf::Accessor& acc, const unsigned char* p) {
     switch (acc.componentType) {
-      case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; std::memcpy(&f, p, 4); return std::isfinite(f) ? f : 0.0f; }
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return acc.normalized ? *p / 255.0f : *p;
+      case TINYGLTF_COMPONENT_TYPE_FLOAT: {
+        float f;
+        std::memcpy(&f, p, 4);
+        return std::isfinite(f) ? f : 0.0f;
+      }
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+        return acc.normalized ? *p / 255.0f : *p;
       case TINYGLTF_COMPONENT_TYPE_BYTE: {
-        int8_t b; std::memcpy(&b, p, 1);
+        int8_t b;
+        std::memcpy(&b, p, 1);
         return acc.normalized ? std::max(b / 127.0f, -1.0f) : b;
       }
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t s; std::memcpy(&s, p, 2); return acc.normalized ? s / 65535.0f : s; }
-      case TINYGLTF_COMPONENT_TYPE_SHORT: { int16_t s; std::memcpy(&s, p, 2); return acc.normalized ? std::max(s / 32767.0f, -1.0f) : s; }
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: { uint32_t u; std::memcpy(&u, p, 4); return static_cast<float>(u); }
-      default: return 0.0f;
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+        uint16_t s;
+        std::memcpy(&s, p, 2);
+        return acc.normalized ? s / 65535.0f : s;
+      }
+      case TINYGLTF_COMPONENT_TYPE_SHORT: {
+        int16_t s;
+        std::memcpy(&s, p, 2);
+        return acc.normalized ? std::max(s / 32767.0f, -1.0f) : s;
+      }
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+        uint32_t u;
+        std::memcpy(&u, p, 4);
+        return static_cast<float>(u);
+      }
+      default:
+        return 0.0f;
     }
   }
 
@@ -207,9 +237,14 @@ class AccessorReader {
       for (int k = 0; k < sp.count; ++k) {
         const unsigned char* ip = ibase + sp.indices.byteOffset + static_cast<size_t>(k) * isize;
         uint32_t target = 0;
-        if (isize == 1) target = *ip;
-        else if (isize == 2) { uint16_t s; std::memcpy(&s, ip, 2); target = s; }
-        else std::memcpy(&target, ip, 4);
+        if (isize == 1)
+          target = *ip;
+        else if (isize == 2) {
+          uint16_t s;
+          std::memcpy(&s, ip, 2);
+          target = s;
+        } else
+          std::memcpy(&target, ip, 4);
         if (target >= acc.count) fail(index, "has a sparse index beyond its count");
         for (int c = 0; c < comps; ++c)
           fn(target, c, vbase + sp.values.byteOffset + static_cast<size_t>(k) * elem + static_cast<size_t>(c) * csize);
@@ -257,7 +292,9 @@ bool fs_exists(const std::string& path, void* user) {
   std::filesystem::path p;
   return inside(*static_cast<FsContext*>(user), path, &p) && std::filesystem::is_regular_file(p);
 }
-std::string fs_expand(const std::string& path, void*) { return path; }
+std::string fs_expand(const std::string& path, void*) {
+  return path;
+}
 bool fs_read(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
   const FsContext& ctx = *static_cast<FsContext*>(user);
   std::filesystem::path p;
@@ -395,7 +432,8 @@ json container_json(const std::vector<unsigned char>& bytes, bool* binary, const
   if (bytes.size() < 20) throw SceneError(pointer, "the .glb is truncated (no header)");
   if (u32(4) != 2) throw SceneError(pointer, "the .glb has container version " + std::to_string(u32(4)) + ", not 2");
   if (u32(8) > bytes.size())
-    throw SceneError(pointer, "the .glb declares " + std::to_string(u32(8)) + " bytes but has " + std::to_string(bytes.size()));
+    throw SceneError(pointer,
+                     "the .glb declares " + std::to_string(u32(8)) + " bytes but has " + std::to_string(bytes.size()));
   uint32_t json_len = u32(12);
   if (u32(16) != 0x4E4F534Au) throw SceneError(pointer, "the .glb's first chunk is not JSON");
   if (json_len > bytes.size() - 20) throw SceneError(pointer, "the .glb's JSON chunk is longer than the file");
@@ -424,14 +462,18 @@ json texture_param(const json& doc, const json& info, int channel, bool srgb, co
     return nullptr;
   }
   if (source < 0) return nullptr;
-  json p = {{"texture", "#image" + std::to_string(source)}, {"factor", factor}, {"colorspace", srgb ? "srgb" : "linear"}};
+  json p = {
+      {"texture", "#image" + std::to_string(source)}, {"factor", factor}, {"colorspace", srgb ? "srgb" : "linear"}};
   if (channel >= 0) p["channel"] = channel;
   int uv = info.value("texCoord", 0);
   auto wrap_name = [](int mode) {
     switch (mode) {
-      case 33071: return "clamp";
-      case 33648: return "mirror";
-      default: return "repeat";
+      case 33071:
+        return "clamp";
+      case 33648:
+        return "mirror";
+      default:
+        return "repeat";
     }
   };
   if (tex.contains("sampler") && tex["sampler"].is_number_integer() && doc.contains("samplers")) {
@@ -497,17 +539,20 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
   if (ext.contains("KHR_materials_specular")) {
     const json& t = ext["KHR_materials_specular"];
     set("specular", number_or(t, "specularFactor", 1.0), t.value("specularTexture", json()), 3, false);
-    set("specular_color", rgb_or(t, "specularColorFactor", {1, 1, 1}), t.value("specularColorTexture", json()), -1, true);
+    set("specular_color", rgb_or(t, "specularColorFactor", {1, 1, 1}), t.value("specularColorTexture", json()), -1,
+        true);
   }
   if (ext.contains("KHR_materials_clearcoat")) {
     const json& t = ext["KHR_materials_clearcoat"];
     set("clearcoat", number_or(t, "clearcoatFactor", 0.0), t.value("clearcoatTexture", json()), 0, false);
-    set("clearcoat_roughness", number_or(t, "clearcoatRoughnessFactor", 0.0), t.value("clearcoatRoughnessTexture", json()), 1, false);
+    set("clearcoat_roughness", number_or(t, "clearcoatRoughnessFactor", 0.0),
+        t.value("clearcoatRoughnessTexture", json()), 1, false);
   }
   if (ext.contains("KHR_materials_sheen")) {
     const json& t = ext["KHR_materials_sheen"];
     set("sheen_color", rgb_or(t, "sheenColorFactor", {0, 0, 0}), t.value("sheenColorTexture", json()), -1, true);
-    set("sheen_roughness", number_or(t, "sheenRoughnessFactor", 0.0), t.value("sheenRoughnessTexture", json()), 3, false);
+    set("sheen_roughness", number_or(t, "sheenRoughnessFactor", 0.0), t.value("sheenRoughnessTexture", json()), 3,
+        false);
   }
   return p;
 }
@@ -547,7 +592,8 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     for (size_t i = 0; i < doc[section].size(); ++i) {
       const json& item = doc[section][i];
       if (!item.is_object() || !item.contains("uri")) continue;
-      if (!item["uri"].is_string()) throw SceneError(pointer, std::string(section) + "[" + std::to_string(i) + "].uri must be a string");
+      if (!item["uri"].is_string())
+        throw SceneError(pointer, std::string(section) + "[" + std::to_string(i) + "].uri must be a string");
       std::string problem = gltf_uri_problem(item["uri"].get<std::string>());
       if (!problem.empty())
         throw SceneError(pointer, "refused URI \"" + item["uri"].get<std::string>() + "\" in " + section + "[" +
@@ -591,7 +637,8 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   // Materials: glTF materials by index, replaced by the job's materials of the same name.
   const MaterialRegistry& registry = MaterialRegistry::builtin();
   const json no_materials = json::array();
-  const json& gltf_materials = doc.contains("materials") && doc["materials"].is_array() ? doc["materials"] : no_materials;
+  const json& gltf_materials =
+      doc.contains("materials") && doc["materials"].is_array() ? doc["materials"] : no_materials;
   std::vector<uint32_t> material_index(model.materials.size());
   for (size_t i = 0; i < model.materials.size(); ++i) {
     const tinygltf::Material& m = model.materials[i];
@@ -617,7 +664,9 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       material->alpha_mode = m.alphaMode == "MASK" ? Material::AlphaMode::kMask : Material::AlphaMode::kBlend;
       material->alpha_cutoff = static_cast<float>(m.alphaCutoff);
       const json pbr = mj.value("pbrMetallicRoughness", json::object());
-      double a = pbr.contains("baseColorFactor") && pbr["baseColorFactor"].size() == 4 ? pbr["baseColorFactor"][3].get<double>() : 1.0;
+      double a = pbr.contains("baseColorFactor") && pbr["baseColorFactor"].size() == 4
+                     ? pbr["baseColorFactor"][3].get<double>()
+                     : 1.0;
       json tex = texture_param(doc, pbr.value("baseColorTexture", json()), 3, false, std::clamp(a, 0.0, 1.0), nullptr);
       json holder = {{"alpha", tex.is_null() ? json(std::clamp(a, 0.0, 1.0)) : tex}};
       material->alpha = params::float_param(holder, "alpha", mp, 1.0f, 0.0f, 1.0f, mctx);
@@ -651,8 +700,9 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   uint32_t default_material = kNoLight;
   auto get_default_material = [&]() {
     if (default_material == kNoLight) {
-      json params = registry.has("gltf_pbr") ? json{{"type", "gltf_pbr"}, {"base_color", {1, 1, 1}}, {"metallic", 1.0}, {"roughness", 1.0}}
-                                             : json{{"type", "lambert"}, {"albedo", {1, 1, 1}}};
+      json params = registry.has("gltf_pbr")
+                        ? json{{"type", "gltf_pbr"}, {"base_color", {1, 1, 1}}, {"metallic", 1.0}, {"roughness", 1.0}}
+                        : json{{"type", "lambert"}, {"albedo", {1, 1, 1}}};
       default_material = static_cast<uint32_t>(scene.materials.size());
       scene.materials.push_back(registry.create(params, pointer, MaterialContext{}));
       scene.material_names.push_back("gltf:default");
@@ -672,96 +722,103 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     const Mat4 nmat = normal_matrix(world);
     std::vector<Mesh> out;
     for (const tinygltf::Primitive& prim : model.meshes[mesh_index].primitives) {
-        if (prim.mode != TINYGLTF_MODE_TRIANGLES && prim.mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
-            prim.mode != TINYGLTF_MODE_TRIANGLE_FAN) {
-          result.warnings.push_back("mesh " + std::to_string(mesh_index) + ": points and lines are not rendered");
-          continue;
-        }
-        auto pos_it = prim.attributes.find("POSITION");
-        if (pos_it == prim.attributes.end()) continue;
-        Mesh mesh;
-        std::vector<float> pos = reader.floats(pos_it->second, 3);
-        const size_t nv = pos.size() / 3;
-        mesh.positions.resize(nv);
-        for (size_t v = 0; v < nv; ++v) {
-          mesh.positions[v] = apply_point(world, Vec3(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]));
-        }
-        auto attr = [&](const char* name) { auto it = prim.attributes.find(name); return it == prim.attributes.end() ? -1 : it->second; };
-        auto check_count = [&](int acc, const char* name) {
-          if (reader.count(acc) != nv)
-            throw SceneError(pointer, std::string("mesh ") + std::to_string(mesh_index) + ": " + name + " has " +
-                                          std::to_string(reader.count(acc)) + " elements for " + std::to_string(nv) + " positions");
-        };
-        if (int a = attr("NORMAL"); a >= 0) {
-          check_count(a, "NORMAL");
-          std::vector<float> n = reader.floats(a, 3);
-          mesh.normals.resize(nv);
-          for (size_t v = 0; v < nv; ++v) {
-            Vec3 wn = apply_vector(nmat, Vec3(n[3 * v], n[3 * v + 1], n[3 * v + 2]));
-            float len = length(wn);
-            mesh.normals[v] = len > 0 ? wn / len : Vec3(0, 0, 1);
-          }
-        }
-        if (int a = attr("TANGENT"); a >= 0 && !mesh.normals.empty()) {
-          check_count(a, "TANGENT");
-          std::vector<float> t = reader.floats(a, 4);
-          mesh.tangents.resize(nv);
-          mesh.tangent_signs.resize(nv);
-          for (size_t v = 0; v < nv; ++v) {
-            Vec3 wt = apply_vector(world, Vec3(t[4 * v], t[4 * v + 1], t[4 * v + 2]));
-            float len = length(wt);
-            mesh.tangents[v] = len > 0 ? wt / len : Vec3(1, 0, 0);
-            mesh.tangent_signs[v] = (t[4 * v + 3] < 0 ? -1.0f : 1.0f) * (flip ? -1.0f : 1.0f);
-          }
-        }
-        for (int set = 0; set < 2; ++set) {
-          int a = attr(set == 0 ? "TEXCOORD_0" : "TEXCOORD_1");
-          if (a < 0) continue;
-          check_count(a, set == 0 ? "TEXCOORD_0" : "TEXCOORD_1");
-          std::vector<float> uv = reader.floats(a, 2);
-          auto& dst = set == 0 ? mesh.uvs : mesh.uvs1;
-          dst.resize(nv);
-          for (size_t v = 0; v < nv; ++v) dst[v] = Vec2(uv[2 * v], uv[2 * v + 1]);  // glTF: origin top-left
-        }
-        if (int a = attr("COLOR_0"); a >= 0) {
-          check_count(a, "COLOR_0");
-          int comps = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(model.accessors[a].type));
-          std::vector<float> c = reader.floats(a, comps == 4 ? 4 : 3);
-          mesh.colors.resize(nv);
-          for (size_t v = 0; v < nv; ++v) mesh.colors[v] = Rgb(c[comps * v], c[comps * v + 1], c[comps * v + 2]);
-        }
-        std::vector<uint32_t> idx;
-        if (prim.indices >= 0) {
-          idx = reader.indices(prim.indices, nv);
-        } else {
-          idx.resize(nv);
-          for (size_t v = 0; v < nv; ++v) idx[v] = static_cast<uint32_t>(v);
-        }
-        // Triangulate strips and fans (spec 3.7.2.1).
-        std::vector<uint32_t> tri;
-        if (prim.mode == TINYGLTF_MODE_TRIANGLES) {
-          tri.assign(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(idx.size() / 3 * 3));
-        } else if (prim.mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
-          for (size_t i = 0; i + 2 < idx.size(); ++i) {
-            if (i % 2 == 0) tri.insert(tri.end(), {idx[i], idx[i + 1], idx[i + 2]});
-            else tri.insert(tri.end(), {idx[i + 1], idx[i], idx[i + 2]});
-          }
-        } else {
-          for (size_t i = 1; i + 1 < idx.size(); ++i) tri.insert(tri.end(), {idx[0], idx[i], idx[i + 1]});
-        }
-        if (flip)
-          for (size_t i = 0; i + 2 < tri.size(); i += 3) std::swap(tri[i + 1], tri[i + 2]);
-        triangles += tri.size() / 3;
-        if (triangles > options.max_triangles)
-          throw SceneError(pointer, "the asset exceeds the limit of " + std::to_string(options.max_triangles) + " triangles");
-        mesh.indices = std::move(tri);
-        if (prim.material >= static_cast<int>(model.materials.size()))
-          throw SceneError(pointer, "a primitive names material " + std::to_string(prim.material) + ", which does not exist");
-        mesh.material = prim.material >= 0 ? material_index[prim.material] : get_default_material();
-        if (!mesh.indices.empty()) out.push_back(std::move(mesh));
+      if (prim.mode != TINYGLTF_MODE_TRIANGLES && prim.mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
+          prim.mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+        result.warnings.push_back("mesh " + std::to_string(mesh_index) + ": points and lines are not rendered");
+        continue;
       }
+      auto pos_it = prim.attributes.find("POSITION");
+      if (pos_it == prim.attributes.end()) continue;
+      Mesh mesh;
+      std::vector<float> pos = reader.floats(pos_it->second, 3);
+      const size_t nv = pos.size() / 3;
+      mesh.positions.resize(nv);
+      for (size_t v = 0; v < nv; ++v) {
+        mesh.positions[v] = apply_point(world, Vec3(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]));
+      }
+      auto attr = [&](const char* name) {
+        auto it = prim.attributes.find(name);
+        return it == prim.attributes.end() ? -1 : it->second;
+      };
+      auto check_count = [&](int acc, const char* name) {
+        if (reader.count(acc) != nv)
+          throw SceneError(pointer, std::string("mesh ") + std::to_string(mesh_index) + ": " + name + " has " +
+                                        std::to_string(reader.count(acc)) + " elements for " + std::to_string(nv) +
+                                        " positions");
+      };
+      if (int a = attr("NORMAL"); a >= 0) {
+        check_count(a, "NORMAL");
+        std::vector<float> n = reader.floats(a, 3);
+        mesh.normals.resize(nv);
+        for (size_t v = 0; v < nv; ++v) {
+          Vec3 wn = apply_vector(nmat, Vec3(n[3 * v], n[3 * v + 1], n[3 * v + 2]));
+          float len = length(wn);
+          mesh.normals[v] = len > 0 ? wn / len : Vec3(0, 0, 1);
+        }
+      }
+      if (int a = attr("TANGENT"); a >= 0 && !mesh.normals.empty()) {
+        check_count(a, "TANGENT");
+        std::vector<float> t = reader.floats(a, 4);
+        mesh.tangents.resize(nv);
+        mesh.tangent_signs.resize(nv);
+        for (size_t v = 0; v < nv; ++v) {
+          Vec3 wt = apply_vector(world, Vec3(t[4 * v], t[4 * v + 1], t[4 * v + 2]));
+          float len = length(wt);
+          mesh.tangents[v] = len > 0 ? wt / len : Vec3(1, 0, 0);
+          mesh.tangent_signs[v] = (t[4 * v + 3] < 0 ? -1.0f : 1.0f) * (flip ? -1.0f : 1.0f);
+        }
+      }
+      for (int set = 0; set < 2; ++set) {
+        int a = attr(set == 0 ? "TEXCOORD_0" : "TEXCOORD_1");
+        if (a < 0) continue;
+        check_count(a, set == 0 ? "TEXCOORD_0" : "TEXCOORD_1");
+        std::vector<float> uv = reader.floats(a, 2);
+        auto& dst = set == 0 ? mesh.uvs : mesh.uvs1;
+        dst.resize(nv);
+        for (size_t v = 0; v < nv; ++v) dst[v] = Vec2(uv[2 * v], uv[2 * v + 1]);  // glTF: origin top-left
+      }
+      if (int a = attr("COLOR_0"); a >= 0) {
+        check_count(a, "COLOR_0");
+        int comps = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(model.accessors[a].type));
+        std::vector<float> c = reader.floats(a, comps == 4 ? 4 : 3);
+        mesh.colors.resize(nv);
+        for (size_t v = 0; v < nv; ++v) mesh.colors[v] = Rgb(c[comps * v], c[comps * v + 1], c[comps * v + 2]);
+      }
+      std::vector<uint32_t> idx;
+      if (prim.indices >= 0) {
+        idx = reader.indices(prim.indices, nv);
+      } else {
+        idx.resize(nv);
+        for (size_t v = 0; v < nv; ++v) idx[v] = static_cast<uint32_t>(v);
+      }
+      // Triangulate strips and fans (spec 3.7.2.1).
+      std::vector<uint32_t> tri;
+      if (prim.mode == TINYGLTF_MODE_TRIANGLES) {
+        tri.assign(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(idx.size() / 3 * 3));
+      } else if (prim.mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+        for (size_t i = 0; i + 2 < idx.size(); ++i) {
+          if (i % 2 == 0)
+            tri.insert(tri.end(), {idx[i], idx[i + 1], idx[i + 2]});
+          else
+            tri.insert(tri.end(), {idx[i + 1], idx[i], idx[i + 2]});
+        }
+      } else {
+        for (size_t i = 1; i + 1 < idx.size(); ++i) tri.insert(tri.end(), {idx[0], idx[i], idx[i + 1]});
+      }
+      if (flip)
+        for (size_t i = 0; i + 2 < tri.size(); i += 3) std::swap(tri[i + 1], tri[i + 2]);
+      triangles += tri.size() / 3;
+      if (triangles > options.max_triangles)
+        throw SceneError(pointer,
+                         "the asset exceeds the limit of " + std::to_string(options.max_triangles) + " triangles");
+      mesh.indices = std::move(tri);
+      if (prim.material >= static_cast<int>(model.materials.size()))
+        throw SceneError(pointer,
+                         "a primitive names material " + std::to_string(prim.material) + ", which does not exist");
+      mesh.material = prim.material >= 0 ? material_index[prim.material] : get_default_material();
+      if (!mesh.indices.empty()) out.push_back(std::move(mesh));
+    }
     return out;
-
   };
 
   std::function<void(int, const Mat4&, int)> visit = [&](int node_index, const Mat4& parent, int depth) {
@@ -773,7 +830,8 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
 
     if (node.mesh >= 0) {
       if (node.mesh >= static_cast<int>(model.meshes.size()))
-        throw SceneError(pointer, "node " + std::to_string(node_index) + " names mesh " + std::to_string(node.mesh) + ", which does not exist");
+        throw SceneError(pointer, "node " + std::to_string(node_index) + " names mesh " + std::to_string(node.mesh) +
+                                      ", which does not exist");
       if (instanced.count(node.mesh)) {
         // Shared by several nodes: one object-space copy, one Embree instance per node.
         auto [it, fresh] = group_of_mesh.try_emplace(node.mesh, static_cast<uint32_t>(scene.groups.size()));
@@ -796,7 +854,8 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
           for (const Vec3& p : scene.meshes[m].positions) result.bounds.extend(inst.to_world.point(p));
         }
         if (triangles > options.max_triangles)
-          throw SceneError(pointer, "the asset exceeds the limit of " + std::to_string(options.max_triangles) + " triangles");
+          throw SceneError(pointer,
+                           "the asset exceeds the limit of " + std::to_string(options.max_triangles) + " triangles");
         scene.instances.push_back(inst);
       } else {
         for (Mesh& m : build_meshes(node.mesh, world)) {
@@ -806,7 +865,8 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       }
     }
 
-    if (node.camera >= 0 && node.camera < static_cast<int>(model.cameras.size()) && !camera_instances.count(node.camera)) {
+    if (node.camera >= 0 && node.camera < static_cast<int>(model.cameras.size()) &&
+        !camera_instances.count(node.camera)) {
       const tinygltf::Camera& cam = model.cameras[node.camera];
       GltfCamera gc;
       gc.name = cam.name;
@@ -817,7 +877,8 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       if (cam.type == "orthographic") {
         gc.desc.projection = CameraDesc::Projection::kOrthographic;
         gc.desc.ortho_height = static_cast<float>(2 * cam.orthographic.ymag);
-        if (cam.orthographic.ymag > 0) gc.aspect_ratio = static_cast<float>(cam.orthographic.xmag / cam.orthographic.ymag);
+        if (cam.orthographic.ymag > 0)
+          gc.aspect_ratio = static_cast<float>(cam.orthographic.xmag / cam.orthographic.ymag);
       } else {
         gc.desc.fov_deg = static_cast<float>(cam.perspective.yfov * 180 / M_PI);
         gc.aspect_ratio = static_cast<float>(cam.perspective.aspectRatio);
@@ -828,13 +889,15 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
 
     json ext = parse_extensions(node.extensions_json_string);
     if (ext.contains("KHR_lights_punctual") && ext["KHR_lights_punctual"].contains("light")) {
-      int li = ext["KHR_lights_punctual"]["light"].is_number_integer() ? ext["KHR_lights_punctual"]["light"].get<int>() : -1;
+      int li =
+          ext["KHR_lights_punctual"]["light"].is_number_integer() ? ext["KHR_lights_punctual"]["light"].get<int>() : -1;
       if (li < 0 || li >= static_cast<int>(model.lights.size()))
         throw SceneError(pointer, "node " + std::to_string(node_index) + " names a light that does not exist");
       const tinygltf::Light& l = model.lights[li];
       PunctualLight pl;
       Rgb color(1);
-      if (l.color.size() == 3) color = Rgb(static_cast<float>(l.color[0]), static_cast<float>(l.color[1]), static_cast<float>(l.color[2]));
+      if (l.color.size() == 3)
+        color = Rgb(static_cast<float>(l.color[0]), static_cast<float>(l.color[1]), static_cast<float>(l.color[2]));
       // KHR_lights_punctual units: point and spot in candela, directional in lux; used as W/sr and W/m^2 (the
       // luminous efficacy is a constant factor that exposure absorbs).
       pl.intensity = color * static_cast<float>(l.intensity);

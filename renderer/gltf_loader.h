@@ -20,8 +20,8 @@ struct GltfCamera {
 };
 
 struct GltfImport {
-  std::vector<GltfCamera> cameras;      // in glTF camera order... one per node that carries a camera
-  std::vector<PunctualLight> lights;    // KHR_lights_punctual instances, in world space
+  std::vector<GltfCamera> cameras;    // in glTF camera order... one per node that carries a camera
+  std::vector<PunctualLight> lights;  // KHR_lights_punctual instances, in world space
   std::vector<std::string> warnings;
   Bounds bounds;
 };

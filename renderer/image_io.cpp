@@ -19,13 +19,18 @@
 namespace tessera {
 
 bool parse_tonemap(const std::string& name, ToneMap* out) {
-  if (name == "clamp") *out = ToneMap::kClamp;
-  else if (name == "aces" || name == "filmic") *out = ToneMap::kAces;
-  else return false;
+  if (name == "clamp")
+    *out = ToneMap::kClamp;
+  else if (name == "aces" || name == "filmic")
+    *out = ToneMap::kAces;
+  else
+    return false;
   return true;
 }
 
-const char* tonemap_name(ToneMap t) { return t == ToneMap::kAces ? "aces" : "clamp"; }
+const char* tonemap_name(ToneMap t) {
+  return t == ToneMap::kAces ? "aces" : "clamp";
+}
 
 namespace {
 
@@ -105,7 +110,9 @@ std::vector<uint8_t> encode_png(const std::vector<float>& rgb, int width, int he
 namespace {
 
 // The file's name for messages: not where it lies (a daemon's data directory is not the client's business).
-std::string file_name(const std::string& path) { return std::filesystem::path(path).filename().string(); }
+std::string file_name(const std::string& path) {
+  return std::filesystem::path(path).filename().string();
+}
 
 // `message` with every mention of `path` (OpenImageIO quotes it) replaced by the file's name.
 std::string scrub(std::string message, const std::string& path) {
@@ -145,7 +152,9 @@ struct JpegErrors {
   jpeg_error_mgr mgr;
   std::jmp_buf jump;
 };
-[[noreturn]] void jpeg_error_exit(j_common_ptr info) { std::longjmp(reinterpret_cast<JpegErrors*>(info->err)->jump, 1); }
+[[noreturn]] void jpeg_error_exit(j_common_ptr info) {
+  std::longjmp(reinterpret_cast<JpegErrors*>(info->err)->jump, 1);
+}
 void jpeg_no_message(j_common_ptr, int) {}
 
 // A JPEG header from memory or from an open file (one of the two), read with jpeg_read_header: markers up to the
@@ -161,8 +170,10 @@ bool read_jpeg_header(const unsigned char* bytes, size_t size, std::FILE* file, 
     return false;
   }
   jpeg_create_decompress(&info);
-  if (file) jpeg_stdio_src(&info, file);
-  else jpeg_mem_src(&info, bytes, static_cast<unsigned long>(size));
+  if (file)
+    jpeg_stdio_src(&info, file);
+  else
+    jpeg_mem_src(&info, bytes, static_cast<unsigned long>(size));
   const bool ok = jpeg_read_header(&info, TRUE) == JPEG_HEADER_OK;
   *out = {static_cast<int>(info.image_width), static_cast<int>(info.image_height), info.num_components};
   jpeg_destroy_decompress(&info);
@@ -253,8 +264,7 @@ void read_pixels(OIIO::ImageInput& in, const std::string& path, int channels, si
     // Grey (and alpha): the grey read into the first channel of each texel and repeated over the colour channels,
     // the alpha into the fourth when asked for.
     ok = in.read_image(0, 0, 0, 1, OIIO::TypeDesc::FLOAT, pixels, xstride);
-    if (ok && stored == 2 && channels >= 4)
-      ok = in.read_image(0, 0, 1, 2, OIIO::TypeDesc::FLOAT, pixels + 3, xstride);
+    if (ok && stored == 2 && channels >= 4) ok = in.read_image(0, 0, 1, 2, OIIO::TypeDesc::FLOAT, pixels + 3, xstride);
     for (size_t i = 0; ok && i < texels; ++i)
       for (int c = 1; c < 3; ++c) pixels[i * stride + c] = pixels[i * stride];
   } else {

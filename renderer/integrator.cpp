@@ -9,18 +9,25 @@ namespace tessera {
 
 const char* estimator_name(Estimator e) {
   switch (e) {
-    case Estimator::kHemisphere: return "hemisphere";
-    case Estimator::kArea: return "area";
-    case Estimator::kMis: return "mis";
+    case Estimator::kHemisphere:
+      return "hemisphere";
+    case Estimator::kArea:
+      return "area";
+    case Estimator::kMis:
+      return "mis";
   }
   return "mis";
 }
 
 bool parse_estimator(const std::string& name, Estimator* out) {
-  if (name == "hemisphere") *out = Estimator::kHemisphere;
-  else if (name == "area") *out = Estimator::kArea;
-  else if (name == "mis") *out = Estimator::kMis;
-  else return false;
+  if (name == "hemisphere")
+    *out = Estimator::kHemisphere;
+  else if (name == "area")
+    *out = Estimator::kArea;
+  else if (name == "mis")
+    *out = Estimator::kMis;
+  else
+    return false;
   return true;
 }
 

@@ -17,9 +17,12 @@ void read_outputs(const json& job, RenderJob* out) {
   out->want_png = out->want_exr = false;
   for (size_t i = 0; i < it->size(); ++i) {
     const json& o = (*it)[i];
-    if (o == "png") out->want_png = true;
-    else if (o == "exr") out->want_exr = true;
-    else throw SceneError("/outputs/" + std::to_string(i), "must be \"png\" or \"exr\"");
+    if (o == "png")
+      out->want_png = true;
+    else if (o == "exr")
+      out->want_exr = true;
+    else
+      throw SceneError("/outputs/" + std::to_string(i), "must be \"png\" or \"exr\"");
   }
 }
 
@@ -94,7 +97,7 @@ json material_stage_scene(const json& job) {
   }
 
   const int n = static_cast<int>(subjects.size());
-  const double spacing = 2.5;                    // sphere centres, radius 1
+  const double spacing = 2.5;                       // sphere centres, radius 1
   const double row_half = 0.5 * (n - 1) * spacing;  // half the distance between the outer centres
   json scene;
   json materials = json::object();
@@ -102,14 +105,15 @@ json material_stage_scene(const json& job) {
   for (int i = 0; i < n; ++i) {
     const std::string name = n == 1 ? "subject" : "subject" + std::to_string(i);
     materials[name] = subjects[i];
-    objects.push_back({{"shape", "sphere"}, {"center", {-row_half + i * spacing, 1, 0}}, {"radius", 1}, {"material", name}});
+    objects.push_back(
+        {{"shape", "sphere"}, {"center", {-row_half + i * spacing, 1, 0}}, {"radius", 1}, {"material", name}});
   }
   // Floor: 1-unit checker squares around the row.
   const double floor_half = std::max(12.0, row_half + 12.0);
   const double squares = 2 * floor_half;
-  materials["stage_floor"] = {{"type", "lambert"},
-                              {"albedo", {{"checker", {{"a", {0.62, 0.62, 0.6}}, {"b", {0.18, 0.18, 0.19}},
-                                                       {"scale", squares}}}}}};
+  materials["stage_floor"] = {
+      {"type", "lambert"},
+      {"albedo", {{"checker", {{"a", {0.62, 0.62, 0.6}}, {"b", {0.18, 0.18, 0.19}}, {"scale", squares}}}}}};
   objects.push_back({{"shape", "rectangle"},
                      {"corner", {-floor_half, 0, floor_half}},
                      {"edge1", {2 * floor_half, 0, 0}},
@@ -117,10 +121,8 @@ json material_stage_scene(const json& job) {
                      {"material", "stage_floor"}});
   // Key light: a bright sphere up front on the left, big enough for soft shadows and a visible highlight shape.
   materials["stage_key"] = {{"type", "emission"}, {"radiance", {14, 13.5, 12.5}}};
-  objects.push_back({{"shape", "sphere"},
-                     {"center", {-row_half - 4.0, 6.5, 5.0}},
-                     {"radius", 1.2},
-                     {"material", "stage_key"}});
+  objects.push_back(
+      {{"shape", "sphere"}, {"center", {-row_half - 4.0, 6.5, 5.0}}, {"radius", 1.2}, {"material", "stage_key"}});
   scene["materials"] = materials;
   scene["objects"] = objects;
   scene["environment"] = {{"color", {0.42, 0.46, 0.52}}};
@@ -137,7 +139,7 @@ json material_stage_scene(const json& job) {
   const double tan_half_v = std::tan(fov_deg * kPi / 360.0);
   const double tan_half_h = tan_half_v * aspect;
   const double need_h = (row_half + 1.35) / tan_half_h;  // horizontal extent with a margin
-  const double need_v = 1.5 / tan_half_v;                 // the sphere's height with floor around it
+  const double need_v = 1.5 / tan_half_v;                // the sphere's height with floor around it
   const double dist = std::max(need_h, need_v);
   scene["camera"] = {{"from", {0, 1.0 + 0.32 * dist, dist}}, {"to", {0, 0.85, 0}}, {"fov_deg", fov_deg}};
   return scene;

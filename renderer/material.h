@@ -30,8 +30,8 @@ class Material {
   }
   bool emissive() const { return !is_black(emission.value); }
 
-  RgbParam emission;               // radiance, W/(m^2 sr) per channel
-  bool emission_one_sided = false; // emit only to the side the geometric normal points to
+  RgbParam emission;                // radiance, W/(m^2 sr) per channel
+  bool emission_one_sided = false;  // emit only to the side the geometric normal points to
 
   // Coverage (glTF alphaMode): opaque; masked where coverage < cutoff; or blended, where a ray passes through with
   // probability 1 - coverage (stochastic transparency, unbiased for a path tracer).
@@ -71,9 +71,8 @@ struct MaterialContext {
 };
 
 // Makes a material from its JSON object; throws SceneError naming the field (`pointer` is the object's pointer).
-using MaterialFactory =
-    std::function<std::unique_ptr<Material>(const nlohmann::json& params, const std::string& pointer,
-                                            const MaterialContext& ctx)>;
+using MaterialFactory = std::function<std::unique_ptr<Material>(
+    const nlohmann::json& params, const std::string& pointer, const MaterialContext& ctx)>;
 
 class MaterialRegistry {
  public:

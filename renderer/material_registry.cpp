@@ -9,7 +9,9 @@
 
 namespace tessera {
 
-void MaterialRegistry::add(const std::string& type, MaterialFactory factory) { factories_[type] = std::move(factory); }
+void MaterialRegistry::add(const std::string& type, MaterialFactory factory) {
+  factories_[type] = std::move(factory);
+}
 
 std::vector<std::string> MaterialRegistry::types() const {
   std::vector<std::string> out;
@@ -43,8 +45,8 @@ std::unique_ptr<Material> MaterialRegistry::create(const nlohmann::json& params,
   // Textures (and nested materials) are objects; numbers, colours and names are not.
   material->reads_textures = std::any_of(params.begin(), params.end(), [](const nlohmann::json& v) {
     return v.is_object() || (v.is_array() && std::any_of(v.begin(), v.end(), [](const nlohmann::json& e) {
-                                return e.is_object() || e.is_array();
-                              }));
+                               return e.is_object() || e.is_array();
+                             }));
   });
   if (params.contains("emission")) {
     material->emission = params::rgb_param(params, "emission", pointer, Rgb(0), 0.0f, 1e9f, ctx);
@@ -76,8 +78,8 @@ float checked_number(const nlohmann::json& v, const std::string& at, float min_v
   double d = v.get<double>();
   if (!std::isfinite(d)) throw SceneError(at, "must be finite");
   if (d < min_value || d > max_value) {
-    throw SceneError(at, "must be between " + nlohmann::json(min_value).dump() + " and " +
-                             nlohmann::json(max_value).dump());
+    throw SceneError(
+        at, "must be between " + nlohmann::json(min_value).dump() + " and " + nlohmann::json(max_value).dump());
   }
   return static_cast<float>(d);
 }
@@ -123,7 +125,8 @@ std::filesystem::path resolve_asset(const std::string& name, const std::string& 
   fs::path root = fs::canonical(ctx.asset_root, ec);
   if (ec) throw SceneError(at, "the asset folder cannot be read");
   fs::path full = fs::canonical(root / rel, ec);
-  if (ec || !fs::is_regular_file(full, ec)) throw SceneError(at, "no image file \"" + name + "\" in the scene's folder");
+  if (ec || !fs::is_regular_file(full, ec))
+    throw SceneError(at, "no image file \"" + name + "\" in the scene's folder");
   auto r = root.begin();
   auto f = full.begin();
   for (; r != root.end(); ++r, ++f) {
@@ -161,9 +164,9 @@ std::shared_ptr<const Texture> parse_texture(const nlohmann::json& v, const std:
     return make_checker_texture(a, b, scale, uv_set);
   }
   auto file_it = v.find("texture");
-  if (file_it == v.end())
-    throw SceneError(at, "a texture object needs \"texture\" (an image file) or \"checker\"");
-  check_keys(v, at, {"texture", "wrap", "wrap_t", "scale", "offset", "rotation", "channel", "colorspace", "uv", "factor"});
+  if (file_it == v.end()) throw SceneError(at, "a texture object needs \"texture\" (an image file) or \"checker\"");
+  check_keys(v, at,
+             {"texture", "wrap", "wrap_t", "scale", "offset", "rotation", "channel", "colorspace", "uv", "factor"});
   const std::string fp = at + "/texture";
   if (!file_it->is_string()) throw SceneError(fp, "must be the relative path of an image file");
   // "#key" names an image held in memory (a glTF asset's embedded images); anything else is a file.

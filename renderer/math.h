@@ -26,8 +26,13 @@ inline float fast_atan2(float y, float x) {
   const float hi = std::max(ax, ay), lo = std::min(ax, ay);
   const float t = hi > 0 ? lo / hi : 0.0f;
   const float t2 = t * t;
-  float r = t * (1.0f + t2 * (-0.3333314528f + t2 * (0.1999355085f + t2 * (-0.1420889944f + t2 * (0.1065626393f +
-                t2 * (-0.0752896400f + t2 * (0.0429096138f + t2 * (-0.0161657367f + t2 * 0.0028662257f))))))));
+  float r =
+      t * (1.0f + t2 * (-0.3333314528f +
+                        t2 * (0.1999355085f +
+                              t2 * (-0.1420889944f +
+                                    t2 * (0.1065626393f +
+                                          t2 * (-0.0752896400f +
+                                                t2 * (0.0429096138f + t2 * (-0.0161657367f + t2 * 0.0028662257f))))))));
   if (ay > ax) r = 1.57079632679489661923f - r;
   if (std::signbit(x)) r = kPi - r;
   return std::copysign(r, y);
@@ -57,36 +62,89 @@ struct Vec3 {
   constexpr Vec3 operator/(const Vec3& b) const { return {x / b.x, y / b.y, z / b.z}; }
   constexpr Vec3 operator*(float s) const { return {x * s, y * s, z * s}; }
   constexpr Vec3 operator/(float s) const { return {x / s, y / s, z / s}; }
-  constexpr Vec3& operator+=(const Vec3& b) { x += b.x; y += b.y; z += b.z; return *this; }
-  constexpr Vec3& operator-=(const Vec3& b) { x -= b.x; y -= b.y; z -= b.z; return *this; }
-  constexpr Vec3& operator*=(const Vec3& b) { x *= b.x; y *= b.y; z *= b.z; return *this; }
-  constexpr Vec3& operator*=(float s) { x *= s; y *= s; z *= s; return *this; }
-  constexpr Vec3& operator/=(float s) { x /= s; y /= s; z /= s; return *this; }
+  constexpr Vec3& operator+=(const Vec3& b) {
+    x += b.x;
+    y += b.y;
+    z += b.z;
+    return *this;
+  }
+  constexpr Vec3& operator-=(const Vec3& b) {
+    x -= b.x;
+    y -= b.y;
+    z -= b.z;
+    return *this;
+  }
+  constexpr Vec3& operator*=(const Vec3& b) {
+    x *= b.x;
+    y *= b.y;
+    z *= b.z;
+    return *this;
+  }
+  constexpr Vec3& operator*=(float s) {
+    x *= s;
+    y *= s;
+    z *= s;
+    return *this;
+  }
+  constexpr Vec3& operator/=(float s) {
+    x /= s;
+    y /= s;
+    z /= s;
+    return *this;
+  }
   constexpr bool operator==(const Vec3&) const = default;
 };
-constexpr Vec3 operator*(float s, const Vec3& v) { return v * s; }
+constexpr Vec3 operator*(float s, const Vec3& v) {
+  return v * s;
+}
 
 // Linear RGB radiance, reflectance or throughput.
 using Rgb = Vec3;
 
-constexpr float dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+constexpr float dot(const Vec3& a, const Vec3& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
 constexpr Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
-inline float length(const Vec3& v) { return std::sqrt(dot(v, v)); }
-constexpr float length_squared(const Vec3& v) { return dot(v, v); }
-inline Vec3 normalize(const Vec3& v) { return v / length(v); }
-inline Vec3 vabs(const Vec3& v) { return {std::abs(v.x), std::abs(v.y), std::abs(v.z)}; }
-inline Vec3 vmin(const Vec3& a, const Vec3& b) { return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)}; }
-inline Vec3 vmax(const Vec3& a, const Vec3& b) { return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)}; }
-constexpr float max_component(const Vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
-constexpr bool is_black(const Vec3& v) { return v.x == 0 && v.y == 0 && v.z == 0; }
-inline bool is_finite(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+inline float length(const Vec3& v) {
+  return std::sqrt(dot(v, v));
+}
+constexpr float length_squared(const Vec3& v) {
+  return dot(v, v);
+}
+inline Vec3 normalize(const Vec3& v) {
+  return v / length(v);
+}
+inline Vec3 vabs(const Vec3& v) {
+  return {std::abs(v.x), std::abs(v.y), std::abs(v.z)};
+}
+inline Vec3 vmin(const Vec3& a, const Vec3& b) {
+  return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)};
+}
+inline Vec3 vmax(const Vec3& a, const Vec3& b) {
+  return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)};
+}
+constexpr float max_component(const Vec3& v) {
+  return std::max(v.x, std::max(v.y, v.z));
+}
+constexpr bool is_black(const Vec3& v) {
+  return v.x == 0 && v.y == 0 && v.z == 0;
+}
+inline bool is_finite(const Vec3& v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
 // Rec. 709 / sRGB luminance of linear RGB.
-constexpr float luminance(const Rgb& c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
-constexpr float average(const Rgb& c) { return (c.x + c.y + c.z) * (1.0f / 3.0f); }
+constexpr float luminance(const Rgb& c) {
+  return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
+}
+constexpr float average(const Rgb& c) {
+  return (c.x + c.y + c.z) * (1.0f / 3.0f);
+}
 
-inline Vec3 reflect(const Vec3& wo, const Vec3& n) { return -wo + n * (2 * dot(wo, n)); }
+inline Vec3 reflect(const Vec3& wo, const Vec3& n) {
+  return -wo + n * (2 * dot(wo, n));
+}
 
 // Orthonormal basis with `n` as its z axis (Duff et al., "Building an Orthonormal Basis, Revisited", JCGT 2017).
 struct Frame {
@@ -146,22 +204,32 @@ template <typename T>
 constexpr T clamp(T v, T lo, T hi) {
   return v < lo ? lo : (v > hi ? hi : v);
 }
-constexpr float sqr(float x) { return x * x; }
+constexpr float sqr(float x) {
+  return x * x;
+}
 // a if `mask` else b, without a branch: for conditions that are a coin toss per sample, where a mispredicted branch
 // costs more than computing both sides (compilers turn a plain ?: on floats back into a branch). `mask` comes from
 // greater_mask.
 #if defined(__SSE2__)
 using FloatMask = __m128;
-inline FloatMask greater_mask(float a, float b) { return _mm_cmpgt_ss(_mm_set_ss(a), _mm_set_ss(b)); }
+inline FloatMask greater_mask(float a, float b) {
+  return _mm_cmpgt_ss(_mm_set_ss(a), _mm_set_ss(b));
+}
 inline float select(FloatMask mask, float a, float b) {
   return _mm_cvtss_f32(_mm_or_ps(_mm_and_ps(mask, _mm_set_ss(a)), _mm_andnot_ps(mask, _mm_set_ss(b))));
 }
 #else
 using FloatMask = bool;
-inline FloatMask greater_mask(float a, float b) { return a > b; }
-inline float select(FloatMask mask, float a, float b) { return mask ? a : b; }
+inline FloatMask greater_mask(float a, float b) {
+  return a > b;
+}
+inline float select(FloatMask mask, float a, float b) {
+  return mask ? a : b;
+}
 #endif
 
-inline float safe_sqrt(float x) { return std::sqrt(std::max(0.0f, x)); }
+inline float safe_sqrt(float x) {
+  return std::sqrt(std::max(0.0f, x));
+}
 
 }  // namespace tessera

@@ -96,8 +96,7 @@ class PixelSampler {
   };
 
   PixelSampler() = default;  // a placeholder, to be assigned before use
-  PixelSampler(uint64_t seed, uint32_t pixel_index, uint64_t sample_index,
-               SamplerKind kind = SamplerKind::kIndependent)
+  PixelSampler(uint64_t seed, uint32_t pixel_index, uint64_t sample_index, SamplerKind kind = SamplerKind::kIndependent)
       : PixelSampler(SeedKeys(seed), pixel_index, sample_index, kind) {}
   PixelSampler(const SeedKeys& keys, uint32_t pixel_index, uint64_t sample_index,
                SamplerKind kind = SamplerKind::kIndependent)

@@ -122,9 +122,8 @@ void Distribution2D::build(const std::function<void(int, Cell*, float*)>& row_we
   // Rows are independent: built in parallel, about 64k cells per item (a 4k environment map has 2048 rows of 4096);
   // a small grid is one item, built on this thread.
   const size_t rows_per_item = std::max<size_t>(1, 65536 / n);
-  run_in_parallel((static_cast<size_t>(height_) + rows_per_item - 1) / rows_per_item, [&](size_t i) {
-    build_rows(i * rows_per_item, std::min<size_t>(height_, (i + 1) * rows_per_item));
-  });
+  run_in_parallel((static_cast<size_t>(height_) + rows_per_item - 1) / rows_per_item,
+                  [&](size_t i) { build_rows(i * rows_per_item, std::min<size_t>(height_, (i + 1) * rows_per_item)); });
   marginal_ = Distribution1D(marginal_weights.data(), marginal_weights.size());
 }
 

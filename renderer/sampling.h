@@ -40,16 +40,24 @@ inline Vec3 sample_cosine_hemisphere(Vec2 u) {
   Vec2 d = sample_concentric_disk(u);
   return {d.x, d.y, safe_sqrt(1 - d.x * d.x - d.y * d.y)};
 }
-inline float cosine_hemisphere_pdf(float cos_theta) { return cos_theta > 0 ? cos_theta * kInvPi : 0.0f; }
+inline float cosine_hemisphere_pdf(float cos_theta) {
+  return cos_theta > 0 ? cos_theta * kInvPi : 0.0f;
+}
 // Uniform on the hemisphere z > 0: pdf = 1 / (2 pi).
 Vec3 sample_uniform_hemisphere(Vec2 u);
-inline constexpr float uniform_hemisphere_pdf() { return kInv2Pi; }
+inline constexpr float uniform_hemisphere_pdf() {
+  return kInv2Pi;
+}
 // Uniform on the unit sphere: pdf = 1 / (4 pi).
 Vec3 sample_uniform_sphere(Vec2 u);
-inline constexpr float uniform_sphere_pdf() { return kInv4Pi; }
+inline constexpr float uniform_sphere_pdf() {
+  return kInv4Pi;
+}
 // Uniform in the cone around +z with the given cos of its half-angle: pdf = 1 / (2 pi (1 - cos_max)).
 Vec3 sample_uniform_cone(Vec2 u, float cos_theta_max);
-inline float uniform_cone_pdf(float cos_theta_max) { return 1.0f / (2 * kPi * (1 - cos_theta_max)); }
+inline float uniform_cone_pdf(float cos_theta_max) {
+  return 1.0f / (2 * kPi * (1 - cos_theta_max));
+}
 // Uniform on a triangle: barycentric coordinates (b1, b2) of the second and third vertex (Heitz, "A Low-Distortion
 // Map Between Triangle and Square", 2019).
 inline Vec2 sample_uniform_triangle(Vec2 u) {
@@ -142,7 +150,7 @@ class Distribution1D {
 
  private:
   std::vector<float> pdf_;
-  std::vector<double> cdf_;  // n + 1 entries
+  std::vector<double> cdf_;      // n + 1 entries
   std::vector<uint32_t> guide_;  // empty below a few dozen buckets (a binary search is as fast), else n + 1 entries
   double slots_per_unit_ = 0;
   double total_ = 0;
@@ -203,8 +211,8 @@ class Distribution2D {
   int width_ = 0, height_ = 0;
   float area_ = 0;  // width * height: a cell's probability times this is its density
   std::vector<Cell> cells_;
-  Distribution1D marginal_;  // of rows
-  std::vector<float> row_total_;        // per row: the sum of its weights (its cdf past the last cell)
+  Distribution1D marginal_;       // of rows
+  std::vector<float> row_total_;  // per row: the sum of its weights (its cdf past the last cell)
   // A row's guide table has a slot per kCellsPerSlot cells: a quarter of the memory of one per cell (the table is read
   // at random, like the cells), and the range it leaves is about one cache line of cells.
   static constexpr int kCellsPerSlot = 4;

@@ -4,7 +4,9 @@
 
 namespace tessera {
 
-void Scene::finalize() { finalize_with_lights({}); }
+void Scene::finalize() {
+  finalize_with_lights({});
+}
 
 void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
   auto start = std::chrono::steady_clock::now();
@@ -21,8 +23,8 @@ void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
       for (const Vec3& p : meshes[m].positions) local.extend(p);
       if (local.empty()) continue;
       for (int c = 0; c < 8; ++c)
-        bounds_.extend(inst.to_world.point(Vec3(c & 1 ? local.hi.x : local.lo.x, c & 2 ? local.hi.y : local.lo.y,
-                                                c & 4 ? local.hi.z : local.lo.z)));
+        bounds_.extend(inst.to_world.point(
+            Vec3(c & 1 ? local.hi.x : local.lo.x, c & 2 ? local.hi.y : local.lo.y, c & 4 ? local.hi.z : local.lo.z)));
     }
   }
   for (const Sphere& s : spheres) {
@@ -152,9 +154,8 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
       }
     }
     if (needs_tangent) sp.frame = Frame::from_normal_tangent(ns, tangent);
-    sp.vertex_color = mesh.colors.empty()
-                          ? Rgb(1)
-                          : mesh.colors[idx[0]] * b0 + mesh.colors[idx[1]] * b1 + mesh.colors[idx[2]] * b2;
+    sp.vertex_color =
+        mesh.colors.empty() ? Rgb(1) : mesh.colors[idx[0]] * b0 + mesh.colors[idx[1]] * b1 + mesh.colors[idx[2]] * b2;
     si->material = material;
     si->light = si->material->emissive() ? mesh.first_light + hit.prim_id : kNoLight;
   }

@@ -15,12 +15,12 @@ namespace tessera {
 
 struct Mesh {
   std::vector<Vec3> positions;
-  std::vector<uint32_t> indices;  // 3 per triangle
-  std::vector<Vec3> normals;      // per vertex, optional
-  std::vector<Vec2> uvs;          // per vertex, optional
-  std::vector<Vec2> uvs1;         // per vertex, optional second set
-  std::vector<Rgb> colors;        // per vertex, optional
-  std::vector<Vec3> tangents;     // per vertex, optional (with normals)
+  std::vector<uint32_t> indices;     // 3 per triangle
+  std::vector<Vec3> normals;         // per vertex, optional
+  std::vector<Vec2> uvs;             // per vertex, optional
+  std::vector<Vec2> uvs1;            // per vertex, optional second set
+  std::vector<Rgb> colors;           // per vertex, optional
+  std::vector<Vec3> tangents;        // per vertex, optional (with normals)
   std::vector<float> tangent_signs;  // per vertex bitangent sign, optional
   uint32_t material = 0;
   uint32_t first_light = 0;  // index of its first triangle's light when the material emits

@@ -13,8 +13,12 @@ using nlohmann::json;
 
 namespace {
 
-std::string at(const std::string& pointer, const std::string& key) { return pointer + "/" + json_pointer_token(key); }
-std::string at(const std::string& pointer, size_t index) { return pointer + "/" + std::to_string(index); }
+std::string at(const std::string& pointer, const std::string& key) {
+  return pointer + "/" + json_pointer_token(key);
+}
+std::string at(const std::string& pointer, size_t index) {
+  return pointer + "/" + std::to_string(index);
+}
 
 const json& require(const json& obj, const std::string& key, const std::string& pointer) {
   auto it = obj.find(key);
@@ -132,9 +136,12 @@ CameraDesc load_camera(const json& cam, const std::string& pointer) {
   if (!cam.is_object()) throw SceneError(pointer, "must be an object");
   CameraDesc desc;
   std::string type = cam.value("type", std::string("perspective"));
-  if (type == "perspective") desc.projection = CameraDesc::Projection::kPerspective;
-  else if (type == "orthographic") desc.projection = CameraDesc::Projection::kOrthographic;
-  else throw SceneError(at(pointer, "type"), "must be \"perspective\" or \"orthographic\"");
+  if (type == "perspective")
+    desc.projection = CameraDesc::Projection::kPerspective;
+  else if (type == "orthographic")
+    desc.projection = CameraDesc::Projection::kOrthographic;
+  else
+    throw SceneError(at(pointer, "type"), "must be \"perspective\" or \"orthographic\"");
   desc.from = vec3_key(cam, "from", pointer);
   desc.to = vec3_key(cam, "to", pointer);
   if (cam.contains("up")) desc.up = vec3(cam["up"], at(pointer, "up"));
@@ -257,19 +264,26 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     if (cam_it != doc.end()) {
       const json& sel = (*cam_it)["gltf"];
       const GltfCamera* found = nullptr;
-      if (sel.is_number_integer() && sel.get<int64_t>() >= 0 && sel.get<int64_t>() < static_cast<int64_t>(gltf.cameras.size()))
+      if (sel.is_number_integer() && sel.get<int64_t>() >= 0 &&
+          sel.get<int64_t>() < static_cast<int64_t>(gltf.cameras.size()))
         found = &gltf.cameras[sel.get<size_t>()];
       if (sel.is_string())
         for (const GltfCamera& c : gltf.cameras)
           if (c.name == sel.get<std::string>()) found = &c;
-      if (!found) throw SceneError(at(cp, "gltf"), "no such camera in the glTF asset (it has " + std::to_string(gltf.cameras.size()) + ")");
+      if (!found)
+        throw SceneError(at(cp, "gltf"),
+                         "no such camera in the glTF asset (it has " + std::to_string(gltf.cameras.size()) + ")");
       scene->camera = found->desc;
     } else if (!gltf.cameras.empty()) {
       scene->camera = gltf.cameras[0].desc;
     } else {
       Bounds b = gltf.bounds;
-      for (const Sphere& sp : scene->spheres) { b.extend(sp.center - Vec3(sp.radius)); b.extend(sp.center + Vec3(sp.radius)); }
-      for (const Mesh& m : scene->meshes) for (const Vec3& p : m.positions) b.extend(p);
+      for (const Sphere& sp : scene->spheres) {
+        b.extend(sp.center - Vec3(sp.radius));
+        b.extend(sp.center + Vec3(sp.radius));
+      }
+      for (const Mesh& m : scene->meshes)
+        for (const Vec3& p : m.positions) b.extend(p);
       scene->camera = framing_camera(b);
     }
   } else {
@@ -344,8 +358,9 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
   // as a viewer would, and say so.
   if (has_gltf && !doc.contains("environment") && punctual.empty()) {
     scene->environment.color = Rgb(1);
-    scene->notes.push_back("the scene has no environment or punctual light; a uniform white environment of "
-                           "radiance 1 was added");
+    scene->notes.push_back(
+        "the scene has no environment or punctual light; a uniform white environment of "
+        "radiance 1 was added");
   }
   if (options.build) scene->finalize_with_lights(punctual);
   return scene;
@@ -387,9 +402,12 @@ RenderSettings parse_render_settings(const json& render, const std::string& poin
       throw SceneError(at(pointer, "estimator"), "must be \"mis\", \"area\" or \"hemisphere\"");
   }
   if (auto it = render.find("sampler"); it != render.end()) {
-    if (*it == "sobol") s.sampler = SamplerKind::kSobol;
-    else if (*it == "independent") s.sampler = SamplerKind::kIndependent;
-    else throw SceneError(at(pointer, "sampler"), "must be \"sobol\" or \"independent\"");
+    if (*it == "sobol")
+      s.sampler = SamplerKind::kSobol;
+    else if (*it == "independent")
+      s.sampler = SamplerKind::kIndependent;
+    else
+      throw SceneError(at(pointer, "sampler"), "must be \"sobol\" or \"independent\"");
   }
   s.time_limit_s = number_key(render, "time_limit_s", pointer, 0, 0, 7 * 24 * 3600.0);
   s.noise_target = number_key(render, "noise_target", pointer, 0, 0, 1);

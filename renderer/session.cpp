@@ -11,11 +11,16 @@ namespace tessera {
 
 const char* stop_reason_name(StopReason r) {
   switch (r) {
-    case StopReason::kSamples: return "samples";
-    case StopReason::kTimeLimit: return "time_limit";
-    case StopReason::kNoiseTarget: return "noise_target";
-    case StopReason::kStopped: return "stopped";
-    case StopReason::kCancelled: return "cancelled";
+    case StopReason::kSamples:
+      return "samples";
+    case StopReason::kTimeLimit:
+      return "time_limit";
+    case StopReason::kNoiseTarget:
+      return "noise_target";
+    case StopReason::kStopped:
+      return "stopped";
+    case StopReason::kCancelled:
+      return "cancelled";
   }
   return "samples";
 }
@@ -64,8 +69,7 @@ StopReason RenderSession::run(const std::function<void(const RenderProgress&, co
   auto budget_met = [&]() -> std::optional<StopReason> {
     if (progress_.samples_done >= settings_.spp) return StopReason::kSamples;
     if (settings_.time_limit_s > 0 && progress_.elapsed_s >= settings_.time_limit_s) return StopReason::kTimeLimit;
-    if (settings_.noise_target > 0 && progress_.samples_done >= 4 &&
-        progress_.relative_error <= settings_.noise_target)
+    if (settings_.noise_target > 0 && progress_.samples_done >= 4 && progress_.relative_error <= settings_.noise_target)
       return StopReason::kNoiseTarget;
     return std::nullopt;
   };
@@ -93,7 +97,8 @@ StopReason RenderSession::run(const std::function<void(const RenderProgress&, co
     progress_.eta_s = per_sample_s * (settings_.spp - progress_.samples_done);
     if (settings_.time_limit_s > 0)
       progress_.eta_s = std::min(progress_.eta_s, std::max(0.0, settings_.time_limit_s - progress_.elapsed_s));
-    if (settings_.noise_target > 0) progress_.relative_error = film_.relative_error();
+    if (settings_.noise_target > 0)
+      progress_.relative_error = film_.relative_error();
     else if (progress_.samples_done >= 2 && (progress_.pass % 4 == 0 || progress_.samples_done >= settings_.spp))
       progress_.relative_error = film_.relative_error();
     progress_.rays = integrator_->rays();

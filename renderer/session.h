@@ -23,33 +23,33 @@ class Scene;
 struct RenderSettings {
   int width = 512;
   int height = 512;
-  uint32_t spp = 64;            // samples per pixel budget
-  uint32_t first_sample = 0;    // render sample indices [first_sample, first_sample + spp): a range of a larger job
+  uint32_t spp = 64;          // samples per pixel budget
+  uint32_t first_sample = 0;  // render sample indices [first_sample, first_sample + spp): a range of a larger job
   // Crop window in pixels (render only these; the film keeps the full size). Empty (w or h 0): the whole image.
   using Region = PixelRegion;
   Region region;
   uint64_t seed = 0;
   SamplerKind sampler = SamplerKind::kSobol;
   IntegratorSettings integrator;  // which integrator renders, and its settings
-  double time_limit_s = 0;      // stop after the pass that crosses this; 0: none
-  double noise_target = 0;      // stop when Film::relative_error() falls below; 0: none
+  double time_limit_s = 0;        // stop after the pass that crosses this; 0: none
+  double noise_target = 0;        // stop when Film::relative_error() falls below; 0: none
   int tile_size = 32;
-  DisplaySettings display;      // for PNG outputs and previews
-  bool exr_half = true;         // EXR channel precision
+  DisplaySettings display;  // for PNG outputs and previews
+  bool exr_half = true;     // EXR channel precision
 };
 
 enum class StopReason { kSamples, kTimeLimit, kNoiseTarget, kStopped, kCancelled };
 const char* stop_reason_name(StopReason r);
 
 struct RenderProgress {
-  uint32_t pass = 0;          // passes completed
-  uint32_t samples_done = 0;  // per pixel
-  uint32_t samples_total = 0; // per pixel, the spp budget
-  double elapsed_s = 0;       // render time, including time before a resume
-  double eta_s = 0;           // estimated seconds to the end of the budget
-  double samples_per_s = 0;   // pixel samples per second over the whole render
-  double relative_error = 0;  // Film::relative_error() (infinity before 2 samples)
-  RayCounters rays;           // totals since the start (or the resume)
+  uint32_t pass = 0;           // passes completed
+  uint32_t samples_done = 0;   // per pixel
+  uint32_t samples_total = 0;  // per pixel, the spp budget
+  double elapsed_s = 0;        // render time, including time before a resume
+  double eta_s = 0;            // estimated seconds to the end of the budget
+  double samples_per_s = 0;    // pixel samples per second over the whole render
+  double relative_error = 0;   // Film::relative_error() (infinity before 2 samples)
+  RayCounters rays;            // totals since the start (or the resume)
   uint64_t nonfinite_samples = 0;
 };
 

@@ -24,10 +24,10 @@ float srgb_to_linear(float v) {
 // texture takes 16 MB, not 64 MB as floats), and as linear floats otherwise (EXR, HDR, 16-bit).
 struct Image {
   int width = 0, height = 0, channels = 0;
-  PixelBuffer<float> pixels;   // linear, row-major from the top row (float sources)
-  PixelBuffer<uint8_t> bytes;  // 8-bit sources, row-major from the top row
+  PixelBuffer<float> pixels;                  // linear, row-major from the top row (float sources)
+  PixelBuffer<uint8_t> bytes;                 // 8-bit sources, row-major from the top row
   std::shared_ptr<const ImagePixels> shared;  // or 8-bit pixels owned elsewhere (embedded images), not copied
-  bool srgb = false;           // bytes of the colour channels (not alpha) are sRGB-encoded
+  bool srgb = false;                          // bytes of the colour channels (not alpha) are sRGB-encoded
   // Mip levels 1, 2, ... (level 0 is the image itself), each half the size of the one before (rounded up) down to
   // 1x1, averaged in linear values and stored as the image is (8-bit sRGB-encoded bytes, or floats).
   struct Level {
@@ -94,17 +94,26 @@ void build_mips(Image* img, const uint8_t* bytes, const float* floats) {
   // Row `r` of level 0 as linear floats.
   auto level0_row = [&](int r, float* out) {
     const size_t row_values = static_cast<size_t>(img->width) * channels, first = static_cast<size_t>(r) * row_values;
-    if (floats) std::copy_n(&floats[first], row_values, out);
+    if (floats)
+      std::copy_n(&floats[first], row_values, out);
     else
       for (size_t i = 0; i < row_values; i += channels)
         for (int c = 0; c < channels; ++c) out[i + c] = decode[std::min(c, 3)][bytes[first + i + c]];
   };
   auto add_row = [channels](const float* row, int w, std::array<double, 4>* sum) {
     switch (std::min(channels, 4)) {
-      case 1: sum_row<1>(row, w, channels, sum); break;
-      case 2: sum_row<2>(row, w, channels, sum); break;
-      case 3: sum_row<3>(row, w, channels, sum); break;
-      default: sum_row<4>(row, w, channels, sum); break;
+      case 1:
+        sum_row<1>(row, w, channels, sum);
+        break;
+      case 2:
+        sum_row<2>(row, w, channels, sum);
+        break;
+      case 3:
+        sum_row<3>(row, w, channels, sum);
+        break;
+      default:
+        sum_row<4>(row, w, channels, sum);
+        break;
     }
   };
   int w = img->width, h = img->height;
@@ -132,8 +141,10 @@ void build_mips(Image* img, const uint8_t* bytes, const float* floats) {
         for (int j = 0; j < 2; ++j) {
           const int r = std::min(2 * y + j, h - 1);
           float* out = &rows[j * row_values];
-          if (!from_level0) std::copy_n(&prev[static_cast<size_t>(r) * row_values], row_values, out);
-          else level0_row(r, out);
+          if (!from_level0)
+            std::copy_n(&prev[static_cast<size_t>(r) * row_values], row_values, out);
+          else
+            level0_row(r, out);
           if (from_level0 && 2 * y + j < h) add_row(out, w, &row_sums[y]);
         }
         const size_t first = static_cast<size_t>(y) * nw * channels;
@@ -281,9 +292,12 @@ class ImageTexture final : public Texture {
     // What every fetch needs, resolved once: where each level's texels are, how they decode, which channels are read.
     channels_ = image_->channels;
     LevelView base{image_->width, image_->height, nullptr, nullptr};
-    if (image_->shared) base.bytes = image_->shared->data.data();
-    else if (!image_->bytes.empty()) base.bytes = image_->bytes.data();
-    else base.floats = image_->pixels.data();
+    if (image_->shared)
+      base.bytes = image_->shared->data.data();
+    else if (!image_->bytes.empty())
+      base.bytes = image_->bytes.data();
+    else
+      base.floats = image_->pixels.data();
     levels_.push_back(base);
     for (const Image::Level& l : image_->mips)
       levels_.push_back({l.width, l.height, l.bytes.empty() ? nullptr : l.bytes.data(),
@@ -415,7 +429,9 @@ std::shared_ptr<const Texture> make_checker_texture(const Rgb& a, const Rgb& b, 
   return std::make_shared<CheckerTexture>(a, b, squares_per_unit, uv_set);
 }
 
-void check_image_file(const std::filesystem::path& file) { read_image_header(file.string(), kMaxTextureTexels); }
+void check_image_file(const std::filesystem::path& file) {
+  read_image_header(file.string(), kMaxTextureTexels);
+}
 
 std::shared_ptr<const ImagePixels> stand_in_image() {
   static const std::shared_ptr<const ImagePixels> texel = [] {
@@ -428,6 +444,8 @@ std::shared_ptr<const ImagePixels> stand_in_image() {
   return texel;
 }
 
-size_t texture_cache_loads() { return g_loads.load(); }
+size_t texture_cache_loads() {
+  return g_loads.load();
+}
 
 }  // namespace tessera

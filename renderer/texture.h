@@ -1,8 +1,8 @@
 // Material parameters: a constant, or a texture evaluated at the shading point.
 #pragma once
 
-#include <filesystem>
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <optional>
 #include <type_traits>
@@ -54,10 +54,10 @@ enum class WrapMode : uint8_t { kRepeat, kClamp, kMirror };
 struct TextureMapping {
   Vec2 scale{1, 1};
   Vec2 offset{0, 0};
-  float rotation = 0;  // radians, applied between scale and offset (KHR_texture_transform)
-  WrapMode wrap = WrapMode::kRepeat;    // horizontal (and vertical unless wrap_t is set)
-  std::optional<WrapMode> wrap_t;       // vertical, when it differs
-  int uv_set = 0;  // 0: ShadingPoint::uv, 1: ShadingPoint::uv1
+  float rotation = 0;                 // radians, applied between scale and offset (KHR_texture_transform)
+  WrapMode wrap = WrapMode::kRepeat;  // horizontal (and vertical unless wrap_t is set)
+  std::optional<WrapMode> wrap_t;     // vertical, when it differs
+  int uv_set = 0;                     // 0: ShadingPoint::uv, 1: ShadingPoint::uv1
   bool operator==(const TextureMapping&) const = default;
 };
 

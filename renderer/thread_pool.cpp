@@ -11,7 +11,9 @@ namespace tessera {
 namespace {
 
 // Hardware threads, at least one (the standard allows 0 for "unknown").
-unsigned hardware_threads() { return std::max(1u, std::thread::hardware_concurrency()); }
+unsigned hardware_threads() {
+  return std::max(1u, std::thread::hardware_concurrency());
+}
 
 }  // namespace
 

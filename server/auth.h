@@ -13,7 +13,7 @@
 namespace tessera::server {
 
 struct Caller {
-  std::string name;     // the token's name; empty when tokens are off
+  std::string name;  // the token's name; empty when tokens are off
   bool admin = true;
   bool authenticated = true;  // false: tokens are on and the request carried no valid one
 };
@@ -39,7 +39,7 @@ class TokenSet {
 
 class Auth {
  public:
-  Auth() = default;  // tokens off
+  Auth() = default;                           // tokens off
   explicit Auth(std::filesystem::path file);  // throws like TokenSet::load
 
   bool enabled() const { return !file_.empty(); }

@@ -38,10 +38,10 @@ struct JobRecord {
   std::string settings;  // the render settings as JSON, defaults filled in
   std::string outputs;   // JSON array of "png" / "exr"
   JobProgress progress;
-  std::string stop_reason;  // empty until the render ends
-  std::string error;        // empty unless failed
-  std::string owner;        // the token name of who submitted it; empty without tokens
-  std::string warnings;     // JSON array of strings (unsupported optional glTF extensions, ...)
+  std::string stop_reason;      // empty until the render ends
+  std::string error;            // empty unless failed
+  std::string owner;            // the token name of who submitted it; empty without tokens
+  std::string warnings;         // JSON array of strings (unsupported optional glTF extensions, ...)
   std::string idempotency_key;  // the client's Idempotency-Key, empty if none
   std::string request_hash;     // sha256 of the request the key came with
 
@@ -51,9 +51,9 @@ struct JobRecord {
 
 struct JobFilter {
   std::optional<JobState> state;
-  std::vector<JobState> states;        // any of these (with `state`, its union)
-  std::optional<std::string> owner;    // only this owner's jobs
-  std::optional<int64_t> before_seq;   // only jobs submitted before this one (cursor)
+  std::vector<JobState> states;               // any of these (with `state`, its union)
+  std::optional<std::string> owner;           // only this owner's jobs
+  std::optional<int64_t> before_seq;          // only jobs submitted before this one (cursor)
   std::optional<int64_t> finished_before_ms;  // only jobs that ended before this time (retention)
   int limit = 100;
 };

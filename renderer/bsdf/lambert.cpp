@@ -9,9 +9,7 @@ namespace {
 class LambertBsdf final : public Bsdf {
  public:
   explicit LambertBsdf(Rgb rho) : rho_(rho) {}
-  Rgb eval(const Vec3& wo, const Vec3& wi) const override {
-    return same_hemisphere(wo, wi) ? rho_ * kInvPi : Rgb(0);
-  }
+  Rgb eval(const Vec3& wo, const Vec3& wi) const override { return same_hemisphere(wo, wi) ? rho_ * kInvPi : Rgb(0); }
   std::optional<BsdfSample> sample(const Vec3& wo, float, Vec2 u) const override {
     if (wo.z == 0) return std::nullopt;
     Vec3 wi = sample_cosine_hemisphere(u);

@@ -196,7 +196,8 @@ float microfacet_reflection_eval_pdf(const MicrofacetDistribution& dist, const V
     *pdf = dist.g1(wo, h) * d / (4 * wo.z);
     return d * dist.g(wo, wi, h) / (4 * wo.z * wi.z);
   }
-  // Smith: pdf = G1(o) D / (4 cos_o) with G1 = 1 / (1 + Lambda(o)); f = D / ((1 + Lambda(o) + Lambda(i)) 4 cos_o cos_i).
+  // Smith: pdf = G1(o) D / (4 cos_o) with G1 = 1 / (1 + Lambda(o)); f = D / ((1 + Lambda(o) + Lambda(i)) 4 cos_o
+  // cos_i).
   const float lambda_o = dist.lambda(wo);
   *pdf = d / ((1 + lambda_o) * 4 * wo.z);
   if (dot(wi, h) <= 0) return 0;

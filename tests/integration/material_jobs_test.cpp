@@ -32,7 +32,8 @@ json wait_until_done(httplib::Client& c, const std::string& id, double timeout_s
 class MaterialJobs : public testing::Test {
  protected:
   void SetUp() override {
-    daemon_ = std::make_unique<Daemon>(dir_.path() / "data", std::vector<std::string>{"--threads", "2", "--max-jobs", "2"});
+    daemon_ =
+        std::make_unique<Daemon>(dir_.path() / "data", std::vector<std::string>{"--threads", "2", "--max-jobs", "2"});
     client_ = daemon_->client();
   }
   void TearDown() override {
@@ -72,9 +73,10 @@ TEST_F(MaterialJobs, EveryListedModelRendersWithItsDefaults) {
 }
 
 TEST_F(MaterialJobs, ARowOfMaterialsRendersAndBadParametersAreNamed) {
-  json row = {{"kind", "material"},
-              {"materials", {{{"type", "lambert"}}, {{"type", "conductor"}, {"metal", "copper"}}, {{"type", "dielectric"}}}},
-              {"render", {{"width", 48}, {"height", 16}, {"spp", 2}}}};
+  json row = {
+      {"kind", "material"},
+      {"materials", {{{"type", "lambert"}}, {{"type", "conductor"}, {"metal", "copper"}}, {{"type", "dielectric"}}}},
+      {"render", {{"width", 48}, {"height", 16}, {"spp", 2}}}};
   auto r = client_->Post("/v1/jobs", row.dump(), "application/json");
   ASSERT_TRUE(r);
   ASSERT_EQ(r->status, 202) << r->body;

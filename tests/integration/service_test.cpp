@@ -30,8 +30,9 @@ using nlohmann::json;
 namespace fs = std::filesystem;
 
 std::vector<std::string> args(std::vector<std::string> extra = {}) {
-  std::vector<std::string> a = {"--threads", "2", "--max-jobs", "2", "--max-width", "2048", "--max-height", "2048",
-                                "--log-level", "debug", "--max-body-bytes", "8388608", "--keepalive-s", "1"};
+  std::vector<std::string> a = {"--threads",     "2",    "--max-jobs",  "2",     "--max-width",      "2048",
+                                "--max-height",  "2048", "--log-level", "debug", "--max-body-bytes", "8388608",
+                                "--keepalive-s", "1"};
   a.insert(a.end(), extra.begin(), extra.end());
   return a;
 }
@@ -97,13 +98,18 @@ json triangle_gltf(const std::string& uri, int byte_length = 36, int count = 3) 
   return {{"asset", {{"version", "2.0"}}},
           {"scene", 0},
           {"scenes", {{{"nodes", {0, 1}}}}},
-          {"nodes", {{{"mesh", 0}}, {{"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}, {"translation", {0, 0, 2}}}}},
+          {"nodes",
+           {{{"mesh", 0}}, {{"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}, {"translation", {0, 0, 2}}}}},
           {"extensionsUsed", {"KHR_lights_punctual"}},
           {"extensions", {{"KHR_lights_punctual", {{"lights", {{{"type", "point"}, {"intensity", 5}}}}}}}},
           {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}}}}}}},
           {"accessors",
-           {{{"bufferView", 0}, {"componentType", 5126}, {"count", count}, {"type", "VEC3"},
-             {"min", {-1, -1, 0}}, {"max", {1, 1, 0}}}}},
+           {{{"bufferView", 0},
+             {"componentType", 5126},
+             {"count", count},
+             {"type", "VEC3"},
+             {"min", {-1, -1, 0}},
+             {"max", {1, 1, 0}}}}},
           {"bufferViews", {{{"buffer", 0}, {"byteLength", 36}}}},
           {"buffers", {{{"uri", uri}, {"byteLength", byte_length}}}}};
 }
@@ -145,7 +151,8 @@ class ServiceTest : public testing::Test {
     client_ = daemon_->client();
   }
   void TearDown() override {
-    if (HasFailure() && daemon_) std::fprintf(stderr, "--- tesserad log (tail) ---\n%s\n", tail(daemon_->log()).c_str());
+    if (HasFailure() && daemon_)
+      std::fprintf(stderr, "--- tesserad log (tail) ---\n%s\n", tail(daemon_->log()).c_str());
   }
   static std::string tail(const std::string& s) { return s.size() > 20000 ? s.substr(s.size() - 20000) : s; }
   TempDir dir_;
@@ -196,7 +203,12 @@ TEST_F(ServiceTest, UploadsTheSampleAssetsAndRendersThem) {
 TEST_F(ServiceTest, MultipartJobWithGltfAndBin) {
   start();
   httplib::MultipartFormDataItems items = {
-      {"job", json{{"kind", "scene"}, {"scene", {{"gltf", "tri.gltf"}}}, {"render", {{"width", 24}, {"height", 24}, {"spp", 2}}}}.dump(), "", "application/json"},
+      {"job",
+       json{{"kind", "scene"},
+            {"scene", {{"gltf", "tri.gltf"}}},
+            {"render", {{"width", 24}, {"height", 24}, {"spp", 2}}}}
+           .dump(),
+       "", "application/json"},
       {"file", triangle_gltf("tri.bin").dump(), "tri.gltf", "model/gltf+json"},
       {"file", triangle_bin(), "tri.bin", "application/octet-stream"},
   };
@@ -230,18 +242,23 @@ TEST_F(ServiceTest, ImagesAreCheckedByTheirHeadersAtSubmissionAndByTheirPixelsAt
   gltf["materials"] = {{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
   gltf["meshes"][0]["primitives"][0]["material"] = 0;
   auto submit_with = [&](const std::string& image) {
-    httplib::MultipartFormDataItems items = {
-        {"job", json{{"kind", "scene"}, {"scene", {{"gltf", "tri.gltf"}}}, {"render", {{"width", 16}, {"height", 16}, {"spp", 1}}}}.dump(), "", "application/json"},
-        {"file", gltf.dump(), "tri.gltf", "model/gltf+json"},
-        {"file", triangle_bin(), "tri.bin", "application/octet-stream"},
-        {"file", image, "tex.png", "image/png"}};
+    httplib::MultipartFormDataItems items = {{"job",
+                                              json{{"kind", "scene"},
+                                                   {"scene", {{"gltf", "tri.gltf"}}},
+                                                   {"render", {{"width", 16}, {"height", 16}, {"spp", 1}}}}
+                                                  .dump(),
+                                              "", "application/json"},
+                                             {"file", gltf.dump(), "tri.gltf", "model/gltf+json"},
+                                             {"file", triangle_bin(), "tri.bin", "application/octet-stream"},
+                                             {"file", image, "tex.png", "image/png"}};
     return client_->Post("/v1/jobs", items);
   };
 
   auto res = submit_with("not an image at all");
   expect_status(res, 422, "an image that does not open");
-  EXPECT_NE(json::parse(res->body).value("detail", "").find("tri.gltf: the glTF asset is invalid: image 0 cannot be decoded"),
-            std::string::npos)
+  EXPECT_NE(
+      json::parse(res->body).value("detail", "").find("tri.gltf: the glTF asset is invalid: image 0 cannot be decoded"),
+      std::string::npos)
       << res->body;
 
   res = submit_with(std::string(png.begin(), png.end()));
@@ -350,7 +367,8 @@ TEST_F(ServiceTest, HostileUploadsAreRefusedAndTheDaemonLives) {
     return httplib::MultipartFormDataItems{{"f", triangle_gltf(uri).dump(), "a.gltf", ""},
                                            {"f", triangle_bin(), "a.bin", ""}};
   };
-  const std::string good_glb = make_glb(triangle_gltf("").patch(json::parse(R"([{"op":"remove","path":"/buffers/0/uri"}])")), triangle_bin());
+  const std::string good_glb =
+      make_glb(triangle_gltf("").patch(json::parse(R"([{"op":"remove","path":"/buffers/0/uri"}])")), triangle_bin());
   std::vector<Case> cases = {
       {"dot-dot uri", gltf_with("../a.bin"), 422, "../a.bin"},
       {"absolute uri", gltf_with("/etc/passwd"), 422, "/etc/passwd"},
@@ -362,9 +380,12 @@ TEST_F(ServiceTest, HostileUploadsAreRefusedAndTheDaemonLives) {
       {"hidden file name", {{"f", triangle_gltf("a.bin").dump(), ".a.gltf", ""}}, 422, "not plain"},
       {"bad JSON", {{"f", "{not json", "a.gltf", ""}}, 422, "does not parse"},
       {"buffer shorter than declared",
-       {{"f", triangle_gltf("a.bin", 4000).dump(), "a.gltf", ""}, {"f", triangle_bin(), "a.bin", ""}}, 422, "4000"},
+       {{"f", triangle_gltf("a.bin", 4000).dump(), "a.gltf", ""}, {"f", triangle_bin(), "a.bin", ""}},
+       422,
+       "4000"},
       {"accessor out of bounds",
-       {{"f", triangle_gltf("a.bin", 36, 300).dump(), "a.gltf", ""}, {"f", triangle_bin(), "a.bin", ""}}, 422,
+       {{"f", triangle_gltf("a.bin", 36, 300).dump(), "a.gltf", ""}, {"f", triangle_bin(), "a.bin", ""}},
+       422,
        "accessor"},
       {"truncated glb", {{"f", good_glb.substr(0, good_glb.size() - 10), "a.glb", ""}}, 422, "a.glb"},
       {"wrong magic", {{"f", "glTX" + good_glb.substr(4), "a.glb", ""}}, 422, "magic"},
@@ -446,7 +467,8 @@ TEST_F(ServiceTest, JobEventsEndWithTheTerminalStateAndReplayFromLastEventId) {
   EXPECT_TRUE(types.count("preview"));
   // A reconnect after event n gets exactly the buffered events after n.
   const uint64_t n = events[events.size() / 2].id;
-  const auto replay = read_events(daemon_->port(), "/v1/jobs/" + id + "/events", {{"Last-Event-ID", std::to_string(n)}});
+  const auto replay =
+      read_events(daemon_->port(), "/v1/jobs/" + id + "/events", {{"Last-Event-ID", std::to_string(n)}});
   ASSERT_FALSE(replay.empty());
   EXPECT_EQ(replay.front().id, n + 1);
   EXPECT_EQ(replay.back().id, events.back().id);
@@ -507,8 +529,8 @@ TEST_F(ServiceTest, IdempotencyETagsPaginationRetryAfter) {
   const std::string id = json::parse(first->body)["id"];
   EXPECT_EQ(json::parse(again->body)["id"], id);
   expect_status(client_->Post("/v1/jobs", key, cornell_job(16, 3).dump(), "application/json"), 422, "other body");
-  expect_status(client_->Post("/v1/jobs", {{"Idempotency-Key", std::string(300, 'k')}}, body, "application/json"),
-                400, "long key");
+  expect_status(client_->Post("/v1/jobs", {{"Idempotency-Key", std::string(300, 'k')}}, body, "application/json"), 400,
+                "long key");
   wait_for(*client_, id, in_state("succeeded"));
   // ETag and 304.
   auto png = client_->Get("/v1/jobs/" + id + "/result.png");
@@ -582,13 +604,13 @@ TEST_F(ServiceTest, TokensIsolateUsersAdminsSeeAllCorsOnlyForConfiguredOrigins) 
   EXPECT_EQ(client_->Post("/v1/jobs", bearer(bob), cornell_job(8, 1).dump(), "application/json")->status, 202);
   // Event streams take ?access_token= and show only the caller's jobs.
   const auto events = read_events(daemon_->port(), "/v1/events?access_token=" + bob, {{"Last-Event-ID", "0"}},
-                                   [](const std::vector<SseEvent>& e) { return !e.empty(); });
+                                  [](const std::vector<SseEvent>& e) { return !e.empty(); });
   ASSERT_FALSE(events.empty());
   for (const SseEvent& e : events) EXPECT_EQ(e.data.find(a), std::string::npos);
   expect_status(client_->Get("/v1/events?access_token=nope"), 401, "sse bad token");
   // CORS: the configured origin only.
-  auto pre = client_->Options("/v1/jobs", {{"Origin", "https://app.example"},
-                                           {"Access-Control-Request-Method", "POST"}});
+  auto pre =
+      client_->Options("/v1/jobs", {{"Origin", "https://app.example"}, {"Access-Control-Request-Method", "POST"}});
   ASSERT_TRUE(pre);
   EXPECT_EQ(pre->status, 204);
   EXPECT_EQ(pre->get_header_value("Access-Control-Allow-Origin"), "https://app.example");
@@ -617,15 +639,16 @@ TEST_F(ServiceTest, MetricsPassPromtool) {
   wait_for(*client_, submit(*client_, cornell_job(16, 4)), in_state("succeeded"));
   client_->Get("/v1/jobs/0123456789abcdef0123456789abcdef");
   const std::string text = client_->Get("/metrics")->body;
-  for (const char* name : {"tessera_jobs{state=\"succeeded\"} 1", "tessera_queue_length ",
-                           "tessera_samples_rendered_total ", "tessera_job_duration_seconds_count 1",
-                           "tessera_http_requests_total{route=\"/v1/jobs/{id}\",code=\"404\"} 1",
-                           "tessera_render_threads_busy "})
+  for (const char* name :
+       {"tessera_jobs{state=\"succeeded\"} 1", "tessera_queue_length ", "tessera_samples_rendered_total ",
+        "tessera_job_duration_seconds_count 1", "tessera_http_requests_total{route=\"/v1/jobs/{id}\",code=\"404\"} 1",
+        "tessera_render_threads_busy "})
     EXPECT_NE(text.find(name), std::string::npos) << name << "\n" << text;
   EXPECT_EQ(text.find("0123456789abcdef"), std::string::npos);  // no ids as labels
   const fs::path file = dir_.path() / "metrics.txt";
   std::ofstream(file) << text;
-  const int rc = std::system(("promtool check metrics < " + file.string() + " > " + file.string() + ".out 2>&1").c_str());
+  const int rc =
+      std::system(("promtool check metrics < " + file.string() + " > " + file.string() + ".out 2>&1").c_str());
   ASSERT_NE(rc, -1);
   EXPECT_EQ(WEXITSTATUS(rc), 0) << "promtool (Debian package prometheus) says:\n" << read_text(file.string() + ".out");
 }
@@ -671,47 +694,253 @@ TEST_F(ServiceTest, SixtyHostileRequestsGetTheRight4xx) {
       {"string", "POST", "/v1/jobs", J, "\"job\"", 422, {}},
       {"number", "POST", "/v1/jobs", J, "42", 422, {}},
       {"deep arrays", "POST", "/v1/jobs", J, std::string(10000, '[') + std::string(10000, ']'), 422, {}},
-      {"deep objects", "POST", "/v1/jobs", J, [] { std::string s; for (int i = 0; i < 5000; ++i) s += "{\"a\":"; s += "1"; for (int i = 0; i < 5000; ++i) s += "}"; return s; }(), 422, {}},
-      {"long string", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/kind","value":")" + std::string(100000, 'x') + "\"}]"), 422, {}},
-      {"long material name", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/scene/materials/)" + std::string(1000, 'm') + R"(","value":{"type":"lambert"}}])"), 422, {}},
-      {"width string", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/width","value":"64"}])"), 422, {}},
-      {"width float", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/width","value":64.5}])"), 422, {}},
-      {"width negative", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/width","value":-1}])"), 422, {}},
-      {"width huge", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/width","value":1e308}])"), 422, {}},
-      {"height zero", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/height","value":0}])"), 422, {}},
-      {"spp huge", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/spp","value":99999999999}])"), 422, {}},
-      {"spp negative", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/spp","value":-5}])"), 422, {}},
-      {"seed negative", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/seed","value":-5}])"), 422, {}},
-      {"max_depth huge", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/max_depth","value":100000}])"), 422, {}},
-      {"time limit negative", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/render/time_limit_s","value":-1}])"), 422, {}},
-      {"noise target NaN string", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/render/noise_target","value":"NaN"}])"), 422, {}},
-      {"bad sampler", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/render/sampler","value":"halton"}])"), 422, {}},
-      {"bad tonemap", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/render/tonemap","value":"reinhard"}])"), 422, {}},
-      {"unknown render key", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/render/turbo","value":true}])"), 422, {}},
+      {"deep objects",
+       "POST",
+       "/v1/jobs",
+       J,
+       [] {
+         std::string s;
+         for (int i = 0; i < 5000; ++i) s += "{\"a\":";
+         s += "1";
+         for (int i = 0; i < 5000; ++i) s += "}";
+         return s;
+       }(),
+       422,
+       {}},
+      {"long string",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/kind","value":")" + std::string(100000, 'x') + "\"}]"),
+       422,
+       {}},
+      {"long material name",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/scene/materials/)" + std::string(1000, 'm') +
+                R"(","value":{"type":"lambert"}}])"),
+       422,
+       {}},
+      {"width string",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/render/width","value":"64"}])"),
+       422,
+       {}},
+      {"width float",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/render/width","value":64.5}])"),
+       422,
+       {}},
+      {"width negative",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/render/width","value":-1}])"),
+       422,
+       {}},
+      {"width huge",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/render/width","value":1e308}])"),
+       422,
+       {}},
+      {"height zero",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/render/height","value":0}])"),
+       422,
+       {}},
+      {"spp huge",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/render/spp","value":99999999999}])"),
+       422,
+       {}},
+      {"spp negative",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/render/spp","value":-5}])"),
+       422,
+       {}},
+      {"seed negative",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/render/seed","value":-5}])"),
+       422,
+       {}},
+      {"max_depth huge",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/render/max_depth","value":100000}])"),
+       422,
+       {}},
+      {"time limit negative",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/render/time_limit_s","value":-1}])"),
+       422,
+       {}},
+      {"noise target NaN string",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/render/noise_target","value":"NaN"}])"),
+       422,
+       {}},
+      {"bad sampler",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/render/sampler","value":"halton"}])"),
+       422,
+       {}},
+      {"bad tonemap",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/render/tonemap","value":"reinhard"}])"),
+       422,
+       {}},
+      {"unknown render key",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/render/turbo","value":true}])"),
+       422,
+       {}},
       {"unknown top key", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/owner","value":"root"}])"), 422, {}},
-      {"priority too high", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/priority","value":1000}])"), 422, {}},
+      {"priority too high",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/priority","value":1000}])"),
+       422,
+       {}},
       {"priority float", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/priority","value":1.5}])"), 422, {}},
       {"outputs bad", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/outputs","value":["tiff"]}])"), 422, {}},
       {"outputs empty", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/outputs","value":[]}])"), 422, {}},
-      {"coordinate NaN string", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/scene/camera/from/0","value":"NaN"}])"), 422, {}},
-      {"coordinate huge", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/scene/camera/from/0","value":1e300}])"), 422, {}},
-      {"camera to == from", "POST", "/v1/jobs", J, job_with(R"([{"op":"copy","from":"/scene/camera/from","path":"/scene/camera/to"}])"), 422, {}},
-      {"fov 180", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/scene/camera/fov_deg","value":180}])"), 422, {}},
-      {"gltf camera without gltf", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/scene/camera","value":{"gltf":0}}])"), 422, {}},
-      {"gltf path not id", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/scene/gltf","value":"../../etc/passwd"}])"), 422, {}},
-      {"unknown gltf id", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/scene/gltf","value":")" + std::string(64, 'f') + "\"}]"), 422, {}},
-      {"env map path", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/scene/environment","value":{"map":"/etc/passwd"}}])"), 422, {}},
-      {"env rotation 720", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/scene/environment","value":{"rotation_deg":720}}])"), 422, {}},
-      {"objects null", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/scene/objects","value":null}])"), 422, {}},
-      {"unknown material", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/scene/objects/0/material","value":"nope"}])"), 422, {}},
-      {"index out of range", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/scene/objects/6/indices/0","value":1000000}])"), 422, {}},
-      {"radius negative", "POST", "/v1/jobs", J, job_with(R"([{"op":"add","path":"/scene/objects/-","value":{"shape":"sphere","center":[0,0,0],"radius":-1,"material":"white"}}])"), 422, {}},
-      {"work above --max-work", "POST", "/v1/jobs", J, job_with(R"([{"op":"replace","path":"/render/spp","value":60000},{"op":"replace","path":"/render/width","value":1024},{"op":"replace","path":"/render/height","value":1024}])"), 422, {}},
+      {"coordinate NaN string",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/scene/camera/from/0","value":"NaN"}])"),
+       422,
+       {}},
+      {"coordinate huge",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/scene/camera/from/0","value":1e300}])"),
+       422,
+       {}},
+      {"camera to == from",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"copy","from":"/scene/camera/from","path":"/scene/camera/to"}])"),
+       422,
+       {}},
+      {"fov 180",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/scene/camera/fov_deg","value":180}])"),
+       422,
+       {}},
+      {"gltf camera without gltf",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/scene/camera","value":{"gltf":0}}])"),
+       422,
+       {}},
+      {"gltf path not id",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/scene/gltf","value":"../../etc/passwd"}])"),
+       422,
+       {}},
+      {"unknown gltf id",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/scene/gltf","value":")" + std::string(64, 'f') + "\"}]"),
+       422,
+       {}},
+      {"env map path",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/scene/environment","value":{"map":"/etc/passwd"}}])"),
+       422,
+       {}},
+      {"env rotation 720",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"add","path":"/scene/environment","value":{"rotation_deg":720}}])"),
+       422,
+       {}},
+      {"objects null",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/scene/objects","value":null}])"),
+       422,
+       {}},
+      {"unknown material",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/scene/objects/0/material","value":"nope"}])"),
+       422,
+       {}},
+      {"index out of range",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(R"([{"op":"replace","path":"/scene/objects/6/indices/0","value":1000000}])"),
+       422,
+       {}},
+      {"radius negative",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(
+           R"([{"op":"add","path":"/scene/objects/-","value":{"shape":"sphere","center":[0,0,0],"radius":-1,"material":"white"}}])"),
+       422,
+       {}},
+      {"work above --max-work",
+       "POST",
+       "/v1/jobs",
+       J,
+       job_with(
+           R"([{"op":"replace","path":"/render/spp","value":60000},{"op":"replace","path":"/render/width","value":1024},{"op":"replace","path":"/render/height","value":1024}])"),
+       422,
+       {}},
       {"text/plain", "POST", "/v1/jobs", "text/plain", cornell_job(32, 8).dump(), 415, {}},
       {"no content type", "POST", "/v1/jobs", "", cornell_job(32, 8).dump(), 415, {}},
       {"xml", "POST", "/v1/jobs", "application/xml", "<job/>", 415, {}},
-      {"multipart without job", "POST", "/v1/jobs", "multipart/form-data; boundary=XyZ",
-       "--XyZ\r\nContent-Disposition: form-data; name=\"x\"\r\n\r\n1\r\n--XyZ--\r\n", 422, {}},
+      {"multipart without job",
+       "POST",
+       "/v1/jobs",
+       "multipart/form-data; boundary=XyZ",
+       "--XyZ\r\nContent-Disposition: form-data; name=\"x\"\r\n\r\n1\r\n--XyZ--\r\n",
+       422,
+       {}},
       {"oversized", "POST", "/v1/jobs", J, std::string(9 << 20, ' '), 413, {}},
       {"PUT jobs", "PUT", "/v1/jobs", J, "{}", 405, {}},
       {"DELETE jobs", "DELETE", "/v1/jobs", "", "", 405, {}},
@@ -735,7 +964,13 @@ TEST_F(ServiceTest, SixtyHostileRequestsGetTheRight4xx) {
       {"huge token", "GET", "/v1/jobs", "", "", 401, {{"Authorization", "Bearer " + std::string(3000, 'x')}}},
       {"lowercase bearer", "GET", "/v1/jobs", "", "", 401, {{"Authorization", "bearer " + user}}},
       {"token in query on non-SSE", "GET", "/v1/jobs?access_token=" + user, "", "", 401, {{"Authorization", ""}}},
-      {"bad idempotency key", "POST", "/v1/jobs", J, cornell_job(32, 8).dump(), 400, {{"Idempotency-Key", "has space"}}},
+      {"bad idempotency key",
+       "POST",
+       "/v1/jobs",
+       J,
+       cornell_job(32, 8).dump(),
+       400,
+       {{"Idempotency-Key", "has space"}}},
   };
   ASSERT_GE(cases.size(), 60u);
   for (const Case& c : cases) {

@@ -11,9 +11,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "tests/renderer/test_util.h"
 #include "renderer/arena.h"
 #include "renderer/material.h"
+#include "tests/renderer/test_util.h"
 
 namespace tessera::test {
 

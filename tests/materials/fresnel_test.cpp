@@ -104,8 +104,8 @@ TEST(Fresnel, ConductorMatchesTheComplexEquations) {
     for (double k : {0.0, 0.01, 0.5, 1.7704, 3.4242, 7.6635, 12.0})
       for (int a = 0; a <= 40; ++a) {
         const double cos_i = std::max(0.01, a / 40.0);
-        const float got = fresnel_conductor(static_cast<float>(cos_i), Rgb(static_cast<float>(eta)),
-                                            Rgb(static_cast<float>(k))).x;
+        const float got =
+            fresnel_conductor(static_cast<float>(cos_i), Rgb(static_cast<float>(eta)), Rgb(static_cast<float>(k))).x;
         EXPECT_NEAR(got, reference(cos_i, eta, k), 4e-6) << "eta " << eta << " k " << k << " cos " << cos_i;
         ++checked;
       }

@@ -152,7 +152,9 @@ TEST_F(TextureTest, MaterialsKnowWhetherTheyReadTextures) {
       {{"type", "conductor"}, {"roughness", {{"texture", "sub/grey.exr"}, {"channel", 1}}}},
       {{"type", "lambert"}, {"emission", {{"texture", "sub/grey.exr"}}}},
       {{"type", "lambert"}, {"normal_map", {{"texture", "sub/grey.exr"}}}},
-      {{"type", "mix"}, {"a", {{"type", "lambert"}, {"albedo", {{"checker", {{"a", 0.9}}}}}}}, {"b", {{"type", "lambert"}}}},
+      {{"type", "mix"},
+       {"a", {{"type", "lambert"}, {"albedo", {{"checker", {{"a", 0.9}}}}}}},
+       {"b", {{"type", "lambert"}}}},
   };
   for (const json& m : textured) EXPECT_TRUE(registry.create(m, "/m", ctx_)->reads_textures) << m.dump();
 }
@@ -194,7 +196,8 @@ TEST_F(TextureTest, MaterialsMadeSideBySideKeepTheirOrderAndTheFirstError) {
   for (int i = 0; i < 6; ++i) {
     const float v = 0.1f * (i + 1);
     write(root_ / "assets" / ("t" + std::to_string(i) + ".exr"), 1, 1, {v, v, v});
-    materials["m" + std::to_string(i)] = {{"type", "lambert"}, {"albedo", {{"texture", "t" + std::to_string(i) + ".exr"}}}};
+    materials["m" + std::to_string(i)] = {{"type", "lambert"},
+                                          {"albedo", {{"texture", "t" + std::to_string(i) + ".exr"}}}};
   }
   json doc = {{"materials", materials},
               {"objects", {{{"shape", "sphere"}, {"center", {0, 0, 0}}, {"radius", 1}, {"material", "m3"}}}},

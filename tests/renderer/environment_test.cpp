@@ -68,7 +68,8 @@ TEST(EnvironmentMap, PdfIntegratesToOne) {
   for (int r = 0; r < rows; ++r)
     for (int c = 0; c < cols; ++c) {
       double z = -1 + 2.0 * (r + 0.5) / rows, phi = 2 * M_PI * (c + 0.5) / cols, s = std::sqrt(1 - z * z);
-      integral += map->pdf(Vec3(float(s * std::cos(phi)), float(s * std::sin(phi)), float(z))) * (4 * M_PI / (rows * cols));
+      integral +=
+          map->pdf(Vec3(float(s * std::cos(phi)), float(s * std::sin(phi)), float(z))) * (4 * M_PI / (rows * cols));
     }
   EXPECT_NEAR(integral, 1.0, 0.02);
 }

@@ -44,8 +44,10 @@ class GltfBuilder {
 
   // Appends float data as an accessor of `type` ("VEC3", "VEC2", "SCALAR"); returns its index.
   int floats(const std::vector<float>& v, const std::string& type, int components) {
-    nlohmann::json acc = {{"bufferView", view(v.data(), v.size() * 4)}, {"componentType", 5126},
-                          {"count", v.size() / components}, {"type", type}};
+    nlohmann::json acc = {{"bufferView", view(v.data(), v.size() * 4)},
+                          {"componentType", 5126},
+                          {"count", v.size() / components},
+                          {"type", type}};
     if (type == "VEC3") {
       float lo[3] = {1e30f, 1e30f, 1e30f}, hi[3] = {-1e30f, -1e30f, -1e30f};
       for (size_t i = 0; i < v.size(); ++i) {
@@ -59,8 +61,10 @@ class GltfBuilder {
     return static_cast<int>(doc["accessors"].size()) - 1;
   }
   int indices16(const std::vector<uint16_t>& v) {
-    doc["accessors"].push_back({{"bufferView", view(v.data(), v.size() * 2)}, {"componentType", 5123},
-                                {"count", v.size()}, {"type", "SCALAR"}});
+    doc["accessors"].push_back({{"bufferView", view(v.data(), v.size() * 2)},
+                                {"componentType", 5123},
+                                {"count", v.size()},
+                                {"type", "SCALAR"}});
     return static_cast<int>(doc["accessors"].size()) - 1;
   }
   int material(const nlohmann::json& m) {
@@ -92,8 +96,8 @@ class GltfBuilder {
     return static_cast<int>(doc["textures"].size()) - 1;
   }
   // A mesh with texture coordinates (and optional normals).
-  int textured_mesh(const std::vector<float>& positions, const std::vector<float>& uvs, const std::vector<uint16_t>& idx,
-                    int material) {
+  int textured_mesh(const std::vector<float>& positions, const std::vector<float>& uvs,
+                    const std::vector<uint16_t>& idx, int material) {
     nlohmann::json attrs = {{"POSITION", floats(positions, "VEC3", 3)}, {"TEXCOORD_0", floats(uvs, "VEC2", 2)}};
     nlohmann::json prim = {{"attributes", attrs}, {"indices", indices16(idx)}, {"material", material}};
     doc["meshes"].push_back({{"primitives", nlohmann::json::array({prim})}});
@@ -121,7 +125,9 @@ class GltfBuilder {
     std::vector<unsigned char> b = bin;
     while (b.size() % 4) b.push_back(0);
     std::vector<unsigned char> out;
-    auto u32 = [&](uint32_t v) { for (int i = 0; i < 4; ++i) out.push_back(static_cast<unsigned char>(v >> (8 * i))); };
+    auto u32 = [&](uint32_t v) {
+      for (int i = 0; i < 4; ++i) out.push_back(static_cast<unsigned char>(v >> (8 * i)));
+    };
     out.insert(out.end(), {'g', 'l', 'T', 'F'});
     u32(2);
     u32(static_cast<uint32_t>(12 + 8 + j.size() + 8 + b.size()));

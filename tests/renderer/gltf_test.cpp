@@ -27,8 +27,9 @@ std::filesystem::path fixture_dir() {
   // TESSERA_GLTF_FIXTURES keeps them in a given folder (for the Khronos validator test, tests/gltf).
   static const struct Folder {
     const char* keep = std::getenv("TESSERA_GLTF_FIXTURES");
-    std::filesystem::path path = keep ? std::filesystem::path(keep)
-                                      : std::filesystem::temp_directory_path() / ("tessera-gltf-" + std::to_string(::getpid()));
+    std::filesystem::path path =
+        keep ? std::filesystem::path(keep)
+             : std::filesystem::temp_directory_path() / ("tessera-gltf-" + std::to_string(::getpid()));
     ~Folder() {
       std::error_code ec;
       if (!keep) std::filesystem::remove_all(path, ec);
@@ -41,7 +42,10 @@ std::filesystem::path fixture_dir() {
 struct Rendered {
   int width, height;
   std::vector<float> rgb;
-  Rgb at(int x, int y) const { const float* p = &rgb[(static_cast<size_t>(y) * width + x) * 3]; return {p[0], p[1], p[2]}; }
+  Rgb at(int x, int y) const {
+    const float* p = &rgb[(static_cast<size_t>(y) * width + x) * 3];
+    return {p[0], p[1], p[2]};
+  }
 };
 
 Rendered render_job(const json& job) {
@@ -67,22 +71,28 @@ TEST(Gltf, NestedTransformsPutAVertexOnItsPixel) {
     int m = b.material({{"emissiveFactor", {1, 1, 1}}, {"doubleSided", false}});
     int mesh;
     square(b, 0.25f, 0.1f, 0.01f, m, &mesh);
-    int child = b.node({{"mesh", mesh}, {"translation", {0, 0.5, 0}}, {"rotation", {0, 0, std::sqrt(0.5), std::sqrt(0.5)}}}, false);
+    int child = b.node(
+        {{"mesh", mesh}, {"translation", {0, 0.5, 0}}, {"rotation", {0, 0, std::sqrt(0.5), std::sqrt(0.5)}}}, false);
     b.node({{"children", {child}}, {"translation", {1, 0, 0}}, {"scale", {mirrored ? -2 : 2, 2, 2}}}, true);
     b.write(fixture_dir(), mirrored ? "nested_mirror" : "nested");
     // Local (0.25, 0.1, 0) -> rotate 90 deg about z: (-0.1, 0.25) -> +(0, 0.5): (-0.1, 0.75) -> scale -> + (1, 0, 0).
     Vec3 expected(1 + (mirrored ? 0.2f : -0.2f), 1.5f, 0);
     json job = {{"kind", "scene"},
-                {"scene", {{"gltf", mirrored ? "nested_mirror.gltf" : "nested.gltf"},
-                           {"camera", {{"from", {0, 1, 10}}, {"to", {0, 1, 0}}, {"fov_deg", 30}}},
-                           {"environment", {{"color", 0}}}}},
+                {"scene",
+                 {{"gltf", mirrored ? "nested_mirror.gltf" : "nested.gltf"},
+                  {"camera", {{"from", {0, 1, 10}}, {"to", {0, 1, 0}}, {"fov_deg", 30}}},
+                  {"environment", {{"color", 0}}}}},
                 {"render", {{"width", 101}, {"height", 101}, {"spp", 16}, {"max_depth", 1}}}};
     Rendered img = render_job(job);
     int bx = 0, by = 0;
     float best = -1;
     for (int y = 0; y < img.height; ++y)
       for (int x = 0; x < img.width; ++x)
-        if (img.at(x, y).y > best) { best = img.at(x, y).y; bx = x; by = y; }
+        if (img.at(x, y).y > best) {
+          best = img.at(x, y).y;
+          bx = x;
+          by = y;
+        }
     CameraDesc cd;
     cd.from = Vec3(0, 1, 10);
     cd.to = Vec3(0, 1, 0);
@@ -99,10 +109,11 @@ TEST(Gltf, NestedTransformsPutAVertexOnItsPixel) {
 // surface of albedo rho is rho / pi times the irradiance.
 json lit_floor_job(const std::string& file) {
   return {{"kind", "scene"},
-          {"scene", {{"gltf", file},
-                     {"materials", {{"floor", {{"type", "lambert"}, {"albedo", 0.5}}}}},
-                     {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}},
-                     {"environment", {{"color", 0}}}}},
+          {"scene",
+           {{"gltf", file},
+            {"materials", {{"floor", {{"type", "lambert"}, {"albedo", 0.5}}}}},
+            {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}},
+            {"environment", {{"color", 0}}}}},
           {"render", {{"width", 8}, {"height", 8}, {"spp", 16}, {"max_depth", 1}}}};
 }
 
@@ -154,7 +165,8 @@ TEST(Gltf, OrthographicCameraSpansItsMagnification) {
   int mesh;
   square(b, 0, 0, 0.5f, m, &mesh);  // 1 x 1 at the origin
   b.node({{"mesh", mesh}}, true);
-  b.doc["cameras"] = {{{"type", "orthographic"}, {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.1}, {"zfar", 100}}}}};
+  b.doc["cameras"] = {
+      {{"type", "orthographic"}, {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.1}, {"zfar", 100}}}}};
   b.node({{"camera", 0}, {"translation", {0, 0, 5}}}, true);
   b.write(fixture_dir(), "ortho");
   json job = {{"kind", "scene"},
@@ -178,7 +190,8 @@ TEST(Gltf, PerspectiveCameraUsesItsVerticalFieldOfView) {
   b.node({{"mesh", mesh}}, true);
   // yfov chosen so that the unit square at distance d spans half the image height: tan(yfov/2) = 1 / d.
   const double d = 4;
-  b.doc["cameras"] = {{{"type", "perspective"}, {"perspective", {{"yfov", 2 * std::atan(1 / d)}, {"aspectRatio", 2.0}, {"znear", 0.1}}}}};
+  b.doc["cameras"] = {{{"type", "perspective"},
+                       {"perspective", {{"yfov", 2 * std::atan(1 / d)}, {"aspectRatio", 2.0}, {"znear", 0.1}}}}};
   b.node({{"camera", 0}, {"translation", {0, 0, d}}}, true);
   b.write(fixture_dir(), "persp");
   json job = {{"kind", "scene"},
@@ -202,8 +215,10 @@ TEST(Gltf, EmissiveStrengthScalesEmission) {
   b.node({{"mesh", mesh}}, true);
   b.write(fixture_dir(), "strength");
   json job = {{"kind", "scene"},
-              {"scene", {{"gltf", "strength.gltf"}, {"camera", {{"from", {0, 0, 3}}, {"to", {0, 0, 0}}, {"fov_deg", 10}}},
-                         {"environment", {{"color", 0}}}}},
+              {"scene",
+               {{"gltf", "strength.gltf"},
+                {"camera", {{"from", {0, 0, 3}}, {"to", {0, 0, 0}}, {"fov_deg", 10}}},
+                {"environment", {{"color", 0}}}}},
               {"render", {{"width", 8}, {"height", 8}, {"spp", 1}, {"max_depth", 0}}}};
   Rgb c = render_job(job).at(4, 4);
   EXPECT_NEAR(c.x, 4, 1e-4);
@@ -395,8 +410,8 @@ TEST(Gltf, RepeatedMeshesAreInstancedAndRenderLikeCopies) {
     GltfBuilder b;
     int m = b.material({{"name", "grey"}, {"pbrMetallicRoughness", {{"baseColorFactor", {0.7, 0.7, 0.7, 1}}}}});
     // A unit cube's front and top faces are enough to show orientation and shading.
-    std::vector<float> pos = {-0.5f, -0.5f, 0.5f, 0.5f, -0.5f, 0.5f, 0.5f, 0.5f, 0.5f, -0.5f, 0.5f, 0.5f,
-                              -0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, -0.5f, -0.5f, 0.5f, -0.5f};
+    std::vector<float> pos = {-0.5f, -0.5f, 0.5f, 0.5f, -0.5f, 0.5f, 0.5f, 0.5f, 0.5f,  -0.5f, 0.5f, 0.5f,
+                              -0.5f, 0.5f,  0.5f, 0.5f, 0.5f,  0.5f, 0.5f, 0.5f, -0.5f, -0.5f, 0.5f, -0.5f};
     std::vector<uint16_t> idx = {0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7};
     int first = b.mesh(pos, idx, m);
     json scales = {{1, 1, 1}, {-1, 1, 1}, {1, 2, 1}};
@@ -415,9 +430,10 @@ TEST(Gltf, RepeatedMeshesAreInstancedAndRenderLikeCopies) {
   EXPECT_TRUE(scene.instances[1].mirrored);
   auto job = [](const std::string& file) {
     return json{{"kind", "scene"},
-                {"scene", {{"gltf", file},
-                           {"camera", {{"from", {0, 2, 6}}, {"to", {0, 0, 0}}, {"fov_deg", 45}}},
-                           {"environment", {{"color", 1}}}}},
+                {"scene",
+                 {{"gltf", file},
+                  {"camera", {{"from", {0, 2, 6}}, {"to", {0, 0, 0}}, {"fov_deg", 45}}},
+                  {"environment", {{"color", 1}}}}},
                 {"render", {{"width", 64}, {"height", 32}, {"spp", 16}, {"max_depth", 2}}}};
   };
   Rendered a = render_job(job("instanced.gltf")), c = render_job(job("copies.gltf"));
@@ -445,7 +461,8 @@ namespace {
 double seen_through(const std::string& mode, double alpha, double cutoff = 0.5) {
   GltfBuilder b;
   json front = {{"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, alpha}}, {"metallicFactor", 0}}},
-                {"alphaMode", mode}, {"alphaCutoff", cutoff}};
+                {"alphaMode", mode},
+                {"alphaCutoff", cutoff}};
   int mf = b.material(front);
   int mb = b.material({{"emissiveFactor", {1, 1, 1}}});
   int quad, backdrop;
@@ -456,19 +473,20 @@ double seen_through(const std::string& mode, double alpha, double cutoff = 0.5) 
   std::string name = "alpha_" + mode + "_" + std::to_string(static_cast<int>(alpha * 100));
   b.write(fixture_dir(), name);
   json job = {{"kind", "scene"},
-              {"scene", {{"gltf", name + ".gltf"},
-                         {"camera", {{"from", {0, 0, 3}}, {"to", {0, 0, 0}}, {"fov_deg", 10}}},
-                         {"environment", {{"color", 0}}}}},
+              {"scene",
+               {{"gltf", name + ".gltf"},
+                {"camera", {{"from", {0, 0, 3}}, {"to", {0, 0, 0}}, {"fov_deg", 10}}},
+                {"environment", {{"color", 0}}}}},
               {"render", {{"width", 8}, {"height", 8}, {"spp", 256}, {"max_depth", 1}}}};
   return mean_green(render_job(job));
 }
 
 TEST(Gltf, AlphaMaskCutsOutAndBlendIsStochasticCoverage) {
-  EXPECT_NEAR(seen_through("MASK", 0.3), 1.0, 1e-4);    // below the cutoff: not there
-  EXPECT_NEAR(seen_through("MASK", 0.8), 0.0, 1e-4);    // above: opaque
+  EXPECT_NEAR(seen_through("MASK", 0.3), 1.0, 1e-4);       // below the cutoff: not there
+  EXPECT_NEAR(seen_through("MASK", 0.8), 0.0, 1e-4);       // above: opaque
   EXPECT_NEAR(seen_through("MASK", 0.3, 0.2), 0.0, 1e-4);  // the cutoff is the material's
-  EXPECT_NEAR(seen_through("BLEND", 0.25), 0.75, 0.02); // a quarter of the rays stop
-  EXPECT_NEAR(seen_through("OPAQUE", 0.1), 0.0, 1e-4);  // alpha ignored when opaque
+  EXPECT_NEAR(seen_through("BLEND", 0.25), 0.75, 0.02);    // a quarter of the rays stop
+  EXPECT_NEAR(seen_through("OPAQUE", 0.1), 0.0, 1e-4);     // alpha ignored when opaque
 }
 
 TEST(Gltf, MaskedOutSurfacesCastNoShadow) {
@@ -487,14 +505,15 @@ TEST(Gltf, MaskedOutSurfacesCastNoShadow) {
     json job = lit_floor_job("shadow.gltf");
     job["scene"]["camera"] = {{"from", {0.001, 0.5, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}};
     double lit = mean_green(render_job(job));
-    if (alpha < 0.5) EXPECT_NEAR(lit, 0.5 / M_PI * 10 / 4, 0.01);  // unshadowed
-    else EXPECT_LT(lit, 1e-6);
+    if (alpha < 0.5)
+      EXPECT_NEAR(lit, 0.5 / M_PI * 10 / 4, 0.01);  // unshadowed
+    else
+      EXPECT_LT(lit, 1e-6);
   }
 }
 
 }  // namespace
 }  // namespace tessera
-
 
 namespace tessera {
 namespace {
@@ -533,33 +552,44 @@ json textured_job(GltfBuilder& b, const json& material, const std::string& name)
   b.node({{"mesh", mesh}}, true);
   b.write(fixture_dir(), name);
   return {{"kind", "scene"},
-          {"scene", {{"gltf", name + ".gltf"},
-                     {"camera", {{"type", "orthographic"}, {"from", {0, 0, 5}}, {"to", {0, 0, 0}}, {"height", 2}}},
-                     {"environment", {{"color", {0.25, 0.25, 0.25}}}}}},
+          {"scene",
+           {{"gltf", name + ".gltf"},
+            {"camera", {{"type", "orthographic"}, {"from", {0, 0, 5}}, {"to", {0, 0, 0}}, {"height", 2}}},
+            {"environment", {{"color", {0.25, 0.25, 0.25}}}}}},
           {"render", {{"width", 32}, {"height", 32}, {"spp", 4}, {"max_depth", 0}}}};
 }
 
 TEST(GltfTextures, TexelColoursAppearWhereTheirUvsAre) {
   GltfBuilder b;
   int tex = b.texture_png(quad_texture(), {{"wrapS", 33071}, {"wrapT", 33071}, {"magFilter", 9728}});
-  json mat = {{"emissiveFactor", {1, 1, 1}}, {"emissiveTexture", {{"index", tex}}},
+  json mat = {{"emissiveFactor", {1, 1, 1}},
+              {"emissiveTexture", {{"index", tex}}},
               {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}}}};
   Rendered img = render_job(textured_job(b, mat, "texels"));
   // Quadrant centres: top-left red, top-right green, bottom-left blue, bottom-right white.
   Rgb tl = img.at(8, 8), tr = img.at(24, 8), bl = img.at(8, 24), br = img.at(24, 24);
-  EXPECT_NEAR(tl.x, 1, 1e-3); EXPECT_NEAR(tl.y, 0, 1e-3); EXPECT_NEAR(tl.z, 0, 1e-3);
-  EXPECT_NEAR(tr.x, 0, 1e-3); EXPECT_NEAR(tr.y, 1, 1e-3); EXPECT_NEAR(tr.z, 0, 1e-3);
-  EXPECT_NEAR(bl.x, 0, 1e-3); EXPECT_NEAR(bl.y, 0, 1e-3); EXPECT_NEAR(bl.z, 1, 1e-3);
-  EXPECT_NEAR(br.x, 1, 1e-3); EXPECT_NEAR(br.y, 1, 1e-3); EXPECT_NEAR(br.z, 1, 1e-3);
+  EXPECT_NEAR(tl.x, 1, 1e-3);
+  EXPECT_NEAR(tl.y, 0, 1e-3);
+  EXPECT_NEAR(tl.z, 0, 1e-3);
+  EXPECT_NEAR(tr.x, 0, 1e-3);
+  EXPECT_NEAR(tr.y, 1, 1e-3);
+  EXPECT_NEAR(tr.z, 0, 1e-3);
+  EXPECT_NEAR(bl.x, 0, 1e-3);
+  EXPECT_NEAR(bl.y, 0, 1e-3);
+  EXPECT_NEAR(bl.z, 1, 1e-3);
+  EXPECT_NEAR(br.x, 1, 1e-3);
+  EXPECT_NEAR(br.y, 1, 1e-3);
+  EXPECT_NEAR(br.z, 1, 1e-3);
 }
 
 TEST(GltfTextures, TextureTransformOffsetsTheLookup) {
   GltfBuilder b;
   b.doc["extensionsUsed"] = {"KHR_texture_transform"};
   int tex = b.texture_png(quad_texture(), {{"wrapS", 10497}, {"wrapT", 10497}});
-  json mat = {{"emissiveFactor", {1, 1, 1}},
-              {"emissiveTexture", {{"index", tex}, {"extensions", {{"KHR_texture_transform", {{"offset", {0.5, 0}}}}}}}},
-              {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}}}};
+  json mat = {
+      {"emissiveFactor", {1, 1, 1}},
+      {"emissiveTexture", {{"index", tex}, {"extensions", {{"KHR_texture_transform", {{"offset", {0.5, 0}}}}}}}},
+      {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}}}};
   Rendered img = render_job(textured_job(b, mat, "offset"));
   // Shifted by half the texture horizontally (wrapping): the top-left quadrant now shows the green texel.
   EXPECT_NEAR(img.at(8, 8).y, 1, 1e-3);
@@ -571,10 +601,12 @@ TEST(GltfTextures, TextureTransformOffsetsTheLookup) {
 TEST(GltfTextures, BaseColourAlphaCutsOutUnderMask) {
   GltfBuilder b;
   int tex = b.texture_png(quad_texture(), {{"wrapS", 33071}, {"wrapT", 33071}});
-  json mat = {{"emissiveFactor", {1, 1, 1}}, {"emissiveTexture", {{"index", tex}}}, {"alphaMode", "MASK"},
+  json mat = {{"emissiveFactor", {1, 1, 1}},
+              {"emissiveTexture", {{"index", tex}}},
+              {"alphaMode", "MASK"},
               {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}, {"baseColorTexture", {{"index", tex}}}}}};
   Rendered img = render_job(textured_job(b, mat, "cutout"));
-  EXPECT_NEAR(img.at(8, 8).x, 1, 1e-3);     // red texel: opaque
+  EXPECT_NEAR(img.at(8, 8).x, 1, 1e-3);       // red texel: opaque
   EXPECT_NEAR(img.at(24, 24).x, 0.25, 1e-3);  // white texel has alpha 0: the environment shows through
   EXPECT_NEAR(img.at(24, 24).z, 0.25, 1e-3);
 }
@@ -606,8 +638,11 @@ TEST(GltfTextures, ImagesOfEveryChannelCountReadAsRgba) {
       for (int i = 0; i < 4; ++i) values.insert(values.end(), c.texel.begin(), c.texel.end());  // 2x2 of one value
       textures.push_back(b.texture_png(png_pixels(2, 2, c.channels, values)));
     }
-    json mat = {{"emissiveFactor", {1, 1, 1}}, {"emissiveTexture", {{"index", textures[k]}}}, {"alphaMode", "MASK"},
-                {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}, {"baseColorTexture", {{"index", textures[k]}}}}}};
+    json mat = {
+        {"emissiveFactor", {1, 1, 1}},
+        {"emissiveTexture", {{"index", textures[k]}}},
+        {"alphaMode", "MASK"},
+        {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}, {"baseColorTexture", {{"index", textures[k]}}}}}};
     Rendered img = render_job(textured_job(b, mat, "channels" + std::to_string(k)));
     const Rgb got = img.at(16, 16);
     const Case& c = cases[k];
@@ -855,14 +890,18 @@ TEST(Textures, ADistantTextureIsFilteredOverThePixel) {
   }());
   std::ofstream(fixture_dir() / "fine.png", std::ios::binary)
       .write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
-  json job = {{"kind", "scene"},
-              {"scene",
-               {{"materials",
-                 {{"board", {{"type", "lambert"}, {"albedo", 0}, {"emission", {{"texture", "fine.png"}}}}}}},
-                {"objects", {{{"shape", "rectangle"}, {"corner", {-0.05, 0, 0.05}}, {"edge1", {0.1, 0, 0}},
-                              {"edge2", {0, 0, -0.1}}, {"material", "board"}}}},
-                {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}}}},
-              {"render", {{"width", 8}, {"height", 8}, {"spp", 1}, {"max_depth", 1}}}};
+  json job = {
+      {"kind", "scene"},
+      {"scene",
+       {{"materials", {{"board", {{"type", "lambert"}, {"albedo", 0}, {"emission", {{"texture", "fine.png"}}}}}}},
+        {"objects",
+         {{{"shape", "rectangle"},
+           {"corner", {-0.05, 0, 0.05}},
+           {"edge1", {0.1, 0, 0}},
+           {"edge2", {0, 0, -0.1}},
+           {"material", "board"}}}},
+        {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}}}},
+      {"render", {{"width", 8}, {"height", 8}, {"spp", 1}, {"max_depth", 1}}}};
   Rendered r = render_job(job);
   for (int y = 0; y < 8; ++y)
     for (int x = 0; x < 8; ++x) EXPECT_NEAR(r.at(x, y).y, 0.5f, 0.05f) << x << ", " << y;
@@ -872,17 +911,23 @@ TEST(Textures, NormalMapTiltsTheShadingNormal) {
   // A constant normal map tilting the normal 60 degrees towards +u on a Lambert floor lit straight from above:
   // the reflected radiance falls to cos 60 = one half (the geometric normal is unchanged).
   auto png = tilted_normal_png(M_PI / 3);
-  std::ofstream(fixture_dir() / "tilt.png", std::ios::binary).write(reinterpret_cast<const char*>(png.data()), png.size());
+  std::ofstream(fixture_dir() / "tilt.png", std::ios::binary)
+      .write(reinterpret_cast<const char*>(png.data()), png.size());
   double radiance[2];
   for (int with_map = 0; with_map < 2; ++with_map) {
     json floor = {{"type", "lambert"}, {"albedo", 0.5}};
     if (with_map) floor["normal_map"] = {{"texture", "tilt.png"}};
     json job = {{"kind", "scene"},
-                {"scene", {{"materials", {{"floor", floor}}},
-                           {"objects", {{{"shape", "rectangle"}, {"corner", {-10, 0, 10}}, {"edge1", {20, 0, 0}},
-                                         {"edge2", {0, 0, -20}}, {"material", "floor"}}}},
-                           {"lights", {{{"type", "directional"}, {"direction", {0, -1, 0}}, {"irradiance", 3}}}},
-                           {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}}}},
+                {"scene",
+                 {{"materials", {{"floor", floor}}},
+                  {"objects",
+                   {{{"shape", "rectangle"},
+                     {"corner", {-10, 0, 10}},
+                     {"edge1", {20, 0, 0}},
+                     {"edge2", {0, 0, -20}},
+                     {"material", "floor"}}}},
+                  {"lights", {{{"type", "directional"}, {"direction", {0, -1, 0}}, {"irradiance", 3}}}},
+                  {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}}}},
                 {"render", {{"width", 8}, {"height", 8}, {"spp", 4}, {"max_depth", 1}}}};
     radiance[with_map] = mean_green(render_job(job));
   }
@@ -896,19 +941,24 @@ TEST(GltfTextures, NormalTextureIsApplied) {
   for (int with_map = 0; with_map < 2; ++with_map) {
     GltfBuilder b;
     int tex = b.texture_png(tilted_normal_png(M_PI / 3));
-    json mat = {{"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.5, 0.5, 1}}, {"metallicFactor", 0}, {"roughnessFactor", 1}}}};
+    json mat = {{"pbrMetallicRoughness",
+                 {{"baseColorFactor", {0.5, 0.5, 0.5, 1}}, {"metallicFactor", 0}, {"roughnessFactor", 1}}}};
     if (with_map) mat["normalTexture"] = {{"index", tex}, {"scale", 1}};
     int m = b.material(mat);
-    int mesh = b.textured_mesh({-10, 0, -10, 10, 0, -10, 10, 0, 10, -10, 0, 10}, {0, 0, 1, 0, 1, 1, 0, 1}, {0, 2, 1, 0, 3, 2}, m);
+    int mesh = b.textured_mesh({-10, 0, -10, 10, 0, -10, 10, 0, 10, -10, 0, 10}, {0, 0, 1, 0, 1, 1, 0, 1},
+                               {0, 2, 1, 0, 3, 2}, m);
     b.node({{"mesh", mesh}}, true);
     b.doc["extensionsUsed"] = {"KHR_lights_punctual"};
     b.doc["extensions"] = {{"KHR_lights_punctual", {{"lights", {{{"type", "directional"}, {"intensity", 3}}}}}}};
-    b.node({{"rotation", {-std::sqrt(0.5), 0, 0, std::sqrt(0.5)}}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}}, true);
+    b.node({{"rotation", {-std::sqrt(0.5), 0, 0, std::sqrt(0.5)}},
+            {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}},
+           true);
     b.write(fixture_dir(), "normaltex");
     json job = {{"kind", "scene"},
-                {"scene", {{"gltf", "normaltex.gltf"},
-                           {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}},
-                           {"environment", {{"color", 0}}}}},
+                {"scene",
+                 {{"gltf", "normaltex.gltf"},
+                  {"camera", {{"from", {0, 1, 0}}, {"to", {0, 0, 0}}, {"up", {0, 0, -1}}, {"fov_deg", 2}}},
+                  {"environment", {{"color", 0}}}}},
                 {"render", {{"width", 8}, {"height", 8}, {"spp", 16}, {"max_depth", 1}}}};
     radiance[with_map] = mean_green(render_job(job));
   }
@@ -929,12 +979,13 @@ namespace {
 TEST(Accel, PacketHitsAreTheSingleRayHits) {
   GltfBuilder b;
   int grey = b.material({{"pbrMetallicRoughness", {{"baseColorFactor", {0.7, 0.7, 0.7, 1}}}}});
-  std::vector<float> pos = {-0.5f, -0.5f, 0.5f, 0.5f, -0.5f, 0.5f, 0.5f, 0.5f, 0.5f, -0.5f, 0.5f, 0.5f,
-                            -0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, -0.5f, -0.5f, 0.5f, -0.5f};
+  std::vector<float> pos = {-0.5f, -0.5f, 0.5f, 0.5f, -0.5f, 0.5f, 0.5f, 0.5f, 0.5f,  -0.5f, 0.5f, 0.5f,
+                            -0.5f, 0.5f,  0.5f, 0.5f, 0.5f,  0.5f, 0.5f, 0.5f, -0.5f, -0.5f, 0.5f, -0.5f};
   std::vector<uint16_t> idx = {0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7};
   int cube = b.mesh(pos, idx, grey);
   json scales = {{1, 1, 1}, {-1, 1, 1}, {1, 2, 1}};
-  for (int i = 0; i < 3; ++i) b.node({{"mesh", cube}, {"translation", {-2.0 + 2 * i, 0, 0}}, {"scale", scales[i]}}, true);
+  for (int i = 0; i < 3; ++i)
+    b.node({{"mesh", cube}, {"translation", {-2.0 + 2 * i, 0, 0}}, {"scale", scales[i]}}, true);
   int masked = b.material({{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 0.3}}}}, {"alphaMode", "MASK"}});
   int blended = b.material({{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 0.5}}}}, {"alphaMode", "BLEND"}});
   int qm, qb;
@@ -944,8 +995,9 @@ TEST(Accel, PacketHitsAreTheSingleRayHits) {
   b.node({{"mesh", qb}, {"translation", {0, 0, 1.2}}}, true);
   b.write(fixture_dir(), "packets");
   json doc = {{"gltf", "packets.gltf"},
-              {"objects", {{{"shape", "sphere"}, {"center", {0, 1.5, 0}}, {"radius", 0.6}, {"material", "ball"}},
-                           {{"shape", "sphere"}, {"center", {1.5, -1, 0.5}}, {"radius", 0.3}, {"material", "ball"}}}},
+              {"objects",
+               {{{"shape", "sphere"}, {"center", {0, 1.5, 0}}, {"radius", 0.6}, {"material", "ball"}},
+                {{"shape", "sphere"}, {"center", {1.5, -1, 0.5}}, {"radius", 0.3}, {"material", "ball"}}}},
               {"materials", {{"ball", {{"type", "lambert"}}}}},
               {"camera", {{"from", {0, 1, 6}}, {"to", {0, 0, 0}}, {"fov_deg", 50}}}};
   SceneLoadOptions opts;

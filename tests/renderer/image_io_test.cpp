@@ -99,8 +99,8 @@ TEST(ImageIo, ExposureAndAcesToneCurve) {
   DisplaySettings aces;
   aces.tonemap = ToneMap::kAces;
   auto c = to_display(rgb, 2, 1, aces);
-  EXPECT_LT(c[0], b[0]);   // the filmic curve darkens mid-grey a little
-  EXPECT_GE(c[3], 250);    // and rolls highlights off to white
+  EXPECT_LT(c[0], b[0]);  // the filmic curve darkens mid-grey a little
+  EXPECT_GE(c[3], 250);   // and rolls highlights off to white
 }
 
 // Writes a w x h float EXR of `channels` channels (values[i] is texel i's channel values).
@@ -174,10 +174,12 @@ TEST(ImageIo, ReadsIntoTheCallersMemoryAtAStride) {
   // The limits are checked before memory is asked for.
   const auto path = write_channels("s.exr", 3, 2, 3, std::vector<float>(3 * 2 * 3, 1.0f));
   bool asked = false;
-  EXPECT_THROW(read_image_into(path.string(), 3, 4, 5, 0, [&](int, int) {
-    asked = true;
-    return static_cast<float*>(nullptr);
-  }), std::runtime_error);
+  EXPECT_THROW(read_image_into(path.string(), 3, 4, 5, 0,
+                               [&](int, int) {
+                                 asked = true;
+                                 return static_cast<float*>(nullptr);
+                               }),
+               std::runtime_error);
   EXPECT_FALSE(asked);
 }
 
@@ -189,7 +191,8 @@ TEST(ImageIo, ImagesAboveTheTexelLimitAreRefused) {
     read_image(path.string(), 3, 0, 7);
     ADD_FAILURE() << "an image over the width limit was read";
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("it is 8 texels wide, more than the 7 allowed"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("it is 8 texels wide, more than the 7 allowed"), std::string::npos)
+        << e.what();
   }
   try {
     read_image(path.string(), 3, 31);

@@ -61,7 +61,8 @@ TEST(OnceCache, OtherKeysAreServedWhileAValueIsMade) {
   GatedMake slow(1);
   auto blocked = std::async(std::launch::async, [&] { return cache.get("slow", slow.fn()); });
   ASSERT_TRUE(eventually([&] { return slow.started.load(); }));
-  auto other = std::async(std::launch::async, [&] { return cache.get("fast", [] { return std::make_shared<const int>(2); }); });
+  auto other =
+      std::async(std::launch::async, [&] { return cache.get("fast", [] { return std::make_shared<const int>(2); }); });
   const bool served = other.wait_for(std::chrono::seconds(10)) == std::future_status::ready;
   slow.gate.set_value();  // let the slow one finish either way, so that a failure does not hang the test
   EXPECT_TRUE(served) << "a caller of another key waited for the value being made";

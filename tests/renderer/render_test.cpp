@@ -330,8 +330,11 @@ TEST(Transport, EstimatorsAgreeUnderAnEnvironmentMap) {
   json doc = {
       {"materials", {{"grey", {{"type", "lambert"}, {"albedo", 0.6}}}}},
       {"objects", json::array({{{"shape", "sphere"}, {"center", {0, 1, 0}}, {"radius", 1}, {"material", "grey"}},
-                               {{"shape", "rectangle"}, {"corner", {-4, 0, 4}}, {"edge1", {8, 0, 0}},
-                                {"edge2", {0, 0, -8}}, {"material", "grey"}}})},
+                               {{"shape", "rectangle"},
+                                {"corner", {-4, 0, 4}},
+                                {"edge1", {8, 0, 0}},
+                                {"edge2", {0, 0, -8}},
+                                {"material", "grey"}}})},
       {"camera", {{"from", {0, 2, 5}}, {"to", {0, 0.8, 0}}, {"fov_deg", 45}}},
   };
   const int size = 32, runs = 24;
@@ -388,7 +391,8 @@ TEST(Sampler, SobolIsNotWorseThanIndependentAtEqualSpp) {
       RenderSettings s = settings(32, 32, 16, Estimator::kMis, 10 + seed);
       s.sampler = k == 0 ? SamplerKind::kIndependent : SamplerKind::kSobol;
       Image img = render(scene, s);
-      for (size_t i = 0; i < img.rgb.size(); ++i) mse[k] += sqr(img.rgb[i] - reference.rgb[i]) / (img.rgb.size() * seeds);
+      for (size_t i = 0; i < img.rgb.size(); ++i)
+        mse[k] += sqr(img.rgb[i] - reference.rgb[i]) / (img.rgb.size() * seeds);
     }
   std::printf("Cornell 32x32 at 16 spp: RMSE independent %.5f, sobol %.5f (ratio %.2f)\n", std::sqrt(mse[0]),
               std::sqrt(mse[1]), std::sqrt(mse[1] / mse[0]));

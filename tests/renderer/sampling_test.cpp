@@ -69,7 +69,8 @@ TEST(Sampling, QuarterPiCosSinMatchesTheLibrary) {
   for (int i = -100000; i <= 100000; ++i) {
     const float x = static_cast<float>(i) * (kPi / 4) / 100000;
     const Vec2 cs = cos_sin_quarter_pi(x);
-    worst = std::max({worst, std::abs(double(cs.x) - std::cos(double(x))), std::abs(double(cs.y) - std::sin(double(x)))});
+    worst =
+        std::max({worst, std::abs(double(cs.x) - std::cos(double(x))), std::abs(double(cs.y) - std::sin(double(x)))});
   }
   EXPECT_LT(worst, 1.5e-7);  // 2.5 float ulps at 0.7
   // And the map stays on the disk.

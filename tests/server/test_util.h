@@ -56,7 +56,9 @@ inline nlohmann::json cornell_job(int size, int spp) {
   return doc;
 }
 // A job that renders until cancelled (on two threads, 65536 spp of 128x128 take minutes).
-inline nlohmann::json long_cornell_job() { return cornell_job(128, 65536); }
+inline nlohmann::json long_cornell_job() {
+  return cornell_job(128, 65536);
+}
 
 // One triangle as an upload: tri.gltf, padded with `padding` bytes of extras (which loaders ignore), and its tri.bin;
 // (file name, bytes) pairs.
