@@ -7,8 +7,10 @@
 #include <array>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <set>
 
+#include "renderer/gltf_container.h"
 #include "renderer/image_io.h"
 #include "renderer/scene_error.h"
 #include "renderer/thread_pool.h"
@@ -387,11 +389,13 @@ std::string decode_image(const std::vector<unsigned char>& bytes, size_t index, 
 
 // Decodes every image tinygltf kept encoded, in parallel (decoding is most of a textured asset's load time), freeing
 // the encoded bytes as it goes; with `headers_only`, checks their headers and gives 1x1 stand-ins. Throws the first
-// problem, by image index, as a SceneError at `pointer`.
+// problem, by image index, as a SceneError at `pointer`; LoadStopped once `stop` is asked to stop.
 std::vector<std::shared_ptr<const ImagePixels>> decode_images(tinygltf::Model* model, size_t max_pixels,
-                                                              bool headers_only, const std::string& pointer) {
+                                                              bool headers_only, const std::string& pointer,
+                                                              const std::stop_token& stop) {
   std::vector<std::shared_ptr<const ImagePixels>> decoded(model->images.size());
   run_in_parallel(decoded.size(), [&](size_t i) {
+    if (stop.stop_requested()) throw LoadStopped();
     tinygltf::Image& img = model->images[i];
     if (!img.as_is) return;
     std::string problem = "image " + std::to_string(i) + " cannot be decoded: it has no bytes";
@@ -416,34 +420,21 @@ json parse_extensions(const std::string& text) {
   return j.is_object() ? j : json::object();
 }
 
-// Reads the JSON part of a .gltf or .glb, checking the binary container's framing.
+// Reads the JSON part of a .gltf or .glb, checking the binary container's framing (parse_glb).
 json container_json(const std::vector<unsigned char>& bytes, bool* binary, const std::string& pointer) {
-  *binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+  const std::string_view view(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  *binary = is_glb(view);
   if (!*binary) {
     json j = json::parse(bytes.begin(), bytes.end(), nullptr, false);
     if (j.is_discarded() || !j.is_object()) throw SceneError(pointer, "the file is neither a .glb nor glTF JSON");
     return j;
   }
-  auto u32 = [&](size_t off) {
-    uint32_t v;
-    std::memcpy(&v, bytes.data() + off, 4);
-    return v;
-  };
-  if (bytes.size() < 20) throw SceneError(pointer, "the .glb is truncated (no header)");
-  if (u32(4) != 2) throw SceneError(pointer, "the .glb has container version " + std::to_string(u32(4)) + ", not 2");
-  if (u32(8) > bytes.size())
-    throw SceneError(pointer,
-                     "the .glb declares " + std::to_string(u32(8)) + " bytes but has " + std::to_string(bytes.size()));
-  uint32_t json_len = u32(12);
-  if (u32(16) != 0x4E4F534Au) throw SceneError(pointer, "the .glb's first chunk is not JSON");
-  if (json_len > bytes.size() - 20) throw SceneError(pointer, "the .glb's JSON chunk is longer than the file");
-  json j = json::parse(bytes.begin() + 20, bytes.begin() + 20 + json_len, nullptr, false);
+  auto chunks = parse_glb(view);
+  if (auto* problem = std::get_if<std::string>(&chunks))
+    throw SceneError(pointer, "the .glb is malformed: " + *problem);
+  const std::string_view text = std::get<GlbChunks>(chunks).json;
+  json j = json::parse(text.begin(), text.end(), nullptr, false);
   if (j.is_discarded() || !j.is_object()) throw SceneError(pointer, "the .glb's JSON chunk is not valid JSON");
-  size_t next = 20 + ((json_len + 3) & ~3u);
-  if (next + 8 <= bytes.size()) {
-    uint32_t bin_len = u32(next);
-    if (bin_len > bytes.size() - next - 8) throw SceneError(pointer, "the .glb's binary chunk is longer than the file");
-  }
   return j;
 }
 
@@ -557,6 +548,35 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
   return p;
 }
 
+// The node instances a walk from `roots` makes: a node counts once per path that reaches it. The specification wants
+// the hierarchy to be disjoint trees (glTF 2.0, section 3.5.3), where this is the number of nodes; a file whose nodes
+// share children is still read (as instancing), and its count grows with the paths: a chain of n nodes each listing
+// the next four times makes 4^n. Counted per node once (memoised), in time linear in the nodes and child lists;
+// returns at most limit + 1. Throws SceneError at `pointer` for a cycle, a node that does not exist or a hierarchy
+// deeper than 256 levels.
+uint64_t count_node_instances(const tinygltf::Model& model, const std::vector<int>& roots, uint64_t limit,
+                              const std::string& pointer) {
+  const int nodes = static_cast<int>(model.nodes.size());
+  std::vector<uint64_t> subtree(model.nodes.size(), 0);  // instances a node makes with its descendants; 0: not counted
+  std::vector<bool> on_path(model.nodes.size(), false);
+  std::function<uint64_t(int, int)> count = [&](int n, int depth) -> uint64_t {
+    if (n < 0 || n >= nodes) throw SceneError(pointer, "node " + std::to_string(n) + " does not exist");
+    if (on_path[n]) throw SceneError(pointer, "node " + std::to_string(n) + " is its own ancestor (a cycle)");
+    if (depth > 256) throw SceneError(pointer, "the node hierarchy is deeper than 256 levels");
+    if (subtree[n] == 0) {
+      on_path[n] = true;
+      uint64_t total = 1;
+      for (int child : model.nodes[n].children) total = std::min(total + count(child, depth + 1), limit + 1);
+      on_path[n] = false;
+      subtree[n] = total;
+    }
+    return subtree[n];
+  };
+  uint64_t total = 0;
+  for (int root : roots) total = std::min(total + count(root, 0), limit + 1);
+  return total;
+}
+
 }  // namespace
 
 std::string gltf_uri_problem(const std::string& uri) {
@@ -573,6 +593,9 @@ std::string gltf_uri_problem(const std::string& uri) {
 
 GltfImport import_gltf(const std::filesystem::path& path, const std::string& pointer, Scene& scene,
                        const GltfImportOptions& options) {
+  const auto check_stop = [&options] {
+    if (options.stop.stop_requested()) throw LoadStopped();
+  };
   GltfImport result;
   std::error_code ec;
   auto size = std::filesystem::file_size(path, ec);
@@ -627,10 +650,30 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     throw SceneError(pointer, "the glTF asset is invalid: " + (err.empty() ? std::string("tinygltf failed") : err));
   }
 
+  // The nodes to render, and how many instances of them the walk will make: bounded before anything is made.
+  std::vector<int> roots;
+  int scene_index = model.defaultScene >= 0 ? model.defaultScene : (model.scenes.empty() ? -1 : 0);
+  if (scene_index >= 0 && scene_index < static_cast<int>(model.scenes.size())) {
+    roots = model.scenes[scene_index].nodes;
+  } else {
+    // No scenes: render every node that is nobody's child.
+    std::vector<bool> is_child(model.nodes.size(), false);
+    for (const auto& n : model.nodes)
+      for (int c : n.children)
+        if (c >= 0 && c < static_cast<int>(is_child.size())) is_child[c] = true;
+    for (size_t i = 0; i < model.nodes.size(); ++i)
+      if (!is_child[i]) roots.push_back(static_cast<int>(i));
+  }
+  if (count_node_instances(model, roots, options.max_instances, pointer) > options.max_instances)
+    throw SceneError(pointer, "the node hierarchy makes more than " + std::to_string(options.max_instances) +
+                                  " node instances, the limit (a node counts once per path to it from the scene: "
+                                  "children that nodes share multiply)");
+  check_stop();
+
   // Images, decoded once, shared by every texture that uses them (as "#image<i>").
   MaterialContext mctx;
   std::vector<std::shared_ptr<const ImagePixels>> images =
-      decode_images(&model, options.max_texture_pixels, options.headers_only, pointer);
+      decode_images(&model, options.max_texture_pixels, options.headers_only, pointer, options.stop);
   for (size_t i = 0; i < images.size(); ++i)
     if (images[i]) mctx.images["image" + std::to_string(i)] = std::move(images[i]);
 
@@ -641,6 +684,7 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       doc.contains("materials") && doc["materials"].is_array() ? doc["materials"] : no_materials;
   std::vector<uint32_t> material_index(model.materials.size());
   for (size_t i = 0; i < model.materials.size(); ++i) {
+    check_stop();
     const tinygltf::Material& m = model.materials[i];
     if (auto it = options.material_overrides.find(m.name); !m.name.empty() && it != options.material_overrides.end()) {
       material_index[i] = it->second;
@@ -722,6 +766,7 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     const Mat4 nmat = normal_matrix(world);
     std::vector<Mesh> out;
     for (const tinygltf::Primitive& prim : model.meshes[mesh_index].primitives) {
+      check_stop();
       if (prim.mode != TINYGLTF_MODE_TRIANGLES && prim.mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
           prim.mode != TINYGLTF_MODE_TRIANGLE_FAN) {
         result.warnings.push_back("mesh " + std::to_string(mesh_index) + ": points and lines are not rendered");
@@ -825,6 +870,7 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     if (node_index < 0 || node_index >= static_cast<int>(model.nodes.size()))
       throw SceneError(pointer, "node " + std::to_string(node_index) + " does not exist");
     if (depth > 256) throw SceneError(pointer, "the node hierarchy is deeper than 256 levels (a cycle?)");
+    check_stop();
     const tinygltf::Node& node = model.nodes[node_index];
     const Mat4 world = multiply(parent, local_matrix(node));
 
@@ -918,23 +964,11 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     for (int child : node.children) visit(child, world, depth + 1);
   };
 
-  std::vector<int> roots;
-  int scene_index = model.defaultScene >= 0 ? model.defaultScene : (model.scenes.empty() ? -1 : 0);
-  if (scene_index >= 0 && scene_index < static_cast<int>(model.scenes.size())) {
-    roots = model.scenes[scene_index].nodes;
-  } else {
-    // No scenes: render every node that is nobody's child.
-    std::vector<bool> is_child(model.nodes.size(), false);
-    for (const auto& n : model.nodes)
-      for (int c : n.children)
-        if (c >= 0 && c < static_cast<int>(is_child.size())) is_child[c] = true;
-    for (size_t i = 0; i < model.nodes.size(); ++i)
-      if (!is_child[i]) roots.push_back(static_cast<int>(i));
-  }
   // Meshes that several nodes reference are instanced, unless they emit (lights are sampled in world space).
   std::map<int, int> references;
   std::function<void(int, int)> census = [&](int n, int depth) {
     if (n < 0 || n >= static_cast<int>(model.nodes.size()) || depth > 256) return;
+    check_stop();
     if (model.nodes[n].mesh >= 0) ++references[model.nodes[n].mesh];
     for (int c : model.nodes[n].children) census(c, depth + 1);
   };

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <map>
+#include <stop_token>
 #include <string>
 #include <vector>
 
@@ -31,13 +32,19 @@ struct GltfImportOptions {
   std::map<std::string, uint32_t> material_overrides;
   size_t max_triangles = 50'000'000;
   size_t max_texture_pixels = 64u << 20;
+  // Node instances: every path from a scene's roots to a node counts, since nodes may share children (a chain where
+  // each node lists the next four times is 4^n instances of a few nodes). Above it, SceneError naming the limit.
+  uint64_t max_instances = 1'000'000;
+  // Asked to stop (shutdown, cancel), the import ends soon with LoadStopped.
+  std::stop_token stop;
   // Images are checked from their headers (they open, within max_texture_pixels) and stand in as 1x1 white: for a
   // scene that is checked, not rendered.
   bool headers_only = false;
 };
 
 // Appends the default scene of the glTF file `path` (.glb or .gltf) to `scene`. URIs inside may name only files in
-// the same folder as `path` or data: URIs. Throws SceneError at `pointer` naming what is wrong.
+// the same folder as `path` or data: URIs. Throws SceneError at `pointer` naming what is wrong, LoadStopped when
+// options.stop is asked to stop.
 GltfImport import_gltf(const std::filesystem::path& path, const std::string& pointer, Scene& scene,
                        const GltfImportOptions& options);
 

@@ -16,6 +16,13 @@ class SceneError : public std::runtime_error {
   std::string pointer_;
 };
 
+// A scene load given up because its stop token was asked to stop (a daemon shutting down, a job cancelled or paused):
+// no fault of the document.
+class LoadStopped : public std::runtime_error {
+ public:
+  LoadStopped() : std::runtime_error("the scene load was stopped") {}
+};
+
 // RFC 6901 escaping of one reference token.
 inline std::string json_pointer_token(const std::string& key) {
   std::string out;

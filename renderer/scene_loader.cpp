@@ -203,6 +203,7 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     // load). Of several bad materials, the first in document order is reported (run_in_parallel's rule).
     std::vector<std::unique_ptr<Material>> made(items.size());
     run_in_parallel(items.size(), [&](size_t i) {
+      if (options.stop.stop_requested()) throw LoadStopped();
       made[i] = MaterialRegistry::builtin().create(*items[i].second, at(mp, items[i].first), mctx);
     });
     for (size_t i = 0; i < items.size(); ++i) {
@@ -221,6 +222,8 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     gopts.material_overrides = names;
     gopts.max_triangles = options.max_triangles;
     gopts.headers_only = !options.build;
+    gopts.max_instances = options.max_gltf_instances;
+    gopts.stop = options.stop;
     gltf = import_gltf(resolve(options, *it, gp), gp, *scene, gopts);
     has_gltf = true;
     for (const std::string& w : gltf.warnings) scene->warnings.push_back(w);
@@ -233,6 +236,7 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
   if (!objects.is_array()) throw SceneError(op, "must be an array of objects");
   size_t triangles = scene->triangle_count();
   for (size_t i = 0; i < objects.size(); ++i) {
+    if (options.stop.stop_requested()) throw LoadStopped();
     const json& obj = objects[i];
     const std::string p = at(op, i);
     if (!obj.is_object()) throw SceneError(p, "must be an object");
@@ -362,6 +366,7 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
         "the scene has no environment or punctual light; a uniform white environment of "
         "radiance 1 was added");
   }
+  if (options.stop.stop_requested()) throw LoadStopped();
   if (options.build) scene->finalize_with_lights(punctual);
   return scene;
 }

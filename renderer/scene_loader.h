@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <stop_token>
 
 #include <nlohmann/json.hpp>
 
@@ -17,6 +18,9 @@ struct SceneLoadOptions {
   // Folder that file references inside the scene (textures, glTF) resolve against; empty: none allowed.
   std::filesystem::path asset_root;
   size_t max_triangles = 50'000'000;
+  uint64_t max_gltf_instances = 1'000'000;  // GltfImportOptions::max_instances
+  // Asked to stop (a daemon shutting down, a job cancelled or paused), load_scene ends soon with LoadStopped.
+  std::stop_token stop;
   // false: check the document and make its objects but build no lights or acceleration structure, and check images
   // (textures, environment maps) from their headers without reading their pixels (for validating a job at
   // submission, cheaply); the scene is then not renderable.

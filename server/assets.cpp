@@ -5,12 +5,12 @@
 
 #include <algorithm>
 #include <atomic>
-#include <cstring>
 #include <fstream>
 #include <set>
 #include <sstream>
 #include <system_error>
 
+#include "renderer/gltf_container.h"
 #include "renderer/gltf_loader.h"
 #include "renderer/scene_error.h"
 #include "renderer/scene_loader.h"
@@ -34,40 +34,6 @@ std::string lower_ext(const std::string& name) {
 
 Problem invalid(const std::string& detail) {
   return Problem{422, detail, std::nullopt};
-}
-
-uint32_t u32(const std::string& b, size_t at) {
-  uint32_t v;
-  std::memcpy(&v, b.data() + at, 4);
-  return v;
-}
-
-// A .glb container (glTF 2.0 spec, 4.4): header, a JSON chunk, an optional BIN chunk, lengths that add up.
-// Returns the JSON chunk's text or a problem.
-std::variant<std::string, Problem> glb_json(const UploadFile& f) {
-  const std::string& b = f.bytes;
-  const std::string where = f.name + ": ";
-  if (b.size() < 20) return invalid(where + "truncated: a .glb has a 12-byte header and a JSON chunk");
-  if (std::memcmp(b.data(), "glTF", 4) != 0) return invalid(where + "not a binary glTF (wrong magic)");
-  if (u32(b, 4) != 2) return invalid(where + "binary glTF version " + std::to_string(u32(b, 4)) + ", expected 2");
-  if (u32(b, 8) != b.size())
-    return invalid(where + "the header declares " + std::to_string(u32(b, 8)) + " bytes but the file has " +
-                   std::to_string(b.size()) + " (truncated or padded)");
-  std::string json_text;
-  size_t at = 12;
-  for (int chunk = 0; at < b.size(); ++chunk) {
-    if (b.size() - at < 8) return invalid(where + "truncated chunk header at byte " + std::to_string(at));
-    const uint32_t length = u32(b, at), type = u32(b, at + 4);
-    if (length > b.size() - at - 8)
-      return invalid(where + "chunk " + std::to_string(chunk) + " declares " + std::to_string(length) +
-                     " bytes, beyond the end of the file");
-    if (chunk == 0) {
-      if (type != 0x4E4F534A) return invalid(where + "the first chunk is not JSON");
-      json_text.assign(b, at + 8, length);
-    }
-    at += 8 + length;
-  }
-  return json_text;
 }
 
 std::string read_file(const fs::path& p) {
@@ -127,7 +93,8 @@ std::string sha256_hex(std::string_view bytes) {
   return out;
 }
 
-DirectoryAssetStore::DirectoryAssetStore(const fs::path& data_dir) : root_(data_dir / "assets") {
+DirectoryAssetStore::DirectoryAssetStore(const fs::path& data_dir, AssetCheckOptions check)
+    : root_(data_dir / "assets"), check_(std::move(check)) {
   fs::create_directories(root_);
   // Temp dirs of uploads a crash interrupted.
   std::error_code ec;
@@ -177,9 +144,9 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
     const UploadFile& main = *scenes[0];
     std::string text;
     if (lower_ext(main.name) == ".glb") {
-      auto r = glb_json(main);
-      if (auto* p = std::get_if<Problem>(&r)) return *p;
-      text = std::get<std::string>(r);
+      auto chunks = parse_glb(main.bytes);
+      if (auto* problem = std::get_if<std::string>(&chunks)) return invalid(main.name + ": " + *problem);
+      text = std::get<GlbChunks>(chunks).json;
     } else {
       text = main.bytes;
     }
@@ -228,6 +195,8 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
     // The asset as the renderer will load it: a malformed buffer or accessor is refused now, not at render time.
     SceneLoadOptions options;
     options.build = false;
+    options.max_gltf_instances = check_.max_gltf_instances;
+    options.stop = check_.stop;
     options.resolve_asset = [&](const std::string&, const std::string&) { return temp / info.main; };
     json scene;
     if (info.kind == "gltf") {
@@ -246,6 +215,9 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
       for (size_t at; (at = what.find(temp.string() + "/")) != std::string::npos;)
         what.erase(at, temp.string().size() + 1);
       return invalid(info.main + ": " + what);
+    } catch (const LoadStopped&) {
+      fs::remove_all(temp, ec);
+      return stopping_problem();
     }
     json meta = info.to_json();
     meta["owners"] = info.owners;

@@ -12,6 +12,7 @@
 #include <functional>
 #include <mutex>
 #include <optional>
+#include <stop_token>
 #include <string>
 #include <variant>
 #include <vector>
@@ -53,8 +54,8 @@ class AssetStore {
   virtual ~AssetStore() = default;
 
   // The asset, stored or found already stored (`owner` is then added to its owners); or why not: 4xx for the
-  // upload's fault, 507 when the disk ran out of room while it was written (ENOSPC, EDQUOT, EFBIG). A refused upload
-  // leaves no file behind.
+  // upload's fault, 507 when the disk ran out of room while it was written (ENOSPC, EDQUOT, EFBIG), 503 when the
+  // daemon began stopping during the check. A refused upload leaves no file behind.
   virtual std::variant<StoredAsset, Problem> store(std::vector<UploadFile> files, const std::string& owner) = 0;
   virtual std::optional<AssetInfo> get(const std::string& id) const = 0;
   // Takes `owner` off the asset's owners, and removes its files once it has none; without an owner, removes it
@@ -64,10 +65,16 @@ class AssetStore {
   virtual std::optional<std::filesystem::path> main_file(const std::string& id, const std::string& kind) const = 0;
 };
 
+// How an upload is checked by loading it as the renderer will.
+struct AssetCheckOptions {
+  uint64_t max_gltf_instances = 1'000'000;  // SceneLoadOptions::max_gltf_instances
+  std::stop_token stop;                     // the daemon stopping: a check under way ends, and the upload is 503
+};
+
 // The assets in the data directory, <data>/assets/<id>/.
 class DirectoryAssetStore final : public AssetStore {
  public:
-  explicit DirectoryAssetStore(const std::filesystem::path& data_dir);
+  explicit DirectoryAssetStore(const std::filesystem::path& data_dir, AssetCheckOptions check = {});
 
   std::variant<StoredAsset, Problem> store(std::vector<UploadFile> files, const std::string& owner) override;
   std::optional<AssetInfo> get(const std::string& id) const override;
@@ -78,6 +85,7 @@ class DirectoryAssetStore final : public AssetStore {
   // Rewrites an asset's metadata (its owners) in place, atomically; false when it cannot.
   bool write_meta(const AssetInfo& info);
   std::filesystem::path root_;
+  AssetCheckOptions check_;
   std::mutex owners_mutex_;  // owners are read, changed and written back under it
 };
 

@@ -34,16 +34,17 @@ struct Config {
   std::string tokens_file;      // bearer tokens; empty: no authentication
   int max_user_priority = 100;  // above it, admin only (403)
   std::vector<std::string> cors_origins;
-  int max_queued_per_user = 0;             // 0: no limit; above it 429
-  double max_work = 0;                     // width x height x spp x max_depth; 0: no limit; above it 422
-  double grace_s = 20;                     // SIGTERM: running jobs end their pass and checkpoint within this
-  int http_threads = 64;                   // workers for ordinary requests (not event streams, not idle connections)
-  int max_event_streams = 256;             // event streams sent at once (each holds a thread of its own); more: 503
-  int max_connections = 1024;              // open connections; more: 503
-  int max_connections_per_client = 32;     // open connections of one remote address; more: 429; 0: no cap
-  double header_timeout_s = 10;            // a request's line and headers must arrive within this; else 408
-  uint64_t min_transfer_rate = 16u << 10;  // bytes/s a body or response must average after 10 s; 0: no minimum
-  int keepalive_s = 15;                    // SSE heartbeat period
+  int max_queued_per_user = 0;              // 0: no limit; above it 429
+  double max_work = 0;                      // width x height x spp x max_depth; 0: no limit; above it 422
+  uint64_t max_gltf_instances = 1'000'000;  // node instances of a glTF (paths through its hierarchy); above: 422
+  double grace_s = 20;                      // SIGTERM: running jobs end their pass and checkpoint within this
+  int http_threads = 64;                    // workers for ordinary requests (not event streams, not idle connections)
+  int max_event_streams = 256;              // event streams sent at once (each holds a thread of its own); more: 503
+  int max_connections = 1024;               // open connections; more: 503
+  int max_connections_per_client = 32;      // open connections of one remote address; more: 429; 0: no cap
+  double header_timeout_s = 10;             // a request's line and headers must arrive within this; else 408
+  uint64_t min_transfer_rate = 16u << 10;   // bytes/s a body or response must average after 10 s; 0: no minimum
+  int keepalive_s = 15;                     // SSE heartbeat period
   uint64_t min_free_disk_bytes = 256ull << 20;  // below it on the data dir's filesystem, new jobs/assets are 507
   int64_t retain_finished_s = 0;                // finished jobs older than this are deleted; 0: kept forever
 };

@@ -90,7 +90,13 @@ int run(const Config& config) {
     store = std::make_unique<SqliteJobStore>(data_dir / "jobs.db");
   }
   std::unique_ptr<JobFiles> files = std::make_unique<DirectoryJobFiles>(data_dir);
-  std::unique_ptr<AssetStore> assets = std::make_unique<DirectoryAssetStore>(data_dir);
+  // Asked to stop at SIGTERM/SIGINT: every scene load and asset check under way ends (a render's load, an upload's
+  // check, a submitted job's check), so that none holds the daemon past --grace-s.
+  std::stop_source stopping;
+  AssetCheckOptions asset_check;
+  asset_check.max_gltf_instances = config.max_gltf_instances;
+  asset_check.stop = stopping.get_token();
+  std::unique_ptr<AssetStore> assets = std::make_unique<DirectoryAssetStore>(data_dir, asset_check);
   std::unique_ptr<EventBus> events = std::make_unique<EventHub>();
   tessera::ThreadPool pool(config.threads);
   // Loading (image decoding, mip levels, environment maps) borrows at most as many extra threads as render threads.
@@ -103,6 +109,7 @@ int run(const Config& config) {
   scheduler_options.limits.max_height = config.max_height;
   scheduler_options.limits.max_spp = config.max_spp;
   scheduler_options.resolve_asset = asset_resolver(*assets);
+  scheduler_options.max_gltf_instances = config.max_gltf_instances;
   Scheduler scheduler(*store, *files, pool, scheduler_options);
   JobServiceOptions service_options;
   service_options.max_user_priority = config.max_user_priority;
@@ -113,6 +120,8 @@ int run(const Config& config) {
   limits.render = scheduler_options.limits;
   limits.max_work = config.max_work;
   limits.resolve_asset = scheduler_options.resolve_asset;
+  limits.max_gltf_instances = config.max_gltf_instances;
+  limits.stop = stopping.get_token();
   ApiContext ctx{jobs,
                  *assets,
                  *events,
@@ -183,6 +192,7 @@ int run(const Config& config) {
       }
       log(LogLevel::kInfo, "stopping: no new jobs; running ones end their pass and checkpoint",
           {{"signal", sig == SIGINT ? "SIGINT" : "SIGTERM"}, {"grace_s", config.grace_s}});
+      stopping.request_stop();
       scheduler.begin_drain();
       retention.stop();
       events->close();

@@ -66,4 +66,8 @@ Problem insufficient_storage(const std::string& why, const std::string& kept) {
   return Problem{507, why + "; " + kept + ". Retry once finished jobs or assets have been deleted", std::nullopt};
 }
 
+Problem stopping_problem() {
+  return Problem{503, "the daemon is shutting down; nothing was stored. Retry shortly", std::nullopt, 5};
+}
+
 }  // namespace tessera::server

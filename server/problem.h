@@ -33,4 +33,8 @@ inline constexpr const char* kProblemMediaType = "application/problem+json";
 // all the same.
 Problem insufficient_storage(const std::string& why, const std::string& kept = "nothing was stored");
 
+// 503: the daemon is stopping, and gave up checking what the request sent (a scene or an asset being loaded);
+// nothing was stored. Retry-After: 5 (another instance, or this one restarted).
+Problem stopping_problem();
+
 }  // namespace tessera::server

@@ -24,6 +24,7 @@ class Scheduler::RenderSlot {
  public:
   std::string id;
   RenderSession* session = nullptr;  // set while the render runs
+  std::stop_source load_stop;        // asked to stop with the render: ends the scene's load (LoadStopped)
   bool cancel_requested = false;     // by a client: the job ends cancelled
   bool pause_requested = false;      // by a client: the job ends its pass and is paused
   bool delete_requested = false;     // by a client: the job is gone, its files go when the render stops
@@ -134,8 +135,10 @@ void Scheduler::begin_drain() {
     std::lock_guard lock(mutex_);
     if (!started_) return;
     stopping_ = true;
-    for (auto& [id, slot] : running_)
+    for (auto& [id, slot] : running_) {
+      slot->load_stop.request_stop();  // a load has no pass to end: it stops now, and the job is requeued
       if (slot->session) slot->session->stop();
+    }
   }
   cv_.notify_all();
 }
@@ -156,8 +159,10 @@ void Scheduler::shutdown(double grace_s) {
       cv_.wait_for(lock, std::chrono::milliseconds(20));
     }
     // Out of time: abandon the passes under way; the last checkpoints stay.
-    for (auto& [id, slot] : running_)
+    for (auto& [id, slot] : running_) {
+      slot->load_stop.request_stop();
       if (slot->session) slot->session->cancel();
+    }
   }
   cv_.notify_all();
   if (dispatcher_.joinable()) dispatcher_.join();
@@ -216,11 +221,45 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     slot->session = nullptr;
   };
   double render_s = 0;
+  // A render (or a load) that stopped before its end: the job is deleted, cancelled, paused or (the daemon stopping)
+  // back in the queue, to resume from its last checkpoint.
+  const auto end_interrupted = [&](uint32_t samples_done) {
+    bool cancelled_by_client, paused, deleted;
+    {
+      std::lock_guard lock(mutex_);
+      cancelled_by_client = slot->cancel_requested;
+      paused = slot->pause_requested;
+      deleted = slot->delete_requested;
+    }
+    // The end of the run goes to the store through record_end(): retried while the store fails; when the daemon
+    // stops first, the job stays running in the store, with its checkpoint, for the next start to resume.
+    if (deleted) {
+      log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
+    } else if (cancelled_by_client) {
+      log_.add(id, printf_string("cancelled by a client at %u spp", static_cast<unsigned>(samples_done)));
+      if (record_terminal(*slot, JobState::kCancelled, render_s, "cancelled"))
+        log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+    } else if (paused) {
+      log_.add(id, printf_string("paused by a client at %u spp; its checkpoint is kept",
+                                 static_cast<unsigned>(samples_done)));
+      if (record_end(*slot, [&] { return store_.transition(id, JobState::kPaused, now_ms()); }))
+        log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", samples_done}});
+    } else {
+      // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
+      log_.add(id, printf_string("the daemon is stopping: back in the queue at %u spp, to resume from its checkpoint",
+                                 static_cast<unsigned>(samples_done)));
+      if (record_end(*slot, [&] { return store_.transition(id, JobState::kQueued, now_ms()); }))
+        log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
+            {{"job", id}, {"samples_done", samples_done}});
+    }
+  };
   try {
     const json doc = json::parse(record.document);
     JobLoadOptions options;
     options.limits = options_.limits;
     options.scene.resolve_asset = options_.resolve_asset;
+    options.scene.max_gltf_instances = options_.max_gltf_instances;
+    options.scene.stop = slot->load_stop.get_token();
     log_.add(id, "loading the scene");
     const auto load_start = std::chrono::steady_clock::now();
     const RenderJob job = load_job(doc, options);
@@ -299,35 +338,14 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     detach();
     render_s = session.progress().elapsed_s;
 
-    bool cancelled_by_client, paused, deleted;
+    bool deleted;
     {
       std::lock_guard lock(mutex_);
-      cancelled_by_client = slot->cancel_requested;
-      paused = slot->pause_requested;
       deleted = slot->delete_requested;
     }
-    // The end of the run goes to the store through record_end(): retried while the store fails; when the daemon
-    // stops first, the job stays running in the store, with its checkpoint, for the next start to resume.
     const bool interrupted = reason == StopReason::kStopped || reason == StopReason::kCancelled;
-    if (deleted) {
-      log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
-    } else if (interrupted && cancelled_by_client) {
-      log_.add(
-          id, printf_string("cancelled by a client at %u spp", static_cast<unsigned>(session.progress().samples_done)));
-      if (record_terminal(*slot, JobState::kCancelled, render_s, "cancelled"))
-        log(LogLevel::kInfo, "job cancelled", {{"job", id}});
-    } else if (interrupted && paused) {
-      log_.add(id, printf_string("paused by a client at %u spp; its checkpoint is kept",
-                                 static_cast<unsigned>(session.progress().samples_done)));
-      if (record_end(*slot, [&] { return store_.transition(id, JobState::kPaused, now_ms()); }))
-        log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", session.progress().samples_done}});
-    } else if (interrupted) {
-      // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
-      log_.add(id, printf_string("the daemon is stopping: back in the queue at %u spp, to resume from its checkpoint",
-                                 static_cast<unsigned>(session.progress().samples_done)));
-      if (record_end(*slot, [&] { return store_.transition(id, JobState::kQueued, now_ms()); }))
-        log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
-            {{"job", id}, {"samples_done", session.progress().samples_done}});
+    if (deleted || interrupted) {
+      end_interrupted(session.progress().samples_done);
     } else {
       // The outputs first: a file that cannot be written (a full disk) fails the job, as it should.
       const Film& film = session.film();
@@ -359,6 +377,9 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
              {"stop_reason", stop_reason_name(reason)}});
       }
     }
+  } catch (const LoadStopped&) {
+    detach();
+    end_interrupted(0);
   } catch (const std::exception& e) {
     detach();
     std::string message = e.what();
@@ -479,6 +500,7 @@ Scheduler::Outcome Scheduler::cancel(const std::string& id) {
     std::lock_guard lock(mutex_);
     if (auto it = running_.find(id); it != running_.end() && !it->second->done) {
       it->second->cancel_requested = true;
+      it->second->load_stop.request_stop();
       if (it->second->session) it->second->session->cancel();
       return Outcome::kInProgress;
     }
@@ -499,6 +521,7 @@ Scheduler::Outcome Scheduler::pause(const std::string& id) {
     if (auto it = running_.find(id); it != running_.end() && !it->second->done) {
       if (it->second->cancel_requested || it->second->delete_requested) return Outcome::kConflict;
       it->second->pause_requested = true;
+      it->second->load_stop.request_stop();
       if (it->second->session) it->second->session->stop();
       return Outcome::kInProgress;
     }
@@ -550,6 +573,7 @@ bool Scheduler::remove(const std::string& id, std::optional<int64_t> only_finish
     // round, the render would stop and its files go while the store kept the job running, with no render behind it.
     store_.remove(id);
     it->second->delete_requested = true;
+    it->second->load_stop.request_stop();
     if (it->second->session) it->second->session->cancel();
     return true;  // the render's thread removes the files once it has stopped writing them
   }

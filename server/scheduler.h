@@ -31,6 +31,7 @@ struct SchedulerOptions {
   RenderLimits limits;
   // Maps an asset reference of a job ("gltf", "environment.map") to its file (SceneLoadOptions::resolve_asset).
   std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
+  uint64_t max_gltf_instances = 1'000'000;  // SceneLoadOptions::max_gltf_instances
   // How often the queue is looked at without being woken (jobs another process may have added).
   std::chrono::milliseconds poll_interval{1000};
   // The wait before recording a job's end again after the store failed, doubled after each failure up to the max.

@@ -159,12 +159,16 @@ std::variant<AcceptedJob, Problem> check_job_document(json document, const Submi
   JobLoadOptions options;
   options.scene.build = false;  // names, indices and assets are checked; no BVH is built at submission
   options.scene.resolve_asset = limits.resolve_asset;
+  options.scene.max_gltf_instances = limits.max_gltf_instances;
+  options.scene.stop = limits.stop;
   options.limits = limits.render;
   RenderJob render_job;
   try {
     render_job = load_job(job.document, options);
   } catch (const SceneError& e) {
     return Problem{422, e.what(), e.pointer()};
+  } catch (const LoadStopped&) {
+    return stopping_problem();
   }
   const RenderSettings& s = render_job.settings;
   const double work = static_cast<double>(s.width) * s.height * s.spp * std::max(1, s.integrator.max_depth);

@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <stop_token>
 #include <string>
 #include <string_view>
 #include <variant>
@@ -23,6 +24,8 @@ struct SubmissionLimits {
   double max_work = 0;  // width x height x spp x max_depth; 0: no limit
   // Maps asset references (scene.gltf, scene.environment.map) to files; unset: none allowed.
   std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
+  uint64_t max_gltf_instances = 1'000'000;  // SceneLoadOptions::max_gltf_instances
+  std::stop_token stop;                     // the daemon stopping: the check ends with 503
 };
 
 struct AcceptedJob {

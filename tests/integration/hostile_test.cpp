@@ -22,6 +22,7 @@
 
 #include "proto/contract.h"
 #include "tests/integration/daemon.h"
+#include "tests/renderer/gltf_fixture.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server::test {
@@ -666,6 +667,78 @@ TEST_F(HostileTest, TheQueueCapHoldsAtResumeAndRequeue) {
   ASSERT_EQ(c->Post("/v1/jobs/" + d + "/cancel")->status, 200);
   EXPECT_EQ(c->Post("/v1/jobs/" + a + "/resume")->status, 200);
   EXPECT_EQ(state_of(*c, a), "queued");
+}
+
+// ---- glTF assets that multiply: nodes sharing children -------------------------------------------------------------
+
+// A .glb whose node i lists node i + 1 four times, `levels` deep (4^levels paths), as an upload's bytes.
+std::string shared_children_glb(const fs::path& dir, int levels, bool with_mesh) {
+  const fs::path file =
+      tessera::test::shared_children_chain(levels, 4, with_mesh).write_glb(dir, "chain" + std::to_string(levels));
+  std::ifstream in(file, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// Refused at once at upload with 422 naming the limit, however deep (counted per path, not walked).
+TEST_F(HostileTest, AssetsWhoseNodesMultiplyAreRefusedAtOnce) {
+  start({});
+  auto c = daemon_->client();
+  for (int levels : {30, 11}) {
+    const std::string glb = shared_children_glb(dir_ / "fixtures", levels, true);
+    EXPECT_LT(glb.size(), 2048u);
+    const auto started = Clock::now();
+    auto res = c->Post("/v1/assets?name=chain.glb", glb, "model/gltf-binary");
+    ASSERT_TRUE(res) << levels << " levels: no answer";
+    EXPECT_EQ(res->status, 422) << res->body;
+    EXPECT_NE(res->body.find("more than 1000000 node instances, the limit"), std::string::npos) << res->body;
+    EXPECT_LT(Clock::now() - started, std::chrono::seconds(2)) << levels << " levels";
+  }
+  // The limit is --max-gltf-instances: 4^3 triangles pass with 85 node instances, not with 84.
+  daemon_.reset();
+  start({"--max-gltf-instances", "84"});
+  const std::string small = shared_children_glb(dir_ / "fixtures", 3, true);
+  EXPECT_EQ(daemon_->client()->Post("/v1/assets?name=chain.glb", small, "model/gltf-binary")->status, 422);
+  daemon_.reset();
+  start({"--max-gltf-instances", "85"});
+  EXPECT_EQ(daemon_->client()->Post("/v1/assets?name=chain.glb", small, "model/gltf-binary")->status, 201);
+}
+
+// Whether process `pid` has exited (a zombie not yet reaped counts as exited).
+bool exited(pid_t pid) {
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(stat, line)) return true;
+  const size_t paren = line.rfind(')');
+  return paren == std::string::npos || paren + 2 >= line.size() || line[paren + 2] == 'Z';
+}
+
+// SIGTERM stops the daemon within --grace-s while an upload's check loads a scene that takes long (here allowed by
+// a limit raised to 2^50: 4^24 node instances to walk, for hours).
+TEST_F(HostileTest, SigtermStopsTheDaemonDuringALongAssetCheck) {
+  start({"--max-gltf-instances", "1125899906842624", "--grace-s", "2"});
+  const std::string glb = shared_children_glb(dir_ / "fixtures", 24, false);
+  std::optional<int> status;
+  std::string body;
+  std::thread upload([&, port = port()] {
+    httplib::Client c("127.0.0.1", port);
+    c.set_read_timeout(30, 0);
+    if (auto res = c.Post("/v1/assets?name=chain.glb", glb, "model/gltf-binary")) {
+      status = res->status;
+      body = res->body;
+    }
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // the check is under way
+  const pid_t pid = daemon_->pid();
+  ASSERT_EQ(::kill(pid, SIGTERM), 0);
+  const auto deadline = after(2 + 5);  // the grace time, and time to write the log and exit
+  while (!exited(pid) && Clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  const bool stopped = exited(pid);
+  if (!stopped) ::kill(pid, SIGKILL);
+  upload.join();
+  EXPECT_TRUE(stopped) << "still running 7 s after SIGTERM";
+  if (status) {
+    EXPECT_EQ(*status, 503) << body;  // the check was given up: nothing was stored
+  }
 }
 
 }  // namespace

@@ -130,13 +130,15 @@ class GltfBuilder {
     };
     out.insert(out.end(), {'g', 'l', 'T', 'F'});
     u32(2);
-    u32(static_cast<uint32_t>(12 + 8 + j.size() + 8 + b.size()));
+    u32(static_cast<uint32_t>(12 + 8 + j.size() + (b.empty() ? 0 : 8 + b.size())));
     u32(static_cast<uint32_t>(j.size()));
     u32(0x4E4F534A);
     out.insert(out.end(), j.begin(), j.end());
-    u32(static_cast<uint32_t>(b.size()));
-    u32(0x004E4942);
-    out.insert(out.end(), b.begin(), b.end());
+    if (!b.empty()) {  // no buffer, no BIN chunk
+      u32(static_cast<uint32_t>(b.size()));
+      u32(0x004E4942);
+      out.insert(out.end(), b.begin(), b.end());
+    }
     std::filesystem::create_directories(dir);
     auto path = dir / (name + ".glb");
     std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(out.data()), out.size());
@@ -156,8 +158,23 @@ class GltfBuilder {
     nlohmann::json buffer = {{"byteLength", bin.size()}};
     if (!uri.empty()) buffer["uri"] = uri;
     doc["buffers"] = nlohmann::json::array({buffer});
+    if (bin.empty()) doc.erase("buffers");  // a buffer has at least one byte
     if (doc["materials"].empty()) doc.erase("materials");
   }
 };
+
+// Nodes 0..levels below the scene, node i listing node i + 1 `fan_out` times, the last holding one triangle when
+// `with_mesh`. The specification wants the hierarchy to be trees; shared children like these make fan_out^levels
+// paths to the last node from a file of a few hundred bytes.
+inline GltfBuilder shared_children_chain(int levels, int fan_out, bool with_mesh) {
+  GltfBuilder b;
+  for (int i = 0; i <= levels; ++i) {
+    nlohmann::json node = nlohmann::json::object();
+    if (i < levels) node["children"] = std::vector<int>(static_cast<size_t>(fan_out), i + 1);
+    if (i == levels && with_mesh) node["mesh"] = b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, -1);
+    b.node(node, i == 0);
+  }
+  return b;
+}
 
 }  // namespace tessera::test

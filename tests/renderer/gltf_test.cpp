@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <stop_token>
+#include <thread>
 
 #include "renderer/gltf_loader.h"
 #include "renderer/job.h"
@@ -21,6 +23,7 @@ namespace {
 
 using nlohmann::json;
 using test::GltfBuilder;
+using test::shared_children_chain;
 
 std::filesystem::path fixture_dir() {
   // One folder per test process, removed when the process ends.
@@ -312,6 +315,11 @@ TEST(GltfHostile, MalformedContainersAreRefused) {
     bad[4] = 1;  // container version 1
     expect_refused(write_bytes("version.glb", bad), "version");
   }
+  {
+    auto bad = glb;
+    bad.insert(bad.end(), 4, 0);  // longer than the header declares: the container's length is the file's
+    expect_refused(write_bytes("padded.glb", bad), "declares");
+  }
   expect_refused(write_bytes("empty.glb", {}), "neither");
 }
 
@@ -355,6 +363,52 @@ TEST(GltfHostile, InconsistentBuffersAndAccessorsAreRefused) {
     b.write(fixture_dir(), "cycle");
     expect_refused(fixture_dir() / "cycle.gltf", "");
   }
+}
+
+// Nodes may share children (against the specification, which wants trees): the paths through the hierarchy are
+// counted, not the nodes, and refused above the limit before anything is made, at once.
+TEST(GltfHostile, SharedChildrenAreCountedPerPathAndRefusedAboveTheLimit) {
+  for (int levels : {30, 11}) {  // 4^30 and 4^11 instances of one triangle, from files of about 1 KB
+    const auto file = shared_children_chain(levels, 4, true).write_glb(fixture_dir(), "chain" + std::to_string(levels));
+    const auto started = std::chrono::steady_clock::now();
+    expect_refused(file, "more than 1000000 node instances, the limit");
+    EXPECT_LT(std::chrono::steady_clock::now() - started, std::chrono::seconds(1)) << levels << " levels";
+  }
+  // Within the limit, shared children are instances: 4^3 triangles from one mesh, 1 + 4 + 16 + 64 nodes.
+  const auto small = shared_children_chain(3, 4, true).write_glb(fixture_dir(), "chain3");
+  Scene scene;
+  GltfImportOptions options;
+  options.max_instances = 85;
+  import_gltf(small, "/scene/gltf", scene, options);
+  EXPECT_EQ(scene.instances.size(), 64u);
+  Scene again;
+  options.max_instances = 84;
+  EXPECT_THROW(import_gltf(small, "/scene/gltf", again, options), SceneError);
+}
+
+// A load that takes long (here 4^14 node instances, allowed) ends soon after its stop token is asked to stop: a
+// daemon shutting down, a job cancelled or paused.
+TEST(GltfHostile, AStopTokenEndsALongLoad) {
+  const auto file = shared_children_chain(14, 4, false).write_glb(fixture_dir(), "long");
+  std::stop_source stop;
+  GltfImportOptions options;
+  options.max_instances = uint64_t{1} << 40;
+  options.stop = stop.get_token();
+  std::thread stopper([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    stop.request_stop();
+  });
+  const auto started = std::chrono::steady_clock::now();
+  Scene scene;
+  EXPECT_THROW(import_gltf(file, "/scene/gltf", scene, options), LoadStopped);
+  stopper.join();
+  EXPECT_LT(std::chrono::steady_clock::now() - started, std::chrono::seconds(2));
+  // A scene document's load ends the same way.
+  SceneLoadOptions scene_options;
+  scene_options.asset_root = fixture_dir();
+  scene_options.max_gltf_instances = options.max_instances;
+  scene_options.stop = stop.get_token();
+  EXPECT_THROW(load_scene(json{{"gltf", "long.glb"}}, "/scene", scene_options), LoadStopped);
 }
 
 TEST(GltfHostile, RequiredUnsupportedExtensionFailsOptionalWarns) {
