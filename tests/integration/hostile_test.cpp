@@ -691,7 +691,7 @@ TEST_F(HostileTest, AssetsWhoseNodesMultiplyAreRefusedAtOnce) {
     ASSERT_TRUE(res) << levels << " levels: no answer";
     EXPECT_EQ(res->status, 422) << res->body;
     EXPECT_NE(res->body.find("more than 1000000 node instances, the limit"), std::string::npos) << res->body;
-    EXPECT_LT(Clock::now() - started, std::chrono::seconds(2)) << levels << " levels";
+    EXPECT_LT(Clock::now() - started, std::chrono::seconds(5)) << levels << " levels";
   }
   // The limit is --max-gltf-instances: 4^3 triangles pass with 85 node instances, not with 84.
   daemon_.reset();

@@ -402,7 +402,7 @@ TEST(GltfHostile, AStopTokenEndsALongLoad) {
   Scene scene;
   EXPECT_THROW(import_gltf(file, "/scene/gltf", scene, options), LoadStopped);
   stopper.join();
-  EXPECT_LT(std::chrono::steady_clock::now() - started, std::chrono::seconds(2));
+  EXPECT_LT(std::chrono::steady_clock::now() - started, std::chrono::seconds(5));
   // A scene document's load ends the same way.
   SceneLoadOptions scene_options;
   scene_options.asset_root = fixture_dir();
