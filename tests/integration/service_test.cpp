@@ -132,9 +132,10 @@ std::string make_glb(const json& gltf, const std::string& bin) {
   return out;
 }
 
-std::vector<fs::path> shared_glbs() {
+// The sample assets of examples/.
+std::vector<fs::path> example_glbs() {
   std::vector<fs::path> out;
-  const fs::path scenes = fs::path(TESSERA_SOURCE_DIR) / ".." / "shared" / "scenes";
+  const fs::path scenes = fs::path(TESSERA_SOURCE_DIR) / "examples";
   std::error_code ec;
   for (const auto& dir : fs::directory_iterator(scenes, ec))
     for (const auto& f : fs::directory_iterator(dir.path(), ec))
@@ -164,8 +165,8 @@ class ServiceTest : public testing::Test {
 // ---- assets --------------------------------------------------------------------------------------------------
 
 TEST_F(ServiceTest, UploadsTheSampleAssetsAndRendersThem) {
-  const auto glbs = shared_glbs();
-  if (glbs.empty()) GTEST_SKIP() << "no ../shared/scenes/*/*.glb";
+  const auto glbs = example_glbs();
+  ASSERT_GE(glbs.size(), 3u) << "examples/*/*.glb";
   start();
   std::vector<std::string> jobs;
   for (const fs::path& glb : glbs) {

@@ -425,10 +425,9 @@ TEST(GltfHostile, RequiredUnsupportedExtensionFailsOptionalWarns) {
   EXPECT_NE(imp.warnings[0].find("EXT_unknown_thing"), std::string::npos);
 }
 
-// The public sample assets import without warnings and render something.
+// The public sample assets of examples/ import without warnings and render something.
 TEST(Gltf, SampleAssetsRenderWithoutWarnings) {
-  std::filesystem::path scenes = "../shared/scenes";
-  if (!std::filesystem::exists(scenes)) GTEST_SKIP() << "../shared/scenes is not beside the repository";
+  const std::filesystem::path scenes = "examples";  // tests run in the repository root
   int found = 0;
   for (const auto& entry : std::filesystem::recursive_directory_iterator(scenes)) {
     if (entry.path().extension() != ".glb" && entry.path().extension() != ".gltf") continue;
@@ -449,7 +448,7 @@ TEST(Gltf, SampleAssetsRenderWithoutWarnings) {
     for (float v : rgb) sum += v;
     EXPECT_GT(sum, 0) << entry.path();
   }
-  EXPECT_GE(found, 4);
+  EXPECT_GE(found, 3);
 }
 
 }  // namespace
