@@ -329,12 +329,18 @@ bool keep_encoded_image(tinygltf::Image* image, const int, std::string*, std::st
   return true;
 }
 
+// How messages name image `index`: by the URI of its file as the asset writes it (`image "textures/wood.png"`), else
+// by its index (an image in a buffer view or a data: URI).
+std::string image_label(const tinygltf::Image& image, size_t index) {
+  if (!image.uri.empty() && image.uri.rfind("data:", 0) != 0) return "image \"" + image.uri + "\"";
+  return "image " + std::to_string(index);
+}
+
 // Decodes one image's encoded bytes with OpenImageIO (PNG, JPEG, and whatever else it reads) into 8-bit RGBA, read
 // straight into place for three or four channels (`header_only`: only the header is checked, and `out` is left
-// alone); returns an empty string, or what is wrong with image `index`.
-std::string decode_image(const std::vector<unsigned char>& bytes, size_t index, size_t max_pixels, bool header_only,
-                         ImagePixels* out) {
-  const std::string what = "image " + std::to_string(index);
+// alone); returns an empty string, or what is wrong with the image messages call `what`.
+std::string decode_image(const std::vector<unsigned char>& bytes, const std::string& what, size_t max_pixels,
+                         bool header_only, ImagePixels* out) {
   if (bytes.size() >= 2 && bytes[0] == 0xFF && bytes[1] == 0xD8 && !jpeg_complete(bytes.data(), bytes.size()))
     return what + " is a truncated JPEG (its data ends before the end-of-image marker)";
   if (header_only) {
@@ -398,13 +404,14 @@ std::vector<std::shared_ptr<const ImagePixels>> decode_images(tinygltf::Model* m
     if (stop.stop_requested()) throw LoadStopped();
     tinygltf::Image& img = model->images[i];
     if (!img.as_is) return;
-    std::string problem = "image " + std::to_string(i) + " cannot be decoded: it has no bytes";
+    const std::string what = image_label(img, i);
+    std::string problem = what + " cannot be decoded: it has no bytes";
     auto pixels = std::make_shared<ImagePixels>();
     if (!img.image.empty()) {
       try {
-        problem = decode_image(img.image, i, max_pixels, headers_only, pixels.get());
+        problem = decode_image(img.image, what, max_pixels, headers_only, pixels.get());
       } catch (const std::exception& e) {  // out of memory for a huge image, or a decoder that throws
-        problem = "image " + std::to_string(i) + " cannot be decoded: " + e.what();
+        problem = what + " cannot be decoded: " + e.what();
       }
     }
     std::vector<unsigned char>().swap(img.image);

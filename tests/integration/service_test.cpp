@@ -257,9 +257,10 @@ TEST_F(ServiceTest, ImagesAreCheckedByTheirHeadersAtSubmissionAndByTheirPixelsAt
 
   auto res = submit_with("not an image at all");
   expect_status(res, 422, "an image that does not open");
-  EXPECT_NE(
-      json::parse(res->body).value("detail", "").find("tri.gltf: the glTF asset is invalid: image 0 cannot be decoded"),
-      std::string::npos)
+  EXPECT_NE(json::parse(res->body)
+                .value("detail", "")
+                .find("tri.gltf: the glTF asset is invalid: image \"tex.png\" cannot be decoded"),
+            std::string::npos)
       << res->body;
 
   res = submit_with(std::string(png.begin(), png.end()));
@@ -268,7 +269,8 @@ TEST_F(ServiceTest, ImagesAreCheckedByTheirHeadersAtSubmissionAndByTheirPixelsAt
   const std::string failed = json::parse(res->body)["id"];
   const json done = wait_for(*client_, failed, ended);
   EXPECT_EQ(done.value("state", ""), "failed") << done.dump();
-  EXPECT_NE(done.dump().find("image 0 cannot be decoded"), std::string::npos) << done.dump();
+  // The image is named by its file, not its index.
+  EXPECT_NE(done.value("error", "").find("image \"tex.png\" cannot be decoded"), std::string::npos) << done.dump();
   // Its input is at fault: the same document would fail the same way, so it is not offered a requeue, and one asked
   // for is refused with the reason.
   EXPECT_EQ(done["actions"], json({"delete"})) << done.dump();
@@ -281,7 +283,7 @@ TEST_F(ServiceTest, ImagesAreCheckedByTheirHeadersAtSubmissionAndByTheirPixelsAt
   auto log = client_->Get("/v1/jobs/" + failed + "/log");
   ASSERT_TRUE(log);
   EXPECT_NE(log->body.find("failed: "), std::string::npos) << log->body;
-  EXPECT_NE(log->body.find("image 0 cannot be decoded"), std::string::npos) << log->body;
+  EXPECT_NE(log->body.find("image \"tex.png\" cannot be decoded"), std::string::npos) << log->body;
   EXPECT_NE(log->body.find("(its input is at fault"), std::string::npos) << log->body;
   EXPECT_EQ(client_->Get("/livez")->status, 200);
 }

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <random>
 #include <stop_token>
 #include <thread>
@@ -807,6 +808,15 @@ TEST(GltfHostile, UndecodableAndOversizedImagesAreRefused) {
     b.texture_png({0x89, 'P', 'N', 'G', 1, 2, 3, 4});  // a PNG signature, then nothing decodable
     b.write(fixture_dir(), "undecodable");
     expect_refused(fixture_dir() / "undecodable.gltf", "image 2 cannot be decoded");
+  }
+  {
+    // An image in a file of its own is named by its URI, as the asset writes it.
+    GltfBuilder b = one_triangle();
+    b.texture_png(good);
+    b.doc["images"][0]["uri"] = "broken.png";
+    std::ofstream(fixture_dir() / "broken.png", std::ios::binary) << "not a PNG at all";
+    b.write(fixture_dir(), "named-image");
+    expect_refused(fixture_dir() / "named-image.gltf", "image \"broken.png\" cannot be decoded");
   }
   {
     GltfBuilder b = one_triangle();
