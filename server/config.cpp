@@ -299,7 +299,12 @@ std::string apply_config_file(Config& config, const std::string& file) {
     for (char& c : flag)
       if (c == '_') c = '-';
     const Option* o = find_option(flag);
-    if (!o || flag == "--config") return file + ": unknown key \"" + key + "\"";
+    if (!o || flag == "--config") {
+      std::vector<std::string> keys;
+      for (const Option& known : options())
+        if (std::string_view(known.flag) != "--config") keys.push_back(std::string(known.flag).substr(2));
+      return file + ": unknown key \"" + key + "\"" + proto::did_you_mean(flag.substr(2), keys);
+    }
     std::vector<std::string> values;
     if (value.is_array() && flag == "--cors-origin") {
       for (const auto& v : value) {

@@ -167,5 +167,20 @@ TEST(Config, StorageSettingErrorsNameTheSetting) {
   EXPECT_NE(r.error.find("\"retain-finished\" is too long"), std::string::npos) << r.error;
 }
 
+TEST(Config, AMisspeltOptionOrKeyNamesTheClosestOne) {
+  auto r = parse({"--max-job", "2"});
+  ASSERT_FALSE(r.config);
+  EXPECT_EQ(r.error, "unknown option --max-job (did you mean \"--max-jobs\"?)");
+  EXPECT_EQ(parse({"--frobnicate", "1"}).error, "unknown option --frobnicate");  // nothing close
+  EXPECT_TRUE(parse({"--version"}).version);
+
+  test::TempDir dir;
+  const auto file = dir.path() / "tesserad.json";
+  std::ofstream(file) << R"({"max_job": 2})";
+  r = parse({"--config", file.c_str()});
+  ASSERT_FALSE(r.config);
+  EXPECT_NE(r.error.find(": unknown key \"max_job\" (did you mean \"max-jobs\"?)"), std::string::npos) << r.error;
+}
+
 }  // namespace
 }  // namespace tessera::server
