@@ -22,9 +22,10 @@ struct Config {
   // Where the jobs are kept: "sqlite" (jobs.db in the data directory, this daemon's alone) or a PostgreSQL URI
   // (postgresql://user:password@host:port/database?..., libpq's syntax) that several daemons may share.
   std::string store = "sqlite";
-  std::string node;  // this daemon's name in a shared store (the jobs it claims); empty: the host name
-  int threads = 0;   // render threads; 0: every hardware thread
-  int max_jobs = 1;  // jobs rendering at once, sharing the render threads
+  std::string node;     // this daemon's name in a shared store (the jobs it claims); empty: the host name
+  double lease_s = 30;  // a claim not renewed for this long may be taken over by another daemon
+  int threads = 0;      // render threads; 0: every hardware thread
+  int max_jobs = 1;     // jobs rendering at once, sharing the render threads
   size_t max_body_bytes = 64u << 20;
   int max_width = 8192;
   int max_height = 8192;

@@ -44,6 +44,12 @@ struct JobRecord {
   std::string warnings;         // JSON array of strings (unsupported optional glTF extensions, ...)
   std::string idempotency_key;  // the client's Idempotency-Key, empty if none
   std::string request_hash;     // sha256 of the request the key came with
+  // The lease of the run under way: who renders it, until when, and the epoch each claim advances. Every write of a
+  // run carries its epoch, and the store refuses one of an older epoch (fencing: a node that was paused or cut off
+  // past its lease cannot write over the node that took the job over).
+  int64_t epoch = 0;
+  std::string node;
+  std::optional<int64_t> lease_expires_at_ms;
 
   // It failed because the renderer refused its input (job_state.h): running it again would fail the same way.
   bool input_refused() const { return state == JobState::kFailed && stop_reason == kInputRefused; }
@@ -70,16 +76,28 @@ class JobStoreError : public std::runtime_error {
   bool out_of_space_;
 };
 
+// How long a claim holds a job without being renewed; a render renews its lease about every second.
+inline constexpr int64_t kDefaultLeaseMs = 30000;
+
 class JobStore {
  public:
   virtual ~JobStore() = default;
 
   // Adds a queued job. Throws if the id exists.
   virtual void create(const JobRecord& job) = 0;
-  // Takes the next queued job (highest priority, then first come) and marks it running; nothing when none waits.
-  virtual std::optional<JobRecord> claim_next(int64_t now_ms) = 0;
-  // Records the progress of a running job.
-  virtual void update_progress(const std::string& id, const JobProgress& progress) = 0;
+  // Takes the next job to render (highest priority, then first come): a queued one, or a running one whose lease
+  // expired (its node stopped renewing it: it died, or was paused or cut off). Marks it running under a new lease:
+  // the next epoch, expiring at now_ms + lease_ms, this store's node. Nothing when none waits.
+  virtual std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms = kDefaultLeaseMs) = 0;
+  // Extends the lease of a run to now_ms + lease_ms; false when the run is no longer this epoch's (the job was
+  // claimed again, ended, paused, cancelled or deleted elsewhere): its render must stop and write nothing more.
+  virtual bool renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) = 0;
+  // Records the progress of a run of this epoch; false (and nothing written) when the run is no longer this epoch's.
+  virtual bool update_progress(const std::string& id, int64_t epoch, const JobProgress& progress) = 0;
+  // Ends a run of this epoch: running -> `to` (succeeded, failed, cancelled, paused, or queued to resume elsewhere), as
+  // transition() does; false (nothing written) when the job is not running under this epoch.
+  virtual bool end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms,
+                       const std::string& stop_reason = "", const std::string& error = "") = 0;
   // Moves a job to `to` if can_transition() allows it from its current state (and that state is `only_from`, when
   // given); false otherwise (or unknown id). A terminal state stamps finished_at; back to queued clears the run's
   // progress, its end and its error.

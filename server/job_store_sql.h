@@ -16,8 +16,8 @@ namespace tessera::server {
 inline constexpr const char* kJobColumns =
     "id, kind, state, priority, created_at, started_at, finished_at, settings, outputs, passes, samples_done, "
     "samples_total, elapsed_s, eta_s, samples_per_s, stop_reason, error, seq, owner, warnings, idempotency_key, "
-    "request_hash, name";
-inline constexpr int kJobDocumentColumn = 23;
+    "request_hash, name, epoch, lease_expires_at, node";
+inline constexpr int kJobDocumentColumn = 26;
 
 // States as an SQL list, 'queued','paused' (names from the enum, never client text).
 inline std::string sql_state_list(const std::vector<JobState>& states) {
@@ -70,6 +70,9 @@ JobRecord read_job_record(const Row& row, bool with_document) {
   r.idempotency_key = row.text(20);
   r.request_hash = row.text(21);
   r.name = row.text(22);
+  r.epoch = row.int64(23);
+  if (!row.is_null(24)) r.lease_expires_at_ms = row.int64(24);
+  r.node = row.text(25);
   if (with_document) r.document = row.text(kJobDocumentColumn);
   return r;
 }

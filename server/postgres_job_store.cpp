@@ -49,6 +49,12 @@ constexpr const char* kMigration1 = R"sql(
     WHERE idempotency_key IS NOT NULL;
 )sql";
 
+// Version 2: the lease of a run (JobRecord::epoch).
+constexpr const char* kMigration2 = R"sql(
+  ALTER TABLE tessera_jobs ADD COLUMN epoch BIGINT NOT NULL DEFAULT 0;
+  ALTER TABLE tessera_jobs ADD COLUMN lease_expires_at BIGINT;
+)sql";
+
 std::string to_text(int64_t v) {
   return std::to_string(v);
 }
@@ -58,6 +64,14 @@ std::string to_text(double v) {
   char buf[64];
   auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
   return ec == std::errc() ? std::string(buf, end) : "0";
+}
+
+// Appends a parameter; its placeholder ($N).
+std::string placeholder(std::vector<std::optional<std::string>>& params, std::string value) {
+  params.push_back(std::move(value));
+  std::string out = "$";
+  out += std::to_string(params.size());
+  return out;
 }
 
 std::optional<std::string> text_or_null(const std::string& v) {
@@ -112,7 +126,7 @@ PostgresJobStore::~PostgresJobStore() {
 }
 
 const std::vector<const char*>& PostgresJobStore::migrations() {
-  static const std::vector<const char*> kMigrations = {kMigration1};
+  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2};
   return kMigrations;
 }
 
@@ -202,54 +216,89 @@ void PostgresJobStore::create(const JobRecord& job) {
        text_or_null(job.request_hash), job.name});
 }
 
-std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms) {
+std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms, int64_t lease_ms) {
   std::lock_guard lock(mutex_);
   // The row is locked as it is chosen; rows other daemons are claiming are skipped, not waited for.
   Result r = exec(std::string("UPDATE tessera_jobs SET state = 'running', started_at = $1, node = $2, passes = 0, "
-                              "samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0 "
-                              "WHERE seq = (SELECT seq FROM tessera_jobs WHERE state = 'queued' "
-                              "ORDER BY priority DESC, seq LIMIT 1 FOR UPDATE SKIP LOCKED) RETURNING ") +
+                              "samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0, epoch = epoch + 1, "
+                              "lease_expires_at = $1::bigint + $3::bigint "
+                              "WHERE seq = (SELECT seq FROM tessera_jobs WHERE state = 'queued' OR (state = 'running' "
+                              "AND lease_expires_at < $1) ORDER BY priority DESC, seq LIMIT 1 FOR UPDATE SKIP LOCKED) "
+                              "RETURNING ") +
                       kJobColumns + ", document",
-                  {to_text(now_ms), node_});
+                  {to_text(now_ms), node_, to_text(lease_ms)});
   if (r.rows() == 0) return std::nullopt;
   return r.record(true);
 }
 
-void PostgresJobStore::update_progress(const std::string& id, const JobProgress& p) {
+bool PostgresJobStore::renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) {
   std::lock_guard lock(mutex_);
-  exec(
-      "UPDATE tessera_jobs SET passes = $2, samples_done = $3, samples_total = $4, elapsed_s = $5, eta_s = $6, "
-      "samples_per_s = $7 WHERE id = $1 AND state = 'running'",
-      {id, to_text(static_cast<int64_t>(p.passes)), to_text(static_cast<int64_t>(p.samples_done)),
-       to_text(static_cast<int64_t>(p.samples_total)), to_text(p.elapsed_s),
-       p.eta_s ? std::optional<std::string>(to_text(*p.eta_s)) : std::nullopt, to_text(p.samples_per_s)});
+  return exec(
+             "UPDATE tessera_jobs SET lease_expires_at = $3::bigint + $4::bigint WHERE id = $1 AND "
+             "state = 'running' AND epoch = $2",
+             {id, to_text(epoch), to_text(now_ms), to_text(lease_ms)})
+             .affected() > 0;
+}
+
+bool PostgresJobStore::update_progress(const std::string& id, int64_t epoch, const JobProgress& p) {
+  std::lock_guard lock(mutex_);
+  return exec(
+             "UPDATE tessera_jobs SET passes = $2, samples_done = $3, samples_total = $4, elapsed_s = $5, "
+             "eta_s = $6, samples_per_s = $7 WHERE id = $1 AND state = 'running' AND epoch = $8",
+             {id, to_text(static_cast<int64_t>(p.passes)), to_text(static_cast<int64_t>(p.samples_done)),
+              to_text(static_cast<int64_t>(p.samples_total)), to_text(p.elapsed_s),
+              p.eta_s ? std::optional<std::string>(to_text(*p.eta_s)) : std::nullopt, to_text(p.samples_per_s),
+              to_text(epoch)})
+             .affected() > 0;
 }
 
 bool PostgresJobStore::transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                                   const std::string& error, std::optional<JobState> only_from) {
-  const std::string from_states = sql_states_into(to, only_from);
-  if (from_states.empty()) return false;
-  const std::string where = " WHERE id = $1 AND state IN (" + from_states + ")";
   std::lock_guard lock(mutex_);
+  return move(id, to, now_ms, stop_reason, error, sql_states_into(to, only_from), std::nullopt);
+}
+
+bool PostgresJobStore::end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms,
+                               const std::string& stop_reason, const std::string& error) {
+  std::lock_guard lock(mutex_);
+  return move(id, to, now_ms, stop_reason, error, sql_states_into(to, JobState::kRunning), epoch);
+}
+
+bool PostgresJobStore::move(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
+                            const std::string& error, const std::string& from_states, std::optional<int64_t> epoch) {
+  if (from_states.empty()) return false;
+  Params params{id};
+  std::string where = " WHERE id = $1 AND state IN (" + from_states + ")";
+  auto param = [&](std::string value) { return placeholder(params, std::move(value)); };
+  if (epoch) where += " AND epoch = " + param(to_text(*epoch));
+  // Out of running, the lease ends with the run.
   if (to == JobState::kQueued)
     return exec(
-               "UPDATE tessera_jobs SET state = 'queued', node = NULL, started_at = NULL, finished_at = NULL, "
-               "stop_reason = NULL, error = NULL, passes = 0, samples_done = 0, elapsed_s = 0, eta_s = NULL, "
-               "samples_per_s = 0" +
+               "UPDATE tessera_jobs SET state = 'queued', node = NULL, lease_expires_at = NULL, started_at = NULL, "
+               "finished_at = NULL, stop_reason = NULL, error = NULL, passes = 0, samples_done = 0, elapsed_s = 0, "
+               "eta_s = NULL, samples_per_s = 0" +
                    where,
-               {id})
+               params)
                .affected() > 0;
-  if (to == JobState::kRunning)
-    return exec("UPDATE tessera_jobs SET state = 'running', node = $3, started_at = $2" + where,
-                {id, to_text(now_ms), node_})
+  if (to == JobState::kRunning) {
+    const std::string started = param(to_text(now_ms));
+    return exec("UPDATE tessera_jobs SET state = 'running', node = " + param(node_) + ", started_at = " + started +
+                    where,
+                params)
                .affected() > 0;
+  }
   if (to == JobState::kPaused)
-    return exec("UPDATE tessera_jobs SET state = 'paused', node = NULL, eta_s = NULL" + where, {id}).affected() > 0;
-  return exec(
-             "UPDATE tessera_jobs SET state = $3, node = NULL, finished_at = $2, stop_reason = $4, error = $5, "
-             "eta_s = CASE WHEN $3 = 'succeeded' THEN 0 ELSE eta_s END" +
-                 where,
-             {id, to_text(now_ms), std::string(job_state_name(to)), text_or_null(stop_reason), text_or_null(error)})
+    return exec("UPDATE tessera_jobs SET state = 'paused', node = NULL, lease_expires_at = NULL, eta_s = NULL" + where,
+                params)
+               .affected() > 0;
+  const std::string finished = param(to_text(now_ms));
+  const std::string state = param(job_state_name(to));
+  const std::string reason = param(stop_reason);
+  const std::string why = param(error);
+  return exec("UPDATE tessera_jobs SET state = " + state + ", node = NULL, lease_expires_at = NULL, finished_at = " +
+                  finished + ", stop_reason = NULLIF(" + reason + ", ''), error = NULLIF(" + why +
+                  ", ''), eta_s = CASE WHEN " + state + " = 'succeeded' THEN 0 ELSE eta_s END" + where,
+              params)
              .affected() > 0;
 }
 
@@ -311,12 +360,7 @@ std::vector<JobRecord> PostgresJobStore::list(const JobFilter& filter) {
   std::string where;
   Params params{to_text(static_cast<int64_t>(filter.limit))};
   auto add = [&](const std::string& cond) { where += (where.empty() ? " WHERE " : " AND ") + cond; };
-  auto param = [&](std::string value) {
-    params.push_back(std::move(value));
-    std::string placeholder = "$";
-    placeholder += std::to_string(params.size());
-    return placeholder;
-  };
+  auto param = [&](std::string value) { return placeholder(params, std::move(value)); };
   if (!states.empty()) add("state IN (" + sql_state_list(states) + ")");
   if (filter.owner) add("owner = " + param(*filter.owner));
   if (filter.before_seq) add("seq < " + param(to_text(*filter.before_seq)));
@@ -342,8 +386,9 @@ bool PostgresJobStore::remove(const std::string& id, std::optional<int64_t> only
 int PostgresJobStore::requeue_running() {
   std::lock_guard lock(mutex_);
   return exec(
-             "UPDATE tessera_jobs SET state = 'queued', node = NULL, started_at = NULL, passes = 0, samples_done = 0, "
-             "elapsed_s = 0, eta_s = NULL, samples_per_s = 0 WHERE state = 'running' AND node = $1",
+             "UPDATE tessera_jobs SET state = 'queued', node = NULL, lease_expires_at = NULL, started_at = NULL, "
+             "passes = 0, samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0 "
+             "WHERE state = 'running' AND node = $1",
              {node_})
       .affected();
 }

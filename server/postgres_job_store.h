@@ -30,8 +30,11 @@ class PostgresJobStore final : public JobStore {
   PostgresJobStore& operator=(const PostgresJobStore&) = delete;
 
   void create(const JobRecord& job) override;
-  std::optional<JobRecord> claim_next(int64_t now_ms) override;
-  void update_progress(const std::string& id, const JobProgress& progress) override;
+  std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms = kDefaultLeaseMs) override;
+  bool renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) override;
+  bool update_progress(const std::string& id, int64_t epoch, const JobProgress& progress) override;
+  bool end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms, const std::string& stop_reason = "",
+               const std::string& error = "") override;
   bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                   const std::string& error, std::optional<JobState> only_from = std::nullopt) override;
   bool set_priority(const std::string& id, int priority) override;
@@ -53,6 +56,9 @@ class PostgresJobStore final : public JobStore {
   using Params = std::vector<std::optional<std::string>>;
   // Runs one statement with text parameters ($1, $2, ...; nothing is NULL); throws JobStoreError on failure.
   Result exec(const std::string& sql, const Params& params = {});
+  // transition() and end_run(): a move into `to` from `from_states` (an SQL list), of the run of `epoch` when given.
+  bool move(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
+            const std::string& error, const std::string& from_states, std::optional<int64_t> epoch);
   void connect_locked();
   void migrate();
 

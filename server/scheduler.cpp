@@ -30,6 +30,9 @@ class Scheduler::RenderSlot {
   bool delete_requested = false;     // by a client: the job is gone, its files go when the render stops
   std::optional<JobProgress> progress;
   bool awaiting_store = false;  // its end is rendered but the store failed to record it; retried
+  int64_t epoch = 0;            // of its lease: every write of the run carries it
+  bool lease_lost = false;      // the store refused the lease: the job was taken over or changed elsewhere
+  std::chrono::steady_clock::time_point renewed_at = std::chrono::steady_clock::now();
   bool done = false;
   std::thread thread;
 };
@@ -183,6 +186,34 @@ void Scheduler::reap_finished_locked(std::unique_lock<std::mutex>& lock) {
   }
 }
 
+// Renews the lease of each render under way once per poll interval. A lease the store refuses is lost: the render
+// stops and records nothing (the job ended, was paused or deleted elsewhere, or another daemon took it over after this
+// one failed to renew in time). A store that fails leaves the render going: its lease may still be renewed in time.
+void Scheduler::renew_leases_locked() {
+  const auto now = std::chrono::steady_clock::now();
+  for (auto& [id, slot] : running_) {
+    if (slot->done || slot->lease_lost || now - slot->renewed_at < options_.poll_interval) continue;
+    try {
+      if (store_.renew_lease(id, slot->epoch, now_ms(), options_.lease.count()))
+        slot->renewed_at = now;
+      else
+        lose_lease_locked(*slot);
+    } catch (const JobStoreError& e) {
+      count_store_error();
+      log(LogLevel::kWarn, "cannot renew the lease of a job; the render goes on", {{"job", id}, {"error", e.what()}});
+    }
+  }
+}
+
+void Scheduler::lose_lease_locked(RenderSlot& slot) {
+  if (slot.lease_lost) return;
+  slot.lease_lost = true;
+  slot.load_stop.request_stop();
+  if (slot.session) slot.session->cancel();
+  log(LogLevel::kInfo, "the job was changed or taken over elsewhere; its render here stops and records nothing",
+      {{"job", slot.id}, {"epoch", slot.epoch}});
+}
+
 void Scheduler::dispatch_loop() {
   std::unique_lock lock(mutex_);
   while (!stopping_) {
@@ -190,7 +221,7 @@ void Scheduler::dispatch_loop() {
     while (!stopping_ && static_cast<int>(running_.size()) < options_.max_jobs) {
       std::optional<JobRecord> record;
       try {
-        record = store_.claim_next(now_ms());
+        record = store_.claim_next(now_ms(), options_.lease.count());
       } catch (const std::exception& e) {
         log(LogLevel::kError, "cannot claim a job", {{"error", e.what()}});
         break;
@@ -198,9 +229,11 @@ void Scheduler::dispatch_loop() {
       if (!record) break;
       auto slot = std::make_shared<RenderSlot>();
       slot->id = record->id;
+      slot->epoch = record->epoch;
       running_[slot->id] = slot;
       slot->thread = std::thread([this, slot, rec = std::move(*record)] { run_job(slot, rec); });
     }
+    renew_leases_locked();
     cv_.wait_for(lock, options_.poll_interval);
   }
   // Shutting down: every render has been told to stop; wait for them to put their jobs back.
@@ -224,17 +257,29 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
   // A render (or a load) that stopped before its end: the job is deleted, cancelled, paused or (the daemon stopping)
   // back in the queue, to resume from its last checkpoint.
   const auto end_interrupted = [&](uint32_t samples_done) {
-    bool cancelled_by_client, paused, deleted;
+    bool cancelled_by_client, paused, deleted, lease_lost;
     {
       std::lock_guard lock(mutex_);
       cancelled_by_client = slot->cancel_requested;
       paused = slot->pause_requested;
       deleted = slot->delete_requested;
+      lease_lost = slot->lease_lost;
     }
     // The end of the run goes to the store through record_end(): retried while the store fails; when the daemon
     // stops first, the job stays running in the store, with its checkpoint, for the next start to resume.
     if (deleted) {
       log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
+    } else if (lease_lost) {
+      // Whoever holds the job now owns its end. Its files go only if the job is gone.
+      log_.add(id, printf_string("stopped at %u spp: the job was changed or taken over elsewhere",
+                                 static_cast<unsigned>(samples_done)));
+      try {
+        if (!store_.get(id)) files_.remove(id);
+      } catch (const JobStoreError& e) {
+        count_store_error();
+        log(LogLevel::kWarn, "cannot tell whether a job taken away was deleted; its files stay",
+            {{"job", id}, {"error", e.what()}});
+      }
     } else if (cancelled_by_client) {
       log_.add(id, printf_string("cancelled by a client at %u spp", static_cast<unsigned>(samples_done)));
       if (record_terminal(*slot, JobState::kCancelled, render_s, "cancelled"))
@@ -242,13 +287,13 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     } else if (paused) {
       log_.add(id, printf_string("paused by a client at %u spp; its checkpoint is kept",
                                  static_cast<unsigned>(samples_done)));
-      if (record_end(*slot, [&] { return store_.transition(id, JobState::kPaused, now_ms()); }))
+      if (record_end(*slot, [&] { return store_.end_run(id, slot->epoch, JobState::kPaused, now_ms()); }))
         log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", samples_done}});
     } else {
       // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
       log_.add(id, printf_string("the daemon is stopping: back in the queue at %u spp, to resume from its checkpoint",
                                  static_cast<unsigned>(samples_done)));
-      if (record_end(*slot, [&] { return store_.transition(id, JobState::kQueued, now_ms()); }))
+      if (record_end(*slot, [&] { return store_.end_run(id, slot->epoch, JobState::kQueued, now_ms()); }))
         log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
             {{"job", id}, {"samples_done", samples_done}});
     }
@@ -296,7 +341,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     {
       std::lock_guard lock(mutex_);
       slot->session = &session;
-      if (slot->cancel_requested || slot->delete_requested) session.cancel();
+      if (slot->cancel_requested || slot->delete_requested || slot->lease_lost) session.cancel();
       if (slot->pause_requested || stopping_) session.stop();
     }
     uint32_t samples_before = session.progress().samples_done;
@@ -320,7 +365,11 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
         log_.add(id, printf_string("pass %u: %u/%u spp, %.2f s, %.3g samples/s", static_cast<unsigned>(p.pass),
                                    static_cast<unsigned>(p.samples_done), static_cast<unsigned>(p.samples_total),
                                    p.elapsed_s, p.samples_per_s));
-        store_.update_progress(id, jp);
+        if (!store_.update_progress(id, slot->epoch, jp)) {
+          std::lock_guard lock(mutex_);
+          lose_lease_locked(*slot);
+          return;
+        }
         if (hooks_.progress) hooks_.progress(id, jp);
         if (hooks_.preview) hooks_.preview(id, p.pass);
       } catch (const std::exception& e) {
@@ -369,7 +418,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
                              final_progress.elapsed_s, static_cast<unsigned>(final_progress.samples_done),
                              static_cast<unsigned>(final_progress.passes), written.c_str()));
       if (record_terminal(*slot, JobState::kSucceeded, render_s, stop_reason_name(reason), "",
-                          [&] { store_.update_progress(id, final_progress); })) {
+                          [&] { store_.update_progress(id, slot->epoch, final_progress); })) {
         log(LogLevel::kInfo, "job succeeded",
             {{"job", id},
              {"elapsed_s", final_progress.elapsed_s},
@@ -466,7 +515,7 @@ bool Scheduler::record_terminal(RenderSlot& slot, JobState to, double render_s, 
                                 const std::string& error, const std::function<void()>& before) {
   const bool recorded = record_end(slot, [&] {
     if (before) before();
-    auto record = [&] { return store_.transition(slot.id, to, now_ms(), stop_reason, error); };
+    auto record = [&] { return store_.end_run(slot.id, slot.epoch, to, now_ms(), stop_reason, error); };
     return hooks_.job_ended ? hooks_.job_ended(render_s, record) : record();
   });
   if (recorded) files_.remove(slot.id, JobFile::kCheckpoint);

@@ -32,8 +32,13 @@ struct SchedulerOptions {
   // Maps an asset reference of a job ("gltf", "environment.map") to its file (SceneLoadOptions::resolve_asset).
   std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
   uint64_t max_gltf_instances = 1'000'000;  // SceneLoadOptions::max_gltf_instances
-  // How often the queue is looked at without being woken (jobs another process may have added).
+  // How often the queue is looked at without being woken (jobs another process may have added), and the leases of
+  // the renders under way renewed: a render whose job was cancelled, paused or deleted elsewhere (another daemon on
+  // the same store) finds out within this.
   std::chrono::milliseconds poll_interval{1000};
+  // How long a claim holds a job without being renewed (JobStore::claim_next): past it another daemon may take the
+  // job over, and this one's writes for it are refused.
+  std::chrono::milliseconds lease{kDefaultLeaseMs};
   // The wait before recording a job's end again after the store failed, doubled after each failure up to the max.
   std::chrono::milliseconds store_retry_first{100};
   std::chrono::milliseconds store_retry_max{5000};
@@ -103,6 +108,8 @@ class Scheduler {
   bool record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused);
   void count_store_error();
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
+  void renew_leases_locked();
+  void lose_lease_locked(RenderSlot& slot);
   void notify_state(const std::string& id);
 
   JobStore& store_;

@@ -220,6 +220,14 @@ void SqliteJobStore::migrate() {
       exec("ALTER TABLE jobs ADD COLUMN name TEXT NOT NULL DEFAULT ''");
       exec("INSERT INTO schema_version (version) VALUES (3)");
     }
+    if (version < 4) {
+      // Version 4: the lease of a run (JobRecord::epoch); a job left running by a version 3 daemon has none, and
+      // requeue_running() puts it back at the start.
+      exec("ALTER TABLE jobs ADD COLUMN epoch INTEGER NOT NULL DEFAULT 0");
+      exec("ALTER TABLE jobs ADD COLUMN lease_expires_at INTEGER");
+      exec("ALTER TABLE jobs ADD COLUMN node TEXT NOT NULL DEFAULT ''");
+      exec("INSERT INTO schema_version (version) VALUES (4)");
+    }
     exec("COMMIT");
   } catch (...) {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
@@ -250,15 +258,17 @@ void SqliteJobStore::create(const JobRecord& job) {
   s.step();
 }
 
-std::optional<JobRecord> SqliteJobStore::claim_next(int64_t now_ms) {
+std::optional<JobRecord> SqliteJobStore::claim_next(int64_t now_ms, int64_t lease_ms) {
   std::lock_guard lock(mutex_);
   // One statement, so two daemons sharing the file can never claim the same job.
   Statement s(*this, std::string("UPDATE jobs SET state = 'running', started_at = ?1, passes = 0, samples_done = 0, "
-                                 "elapsed_s = 0, eta_s = NULL, samples_per_s = 0 "
-                                 "WHERE seq = (SELECT seq FROM jobs WHERE state = 'queued' "
-                                 "ORDER BY priority DESC, seq LIMIT 1) RETURNING ") +
+                                 "elapsed_s = 0, eta_s = NULL, samples_per_s = 0, epoch = epoch + 1, "
+                                 "lease_expires_at = ?1 + ?2 "
+                                 "WHERE seq = (SELECT seq FROM jobs WHERE state = 'queued' OR (state = 'running' AND "
+                                 "lease_expires_at < ?1) ORDER BY priority DESC, seq LIMIT 1) RETURNING ") +
                          kJobColumns + ", document");
   s.bind(1, now_ms);
+  s.bind(2, lease_ms);
   if (!s.step()) return std::nullopt;
   JobRecord r = s.record(true);
   while (s.step()) {
@@ -266,11 +276,22 @@ std::optional<JobRecord> SqliteJobStore::claim_next(int64_t now_ms) {
   return r;
 }
 
-void SqliteJobStore::update_progress(const std::string& id, const JobProgress& p) {
+bool SqliteJobStore::renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) {
+  std::lock_guard lock(mutex_);
+  Statement s(*this, "UPDATE jobs SET lease_expires_at = ?3 + ?4 WHERE id = ?1 AND state = 'running' AND epoch = ?2");
+  s.bind(1, id);
+  s.bind(2, epoch);
+  s.bind(3, now_ms);
+  s.bind(4, lease_ms);
+  s.step();
+  return sqlite3_changes(db_) > 0;
+}
+
+bool SqliteJobStore::update_progress(const std::string& id, int64_t epoch, const JobProgress& p) {
   std::lock_guard lock(mutex_);
   Statement s(*this,
               "UPDATE jobs SET passes = ?2, samples_done = ?3, samples_total = ?4, elapsed_s = ?5, eta_s = ?6, "
-              "samples_per_s = ?7 WHERE id = ?1 AND state = 'running'");
+              "samples_per_s = ?7 WHERE id = ?1 AND state = 'running' AND epoch = ?8");
   s.bind(1, id);
   s.bind(2, static_cast<int64_t>(p.passes));
   s.bind(3, static_cast<int64_t>(p.samples_done));
@@ -278,29 +299,44 @@ void SqliteJobStore::update_progress(const std::string& id, const JobProgress& p
   s.bind(5, p.elapsed_s);
   s.bind_optional(6, p.eta_s);
   s.bind(7, p.samples_per_s);
+  s.bind(8, epoch);
   s.step();
+  return sqlite3_changes(db_) > 0;
 }
 
 bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                                 const std::string& error, std::optional<JobState> only_from) {
   std::lock_guard lock(mutex_);
-  const std::string from_states = sql_states_into(to, only_from);
+  return move(id, to, now_ms, stop_reason, error, sql_states_into(to, only_from), std::nullopt);
+}
+
+bool SqliteJobStore::end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms,
+                             const std::string& stop_reason, const std::string& error) {
+  std::lock_guard lock(mutex_);
+  return move(id, to, now_ms, stop_reason, error, sql_states_into(to, JobState::kRunning), epoch);
+}
+
+bool SqliteJobStore::move(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
+                          const std::string& error, const std::string& from_states, std::optional<int64_t> epoch) {
   if (from_states.empty()) return false;
+  // Out of running, the lease ends with the run.
+  const std::string where = " WHERE id = ?1 AND state IN (" + from_states + ")" + (epoch ? " AND epoch = ?6" : "");
   std::string sql;
   if (to == JobState::kQueued) {
     sql =
         "UPDATE jobs SET state = 'queued', started_at = NULL, finished_at = NULL, stop_reason = NULL, error = NULL, "
-        "passes = 0, samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0 WHERE id = ?1 AND state IN (" +
-        from_states + ")";
+        "passes = 0, samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0, lease_expires_at = NULL, "
+        "node = ''" +
+        where;
   } else if (to == JobState::kRunning) {
-    sql = "UPDATE jobs SET state = 'running', started_at = ?2 WHERE id = ?1 AND state IN (" + from_states + ")";
+    sql = "UPDATE jobs SET state = 'running', started_at = ?2" + where;
   } else if (to == JobState::kPaused) {
-    sql = "UPDATE jobs SET state = 'paused', eta_s = NULL WHERE id = ?1 AND state IN (" + from_states + ")";
+    sql = "UPDATE jobs SET state = 'paused', eta_s = NULL, lease_expires_at = NULL, node = ''" + where;
   } else {
     sql =
-        "UPDATE jobs SET state = ?3, finished_at = ?2, stop_reason = ?4, error = ?5, "
-        "eta_s = CASE WHEN ?3 = 'succeeded' THEN 0 ELSE eta_s END WHERE id = ?1 AND state IN (" +
-        from_states + ")";
+        "UPDATE jobs SET state = ?3, finished_at = ?2, stop_reason = ?4, error = ?5, lease_expires_at = NULL, "
+        "node = '', eta_s = CASE WHEN ?3 = 'succeeded' THEN 0 ELSE eta_s END" +
+        where;
   }
   Statement s(*this, sql);
   s.bind(1, id);
@@ -310,6 +346,7 @@ bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_
     s.bind_text_or_null(4, stop_reason);
     s.bind_text_or_null(5, error);
   }
+  if (epoch) s.bind(6, *epoch);
   s.step();
   return sqlite3_changes(db_) > 0;
 }
@@ -408,7 +445,7 @@ int SqliteJobStore::requeue_running() {
   std::lock_guard lock(mutex_);
   Statement s(*this,
               "UPDATE jobs SET state = 'queued', started_at = NULL, passes = 0, samples_done = 0, elapsed_s = 0, "
-              "eta_s = NULL, samples_per_s = 0 WHERE state = 'running'");
+              "eta_s = NULL, samples_per_s = 0, lease_expires_at = NULL, node = '' WHERE state = 'running'");
   s.step();
   return sqlite3_changes(db_);
 }

@@ -23,8 +23,11 @@ class SqliteJobStore final : public JobStore {
   SqliteJobStore& operator=(const SqliteJobStore&) = delete;
 
   void create(const JobRecord& job) override;
-  std::optional<JobRecord> claim_next(int64_t now_ms) override;
-  void update_progress(const std::string& id, const JobProgress& progress) override;
+  std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms = kDefaultLeaseMs) override;
+  bool renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) override;
+  bool update_progress(const std::string& id, int64_t epoch, const JobProgress& progress) override;
+  bool end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms, const std::string& stop_reason = "",
+               const std::string& error = "") override;
   bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                   const std::string& error, std::optional<JobState> only_from = std::nullopt) override;
   bool set_priority(const std::string& id, int priority) override;
@@ -37,7 +40,7 @@ class SqliteJobStore final : public JobStore {
   bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt) override;
   int requeue_running() override;
 
-  static constexpr int kSchemaVersion = 3;
+  static constexpr int kSchemaVersion = 4;
 
  private:
   class Statement;
@@ -45,6 +48,9 @@ class SqliteJobStore final : public JobStore {
     sqlite3_stmt* stmt = nullptr;
     bool in_use = false;
   };
+  // transition() and end_run(): a move into `to` from `from_states` (an SQL list), of the run of `epoch` when given.
+  bool move(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
+            const std::string& error, const std::string& from_states, std::optional<int64_t> epoch);
   void exec(const char* sql);
   void migrate();
   void close();

@@ -1,6 +1,7 @@
 // tesserad with its jobs in PostgreSQL (--store postgresql://...), against a throw-away server: a job goes through
-// and survives a restart of the daemon, an unreachable database stops the start with its reason, and the end of a
-// render that another node cancelled meanwhile is refused by the store, never written over the cancellation.
+// and survives a restart of the daemon, an unreachable database stops the start with its reason, a render cancelled
+// through another node stops within seconds and writes nothing over the cancellation, and a node paused past its
+// lease is taken over, its late writes refused.
 #include <signal.h>
 
 #include <gtest/gtest.h>
@@ -67,27 +68,62 @@ TEST(PostgresStore, AnUnreachableDatabaseStopsTheStartWithItsReason) {
   }
 }
 
+std::string row_of(PostgresCluster& pg, const std::string& uri, const std::string& id, const std::string& columns) {
+  return pg.psql(PostgresCluster::database_of(uri), "SELECT " + columns + " FROM tessera_jobs WHERE id = '" + id + "'");
+}
+
 // Another node (here: an UPDATE made directly, as another daemon's cancel would) cancels a job while this daemon
-// renders it. However the render ends, the store keeps the cancellation.
-TEST(PostgresStore, TheEndOfARenderCancelledElsewhereIsRefused) {
+// renders it: the render loses its lease at its next renewal (every second), stops, and writes nothing over the
+// cancellation.
+TEST(PostgresStore, ARenderCancelledElsewhereStopsWithinSecondsAndRecordsNothing) {
   PostgresCluster& pg = PostgresCluster::shared();
   const std::string uri = pg.create_database();
   TempDir dir;
-  Daemon d(dir.path() / "data", {"--store", uri, "--threads", "2", "--log-level", "debug"});
+  Daemon d(dir.path() / "data", {"--store", uri, "--threads", "2"});
   auto c = d.client();
-  const std::string id = submit(*c, cornell_job(96, 512));
+  const std::string id = submit(*c, long_cornell_job());
   ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "running"; }, 30));
   pg.psql(PostgresCluster::database_of(uri),
-          "UPDATE tessera_jobs SET state = 'cancelled', finished_at = 1, stop_reason = 'cancelled', "
-          "node = NULL WHERE id = '" +
+          "UPDATE tessera_jobs SET state = 'cancelled', finished_at = 1, stop_reason = 'cancelled', node = NULL "
+          "WHERE id = '" +
               id + "'");
-  ASSERT_TRUE(
-      eventually([&] { return d.log().find("the job store refused the end of a job") != std::string::npos; }, 120))
+  const auto cancelled_at = std::chrono::steady_clock::now();
+  ASSERT_TRUE(eventually([&] { return d.log().find("changed or taken over elsewhere") != std::string::npos; }, 30))
       << d.log();
-  EXPECT_EQ(pg.psql(PostgresCluster::database_of(uri),
-                    "SELECT state || ',' || stop_reason FROM tessera_jobs WHERE id = '" + id + "'"),
-            "cancelled,cancelled");
-  EXPECT_EQ(state_of(*c, id), "cancelled");
+  EXPECT_LT(std::chrono::steady_clock::now() - cancelled_at, std::chrono::seconds(5));
+  // The render's thread is gone: the daemon renders nothing (the metrics' busy threads fall to zero).
+  EXPECT_TRUE(eventually(
+      [&] {
+        auto m = c->Get("/metrics");
+        return m && m->body.find("tessera_render_threads_busy 0") != std::string::npos;
+      },
+      10));
+  EXPECT_EQ(row_of(pg, uri, id, "state || ',' || stop_reason || ',' || finished_at"), "cancelled,cancelled,1");
+}
+
+// A node stopped (SIGSTOP) for longer than its lease: another takes the job over under the next epoch and finishes
+// it; the first, continued (SIGCONT), finds its lease gone and writes nothing more.
+TEST(PostgresStore, ANodePausedPastItsLeaseIsTakenOverAndItsLateWritesAreRefused) {
+  PostgresCluster& pg = PostgresCluster::shared();
+  const std::string uri = pg.create_database();
+  TempDir dir;
+  Daemon a(dir.path() / "a", {"--store", uri, "--node", "node-a", "--lease-s", "2", "--threads", "1"});
+  auto ca = a.client();
+  const std::string id = submit(*ca, cornell_job(64, 256));
+  ASSERT_TRUE(eventually([&] { return row_of(pg, uri, id, "state || ',' || node") == "running,node-a"; }, 30));
+  kill(a.pid(), SIGSTOP);
+  Daemon b(dir.path() / "b", {"--store", uri, "--node", "node-b", "--lease-s", "2", "--threads", "1"});
+  ASSERT_TRUE(eventually([&] { return row_of(pg, uri, id, "node || ',' || epoch") == "node-b,2"; }, 30)) << b.log();
+  kill(a.pid(), SIGCONT);
+  ASSERT_TRUE(eventually([&] { return a.log().find("changed or taken over elsewhere") != std::string::npos; }, 30))
+      << a.log();
+  auto cb = b.client();
+  ASSERT_TRUE(eventually([&] { return state_of(*cb, id) == "succeeded"; }, 120)) << b.log();
+  EXPECT_EQ(row_of(pg, uri, id, "state || ',' || epoch || ',' || samples_done"), "succeeded,2,256");
+  EXPECT_EQ(a.log().find("job succeeded"), std::string::npos);
+  auto exr = cb->Get("/v1/jobs/" + id + "/result.exr");
+  ASSERT_TRUE(exr);
+  EXPECT_EQ(exr->status, 200);
 }
 
 }  // namespace

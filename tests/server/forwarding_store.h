@@ -11,8 +11,19 @@ class ForwardingStore : public JobStore {
   explicit ForwardingStore(JobStore& inner) : inner_(inner) {}
 
   void create(const JobRecord& job) override { inner_.create(job); }
-  std::optional<JobRecord> claim_next(int64_t now_ms) override { return inner_.claim_next(now_ms); }
-  void update_progress(const std::string& id, const JobProgress& p) override { inner_.update_progress(id, p); }
+  std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms) override {
+    return inner_.claim_next(now_ms, lease_ms);
+  }
+  bool renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) override {
+    return inner_.renew_lease(id, epoch, now_ms, lease_ms);
+  }
+  bool update_progress(const std::string& id, int64_t epoch, const JobProgress& p) override {
+    return inner_.update_progress(id, epoch, p);
+  }
+  bool end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms, const std::string& stop_reason,
+               const std::string& error) override {
+    return inner_.end_run(id, epoch, to, now_ms, stop_reason, error);
+  }
   bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                   const std::string& error, std::optional<JobState> only_from) override {
     return inner_.transition(id, to, now_ms, stop_reason, error, only_from);

@@ -46,13 +46,22 @@ class FlakyStore final : public JobStore {
     check(true);
     inner_.create(job);
   }
-  std::optional<JobRecord> claim_next(int64_t now_ms) override {
+  std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms) override {
     check(true);
-    return inner_.claim_next(now_ms);
+    return inner_.claim_next(now_ms, lease_ms);
   }
-  void update_progress(const std::string& id, const JobProgress& p) override {
+  bool renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) override {
     check(true);
-    inner_.update_progress(id, p);
+    return inner_.renew_lease(id, epoch, now_ms, lease_ms);
+  }
+  bool update_progress(const std::string& id, int64_t epoch, const JobProgress& p) override {
+    check(true);
+    return inner_.update_progress(id, epoch, p);
+  }
+  bool end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms, const std::string& stop_reason,
+               const std::string& error) override {
+    check(true, is_terminal(to));
+    return inner_.end_run(id, epoch, to, now_ms, stop_reason, error);
   }
   bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                   const std::string& error, std::optional<JobState> only_from) override {

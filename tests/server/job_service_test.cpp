@@ -183,9 +183,9 @@ class SlowEndStore final : public test::ForwardingStore {
   std::atomic<bool> ended{false};
   std::chrono::milliseconds hold{600};
 
-  bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
-                  const std::string& error, std::optional<JobState> only_from) override {
-    const bool taken = inner_.transition(id, to, now_ms, stop_reason, error, only_from);
+  bool end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms, const std::string& stop_reason,
+               const std::string& error) override {
+    const bool taken = inner_.end_run(id, epoch, to, now_ms, stop_reason, error);
     if (taken && is_terminal(to)) {
       ended = true;
       std::this_thread::sleep_for(hold);

@@ -1,7 +1,8 @@
 // What every JobStore does, whatever keeps the jobs: one typed suite run against the SQLite store (a file in a
 // temporary directory) and the PostgreSQL store (a fresh database in a throw-away server, postgres_cluster.h). Claim
 // order (priority, then first come), every move of the state table and no other, a refused move that writes nothing,
-// concurrent claims, progress, lists, removal, idempotency keys, counts per owner, a restart.
+// concurrent claims, leases (renewal, expiry, take-over) and fencing by epoch, progress, lists, removal, idempotency
+// keys, counts per owner, a restart.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -60,6 +61,7 @@ class JobStoreConformance : public ::testing::Test {
       case JobState::kCancelled: {
         auto claimed = store.claim_next(2);
         EXPECT_TRUE(claimed && claimed->id == j.id);
+        if (claimed) j.epoch = claimed->epoch;
         if (state != JobState::kRunning) {
           EXPECT_TRUE(store.transition(j.id, state, 3, "samples", ""));
         }
@@ -145,7 +147,7 @@ TYPED_TEST(JobStoreConformance, AnEndIsStampedAndARequeueStartsOver) {
   p.elapsed_s = 0.1;  // not a binary fraction: read back exactly all the same
   p.eta_s = 2.5e-7;
   p.samples_per_s = 1234.5678;
-  store.update_progress(j.id, p);
+  EXPECT_TRUE(store.update_progress(j.id, j.epoch, p));
   auto got = store.get(j.id, false);
   EXPECT_EQ(got->progress.passes, 3u);
   EXPECT_EQ(got->progress.samples_done, 7u);
@@ -158,7 +160,7 @@ TYPED_TEST(JobStoreConformance, AnEndIsStampedAndARequeueStartsOver) {
   EXPECT_EQ(got->finished_at_ms, 9);
   EXPECT_EQ(got->error, "out of memory");
   EXPECT_EQ(got->document, R"({"kind":"scene"})");
-  store.update_progress(j.id, JobProgress{});  // only a running job's progress is written
+  EXPECT_FALSE(store.update_progress(j.id, j.epoch, JobProgress{}));  // only a running job's progress is written
   EXPECT_EQ(store.get(j.id, false)->progress.samples_done, 7u);
 
   EXPECT_TRUE(store.transition(j.id, JobState::kQueued, 10));
@@ -178,8 +180,8 @@ TYPED_TEST(JobStoreConformance, ASucceededJobKeepsItsStopReasonAndAZeroEta) {
   const JobRecord j = this->job_in(JobState::kRunning);
   JobProgress p;
   p.eta_s = 3;
-  store.update_progress(j.id, p);
-  ASSERT_TRUE(store.transition(j.id, JobState::kSucceeded, 9, "time", ""));
+  ASSERT_TRUE(store.update_progress(j.id, j.epoch, p));
+  ASSERT_TRUE(store.end_run(j.id, j.epoch, JobState::kSucceeded, 9, "time", ""));
   const auto got = store.get(j.id, false);
   EXPECT_EQ(got->stop_reason, "time");
   EXPECT_EQ(got->progress.eta_s, 0.0);
@@ -357,6 +359,90 @@ TYPED_TEST(JobStoreConformance, KeepsNamesAndWarnings) {
   EXPECT_EQ(store.get(j.id, false)->warnings, R"(["KHR_materials_sheen is not supported"])");
 }
 
+TYPED_TEST(JobStoreConformance, AClaimStartsALeaseOfTheNextEpoch) {
+  JobStore& store = this->store;
+  JobRecord j = make_job(0, 1);
+  store.create(j);
+  EXPECT_EQ(store.get(j.id, false)->epoch, 0);
+  auto claimed = store.claim_next(1000, 500);
+  ASSERT_TRUE(claimed);
+  EXPECT_EQ(claimed->epoch, 1);
+  EXPECT_EQ(claimed->lease_expires_at_ms, 1500);
+  EXPECT_TRUE(store.renew_lease(j.id, 1, 1400, 500));
+  EXPECT_EQ(store.get(j.id, false)->lease_expires_at_ms, 1900);
+  ASSERT_TRUE(store.end_run(j.id, 1, JobState::kQueued, 1500));  // the daemon stops: back to the queue
+  EXPECT_FALSE(store.get(j.id, false)->lease_expires_at_ms);     // no run, no lease
+  EXPECT_EQ(store.claim_next(1600, 500)->epoch, 2);              // every claim, a new epoch
+}
+
+// A node stops renewing (killed, paused past its lease, cut off): another claims the job under the next epoch, and
+// whatever the first one writes afterwards, with its old epoch, is refused.
+TYPED_TEST(JobStoreConformance, AnExpiredLeaseIsTakenOverAndTheOldEpochIsFenced) {
+  JobRecord j = make_job(0, 1);
+  this->store.create(j);
+  std::unique_ptr<JobStore> other = this->backend.open("node-b");
+  const JobRecord first = this->store.claim_next(0, 1000).value();
+  EXPECT_FALSE(other->claim_next(999, 1000));  // leased
+  EXPECT_TRUE(this->store.renew_lease(j.id, first.epoch, 900, 1000));
+  EXPECT_FALSE(other->claim_next(1500, 1000));  // renewed until 1900
+  const auto second = other->claim_next(1901, 1000);
+  ASSERT_TRUE(second);
+  EXPECT_EQ(second->id, j.id);
+  EXPECT_EQ(second->epoch, first.epoch + 1);
+  EXPECT_EQ(second->state, JobState::kRunning);
+  EXPECT_EQ(second->document, j.document);
+
+  JobProgress late;
+  late.samples_done = 99;
+  EXPECT_FALSE(this->store.update_progress(j.id, first.epoch, late));
+  EXPECT_FALSE(this->store.renew_lease(j.id, first.epoch, 2000, 1000));
+  EXPECT_FALSE(this->store.end_run(j.id, first.epoch, JobState::kSucceeded, 2000, "samples", ""));
+  EXPECT_FALSE(this->store.end_run(j.id, first.epoch, JobState::kQueued, 2000));
+  auto got = this->store.get(j.id, false);
+  EXPECT_EQ(got->state, JobState::kRunning);
+  EXPECT_EQ(got->epoch, second->epoch);
+  EXPECT_EQ(got->progress.samples_done, 0u);
+
+  JobProgress p;
+  p.samples_done = 16;
+  EXPECT_TRUE(other->update_progress(j.id, second->epoch, p));
+  EXPECT_TRUE(other->end_run(j.id, second->epoch, JobState::kSucceeded, 2100, "samples", ""));
+  got = this->store.get(j.id, false);
+  EXPECT_EQ(got->state, JobState::kSucceeded);
+  EXPECT_EQ(got->progress.samples_done, 16u);
+}
+
+// The job was cancelled, paused or deleted by a client while a node renders it: the node's next renewal, progress or
+// end is refused, which is how it learns to stop.
+TYPED_TEST(JobStoreConformance, ARunChangedElsewhereLosesItsLease) {
+  JobStore& store = this->store;
+  for (JobState elsewhere : {JobState::kCancelled, JobState::kPaused}) {
+    SCOPED_TRACE(job_state_name(elsewhere));
+    const JobRecord j = this->job_in(JobState::kRunning);
+    ASSERT_TRUE(store.transition(j.id, elsewhere, 10, "cancelled", ""));
+    EXPECT_FALSE(store.renew_lease(j.id, j.epoch, 11, 1000));
+    EXPECT_FALSE(store.update_progress(j.id, j.epoch, JobProgress{}));
+    EXPECT_FALSE(store.end_run(j.id, j.epoch, JobState::kSucceeded, 12, "samples", ""));
+    EXPECT_EQ(store.get(j.id, false)->state, elsewhere);
+    store.remove(j.id);
+  }
+  const JobRecord gone = this->job_in(JobState::kRunning);
+  ASSERT_TRUE(store.remove(gone.id));
+  EXPECT_FALSE(store.renew_lease(gone.id, gone.epoch, 11, 1000));
+  EXPECT_FALSE(store.end_run(gone.id, gone.epoch, JobState::kSucceeded, 12, "samples", ""));
+}
+
+// end_run makes only the moves out of running the state table allows.
+TYPED_TEST(JobStoreConformance, AnEndOfARunFollowsTheStateTable) {
+  JobStore& store = this->store;
+  for (JobState to : kAllJobStates) {
+    SCOPED_TRACE(job_state_name(to));
+    const JobRecord j = this->job_in(JobState::kRunning);
+    EXPECT_EQ(store.end_run(j.id, j.epoch, to, 5, "samples", ""), can_transition(JobState::kRunning, to));
+    store.remove(j.id);
+  }
+}
+
 TYPED_TEST(JobStoreConformance, ARestartRequeuesItsRunningJobsAndKeepsTheRest) {
   JobRecord done = make_job(0, 1), running = make_job(0, 2), queued = make_job(0, 3);
   {
@@ -366,11 +452,12 @@ TYPED_TEST(JobStoreConformance, ARestartRequeuesItsRunningJobsAndKeepsTheRest) {
     first->create(queued);
     ASSERT_EQ(first->claim_next(5)->id, done.id);
     ASSERT_TRUE(first->transition(done.id, JobState::kSucceeded, 6, "samples", ""));
-    ASSERT_EQ(first->claim_next(7)->id, running.id);
+    const JobRecord claimed = first->claim_next(7).value();
+    ASSERT_EQ(claimed.id, running.id);
     JobProgress p;
     p.passes = 2;
     p.samples_done = 3;
-    first->update_progress(running.id, p);
+    ASSERT_TRUE(first->update_progress(running.id, claimed.epoch, p));
   }  // the process "dies" with one job running
   std::unique_ptr<JobStore> store = this->backend.open();
   EXPECT_EQ(store->requeue_running(), 1);

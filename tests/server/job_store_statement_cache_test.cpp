@@ -103,7 +103,7 @@ TEST(SqliteJobStoreStatementCache, RepeatedQueriesSeeEveryWrite) {
   for (uint32_t pass = 1; pass <= 200; ++pass) {
     SCOPED_TRACE("pass " + std::to_string(pass));
     const JobProgress p = progress_of_pass(pass);
-    store.update_progress(job.id, p);
+    store.update_progress(job.id, 1, p);
     ASSERT_TRUE(store.set_priority(job.id, static_cast<int>(pass)));
     const bool with_document = pass % 3 == 0;  // two SQL texts of get(), interleaved
     auto got = store.get(job.id, with_document);
@@ -315,7 +315,7 @@ TEST(SqliteJobStoreStatementCache, MoreTextsThanTheCacheKeepsStayCorrect) {
     only_queued.states = {JobState::kQueued};
     ASSERT_EQ(store.list(only_queued).size(), 1u);
     EXPECT_EQ(store.queue_position(queued.id), 1);
-    store.update_progress(running.id, progress_of_pass(3));
+    store.update_progress(running.id, 1, progress_of_pass(3));
     EXPECT_EQ(store.get(running.id, false)->progress.passes, 3u);
   }
   // Closed cleanly: no connection left behind (see ClosingWithCachedStatementsReleasesTheDatabase).
@@ -349,7 +349,7 @@ TEST(SqliteJobStoreStatementCache, ClosingWithCachedStatementsReleasesTheDatabas
       store.set_warnings(b.id, R"(["w)" + std::to_string(reopen) + R"("])");
       if (reopen == 0) {
         ASSERT_EQ(store.claim_next(5)->id, a.id);
-        store.update_progress(a.id, progress_of_pass(4));
+        store.update_progress(a.id, 1, progress_of_pass(4));
         ASSERT_TRUE(store.transition(a.id, JobState::kPaused, 6, "", ""));
       } else {
         EXPECT_EQ(store.requeue_running(), 0);

@@ -22,9 +22,9 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
-// The real SQLite store, except that a transition out of running (the end of a run: succeeded, failed, cancelled,
-// paused, back to queued) throws JobStoreError while `failures_left` is above zero, as SQLITE_FULL would, and a
-// removal while `remove_failures_left` is.
+// The real SQLite store, except that a state change other than a claim (the end of a run: succeeded, failed,
+// cancelled, paused, back to queued; a client's requeue) throws JobStoreError while `failures_left` is above zero, as
+// SQLITE_FULL would, and a removal while `remove_failures_left` is.
 class FailingEndStore final : public test::ForwardingStore {
  public:
   using ForwardingStore::ForwardingStore;
@@ -35,12 +35,20 @@ class FailingEndStore final : public test::ForwardingStore {
 
   bool transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                   const std::string& error, std::optional<JobState> only_from) override {
-    if (to != JobState::kRunning && failures_left.load() > 0) {
+    if (to != JobState::kRunning) fail();
+    return inner_.transition(id, to, now_ms, stop_reason, error, only_from);
+  }
+  bool end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms, const std::string& stop_reason,
+               const std::string& error) override {
+    fail();
+    return inner_.end_run(id, epoch, to, now_ms, stop_reason, error);
+  }
+  void fail() {
+    if (failures_left.load() > 0) {
       failures_left.fetch_sub(1);
       failures.fetch_add(1);
       throw JobStoreError("job store: step: database or disk is full", true);
     }
-    return inner_.transition(id, to, now_ms, stop_reason, error, only_from);
   }
   bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) override {
     if (remove_failures_left.load() > 0) {
