@@ -49,4 +49,26 @@ std::variant<GlbChunks, std::string> parse_glb(std::string_view b) {
   return chunks;
 }
 
+std::string make_glb(std::string_view json, std::string_view bin) {
+  auto padded = [](size_t n) { return (n + 3) & ~size_t{3}; };
+  std::string out;
+  auto u32 = [&](size_t v) {
+    for (int i = 0; i < 4; ++i) out += static_cast<char>((v >> (8 * i)) & 0xff);
+  };
+  out += "glTF";
+  u32(2);
+  u32(12 + 8 + padded(json.size()) + (bin.empty() ? 0 : 8 + padded(bin.size())));
+  u32(padded(json.size()));
+  u32(kJsonChunk);
+  out += json;
+  out.append(padded(json.size()) - json.size(), ' ');
+  if (!bin.empty()) {
+    u32(padded(bin.size()));
+    u32(kBinChunk);
+    out += bin;
+    out.append(padded(bin.size()) - bin.size(), '\0');
+  }
+  return out;
+}
+
 }  // namespace tessera

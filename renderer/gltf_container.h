@@ -21,4 +21,8 @@ bool is_glb(std::string_view bytes);
 // malformed, why (without the file's name).
 std::variant<GlbChunks, std::string> parse_glb(std::string_view bytes);
 
+// A .glb of a JSON chunk holding `json` (padded with spaces) and, unless `bin` is empty, a BIN chunk holding `bin`
+// (padded with zeros).
+std::string make_glb(std::string_view json, std::string_view bin);
+
 }  // namespace tessera

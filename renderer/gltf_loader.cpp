@@ -10,6 +10,7 @@
 #include <functional>
 #include <set>
 
+#include "proto/asset_path.h"
 #include "renderer/gltf_container.h"
 #include "renderer/image_io.h"
 #include "renderer/scene_error.h"
@@ -281,18 +282,22 @@ struct FsContext {
   size_t max_bytes;
 };
 
+// The file tinygltf asks for (the asset's folder joined with a URI it percent-decoded; URIs reach it as
+// uri_from_asset_path() wrote them) as the confined file it names.
 bool inside(const FsContext& ctx, const std::string& path, std::filesystem::path* resolved) {
-  std::error_code ec;
-  std::filesystem::path p = std::filesystem::weakly_canonical(std::filesystem::path(path), ec);
-  if (ec) return false;
-  if (p.parent_path() != ctx.folder) return false;  // only files directly in the asset's folder
-  *resolved = p;
+  const std::string prefix = ctx.folder.string() + "/";
+  if (path.compare(0, prefix.size(), prefix) != 0) return false;
+  const proto::AssetPath relative = proto::asset_path(std::string_view(path).substr(prefix.size()));
+  if (!relative.problem.empty()) return false;
+  auto file = proto::confined_file(ctx.folder, relative.path);
+  if (!file) return false;
+  *resolved = *file;
   return true;
 }
 
 bool fs_exists(const std::string& path, void* user) {
   std::filesystem::path p;
-  return inside(*static_cast<FsContext*>(user), path, &p) && std::filesystem::is_regular_file(p);
+  return inside(*static_cast<FsContext*>(user), path, &p);
 }
 std::string fs_expand(const std::string& path, void*) {
   return path;
@@ -301,7 +306,7 @@ bool fs_read(std::vector<unsigned char>* out, std::string* err, const std::strin
   const FsContext& ctx = *static_cast<FsContext*>(user);
   std::filesystem::path p;
   if (!inside(ctx, path, &p)) {
-    if (err) *err += "refused to read " + path + " (outside the asset)\n";
+    if (err) *err += "cannot read " + path.substr(std::min(path.size(), ctx.folder.string().size() + 1)) + "\n";
     return false;
   }
   std::error_code ec;
@@ -586,18 +591,6 @@ uint64_t count_node_instances(const tinygltf::Model& model, const std::vector<in
 
 }  // namespace
 
-std::string gltf_uri_problem(const std::string& uri) {
-  if (uri.rfind("data:", 0) == 0) return "";
-  if (uri.empty()) return "an empty URI";
-  if (uri.find("://") != std::string::npos || uri.rfind("file:", 0) == 0 || uri.find(':') != std::string::npos)
-    return "URIs with a scheme are not allowed; only files of the same upload and data: URIs";
-  if (uri[0] == '/' || uri[0] == '\\') return "absolute paths are not allowed";
-  if (uri.find("..") != std::string::npos) return "\"..\" is not allowed";
-  if (uri.find('/') != std::string::npos || uri.find('\\') != std::string::npos || uri.find('%') != std::string::npos)
-    return "only plain file names of the same upload are allowed";
-  return "";
-}
-
 GltfImport import_gltf(const std::filesystem::path& path, const std::string& pointer, Scene& scene,
                        const GltfImportOptions& options) {
   const auto check_stop = [&options] {
@@ -616,18 +609,41 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   bool binary = false;
   json doc = container_json(bytes, &binary, pointer);
 
-  // Refuse references that could leave the asset's folder before tinygltf resolves anything.
+  // Every file the asset names must be inside its own folder (proto/asset_path.h), before tinygltf resolves any: the
+  // URIs are decoded and normalised here, and handed to tinygltf encoded as it decodes them.
+  bool rewritten = false;
   for (const char* section : {"buffers", "images"}) {
     if (!doc.contains(section) || !doc[section].is_array()) continue;
     for (size_t i = 0; i < doc[section].size(); ++i) {
-      const json& item = doc[section][i];
+      json& item = doc[section][i];
       if (!item.is_object() || !item.contains("uri")) continue;
-      if (!item["uri"].is_string())
-        throw SceneError(pointer, std::string(section) + "[" + std::to_string(i) + "].uri must be a string");
-      std::string problem = gltf_uri_problem(item["uri"].get<std::string>());
-      if (!problem.empty())
-        throw SceneError(pointer, "refused URI \"" + item["uri"].get<std::string>() + "\" in " + section + "[" +
-                                      std::to_string(i) + "]: " + problem);
+      const std::string where = std::string(section) + "[" + std::to_string(i) + "]";
+      if (!item["uri"].is_string()) throw SceneError(pointer, where + ".uri must be a string");
+      const std::string uri = item["uri"].get<std::string>();
+      if (proto::is_data_uri(uri)) continue;
+      const std::string shown = "refused URI \"" + uri.substr(0, 200) + "\" in " + where + ": ";
+      const proto::AssetPath file = proto::asset_path_from_uri(uri);
+      if (!file.problem.empty()) throw SceneError(pointer, shown + file.problem);
+      bool outside = false;
+      if (!proto::confined_file(path.parent_path(), file.path, &outside) && outside)
+        throw SceneError(pointer, shown + "it resolves outside the asset (a symbolic link)");
+      const std::string encoded = proto::uri_from_asset_path(file.path);
+      if (encoded != uri) {
+        item["uri"] = encoded;
+        rewritten = true;
+      }
+    }
+  }
+  if (rewritten) {
+    // tinygltf reads the URIs from the bytes: give it the document with the rewritten ones.
+    const std::string text = doc.dump();
+    if (binary) {
+      const GlbChunks chunks =
+          std::get<GlbChunks>(parse_glb(std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size())));
+      const std::string glb = make_glb(text, chunks.bin);
+      bytes.assign(glb.begin(), glb.end());
+    } else {
+      bytes.assign(text.begin(), text.end());
     }
   }
   // Required extensions we cannot honour fail the job; optional ones are warnings.

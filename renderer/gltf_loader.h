@@ -43,12 +43,9 @@ struct GltfImportOptions {
 };
 
 // Appends the default scene of the glTF file `path` (.glb or .gltf) to `scene`. URIs inside may name only files in
-// the same folder as `path` or data: URIs. Throws SceneError at `pointer` naming what is wrong, LoadStopped when
-// options.stop is asked to stop.
+// the folder of `path` or its subfolders (proto/asset_path.h), or be data: URIs. Throws SceneError at `pointer` naming
+// what is wrong, LoadStopped when options.stop is asked to stop.
 GltfImport import_gltf(const std::filesystem::path& path, const std::string& pointer, Scene& scene,
                        const GltfImportOptions& options);
-
-// Checks one glTF URI: empty string when it is acceptable, else the reason it is refused.
-std::string gltf_uri_problem(const std::string& uri);
 
 }  // namespace tessera

@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <initializer_list>
 
+#include "proto/asset_path.h"
 #include "proto/did_you_mean.h"
 #include "renderer/material.h"
 #include "renderer/scene_error.h"
@@ -109,30 +110,17 @@ Rgb rgb(const nlohmann::json& obj, const std::string& key, const std::string& po
 
 namespace {
 
-// Resolves a texture file named by a material inside the asset folder: relative paths only, no "..", and the
-// resolved file (symlinks followed) must stay inside the folder.
+// Resolves a texture file named by a material inside the asset folder (proto/asset_path.h: relative, subfolders
+// allowed, no "..", and the file, symlinks followed, inside the folder).
 std::filesystem::path resolve_asset(const std::string& name, const std::string& at, const MaterialContext& ctx) {
-  namespace fs = std::filesystem;
   if (ctx.asset_root.empty()) throw SceneError(at, "file textures are not available here (no asset folder)");
-  if (name.empty()) throw SceneError(at, "must name an image file");
-  fs::path rel(name);
-  if (rel.is_absolute() || rel.has_root_name() || rel.has_root_directory())
-    throw SceneError(at, "must be a path relative to the scene's folder");
-  for (const fs::path& part : rel) {
-    if (part == "..") throw SceneError(at, "must not contain \"..\"");
-  }
-  std::error_code ec;
-  fs::path root = fs::canonical(ctx.asset_root, ec);
-  if (ec) throw SceneError(at, "the asset folder cannot be read");
-  fs::path full = fs::canonical(root / rel, ec);
-  if (ec || !fs::is_regular_file(full, ec))
-    throw SceneError(at, "no image file \"" + name + "\" in the scene's folder");
-  auto r = root.begin();
-  auto f = full.begin();
-  for (; r != root.end(); ++r, ++f) {
-    if (f == full.end() || *r != *f) throw SceneError(at, "resolves outside the scene's folder");
-  }
-  return full;
+  const proto::AssetPath file = proto::asset_path(name);
+  if (!file.problem.empty()) throw SceneError(at, "\"" + name.substr(0, 200) + "\" is refused: " + file.problem);
+  bool outside = false;
+  auto full = proto::confined_file(ctx.asset_root, file.path, &outside);
+  if (!full && outside) throw SceneError(at, "resolves outside the scene's folder");
+  if (!full) throw SceneError(at, "no image file \"" + name + "\" in the scene's folder");
+  return *full;
 }
 
 void check_keys(const nlohmann::json& obj, const std::string& at, std::initializer_list<const char*> allowed) {

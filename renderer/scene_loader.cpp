@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "proto/asset_path.h"
 #include "proto/did_you_mean.h"
 #include "renderer/gltf_loader.h"
 #include "renderer/scene_error.h"
@@ -161,9 +162,14 @@ std::filesystem::path resolve(const SceneLoadOptions& options, const json& ref, 
   const std::string name = ref.get<std::string>();
   if (options.resolve_asset) return options.resolve_asset(name, pointer);
   if (options.asset_root.empty()) throw SceneError(pointer, "this document cannot reference files");
-  std::filesystem::path p = options.asset_root / name;
-  if (!std::filesystem::is_regular_file(p)) throw SceneError(pointer, "no such file: " + name);
-  return p;
+  // A file of the scene's folder or its subfolders, never outside it (proto/asset_path.h).
+  const proto::AssetPath file = proto::asset_path(name);
+  if (!file.problem.empty()) throw SceneError(pointer, "\"" + name.substr(0, 200) + "\" is refused: " + file.problem);
+  bool outside = false;
+  auto full = proto::confined_file(options.asset_root, file.path, &outside);
+  if (!full && outside) throw SceneError(pointer, "\"" + name + "\" resolves outside the scene's folder");
+  if (!full) throw SceneError(pointer, "no such file: " + name);
+  return *full;
 }
 
 // A camera that sees the whole of `b` from the front and a little above.

@@ -10,6 +10,7 @@
 #include <sstream>
 #include <system_error>
 
+#include "proto/asset_path.h"
 #include "renderer/gltf_container.h"
 #include "renderer/gltf_loader.h"
 #include "renderer/scene_error.h"
@@ -67,12 +68,11 @@ bool AssetInfo::owned_by(const std::string& name) const {
   return std::find(owners.begin(), owners.end(), name) != owners.end();
 }
 
-bool is_plain_file_name(const std::string& name) {
-  // 1 to 128 of [A-Za-z0-9._-], not starting with a dot (so never "." or ".." or a hidden file).
-  return !name.empty() && name.size() <= 128 && name[0] != '.' && std::all_of(name.begin(), name.end(), [](char c) {
-    return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' || c == '_' ||
-           c == '-';
-  });
+bool is_asset_file_name(const std::string& name) {
+  // As a URI inside the asset may name it (proto/asset_path.h), already normalised: "textures/wood.png" and
+  // "Normal Map.png" are names, "./x.png", "a//b", "../x" and ".hidden" are not.
+  const proto::AssetPath file = proto::asset_path(name);
+  return file.problem.empty() && file.path == name;
 }
 
 bool is_asset_id(const std::string& s) {
@@ -107,17 +107,20 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
   if (files.size() > 256) return invalid("an upload holds at most 256 files");
   std::set<std::string> names;
   for (const UploadFile& f : files) {
-    if (!is_plain_file_name(f.name))
-      return invalid("file name \"" + f.name.substr(0, 200) +
-                     "\" is not plain: 1 to 128 of A-Z a-z 0-9 . _ -, not starting with a dot");
+    if (!is_asset_file_name(f.name)) {
+      const proto::AssetPath file = proto::asset_path(f.name);
+      return invalid("file name \"" + f.name.substr(0, 200) + "\" is refused: " +
+                     (file.problem.empty() ? "not normalised (it names \"" + file.path + "\")" : file.problem));
+    }
     if (!names.insert(f.name).second) return invalid("file name \"" + f.name + "\" appears twice");
     if (f.bytes.empty()) return invalid(f.name + ": empty file");
   }
   std::sort(files.begin(), files.end(), [](const UploadFile& a, const UploadFile& b) { return a.name < b.name; });
 
-  // The main file decides the kind.
+  // The main file, at the top of the upload (not in a subfolder), decides the kind.
   std::vector<const UploadFile*> scenes, maps;
   for (const UploadFile& f : files) {
+    if (f.name.find('/') != std::string::npos) continue;
     const std::string e = lower_ext(f.name);
     if (e == ".glb" || e == ".gltf") scenes.push_back(&f);
     if (e == ".hdr" || e == ".exr") maps.push_back(&f);
@@ -162,9 +165,11 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
         if (!item["uri"].is_string()) return invalid(where + "is not a string");
         const std::string uri = item["uri"].get<std::string>();
         const std::string shown = "\"" + uri.substr(0, 200) + "\"";
-        if (std::string why = gltf_uri_problem(uri); !why.empty()) return invalid(where + shown + " refused: " + why);
-        if (uri.rfind("data:", 0) == 0) continue;
-        if (!names.count(uri) || uri == main.name) return invalid(where + shown + " names no file of this upload");
+        if (proto::is_data_uri(uri)) continue;
+        const proto::AssetPath file = proto::asset_path_from_uri(uri);
+        if (!file.problem.empty()) return invalid(where + shown + " refused: " + file.problem);
+        if (!names.count(file.path) || file.path == main.name)
+          return invalid(where + shown + " names no file of this upload");
       }
     }
   }
@@ -191,7 +196,10 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
   std::error_code ec;
   try {
     fs::create_directories(temp);
-    for (const UploadFile& f : files) write_file(temp / f.name, f.bytes);
+    for (const UploadFile& f : files) {
+      fs::create_directories((temp / f.name).parent_path());  // a subfolder of the asset
+      write_file(temp / f.name, f.bytes);
+    }
     // The asset as the renderer will load it: a malformed buffer or accessor is refused now, not at render time.
     SceneLoadOptions options;
     options.build = false;
@@ -304,7 +312,8 @@ bool DirectoryAssetStore::remove(const std::string& id, const std::optional<std:
 
 std::optional<fs::path> DirectoryAssetStore::main_file(const std::string& id, const std::string& kind) const {
   auto info = get(id);
-  if (!info || info->kind != kind || !is_plain_file_name(info->main)) return std::nullopt;
+  if (!info || info->kind != kind || !is_asset_file_name(info->main) || info->main.find('/') != std::string::npos)
+    return std::nullopt;
   return root_ / id / info->main;
 }
 

@@ -1,9 +1,10 @@
 // Uploaded assets: a glTF 2.0 asset (.glb, or a .gltf with its buffers and images) or an equirectangular
 // .hdr/.exr environment map, stored content-addressed under <data>/assets/<id>/ and referenced by jobs by id.
 // The id is the sha256 of the file (one file) or of a canonical manifest of (file name, sha256) pairs, sorted by
-// name (several files). Everything is checked before it is stored: file names are plain, a .glb's container is
-// consistent, a .gltf is JSON, every URI inside passes gltf_uri_problem() and names a file of the same upload (or is
-// a data: URI), and the asset loads as the renderer will load it. A directory appears whole (temp dir, rename).
+// name (several files). Everything is checked before it is stored: file names are asset paths (subfolders allowed;
+// the main file at the top), a .glb's container is consistent, a .gltf is JSON, every URI inside is accepted by
+// proto/asset_path.h and names a file of the same upload (or is a data: URI), and the asset loads as the renderer
+// will load it. A directory appears whole (temp dir, rename).
 // Content addressing shares the bytes, never the visibility: an asset belongs to each user who uploaded it, and to
 // no one else (another user's asset is as unknown as one that does not exist).
 #pragma once
@@ -24,7 +25,7 @@
 namespace tessera::server {
 
 struct UploadFile {
-  std::string name;  // plain: ^[A-Za-z0-9._-]{1,128}$, no leading dot
+  std::string name;  // is_asset_file_name(): "scene.gltf", "textures/wood.png"
   std::string bytes;
 };
 
@@ -44,7 +45,8 @@ struct StoredAsset {
   bool created = false;  // false: this owner had uploaded the same content before
 };
 
-bool is_plain_file_name(const std::string& name);
+// A name an uploaded file may have: a normalised asset path (proto/asset_path.h), subfolders allowed.
+bool is_asset_file_name(const std::string& name);
 bool is_asset_id(const std::string& s);
 std::string sha256_hex(std::string_view bytes);
 

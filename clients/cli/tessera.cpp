@@ -10,12 +10,14 @@
 #include <algorithm>
 #include <chrono>
 #include <iostream>
+#include <map>
 #include <optional>
 #include <thread>
 
 #include <nlohmann/json.hpp>
 
 #include "clients/cli/cli_common.h"
+#include "proto/asset_path.h"
 
 namespace {
 
@@ -282,7 +284,9 @@ int cmd_submit(std::vector<std::string> args) {
   if (const std::string file = std::filesystem::path(main).filename().string();
       main != "-" && !doc.contains("name") && file.size() <= 200)
     doc["name"] = file;
-  // A .gltf names its buffers and images: take those that sit beside it along too.
+  // A .gltf names its buffers and images: take those that sit beside it (or in its subfolders) along too, under the
+  // names its URIs give them (proto/asset_path.h, as the daemon reads them).
+  std::map<std::string, std::string> upload_names;  // attachment -> its name in the upload, when not its file name
   for (size_t i = 0; i < attachments.size(); ++i) {
     if (lower_extension(attachments[i]) != ".gltf") continue;
     json g = json::parse(read_file(attachments[i]), nullptr, false);
@@ -291,11 +295,14 @@ int cmd_submit(std::vector<std::string> args) {
       for (const json& e : g.value(key, json::array())) {
         if (!e.is_object() || !e.contains("uri") || !e["uri"].is_string()) continue;
         const std::string uri = e["uri"].get<std::string>();
-        if (uri.rfind("data:", 0) == 0 || uri.find('/') != std::string::npos) continue;
-        const auto file = (std::filesystem::path(attachments[i]).parent_path() / uri).string();
+        const tessera::proto::AssetPath name = tessera::proto::asset_path_from_uri(uri);
+        if (!name.problem.empty()) continue;  // a data: URI, or one the daemon refuses, naming it
+        const auto file = (std::filesystem::path(attachments[i]).parent_path() / name.path).string();
         if (std::find(attachments.begin(), attachments.end(), file) == attachments.end() &&
-            std::filesystem::exists(file))
+            std::filesystem::exists(file)) {
           attachments.push_back(file);
+          upload_names[file] = name.path;
+        }
       }
     }
   }
@@ -312,7 +319,10 @@ int cmd_submit(std::vector<std::string> args) {
                                : e == ".png"                 ? "image/png"
                                : e == ".jpg" || e == ".jpeg" ? "image/jpeg"
                                                              : "application/octet-stream";
-      items.push_back({"file", read_file(f), std::filesystem::path(f).filename().string(), type});
+      const auto named = upload_names.find(f);
+      items.push_back({"file", read_file(f),
+                       named != upload_names.end() ? named->second : std::filesystem::path(f).filename().string(),
+                       type});
     }
     return client->Post("/v1/jobs", items);
   };

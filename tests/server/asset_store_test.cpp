@@ -58,5 +58,46 @@ TEST(AssetStore, AnUploadThatRunsOutOfSpaceIs507AndLeavesNothing) {
   EXPECT_TRUE(assets.main_file(std::get<StoredAsset>(stored).info.id, "gltf"));
 }
 
+// URIs as real assets write them: percent-encoded ("%20" for a space), "./", a subfolder; the upload's files carry
+// those names ("textures/tri angle.bin") and are stored in subfolders. What leaves the upload is still refused,
+// naming the URI.
+TEST(AssetStore, EncodedDotSlashAndSubfolderUrisNameFilesOfTheUpload) {
+  test::TempDir dir;
+  DirectoryAssetStore assets(dir.path());
+  std::vector<UploadFile> files = triangle_upload(0);
+  auto with_uri = [&](const std::string& uri, const std::string& bin_name) {
+    std::vector<UploadFile> out = files;
+    for (UploadFile& f : out) {
+      if (f.name == "tri.bin") f.name = bin_name;
+      if (f.name != "tri.gltf") continue;
+      nlohmann::json doc = nlohmann::json::parse(f.bytes);
+      doc["buffers"][0]["uri"] = uri;
+      f.bytes = doc.dump();
+    }
+    return assets.store(std::move(out), "alice");
+  };
+  for (const auto& [uri, name] :
+       std::vector<std::pair<std::string, std::string>>{{"textures/tri%20angle.bin", "textures/tri angle.bin"},
+                                                        {"./textures/./tri%20angle.bin", "textures/tri angle.bin"},
+                                                        {"./tri.bin", "tri.bin"}}) {
+    auto stored = with_uri(uri, name);
+    ASSERT_TRUE(std::holds_alternative<StoredAsset>(stored)) << uri << ": " << std::get<Problem>(stored).detail;
+    const AssetInfo& info = std::get<StoredAsset>(stored).info;
+    EXPECT_TRUE(fs::is_regular_file(dir.path() / "assets" / info.id / name)) << name;
+    EXPECT_TRUE(assets.main_file(info.id, "gltf"));
+  }
+  for (const std::string uri : {"../tri.bin", "%2e%2e/tri.bin", "textures/../../tri.bin", "/tri.bin"}) {
+    auto stored = with_uri(uri, "tri.bin");
+    ASSERT_TRUE(std::holds_alternative<Problem>(stored)) << uri;
+    const Problem& problem = std::get<Problem>(stored);
+    EXPECT_EQ(problem.status, 422);
+    EXPECT_NE(problem.detail.find("buffers[0].uri \"" + uri + "\" refused"), std::string::npos) << problem.detail;
+  }
+  // A name that is not one the asset could use.
+  auto hidden = with_uri("tri.bin", "../tri.bin");
+  ASSERT_TRUE(std::holds_alternative<Problem>(hidden));
+  EXPECT_EQ(std::get<Problem>(hidden).status, 422);
+}
+
 }  // namespace
 }  // namespace tessera::server

@@ -86,15 +86,16 @@ TEST(JobState, Transitions) {
   EXPECT_FALSE(parse_job_state("done"));
 }
 
-TEST(AssetFileName, PlainNamesOnly) {
-  for (const char* good : {"scene.gltf", "Box0.bin", "a", "tex_01-b.PNG", "x.y.z"})
-    EXPECT_TRUE(is_plain_file_name(good)) << good;
-  EXPECT_TRUE(is_plain_file_name(std::string(128, 'a')));
-  EXPECT_FALSE(is_plain_file_name(std::string(129, 'a')));
-  for (const char* bad : {"", ".", "..", ".hidden", "../x.bin", "dir/x.bin", "dir\\x.bin", "a b.png", "a:b", "%2e%2e",
-                          "t\xc3\xa9.png", "x\n.bin"})
-    EXPECT_FALSE(is_plain_file_name(bad)) << bad;
-  EXPECT_FALSE(is_plain_file_name(std::string("a\0b", 3)));
+TEST(AssetFileName, NormalisedAssetPathsOnly) {
+  for (const char* good : {"scene.gltf", "Box0.bin", "a", "tex_01-b.PNG", "x.y.z", "textures/wood.png",
+                           "Normal Map.png", "t\xc3\xa9.png", "100%.png"})
+    EXPECT_TRUE(is_asset_file_name(good)) << good;
+  EXPECT_TRUE(is_asset_file_name(std::string(255, 'a')));
+  EXPECT_FALSE(is_asset_file_name(std::string(256, 'a')));
+  for (const char* bad : {"", ".", "..", ".hidden", "../x.bin", "dir/../x.bin", "./x.bin", "dir//x.bin", "/x.bin",
+                          "dir/", "dir\\x.bin", "a:b", "x\n.bin", "dir/.asset.json"})
+    EXPECT_FALSE(is_asset_file_name(bad)) << bad;
+  EXPECT_FALSE(is_asset_file_name(std::string("a\0b", 3)));
 }
 
 }  // namespace
