@@ -3,6 +3,9 @@
 // range of sample indices for every pixel of the render's region, into a film, on the render's thread pool; a registry
 // creates them by name, as the material registry does models:
 //   path   unidirectional path tracing from the camera (Kajiya 1986; Dutré et al., §2.6), with a choice of estimator
+//   light  light tracing: paths from the lights joined to the lens and splatted where they land (Veach 1997, 10.2)
+//   bdpt   bidirectional path tracing: subpaths from both ends joined in every way, weighted by the power heuristic
+//          (Veach 1997, ch. 10)
 // Every integrator keeps the image a function of (seed, pixel, sample index) alone, whatever the threads or passes.
 #pragma once
 
@@ -96,6 +99,10 @@ class Integrator {
   // changing its sample count. Returns early, the film incomplete, once `cancel` is set.
   virtual void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel) = 0;
 
+  // Whether the film's squared-luminance sums measure the image's noise (Film::relative_error): not when every
+  // sample is a splat that lands in some other pixel (light tracing).
+  virtual bool measures_noise() const { return true; }
+
   // Totals since the integrator was made: rays traced, and samples dropped for being infinite, NaN or negative.
   RayCounters rays() const;
   uint64_t nonfinite_samples() const;
@@ -134,6 +141,10 @@ class IntegratorRegistry {
  private:
   std::map<std::string, IntegratorFactory> factories_;
 };
+
+// What keeps the integrator `name` from rendering through `camera`, or empty: light tracing and BDPT join paths to
+// the lens through the camera's importance, which only a perspective camera has.
+std::string integrator_camera_problem(const std::string& name, const Camera& camera);
 
 // Adds every integrator the renderer ships to `registry` (one line per integrator in integrators/registry.cpp).
 void register_builtin_integrators(IntegratorRegistry& registry);

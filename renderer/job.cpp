@@ -71,6 +71,9 @@ RenderJob load_job(const json& job, const JobLoadOptions& options) {
     if (it == job.end()) throw SceneError("/scene", "a scene job needs a \"scene\"");
     out.scene = load_scene(*it, "/scene", options.scene);
   }
+  const Camera camera(out.scene->camera, out.settings.width, out.settings.height);
+  const std::string problem = integrator_camera_problem(out.settings.integrator.name, camera);
+  if (!problem.empty()) throw SceneError("/render/integrator", problem);
   return out;
 }
 

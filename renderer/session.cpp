@@ -97,7 +97,10 @@ StopReason RenderSession::run(const std::function<void(const RenderProgress&, co
     progress_.eta_s = per_sample_s * (settings_.spp - progress_.samples_done);
     if (settings_.time_limit_s > 0)
       progress_.eta_s = std::min(progress_.eta_s, std::max(0.0, settings_.time_limit_s - progress_.elapsed_s));
-    if (settings_.noise_target > 0)
+    // An integrator whose film cannot measure its noise reports none (infinity) and never meets a noise target.
+    if (!integrator_->measures_noise())
+      progress_.relative_error = INFINITY;
+    else if (settings_.noise_target > 0)
       progress_.relative_error = film_.relative_error();
     else if (progress_.samples_done >= 2 && (progress_.pass % 4 == 0 || progress_.samples_done >= settings_.spp))
       progress_.relative_error = film_.relative_error();

@@ -40,7 +40,7 @@ const char* kRenderUsage =
     "  --width N, --height N  resolution (override render.width/height)\n"
     "  --time-limit S         stop after the pass that crosses S seconds\n"
     "  --threads N            render threads (default: all hardware threads)\n"
-    "  --integrator NAME      path (render.integrator)\n"
+    "  --integrator NAME      path | bdpt | light (render.integrator)\n"
     "  --estimator NAME       mis | area | hemisphere (the path tracer's)\n"
     "  --seed N               random seed\n"
     "  --max-depth N          maximum bounces\n"

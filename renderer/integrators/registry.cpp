@@ -4,9 +4,11 @@
 namespace tessera {
 
 void register_path(IntegratorRegistry& registry);
+void register_bidirectional(IntegratorRegistry& registry);
 
 void register_builtin_integrators(IntegratorRegistry& registry) {
   register_path(registry);
+  register_bidirectional(registry);
 }
 
 }  // namespace tessera

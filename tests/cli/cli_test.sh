@@ -44,6 +44,8 @@ cd "$tmp"
 r=(--width 40 --height 32 --threads 2 -q)
 expect 0 "render all 12 samples" "$TESSERA" render "$job" "${r[@]}" --spp 12 -o all.exr -o all.png -o all.tfilm
 expect 0 "render samples 5:7" "$TESSERA" render "$job" "${r[@]}" --samples 5:7 --integrator path -o b.tfilm
+expect 0 "render with bdpt" "$TESSERA" render "$job" "${r[@]}" --spp 2 --integrator bdpt -o bdpt.png
+expect 0 "render with light tracing" "$TESSERA" render "$job" "${r[@]}" --spp 2 --integrator light -o light.png
 expect 0 "render samples 0:5 of the top half" "$TESSERA" render "$job" "${r[@]}" --samples 0:5 --region 0,0,40,16 -o a1.tfilm
 expect 0 "render samples 0:5 of the bottom half" "$TESSERA" render "$job" "${r[@]}" --samples 0:5 --region 0,16,40,16 -o a2.tfilm
 expect 0 "merge three parts out of order" "$TESSERA" merge b.tfilm a2.tfilm a1.tfilm -o merged.exr -o merged.png -o merged.tfilm

@@ -1,0 +1,601 @@
+// Light tracing (`light`) and bidirectional path tracing (`bdpt`): the adjoint face of light transport (emitted
+// importance W_e and the measurement equation: Dutre, Bala & Bekaert, Advanced Global Illumination, 2nd ed., 2.8;
+// Veach 1997, ch. 4 and 10).
+//
+// Every pixel sample builds a camera subpath (the camera's vertex, then surfaces found by sampling BSDFs, in radiance
+// mode) and a light subpath (a point on a light, then surfaces found by sampling the adjoint BSDFs, in importance
+// mode). Joining the first s vertices of the light subpath to the first t of the camera subpath gives a path of
+// s + t vertices for every (s, t): s = 0 is a camera path that hits an emitter, s = 1 joins the camera path to a
+// point sampled on a light (next-event estimation), t = 1 joins the light subpath to a point sampled on the lens
+// and splats the result where it lands on the film (light tracing). BDPT weights every strategy by the power
+// heuristic, computed from the ratios of the densities with which the neighbouring strategies would have sampled the
+// same path (Veach 1997, 10.2 and 10.3.4; pbrt-v4, 13.4.4): no product of densities is ever formed, so nothing
+// overflows. Densities are by area, or by solid angle for vertices at infinity; a vertex whose sampling is a delta
+// (a specular bounce, a point or directional light) cannot be joined, and the strategies that would need to are
+// left out of the sum. Russian roulette ends subpaths unbiasedly; the weights leave it out (they are any functions
+// of the path that sum to 1 over the strategies that can make it).
+//
+// `light` keeps only the t = 1 strategies, unweighted: light tracing. It does not see lights at infinity directly
+// (the environment appears black) nor anything seen only through mirrors and glass.
+//
+// Pixel measurement: a pixel's importance is width x height times the camera's W_e over the rays that land in it
+// (Camera::importance). One light subpath is traced per pixel sample of the region; a splat is weighted by the
+// image's pixel count over the region's, so the light paths of a crop estimate the same pixels.
+#include <cmath>
+#include <stdexcept>
+
+#include "renderer/integrator.h"
+#include "renderer/scene.h"
+#include "renderer/thread_pool.h"
+
+namespace tessera {
+
+namespace {
+
+enum class VertexKind : uint8_t { kCamera, kLight, kSurface };
+
+struct Vertex {
+  VertexKind kind = VertexKind::kSurface;
+  Rgb beta;     // the subpath's throughput up to this vertex (its measurement contribution over its density)
+  Vec3 p;       // position (unused for a light at infinity)
+  Vec3 ng;      // geometric normal; zero for points (camera, point and spot lights) and lights at infinity
+  Frame frame;  // shading frame (surfaces)
+  Vec3 wo;      // unit direction towards the previous vertex (surfaces)
+  const Bsdf* bsdf = nullptr;
+  ShadingPoint sp;  // the surface point, for its emission
+  const Material* material = nullptr;
+  uint32_t light = kNoLight;  // the light this vertex is on (light vertices, emitting surfaces)
+  bool delta = false;         // scattered by a delta lobe
+  bool delta_light = false;   // a point, spot or directional light
+  bool infinite = false;      // a light at infinity: `dir` is the direction its light travels
+  Vec3 dir;
+  // Densities of sampling this vertex from the previous one on its own subpath (fwd) and from the next one in the
+  // reverse direction (rev), by area (by solid angle for a vertex at infinity).
+  float pdf_fwd = 0, pdf_rev = 0;
+
+  bool on_surface() const { return !is_black(ng); }
+  bool is_light() const { return kind == VertexKind::kLight || (kind == VertexKind::kSurface && light != kNoLight); }
+  bool connectible() const {
+    switch (kind) {
+      case VertexKind::kCamera:
+        return true;
+      case VertexKind::kLight:
+        return !(infinite && delta_light);  // a directional light's direction is fixed
+      case VertexKind::kSurface:
+        return bsdf && has_non_delta(bsdf->flags());
+    }
+    return false;
+  }
+};
+
+// A density by solid angle at `from` turned into one by area at `to` (unchanged for a vertex at infinity).
+float to_area(float pdf, const Vertex& from, const Vertex& to) {
+  if (to.infinite) return pdf;
+  const Vec3 w = to.p - from.p;
+  const float d2 = length_squared(w);
+  if (!(d2 > 0)) return 0;
+  if (to.on_surface()) pdf *= std::abs(dot(to.ng, w)) / std::sqrt(d2);
+  return pdf / d2;
+}
+
+// Unit direction from vertex a towards vertex b (b may be at infinity).
+Vec3 direction_to(const Vertex& a, const Vertex& b) {
+  if (b.infinite) return -b.dir;
+  return normalize(b.p - a.p);
+}
+
+struct Context {
+  const Scene& scene;
+  const Camera& camera;
+  const IntegratorSettings& settings;
+  float disc_pdf;  // area density of the origins of light from infinity
+};
+
+// The BSDF at surface vertex v for light leaving towards `next`, with the shading-normal correction of importance
+// transport (Veach 1997, 5.3: |wo.ns| |wi.ng| / (|wo.ng| |wi.ns|)); zero where the shading and geometric normals
+// disagree on the side of wi.
+Rgb vertex_f(const Vertex& v, const Vec3& wi, TransportMode mode) {
+  const Vec3 wo_l = v.frame.to_local(v.wo), wi_l = v.frame.to_local(wi);
+  const float go = dot(v.wo, v.ng), gi = dot(wi, v.ng);
+  if ((go * gi > 0) != (wo_l.z * wi_l.z > 0)) return Rgb(0);
+  Rgb f = v.bsdf->eval_for(mode, wo_l, wi_l);
+  if (mode == TransportMode::kImportance) {
+    const float denom = std::abs(go) * std::abs(wi_l.z);
+    if (!(denom > 0)) return Rgb(0);
+    f *= std::abs(wo_l.z) * std::abs(gi) / denom;
+  }
+  return f;
+}
+
+// The area density with which the light at `v` (a light vertex or an emitting surface) emits towards `next`, given
+// the light's choice and origin.
+float pdf_light(const Context& c, const Vertex& v, const Vertex& next) {
+  if (v.infinite) {
+    // From the disc of the scene's bounding sphere, by area across the beam, onto next's surface.
+    float pdf = c.disc_pdf;
+    if (next.on_surface()) pdf *= std::abs(dot(next.ng, v.dir));
+    return pdf;
+  }
+  const Vec3 d = next.p - v.p;
+  const float d2 = length_squared(d);
+  if (!(d2 > 0)) return 0;
+  const Vec3 w = d / std::sqrt(d2);
+  float pdf_pos, pdf_dir;
+  c.scene.lights().emission_pdf(c.scene, v.light, v.ng, w, &pdf_pos, &pdf_dir);
+  float pdf = pdf_dir / d2;
+  if (next.on_surface()) pdf *= std::abs(dot(next.ng, w));
+  return pdf;
+}
+
+// The density of choosing the light at `v` and its origin there (for lights at infinity: of the direction, by solid
+// angle, including the environment's choice; a directional light's direction has none).
+float pdf_light_origin(const Context& c, const Vertex& v, const Vertex& next) {
+  const LightSet& lights = c.scene.lights();
+  if (v.infinite) {
+    if (v.delta_light || lights.environment_light() == kNoLight) return 0;
+    float pdf_pos, pdf_dir;
+    lights.emission_pdf(c.scene, lights.environment_light(), Vec3(0), v.dir, &pdf_pos, &pdf_dir);
+    return lights.environment_pmf() * pdf_dir;
+  }
+  float pdf_pos, pdf_dir;
+  lights.emission_pdf(c.scene, v.light, v.ng, direction_to(v, next), &pdf_pos, &pdf_dir);
+  return pdf_pos;
+}
+
+// The area density with which vertex v, reached from `prev`, samples `next` (Veach 1997, 10.2).
+float vertex_pdf(const Context& c, const Vertex& v, const Vertex* prev, const Vertex& next) {
+  if (v.kind == VertexKind::kLight) return pdf_light(c, v, next);
+  const Vec3 wn = direction_to(v, next);
+  float pdf = 0;
+  if (v.kind == VertexKind::kCamera) {
+    Ray ray;
+    ray.origin = v.p;
+    ray.dir = wn;
+    float pdf_pos;
+    c.camera.importance_pdf(ray, &pdf_pos, &pdf);
+  } else {
+    if (!prev || !v.bsdf) return 0;
+    pdf = v.bsdf->pdf(v.frame.to_local(direction_to(v, *prev)), v.frame.to_local(wn));
+  }
+  return to_area(pdf, v, next);
+}
+
+// Whether the segment between two finite vertices is unobstructed, each end offset off its surface.
+bool visible(const Scene& scene, const Vertex& a, const Vertex& b, RayCounters& counters) {
+  ++counters.shadow;
+  Ray ray;
+  const Vec3 d = b.p - a.p;
+  ray.origin = a.on_surface() ? offset_ray_origin(a.p, a.ng, d) : a.p;
+  const Vec3 target = b.on_surface() ? offset_ray_origin(b.p, b.ng, -d) : b.p;
+  ray.dir = target - ray.origin;
+  ray.tmin = 0;
+  ray.tmax = 1 - 1e-5f;
+  return !scene.occluded(ray);
+}
+
+// The subpath's walk from its endpoint (Veach 1997, 10.2): vertices path[1..] after path[0], the endpoint, up to
+// max_vertices of them; returns how many. `beta` and `pdf_dir` are the throughput and the solid-angle density of
+// the ray leaving the endpoint. Camera subpaths that leave the scene end at the environment, as a light vertex.
+int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vertices, TransportMode mode,
+                PixelSampler& sampler, ScratchArena& arena, Vertex* path, RayCounters& counters) {
+  if (max_vertices <= 0) return 0;
+  const Scene& scene = c.scene;
+  const float beta_ref = std::max(max_component(beta), 1e-30f);
+  float pdf_fwd = pdf_dir;
+  float eta_scale = 1;  // radiance's eta^2 across refractions, kept out of Russian roulette
+  Rgb sigma_a(0);       // absorption of the medium the walk is in
+  int n = 0;
+  for (;;) {
+    Vertex& v = path[n + 1];
+    Vertex& prev = path[n];
+    SurfaceInteraction si;
+    if (!scene.intersect(ray, &si)) {
+      if (mode == TransportMode::kRadiance && !scene.environment.black()) {
+        v = Vertex();
+        v.kind = VertexKind::kLight;
+        v.infinite = true;
+        v.dir = -ray.dir;
+        v.beta = beta;
+        v.pdf_fwd = pdf_fwd;
+        v.light = scene.lights().environment_light();
+        ++n;
+      }
+      break;
+    }
+    if (!is_black(sigma_a)) {
+      const float d = si.t * length(ray.dir);
+      beta *= Rgb(std::exp(-sigma_a.x * d), std::exp(-sigma_a.y * d), std::exp(-sigma_a.z * d));
+    }
+    v = Vertex();
+    v.kind = VertexKind::kSurface;
+    v.p = si.sp.p;
+    v.ng = si.sp.ng;
+    v.frame = si.sp.frame;
+    v.wo = -ray.dir;
+    v.sp = si.sp;
+    v.material = si.material;
+    v.light = si.light;
+    v.beta = beta;
+    v.pdf_fwd = to_area(pdf_fwd, prev, v);
+    v.bsdf = si.material->bsdf(si.sp, arena);
+    ++n;
+    if (n >= max_vertices || !v.bsdf) break;
+    const Vec3 wo = v.frame.to_local(v.wo);
+    if (wo.z == 0) break;
+    const float u_lobe = sampler.get1d();
+    const Vec2 u_dir = sampler.get2d();
+    const float u_rr = sampler.get1d();
+    const std::optional<BsdfSample> bs = v.bsdf->sample_for(mode, wo, u_lobe, u_dir);
+    if (!bs || !(bs->pdf > 0) || is_black(bs->f)) break;
+    const Vec3 wi = v.frame.to_world(bs->wi);
+    const bool transmit = (bs->flags & kBsdfTransmission) != 0;
+    if ((dot(wi, v.ng) * dot(v.wo, v.ng) > 0) == transmit) break;
+    beta *= bs->f * (std::abs(bs->wi.z) / bs->pdf);
+    if (mode == TransportMode::kImportance) {
+      const float denom = std::abs(dot(v.wo, v.ng)) * std::abs(bs->wi.z);
+      if (!(denom > 0)) break;
+      beta *= std::abs(wo.z) * std::abs(dot(wi, v.ng)) / denom;
+    }
+    if (!is_finite(beta)) break;
+    pdf_fwd = bs->pdf;
+    float pdf_rev = v.bsdf->pdf(bs->wi, wo);
+    if (is_delta(bs->flags)) {
+      v.delta = true;
+      pdf_fwd = pdf_rev = 0;
+    }
+    if (transmit) {
+      if (mode == TransportMode::kRadiance) eta_scale *= sqr(bs->eta);
+      sigma_a = si.sp.front_face ? si.material->volume_sigma_a : Rgb(0);
+    }
+    prev.pdf_rev = to_area(pdf_rev, v, prev);
+    // Russian roulette on the throughput relative to the subpath's start.
+    if (n >= c.settings.rr_start_depth) {
+      const float q = std::max(0.05f, 1 - max_component(beta) * eta_scale / beta_ref);
+      if (u_rr < q) break;
+      beta /= 1 - q;
+    }
+    ray.origin = offset_ray_origin(v.p, v.ng, wi);
+    ray.dir = wi;
+    ray.tmin = 0;
+    ray.tmax = kInfinity;
+    ++counters.bounce;
+  }
+  return n;
+}
+
+// Temporarily replaces a value, restoring it when it goes out of scope.
+template <typename T>
+class Scoped {
+ public:
+  Scoped() = default;
+  Scoped(T* target, T value) : target_(target), saved_(*target) { *target = value; }
+  Scoped(const Scoped&) = delete;
+  Scoped& operator=(Scoped&& o) noexcept {
+    restore();
+    target_ = o.target_;
+    saved_ = o.saved_;
+    o.target_ = nullptr;
+    return *this;
+  }
+  ~Scoped() { restore(); }
+
+ private:
+  void restore() {
+    if (target_) *target_ = saved_;
+    target_ = nullptr;
+  }
+  T* target_ = nullptr;
+  T saved_{};
+};
+
+// The power-heuristic weight of strategy (s, t) for the path it made (Veach 1997, 10.3.4 and 9.2.4), from the
+// ratios p_i / p_s of the densities of the neighbouring strategies, each found from the one before by one vertex's
+// reverse and forward densities. `sampled` is the vertex strategies s = 1 and t = 1 sampled afresh.
+float mis_weight(const Context& c, Vertex* light, Vertex* camera, const Vertex& sampled, int s, int t) {
+  if (s + t == 2) return 1;
+  auto remap0 = [](float f) { return f != 0 ? f : 1.0f; };
+  Vertex* qs = s > 0 ? &light[s - 1] : nullptr;
+  Vertex* pt = t > 0 ? &camera[t - 1] : nullptr;
+  Vertex* qs_minus = s > 1 ? &light[s - 2] : nullptr;
+  Vertex* pt_minus = t > 1 ? &camera[t - 2] : nullptr;
+  Scoped<Vertex> a1;
+  if (s == 1)
+    a1 = Scoped<Vertex>(qs, sampled);
+  else if (t == 1)
+    a1 = Scoped<Vertex>(pt, sampled);
+  // The joined vertices are joined, whatever they scattered by.
+  Scoped<bool> a2, a3;
+  if (pt) a2 = Scoped<bool>(&pt->delta, false);
+  if (qs) a3 = Scoped<bool>(&qs->delta, false);
+  // The reverse densities the join makes: of the ends' neighbours, through the other subpath.
+  Scoped<float> a4, a5, a6, a7;
+  if (pt)
+    a4 = Scoped<float>(&pt->pdf_rev, s > 0 ? vertex_pdf(c, *qs, qs_minus, *pt) : pdf_light_origin(c, *pt, *pt_minus));
+  if (pt_minus)
+    a5 = Scoped<float>(&pt_minus->pdf_rev, s > 0 ? vertex_pdf(c, *pt, qs, *pt_minus) : pdf_light(c, *pt, *pt_minus));
+  if (qs) a6 = Scoped<float>(&qs->pdf_rev, vertex_pdf(c, *pt, pt_minus, *qs));
+  if (qs_minus) a7 = Scoped<float>(&qs_minus->pdf_rev, vertex_pdf(c, *qs, pt, *qs_minus));
+  float sum = 0, r = 1;
+  for (int i = t - 1; i > 0; --i) {
+    r *= sqr(remap0(camera[i].pdf_rev) / remap0(camera[i].pdf_fwd));
+    if (!camera[i].delta && !camera[i - 1].delta) sum += r;
+  }
+  r = 1;
+  for (int i = s - 1; i >= 0; --i) {
+    r *= sqr(remap0(light[i].pdf_rev) / remap0(light[i].pdf_fwd));
+    const bool delta_before = i > 0 ? light[i - 1].delta : light[0].delta_light;
+    if (!light[i].delta && !delta_before) sum += r;
+  }
+  return 1 / (1 + sum);
+}
+
+class BidirectionalIntegrator final : public Integrator {
+ public:
+  BidirectionalIntegrator(const IntegratorSetup& setup, bool light_only) : Integrator(setup), light_only_(light_only) {
+    const std::string problem = integrator_camera_problem(setup_.settings.name, setup_.camera);
+    if (!problem.empty()) throw std::invalid_argument(problem);
+    const double image = static_cast<double>(setup_.width) * setup_.height;
+    const double region = static_cast<double>(setup_.region.width) * setup_.region.height;
+    splat_scale_ = region > 0 ? static_cast<float>(image / region) : 1.0f;
+    const float r = std::max(setup_.scene->bounds().radius(), 1e-3f);
+    disc_pdf_ = 1 / (kPi * r * r);
+    // Camera subpaths: the camera and up to max_depth + 1 surfaces (the last may only emit); light subpaths: the
+    // light and up to max_depth surfaces.
+    const size_t per_worker = static_cast<size_t>(setup_.settings.max_depth) * 2 + 4;
+    for (int i = 0; i < setup_.pool->size(); ++i) vertices_.emplace_back(per_worker);
+  }
+
+  bool measures_noise() const override { return !light_only_; }
+
+  void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel) override {
+    setup_.pool->parallel_for(tiles_.count(), [&](size_t tile, int w) {
+      if (cancel.load(std::memory_order_relaxed)) return;
+      render_tile(tiles_.tile(tile), w, first_sample, count, film);
+    });
+  }
+
+ private:
+  void render_tile(const PixelRegion& tile, int w, uint32_t first_sample, uint32_t count, Film& film);
+  // The pixel sample's contribution to its own pixel; splats land on the film directly.
+  Rgb sample(const Context& c, Vec2 film_pos, PixelSampler& sampler, ScratchArena& arena, Vertex* camera, Vertex* light,
+             Film& film, RayCounters& counters);
+  // The unweighted contribution of strategy (s, t), and through `sampled` and `splat_at` the vertex it sampled
+  // afresh and, for t = 1, the film position.
+  Rgb connect(const Context& c, const LightEmission& le, Vertex* light, Vertex* camera, int s, int t,
+              PixelSampler& sampler, Vertex* sampled, Vec2* splat_at, RayCounters& counters);
+  void splat(Film& film, Vec2 at, const Rgb& value) const {
+    const int x = static_cast<int>(at.x), y = static_cast<int>(at.y);
+    const PixelRegion& r = setup_.region;
+    if (x < r.x || y < r.y || x >= r.x + r.width || y >= r.y + r.height) return;
+    if (!is_finite(value) || value.x < 0 || value.y < 0 || value.z < 0) return;
+    film.splat(x, y, value * splat_scale_);
+  }
+
+  bool light_only_;
+  float splat_scale_ = 1;
+  float disc_pdf_ = 1;
+  std::vector<std::vector<Vertex>> vertices_;  // per worker
+};
+
+void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32_t first_sample, uint32_t count,
+                                          Film& film) {
+  Worker& worker = this->worker(w);
+  RayCounters counters;
+  uint64_t nonfinite = 0;
+  const Context c{*setup_.scene, setup_.camera, setup_.settings, disc_pdf_};
+  std::vector<Vertex>& vertices = vertices_[static_cast<size_t>(w)];
+  const size_t half = vertices.size() / 2;
+  Vertex* camera = vertices.data();
+  Vertex* light = vertices.data() + half;
+  const PixelSampler::SeedKeys seed_keys(setup_.seed);
+  for (int y = tile.y; y < tile.y + tile.height; ++y) {
+    for (int x = tile.x; x < tile.x + tile.width; ++x) {
+      const uint32_t pixel = static_cast<uint32_t>(y) * static_cast<uint32_t>(setup_.width) + static_cast<uint32_t>(x);
+      for (uint32_t s = first_sample; s < first_sample + count; ++s) {
+        PixelSampler sampler(seed_keys, pixel, s, setup_.sampler);
+        const Vec2 jitter = sampler.get2d();
+        Rgb l = sample(c, Vec2(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y), sampler,
+                       worker.arena, camera, light, film, counters);
+        if (light_only_) continue;
+        if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
+          ++nonfinite;
+          l = Rgb(0);
+        }
+        film.add_sample_shared(x, y, l);
+      }
+    }
+  }
+  worker.rays += counters;
+  worker.nonfinite += nonfinite;
+}
+
+Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSampler& sampler, ScratchArena& arena,
+                                    Vertex* camera, Vertex* light, Film& film, RayCounters& counters) {
+  arena.reset();
+  const Scene& scene = c.scene;
+  const int max_depth = c.settings.max_depth;
+  const Vec2 u_lens = sampler.get2d();
+  // The camera subpath (none for light tracing).
+  int n_camera = 0;
+  if (!light_only_) {
+    const Ray ray = c.camera.generate_ray(film_pos, u_lens);
+    ++counters.camera;
+    camera[0] = Vertex();
+    camera[0].kind = VertexKind::kCamera;
+    camera[0].p = ray.origin;
+    camera[0].beta = Rgb(1);
+    float pdf_pos, pdf_dir;
+    c.camera.importance_pdf(ray, &pdf_pos, &pdf_dir);
+    n_camera = 1 + random_walk(c, ray, Rgb(1), pdf_dir, max_depth + 1, TransportMode::kRadiance, sampler, arena, camera,
+                               counters);
+  }
+  // The light subpath.
+  int n_light = 0;
+  const float u_select = sampler.get1d();
+  const Vec2 u_pos = sampler.get2d(), u_dir = sampler.get2d();
+  LightEmission le;
+  if (scene.lights().sample_emission(scene, u_select, u_pos, u_dir, &le)) {
+    Vertex& l0 = light[0];
+    l0 = Vertex();
+    l0.kind = VertexKind::kLight;
+    l0.p = le.ray.origin;
+    l0.ng = le.infinite ? Vec3(0) : le.n;
+    l0.light = le.light;
+    l0.infinite = le.infinite;
+    l0.dir = le.ray.dir;
+    l0.delta_light = le.delta_pos || le.delta_dir;
+    l0.beta = Rgb(1 / le.pdf_pos);  // the origin before a direction is chosen: for s = 1, t = 1
+    l0.pdf_fwd = le.pdf_pos;
+    Ray ray = le.ray;
+    ray.tmin = 0;
+    ray.tmax = kInfinity;
+    if (!le.infinite && !is_black(le.n)) ray.origin = offset_ray_origin(le.ray.origin, le.n, le.ray.dir);
+    n_light = 1 + random_walk(c, ray, le.weight(), le.pdf_dir, max_depth, TransportMode::kImportance, sampler, arena,
+                              light, counters);
+    if (le.infinite) {
+      // From infinity the first surface is found by area across the beam, and the light's own density is that of
+      // its direction.
+      if (n_light > 1) {
+        light[1].pdf_fwd = c.disc_pdf;
+        if (light[1].on_surface()) light[1].pdf_fwd *= std::abs(dot(light[1].ng, le.ray.dir));
+      }
+      l0.pdf_fwd = pdf_light_origin(c, l0, l0);
+    }
+  }
+  // Every strategy.
+  Rgb l(0);
+  const int t_max = light_only_ ? 1 : n_camera;
+  for (int t = 1; t <= t_max; ++t) {
+    for (int s = 0; s <= n_light; ++s) {
+      const int depth = s + t - 2;
+      if (depth < 0 || depth > max_depth) continue;
+      if (!light_only_ && s == 1 && t == 1) continue;  // the emitter seen directly: s = 0, t = 2 alone
+      if (light_only_ && s == 0) continue;
+      Vertex sampled;
+      Vec2 splat_at;
+      Rgb contribution = connect(c, le, light, camera, s, t, sampler, &sampled, &splat_at, counters);
+      if (is_black(contribution)) continue;
+      if (!light_only_) contribution *= mis_weight(c, light, camera, sampled, s, t);
+      if (t == 1)
+        splat(film, splat_at, contribution);
+      else
+        l += contribution;
+    }
+  }
+  return l;
+}
+
+Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, Vertex* light, Vertex* camera, int s,
+                                     int t, PixelSampler& sampler, Vertex* sampled, Vec2* splat_at,
+                                     RayCounters& counters) {
+  const Scene& scene = c.scene;
+  // A camera subpath that left the scene is joined to nothing but itself.
+  if (t > 1 && s != 0 && camera[t - 1].kind == VertexKind::kLight) return Rgb(0);
+  if (s == 0) {
+    // The camera subpath found an emitter.
+    const Vertex& pt = camera[t - 1];
+    if (!pt.is_light()) return Rgb(0);
+    const Vertex& prev = camera[t - 2];
+    if (pt.infinite) {
+      // Seen only through delta bounces (or directly): the environment as seen; otherwise the radiance light
+      // sampling reads (one texel), as the path tracer does.
+      bool seen = true;
+      for (int i = 1; i < t - 1; ++i) seen = seen && camera[i].delta;
+      float pdf_dir;
+      const Rgb le = seen ? scene.environment.radiance(-pt.dir) : scene.environment.lighting(-pt.dir, &pdf_dir);
+      return pt.beta * le;
+    }
+    return pt.beta * pt.material->emitted(pt.sp, normalize(prev.p - pt.p));
+  }
+  if (t == 1) {
+    // Light tracing: the light subpath's vertex joined to a point sampled on the lens.
+    Vertex& qs = light[s - 1];
+    if (!qs.connectible() || qs.infinite) return Rgb(0);
+    CameraImportanceSample cs;
+    const Vec2 u_lens = sampler.get2d();
+    if (!c.camera.sample_importance(qs.p, u_lens, &cs)) return Rgb(0);
+    *sampled = Vertex();
+    sampled->kind = VertexKind::kCamera;
+    sampled->p = cs.p_lens;
+    sampled->beta = Rgb(cs.importance / cs.pdf);
+    Rgb l;
+    if (qs.kind == VertexKind::kLight) {
+      // The light's own point seen by the camera (light tracing's s = 1): its emission towards the lens.
+      l = qs.beta * sampled->beta * le.emitted(cs.wi);
+      if (qs.on_surface()) l *= std::abs(dot(cs.wi, qs.ng));
+    } else {
+      l = qs.beta * vertex_f(qs, cs.wi, TransportMode::kImportance) * sampled->beta * std::abs(dot(cs.wi, qs.frame.n));
+    }
+    if (is_black(l) || !visible(scene, qs, *sampled, counters)) return Rgb(0);
+    *splat_at = cs.film;
+    return l;
+  }
+  if (s == 1) {
+    // Next-event estimation: the camera subpath's vertex joined to a point sampled on a light.
+    Vertex& pt = camera[t - 1];
+    if (!pt.connectible()) return Rgb(0);
+    LightSample ls;
+    const float u_select = sampler.get1d();
+    const Vec2 u = sampler.get2d();
+    if (!scene.lights().sample(scene, pt.p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return Rgb(0);
+    *sampled = Vertex();
+    sampled->kind = VertexKind::kLight;
+    sampled->light = ls.light;
+    sampled->infinite = std::isinf(ls.dist);
+    sampled->delta_light = ls.delta;
+    if (sampled->infinite) {
+      sampled->dir = -ls.wi;
+    } else {
+      sampled->p = ls.p_light;
+      sampled->ng = ls.n_light;
+    }
+    sampled->beta = ls.radiance / ls.pdf;
+    sampled->pdf_fwd = pdf_light_origin(c, *sampled, pt);
+    const Rgb l =
+        pt.beta * vertex_f(pt, ls.wi, TransportMode::kRadiance) * sampled->beta * std::abs(dot(ls.wi, pt.frame.n));
+    if (is_black(l)) return Rgb(0);
+    ++counters.shadow;
+    Ray shadow;
+    shadow.origin = offset_ray_origin(pt.p, pt.ng, ls.wi);
+    if (sampled->infinite) {
+      shadow.dir = ls.wi;
+      shadow.tmax = kInfinity;
+    } else {
+      const Vec3 target = is_black(ls.n_light) ? ls.p_light : offset_ray_origin(ls.p_light, ls.n_light, -ls.wi);
+      shadow.dir = target - shadow.origin;
+      shadow.tmax = 1 - 1e-5f;
+    }
+    if (scene.occluded(shadow)) return Rgb(0);
+    return l;
+  }
+  // Both subpaths' ends joined by a segment.
+  Vertex& qs = light[s - 1];
+  Vertex& pt = camera[t - 1];
+  if (!qs.connectible() || !pt.connectible()) return Rgb(0);
+  const Vec3 d = qs.p - pt.p;
+  const float d2 = length_squared(d);
+  if (!(d2 > 0)) return Rgb(0);
+  const Vec3 w = d / std::sqrt(d2);  // from pt towards qs
+  Rgb l = qs.beta * vertex_f(qs, -w, TransportMode::kImportance) * vertex_f(pt, w, TransportMode::kRadiance) * pt.beta;
+  if (is_black(l)) return Rgb(0);
+  l *= std::abs(dot(qs.frame.n, w)) * std::abs(dot(pt.frame.n, w)) / d2;
+  if (!visible(scene, pt, qs, counters)) return Rgb(0);
+  return l;
+}
+
+}  // namespace
+
+std::string integrator_camera_problem(const std::string& name, const Camera& camera) {
+  if ((name == "light" || name == "bdpt") && !camera.has_importance())
+    return "the " + name + " integrator needs a perspective camera";
+  return {};
+}
+
+void register_bidirectional(IntegratorRegistry& registry) {
+  registry.add("light",
+               [](const IntegratorSetup& setup) { return std::make_unique<BidirectionalIntegrator>(setup, true); });
+  registry.add("bdpt",
+               [](const IntegratorSetup& setup) { return std::make_unique<BidirectionalIntegrator>(setup, false); });
+}
+
+}  // namespace tessera
