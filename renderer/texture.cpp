@@ -315,10 +315,11 @@ class ImageTexture final : public Texture {
 
   Rgb eval(const ShadingPoint& sp) const override {
     Vec2 uv = mapping_.uv_set == 1 ? sp.uv1 : sp.uv;
-    // KHR_texture_transform order: scale, then rotate, then offset.
+    // KHR_texture_transform: scale, then rotate, then offset, as its matrix T * R * S with R = [cos sin; -sin cos]
+    // (the extension's specification, "Transform"): counter-clockwise as the texture is seen, its v axis pointing down.
     float su = uv.x * mapping_.scale.x, sv = uv.y * mapping_.scale.y;
-    float s = cos_ * su - sin_ * sv + mapping_.offset.x;
-    float t = sin_ * su + cos_ * sv + mapping_.offset.y;
+    float s = cos_ * su + sin_ * sv + mapping_.offset.x;
+    float t = -sin_ * su + cos_ * sv + mapping_.offset.y;
     // Trilinear filtering: the level where the footprint is one texel wide, blended with the next coarser one.
     const float texels = sp.uv_footprint * texels_per_uv_;
     if (!(texels > 1)) return bilinear(levels_[0], s, t);

@@ -54,7 +54,7 @@ enum class WrapMode : uint8_t { kRepeat, kClamp, kMirror };
 struct TextureMapping {
   Vec2 scale{1, 1};
   Vec2 offset{0, 0};
-  float rotation = 0;                 // radians, applied between scale and offset (KHR_texture_transform)
+  float rotation = 0;                 // radians, between scale and offset, as KHR_texture_transform turns
   WrapMode wrap = WrapMode::kRepeat;  // horizontal (and vertical unless wrap_t is set)
   std::optional<WrapMode> wrap_t;     // vertical, when it differs
   int uv_set = 0;                     // 0: ShadingPoint::uv, 1: ShadingPoint::uv1

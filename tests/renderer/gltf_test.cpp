@@ -694,6 +694,28 @@ TEST(GltfTextures, TextureTransformOffsetsTheLookup) {
   EXPECT_NEAR(img.at(24, 24).x, 0, 1e-3);
 }
 
+// The rotation turns as the extension's matrix does (T * R * S, R = [cos sin; -sin cos]): by a quarter turn the
+// texel at uv (s, t) = (v, -u) shows, so the blue quadrant (bottom-left of the texture) comes to the top-left.
+TEST(GltfTextures, TextureTransformRotatesCounterClockwise) {
+  GltfBuilder b;
+  b.doc["extensionsUsed"] = {"KHR_texture_transform"};
+  int tex = b.texture_png(quad_texture(), {{"wrapS", 10497}, {"wrapT", 10497}});
+  json mat = {{"emissiveFactor", {1, 1, 1}},
+              {"emissiveTexture",
+               {{"index", tex}, {"extensions", {{"KHR_texture_transform", {{"rotation", 1.5707963267948966}}}}}}},
+              {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}}}};
+  Rendered img = render_job(textured_job(b, mat, "rotation"));
+  const Rgb tl = img.at(8, 8), tr = img.at(24, 8), br = img.at(24, 24), bl = img.at(8, 24);
+  EXPECT_NEAR(tl.z, 1, 1e-3);  // blue
+  EXPECT_NEAR(tl.x, 0, 1e-3);
+  EXPECT_NEAR(tr.x, 1, 1e-3);  // red
+  EXPECT_NEAR(tr.y, 0, 1e-3);
+  EXPECT_NEAR(br.y, 1, 1e-3);  // green
+  EXPECT_NEAR(br.x, 0, 1e-3);
+  EXPECT_NEAR(bl.x, 1, 1e-3);  // white
+  EXPECT_NEAR(bl.z, 1, 1e-3);
+}
+
 TEST(GltfTextures, BaseColourAlphaCutsOutUnderMask) {
   GltfBuilder b;
   int tex = b.texture_png(quad_texture(), {{"wrapS", 33071}, {"wrapT", 33071}});
