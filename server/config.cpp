@@ -180,7 +180,15 @@ const std::vector<Option>& options() {
          return "";
        }},
       {"--node", "TESSERA_NODE", "NAME", "this daemon's name in a shared store (default: the host name)",
-       text(&Config::node)},
+       [](Config& c, const std::string& v) -> std::string {
+         // It names a lock file in a data directory daemons may share.
+         if (v.empty() || v.size() > 64 || v.front() == '.' || !std::all_of(v.begin(), v.end(), [](char ch) {
+               return std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_' || ch == '.';
+             }))
+           return "must be 1 to 64 letters, digits, '-', '_' or '.', not starting with '.'";
+         c.node = v;
+         return "";
+       }},
       {"--lease-s", "TESSERA_LEASE_S", "S",
        "seconds a job's claim lasts unless renewed (every second); past it another daemon takes the job over (30)",
        real(&Config::lease_s, 1, 3600)},

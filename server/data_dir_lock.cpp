@@ -10,8 +10,9 @@
 
 namespace tessera::server {
 
-std::variant<DataDirLock, std::string> DataDirLock::acquire(const std::filesystem::path& data_dir) {
-  const std::filesystem::path file = data_dir / kFileName;
+std::variant<DataDirLock, std::string> DataDirLock::acquire(const std::filesystem::path& data_dir,
+                                                            const std::string& node) {
+  const std::filesystem::path file = data_dir / (node.empty() ? std::string(kFileName) : "tesserad-" + node + ".lock");
   const int fd = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd < 0) return "cannot open " + file.string() + ": " + std::strerror(errno);
   if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
@@ -21,6 +22,10 @@ std::variant<DataDirLock, std::string> DataDirLock::acquire(const std::filesyste
     // The holder writes its id right after it takes the lock: a moment's race may find it empty.
     std::string holder;
     std::ifstream(file) >> holder;
+    if (!node.empty())
+      return "the node name " + node + " is in use by another tesserad on the data directory " + data_dir.string() +
+             (holder.empty() ? std::string() : " (process " + holder + ")") + "; it holds " + file.string() +
+             ". Stop it, or give this one another --node";
     return "the data directory " + data_dir.string() + " is in use by another tesserad" +
            (holder.empty() ? std::string() : " (process " + holder + ")") + "; it holds " + file.string() +
            ". Stop it, or give this one another --data-dir";

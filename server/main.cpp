@@ -61,23 +61,25 @@ int run(const Config& config) {
 
   const std::filesystem::path data_dir(config.data_dir);
   std::filesystem::create_directories(data_dir);
-  auto lock = DataDirLock::acquire(data_dir);
+  // The jobs in SQLite are this daemon's alone, and so is its data directory. In PostgreSQL they are shared by every
+  // daemon given the same database, each claiming under its node name; their data directory may be shared too (a
+  // volume every node mounts), each holding the lock of its own name.
+  const bool shared_store = is_postgres_store(config.store);
+  std::string node = config.node;
+  if (node.empty()) {
+    char host[256] = {};
+    gethostname(host, sizeof host - 1);
+    node = host;
+  }
+  auto lock = DataDirLock::acquire(data_dir, shared_store ? node : "");
   if (auto* error = std::get_if<std::string>(&lock)) {
     log(LogLevel::kError, "cannot start: " + *error, {{"data_dir", data_dir.string()}});
     std::fprintf(stderr, "tesserad: %s\n", error->c_str());
     return 1;
   }
   // What the daemon keeps, and where: its jobs, their files, the uploaded assets, and the events streamed to clients.
-  // The jobs in SQLite are this daemon's alone; in PostgreSQL they are shared by every daemon given the same database,
-  // each claiming under its node name.
   std::unique_ptr<JobStore> store;
-  if (is_postgres_store(config.store)) {
-    std::string node = config.node;
-    if (node.empty()) {
-      char host[256] = {};
-      gethostname(host, sizeof host - 1);
-      node = host;
-    }
+  if (shared_store) {
     try {
       store = std::make_unique<PostgresJobStore>(config.store, node);
     } catch (const JobStoreError& e) {

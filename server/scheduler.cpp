@@ -393,7 +393,21 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       deleted = slot->delete_requested;
     }
     const bool interrupted = reason == StopReason::kStopped || reason == StopReason::kCancelled;
-    if (deleted || interrupted) {
+    // Before the outputs, which land where other daemons may read them (a shared data directory): is the run still
+    // this daemon's? A store that fails here changes nothing: the end is recorded, fenced, and retried as ever.
+    bool lease_lost = false;
+    if (!deleted && !interrupted) {
+      try {
+        if (!store_.renew_lease(id, slot->epoch, now_ms(), options_.lease.count())) {
+          std::lock_guard lock(mutex_);
+          lose_lease_locked(*slot);
+          lease_lost = true;
+        }
+      } catch (const JobStoreError&) {
+        count_store_error();
+      }
+    }
+    if (deleted || interrupted || lease_lost) {
       end_interrupted(session.progress().samples_done);
     } else {
       // The outputs first: a file that cannot be written (a full disk) fails the job, as it should.

@@ -7,8 +7,10 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <fstream>
 #include <thread>
 
+#include "renderer/image_io.h"
 #include "tests/integration/daemon.h"
 #include "tests/server/postgres_cluster.h"
 #include "tests/server/test_util.h"
@@ -124,6 +126,58 @@ TEST(PostgresStore, ANodePausedPastItsLeaseIsTakenOverAndItsLateWritesAreRefused
   auto exr = cb->Get("/v1/jobs/" + id + "/result.exr");
   ASSERT_TRUE(exr);
   EXPECT_EQ(exr->status, 200);
+}
+
+// Daemons sharing the store share one data directory too (a volume every node mounts), each under its own node
+// name: a job submitted to one is served by the other, a node frozen past its lease is taken over and the job resumes
+// from its checkpoint on the other node, and the image is the one a single daemon renders.
+TEST(PostgresStore, NodesSharingADataDirectoryServeEachOthersJobsAndResumeATakenOverOne) {
+  PostgresCluster& pg = PostgresCluster::shared();
+  const std::string uri = pg.create_database();
+  TempDir dir;
+  const auto shared = dir.path() / "shared";
+  auto node = [&](const std::string& name) {
+    return std::vector<std::string>{"--store", uri, "--node", name, "--lease-s", "2", "--threads", "1"};
+  };
+  Daemon a(shared, node("node-a"));
+  // One name, one daemon, also on a shared directory.
+  try {
+    Daemon twin(shared, node("node-a"));
+    ADD_FAILURE() << "a second node-a started";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("the node name node-a is in use"), std::string::npos) << e.what();
+  }
+  auto ca = a.client();
+  const nlohmann::json job = cornell_job(64, 512);
+  const std::string id = submit(*ca, job);
+  ASSERT_TRUE(eventually([&] { return row_of(pg, uri, id, "node || ',' || (passes >= 2)::int") == "node-a,1"; }, 60));
+  kill(a.pid(), SIGSTOP);
+  Daemon b(shared, node("node-b"));
+  auto cb = b.client();
+  ASSERT_TRUE(eventually([&] { return state_of(*cb, id) == "succeeded"; }, 120)) << b.log();
+  EXPECT_NE(b.log().find("job resumed from its checkpoint"), std::string::npos) << b.log();
+  kill(a.pid(), SIGCONT);
+  ASSERT_TRUE(eventually([&] { return a.log().find("changed or taken over elsewhere") != std::string::npos; }, 30));
+  // Either node serves the result, and it is the image of one uninterrupted render.
+  auto from_a = ca->Get("/v1/jobs/" + id + "/result.exr");
+  auto from_b = cb->Get("/v1/jobs/" + id + "/result.exr");
+  ASSERT_TRUE(from_a && from_b);
+  ASSERT_EQ(from_a->status, 200);
+  ASSERT_EQ(from_b->status, 200);
+  EXPECT_EQ(from_a->body, from_b->body);
+  Daemon alone(dir.path() / "alone", {"--threads", "1"});
+  auto c1 = alone.client();
+  const std::string reference = submit(*c1, job);
+  ASSERT_TRUE(eventually([&] { return state_of(*c1, reference) == "succeeded"; }, 120));
+  auto one = c1->Get("/v1/jobs/" + reference + "/result.exr");
+  ASSERT_TRUE(one);
+  auto pixels = [&](const std::string& bytes, const std::string& name) {
+    const auto file = dir.path() / name;
+    std::ofstream(file, std::ios::binary) << bytes;
+    return read_image(file.string()).pixels;
+  };
+  EXPECT_TRUE(pixels(from_b->body, "cluster.exr") == pixels(one->body, "alone.exr"))
+      << "the image rendered across two nodes differs from the one-node render";
 }
 
 }  // namespace

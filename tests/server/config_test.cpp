@@ -44,6 +44,8 @@ TEST(Config, TheStoreIsSqliteOrAPostgresUri) {
   EXPECT_EQ(pg.config->store, "postgresql://tessera@db/tessera");
   EXPECT_EQ(pg.config->node, "render-1");
   EXPECT_TRUE(parse({}, {{"TESSERA_STORE", "postgres:///tessera?host=/run/postgresql"}}).config);
+  EXPECT_FALSE(parse({"--node", "../x"}).config);  // it names a lock file in the data directory
+  EXPECT_FALSE(parse({"--node", ""}).config);
   auto wrong = parse({"--store", "mysql://db/tessera"});
   EXPECT_FALSE(wrong.config);
   EXPECT_NE(wrong.error.find("--store must be sqlite or a PostgreSQL URI"), std::string::npos) << wrong.error;
