@@ -521,6 +521,21 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
     json tex = texture_param(doc, info, channel, srgb, factor, warnings);
     p[key] = tex.is_null() ? factor : tex;
   };
+  if (ext.contains("KHR_materials_unlit")) {
+    // KHR_materials_unlit: the surface shows its base colour as it is, lit by nothing. A path tracer gives it that
+    // radiance as emission on a surface that reflects nothing (black, no specular), so the camera sees the colour
+    // exactly; as an emitter it also lights what is around it, which a viewer's unlit shading does not.
+    p["base_color"] = json{0, 0, 0};
+    p["metallic"] = 0.0;
+    p["specular"] = 0.0;
+    set("emission", rgb_or(pbr, "baseColorFactor", {1, 1, 1}), pbr.value("baseColorTexture", json()), -1, true);
+    p["one_sided"] = !m.value("doubleSided", false);
+    if (warnings)
+      warnings->push_back("material \"" + m.value("name", std::string()) +
+                          "\": KHR_materials_unlit is rendered as emission of its base colour (it lights its "
+                          "surroundings too)");
+    return p;
+  }
   set("base_color", rgb_or(pbr, "baseColorFactor", {1, 1, 1}), pbr.value("baseColorTexture", json()), -1, true);
   const json mr = pbr.value("metallicRoughnessTexture", json());
   set("metallic", number_or(pbr, "metallicFactor", 1.0), mr, 2, false);

@@ -716,6 +716,29 @@ TEST(GltfTextures, TextureTransformRotatesCounterClockwise) {
   EXPECT_NEAR(bl.z, 1, 1e-3);
 }
 
+// KHR_materials_unlit: the base colour (factor times texture) is what the camera sees, exactly, whatever lights the
+// scene and however far paths go.
+TEST(GltfTextures, UnlitMaterialsShowTheirBaseColourExactly) {
+  GltfBuilder b;
+  b.doc["extensionsUsed"] = {"KHR_materials_unlit"};
+  int tex = b.texture_png(quad_texture(), {{"wrapS", 33071}, {"wrapT", 33071}});
+  json mat = {
+      {"name", "flat"},
+      {"pbrMetallicRoughness", {{"baseColorFactor", {0.2, 0.5, 0.8, 1}}, {"baseColorTexture", {{"index", tex}}}}},
+      {"extensions", {{"KHR_materials_unlit", json::object()}}}};
+  json job = textured_job(b, mat, "unlit");
+  job["render"]["max_depth"] = 6;
+  job["scene"]["environment"]["color"] = {2, 2, 2};
+  Rendered img = render_job(job);
+  const Rgb white = img.at(24, 24), red = img.at(8, 8);  // texels white and red, times the factor
+  EXPECT_NEAR(white.x, 0.2, 1e-4);
+  EXPECT_NEAR(white.y, 0.5, 1e-4);
+  EXPECT_NEAR(white.z, 0.8, 1e-4);
+  EXPECT_NEAR(red.x, 0.2, 1e-4);
+  EXPECT_NEAR(red.y, 0, 1e-4);
+  EXPECT_NEAR(red.z, 0, 1e-4);
+}
+
 TEST(GltfTextures, BaseColourAlphaCutsOutUnderMask) {
   GltfBuilder b;
   int tex = b.texture_png(quad_texture(), {{"wrapS", 33071}, {"wrapT", 33071}});
