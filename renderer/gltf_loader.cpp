@@ -565,6 +565,9 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
     set("clearcoat", number_or(t, "clearcoatFactor", 0.0), t.value("clearcoatTexture", json()), 0, false);
     set("clearcoat_roughness", number_or(t, "clearcoatRoughnessFactor", 0.0),
         t.value("clearcoatRoughnessTexture", json()), 1, false);
+    if (t.contains("clearcoatNormalTexture") && warnings)
+      warnings->push_back("material \"" + m.value("name", std::string()) +
+                          "\": clearcoatNormalTexture is not applied (the clearcoat follows the surface's normal)");
   }
   if (ext.contains("KHR_materials_sheen")) {
     const json& t = ext["KHR_materials_sheen"];
@@ -810,6 +813,9 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
         result.warnings.push_back("mesh " + std::to_string(mesh_index) + ": points and lines are not rendered");
         continue;
       }
+      if (!prim.targets.empty())
+        result.warnings.push_back("mesh " + std::to_string(mesh_index) +
+                                  ": morph targets are not applied (it is drawn in its base shape)");
       auto pos_it = prim.attributes.find("POSITION");
       if (pos_it == prim.attributes.end()) continue;
       Mesh mesh;
@@ -910,6 +916,9 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     if (depth > 256) throw SceneError(pointer, "the node hierarchy is deeper than 256 levels (a cycle?)");
     check_stop();
     const tinygltf::Node& node = model.nodes[node_index];
+    if (node.skin >= 0 && node.mesh >= 0)
+      result.warnings.push_back("node " + std::to_string(node_index) +
+                                ": its skin is not applied (the mesh is drawn in its bind pose)");
     const Mat4 world = multiply(parent, local_matrix(node));
 
     if (node.mesh >= 0) {
@@ -1021,6 +1030,12 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   }
   for (int r : roots) visit(r, identity(), 0);
   if (!warn.empty()) result.warnings.push_back(warn);
+  // Each warning once, in the order first given (a mesh drawn by many nodes says it once).
+  std::set<std::string> seen;
+  std::vector<std::string> once;
+  for (std::string& w : result.warnings)
+    if (seen.insert(w).second) once.push_back(std::move(w));
+  result.warnings = std::move(once);
   return result;
 }
 

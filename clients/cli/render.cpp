@@ -383,6 +383,9 @@ int cmd_render(int argc, char** argv) {
     fatal(where(e.pointer()) + e.what());
   }
   double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // What the scene could not render as written (an extension ignored, a feature approximated), as the daemon's job
+  // status lists them; on stderr even with --quiet.
+  for (const std::string& w : job.scene->warnings) std::fprintf(stderr, "tessera: warning: %s\n", w.c_str());
 
   if (samples) {
     job.settings.first_sample = static_cast<uint32_t>(samples->first);

@@ -83,11 +83,21 @@ gltf = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
                        "min": [-1, -1, 0], "max": [1, 1, 0]}]}
 json.dump(gltf, open("assets/tri.gltf", "w"))
 json.dump({"kind": "scene", "scene": {"gltf": "tri.gltf"}}, open("assets/tri-job.json", "w"))
+gltf["extensionsUsed"] = ["EXT_unknown_thing"]
+json.dump(gltf, open("assets/tri-ext.gltf", "w"))
 PY
 expect 0 "tessera render of a .gltf" "$TESSERA" render assets/tri.gltf --width 16 --height 16 --spp 2 --threads 2 -q -o tri.exr
 expect 0 "tessera render of the job naming it" "$TESSERA" render assets/tri-job.json --width 16 --height 16 --spp 2 \
   --threads 2 -q -o tri-job.exr
 if same_pixels tri.exr tri-job.exr; then ok "the asset rendered as its job does"; else not_ok "the asset and its job differ"; fi
+# The scene's warnings reach the user of tessera render (as they reach a daemon job's status), even with -q.
+expect 0 "tessera render of a .gltf with an unsupported extension" "$TESSERA" render assets/tri-ext.gltf --width 16 \
+  --height 16 --spp 1 --threads 2 -q -o tri-ext.exr
+if grep -q "warning: extension EXT_unknown_thing is not supported" "$tmp/err"; then
+  ok "tessera render prints the scene's warnings"
+else
+  not_ok "tessera render printed no warning for EXT_unknown_thing: $(cat "$tmp/err")"
+fi
 # The centre pixel sees the emissive triangle through the asset's camera: its emission (1, 0.5, 0.25) plus the grey
 # default sky reflected by its white base colour, so the channels differ by the emission's differences.
 centre=$(oiiotool tri.exr --cut 1x1+8+8 --printstats 2>/dev/null | awk '/Stats Avg/ {print $3, $4, $5}')

@@ -454,6 +454,31 @@ TEST(GltfHostile, AStopTokenEndsALongLoad) {
   EXPECT_THROW(load_scene(json{{"gltf", "long.glb"}}, "/scene", scene_options), LoadStopped);
 }
 
+// What is not rendered as written says so, once, naming the mesh, node or material: morph targets, skins, a
+// clearcoat normal map.
+TEST(Gltf, FeaturesNotAppliedAreWarnings) {
+  GltfBuilder b = one_triangle();
+  b.doc["meshes"][0]["primitives"][0]["targets"] = {{{"POSITION", 0}}};
+  b.doc["nodes"][0]["skin"] = 0;
+  b.doc["skins"] = {{{"joints", {1}}}};
+  b.node(json::object(), false);
+  b.node({{"mesh", 0}}, true);  // the same mesh again: its warning comes once
+  b.doc["extensionsUsed"] = {"KHR_materials_clearcoat"};
+  b.material({{"name", "coat"},
+              {"extensions",
+               {{"KHR_materials_clearcoat", {{"clearcoatFactor", 1}, {"clearcoatNormalTexture", {{"index", 0}}}}}}}});
+  b.doc["meshes"][0]["primitives"][0]["material"] = 0;
+  b.write(fixture_dir(), "not_applied");
+  Scene scene;
+  GltfImport imp = import_gltf(fixture_dir() / "not_applied.gltf", "/scene/gltf", scene, {});
+  std::string all;
+  for (const std::string& w : imp.warnings) all += w + "\n";
+  EXPECT_NE(all.find("mesh 0: morph targets are not applied"), std::string::npos) << all;
+  EXPECT_EQ(all.find("morph targets"), all.rfind("morph targets")) << all;
+  EXPECT_NE(all.find("node 0: its skin is not applied"), std::string::npos) << all;
+  EXPECT_NE(all.find("material \"coat\": clearcoatNormalTexture is not applied"), std::string::npos) << all;
+}
+
 TEST(GltfHostile, RequiredUnsupportedExtensionFailsOptionalWarns) {
   GltfBuilder b = one_triangle();
   b.doc["extensionsUsed"] = {"EXT_unknown_thing"};
