@@ -341,6 +341,16 @@ void get_result(ApiContext& ctx, JobFile file, const Request& req, Response& res
   send_file_or_problem(req, res, ctx.jobs.result(*job, file), job_file_media_type(file));
 }
 
+// The document the job was accepted with, as JSON: what a client needs to submit it again.
+void get_document(ApiContext& ctx, const Request& req, Response& res) {
+  auto job = find_job(ctx, req, res);
+  if (!job) return;
+  auto document = ctx.jobs.document(*job);
+  if (!document) return job_not_found(res);  // deleted meanwhile
+  res.status = 200;
+  res.set_content(std::move(*document), "application/json");
+}
+
 // The job's log as text; empty before it has one (a job that has not started rendering).
 void get_log(ApiContext& ctx, const Request& req, Response& res) {
   auto job = find_job(ctx, req, res);
@@ -571,6 +581,8 @@ std::vector<Route> routes(ApiContext* ctx) {
        [ctx](const Request& q, Response& r) {
          if (auto j = find_job(*ctx, q, r)) stream_events(*ctx, q, r, j);
        }},
+      {"GET", "/v1/jobs/{id}/document", job + "/document",
+       [ctx](const Request& q, Response& r) { get_document(*ctx, q, r); }},
       {"GET", "/v1/jobs/{id}/log", job + "/log", [ctx](const Request& q, Response& r) { get_log(*ctx, q, r); }},
       {"GET", "/v1/jobs/{id}/preview.png", job + "/preview\\.png",
        [ctx](const Request& q, Response& r) { get_preview(*ctx, q, r); }},

@@ -32,7 +32,8 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
   if (job.state == JobState::kRunning || p.passes > 0) links["preview"] = self + "/preview.png";
   json outputs = json::parse(job.outputs, nullptr, false);
   if (!outputs.is_array()) outputs = json::array();
-  if (job.state == JobState::kSucceeded) {
+  // A job cancelled after a pass has the image of its last complete pass as its (partial) results.
+  if (job.state == JobState::kSucceeded || (job.state == JobState::kCancelled && p.samples_done > 0)) {
     for (const json& o : outputs) {
       if (o == "png") links["result_png"] = self + "/result.png";
       if (o == "exr") links["result_exr"] = self + "/result.exr";

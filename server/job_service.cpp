@@ -237,20 +237,30 @@ std::variant<std::unique_ptr<FileReader>, Problem> JobService::preview(const Job
   return Problem{404, "this job has no preview (it ended before its first pass)", std::nullopt};
 }
 
+std::optional<std::string> JobService::document(const JobRecord& job) {
+  auto stored = store_.get(job.id, true);
+  if (!stored) return std::nullopt;
+  return stored->document;
+}
+
 std::unique_ptr<FileReader> JobService::job_log(const JobRecord& job) {
   return files_.open(job.id, JobFile::kLog);
 }
 
 std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobRecord& job, JobFile file) {
-  if (job.state != JobState::kSucceeded)
+  // A cancelled job keeps the image of its last complete pass, if it had one (partial results).
+  if (job.state != JobState::kSucceeded && job.state != JobState::kCancelled)
     return Problem{409,
-                   std::string("the job is ") + job_state_name(job.state) + "; results exist once it has succeeded",
+                   std::string("the job is ") + job_state_name(job.state) +
+                       "; results exist once it has succeeded (or, partial, once it was cancelled after a pass)",
                    std::nullopt};
   const std::string format = file == JobFile::kResultExr ? "exr" : "png";
   const json outputs = json::parse(job.outputs, nullptr, false);
   if (!outputs.is_array() || std::find(outputs.begin(), outputs.end(), format) == outputs.end())
     return Problem{404, "the job did not ask for a " + format + " output", std::nullopt};
   if (auto reader = files_.open(job.id, file)) return reader;
+  if (job.state == JobState::kCancelled)
+    return Problem{404, "the job was cancelled before it finished a pass: it has no partial results", std::nullopt};
   return Problem{404, std::string("the job's ") + job_file_name(file) + " is missing from the data directory",
                  std::nullopt};
 }

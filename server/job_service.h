@@ -84,6 +84,8 @@ class JobService {
 
   // The latest progressive image, or why there is none.
   std::variant<std::unique_ptr<FileReader>, Problem> preview(const JobRecord& job);
+  // The document the job was accepted with (JSON text): its uploaded files named by their asset ids.
+  std::optional<std::string> document(const JobRecord& job);
   // The job's log (job_log.h); null before it has one (it has not started rendering).
   std::unique_ptr<FileReader> job_log(const JobRecord& job);
   // A finished output (kResultPng or kResultExr), or why there is none.

@@ -282,6 +282,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       }
     } else if (cancelled_by_client) {
       log_.add(id, printf_string("cancelled by a client at %u spp", static_cast<unsigned>(samples_done)));
+      write_partial_results(record);
       if (record_terminal(*slot, JobState::kCancelled, render_s, "cancelled"))
         log(LogLevel::kInfo, "job cancelled", {{"job", id}});
     } else if (paused) {
@@ -551,6 +552,41 @@ bool Scheduler::record_failure(RenderSlot& slot, const std::string& message, dou
   }
 }
 
+void Scheduler::write_partial_results(const JobRecord& job) {
+  try {
+    const json settings = json::parse(job.settings);
+    const int width = settings.at("width"), height = settings.at("height");
+    auto bytes = files_.read(job.id, JobFile::kCheckpoint);
+    if (!bytes) return;
+    auto cp = decode_checkpoint(*bytes, width, height, fnv1a64(job.settings));
+    if (!cp || cp->film.samples() == 0) return;
+    DisplaySettings display;
+    display.exposure_ev = settings.value("exposure_ev", 0.0f);
+    parse_tonemap(settings.value("tonemap", "clamp"), &display.tonemap);
+    const std::vector<float> rgb = cp->film.resolve();
+    std::string written;
+    for (const json& format : json::parse(job.outputs)) {
+      if (format == "png") {
+        std::vector<uint8_t> png = encode_png(rgb, width, height, display);
+        files_.write(job.id, JobFile::kResultPng,
+                     std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+        written += " result.png";
+      } else if (format == "exr") {
+        files_.write_with(job.id, JobFile::kResultExr, [&](const std::string& temp) {
+          write_exr(temp, rgb, width, height, settings.value("exr_precision", "half") == "half");
+        });
+        written += " result.exr";
+      }
+    }
+    log_.add(job.id, printf_string("kept what it rendered, %u spp in %u passes, as its partial results:%s",
+                                   static_cast<unsigned>(cp->film.samples()), static_cast<unsigned>(cp->passes),
+                                   written.c_str()));
+  } catch (const std::exception& e) {
+    log(LogLevel::kWarn, "cannot write the partial results of a cancelled job", {{"job", job.id}, {"error", e.what()}});
+    log_.add(job.id, std::string("warning: its partial results cannot be written: ") + e.what());
+  }
+}
+
 std::optional<JobProgress> Scheduler::live_progress(const std::string& id) const {
   std::lock_guard lock(mutex_);
   auto it = running_.find(id);
@@ -568,12 +604,17 @@ Scheduler::Outcome Scheduler::cancel(const std::string& id) {
       return Outcome::kInProgress;
     }
     // Not rendering here, and claims happen under this lock: a queued job stays queued until we are done.
+    auto job = store_.get(id);
+    if (!job) return Outcome::kUnknown;
+    if (!action_allowed(JobAction::kCancel, job->state)) return Outcome::kConflict;
+    log_.add(id, "cancelled by a client");
+    // What a paused (or interrupted) render has done is kept as its partial results, before the state says so.
+    write_partial_results(*job);
     if (!store_.transition(id, JobState::kCancelled, now_ms(), "cancelled"))
       return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
   }
   files_.remove(id, JobFile::kCheckpoint);
   log(LogLevel::kInfo, "job cancelled", {{"job", id}});
-  log_.add(id, "cancelled by a client");
   notify_state(id);
   return Outcome::kDone;
 }

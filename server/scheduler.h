@@ -84,7 +84,8 @@ class Scheduler {
   bool store_failing() const;
 
   enum class Outcome { kDone, kInProgress, kConflict, kUnknown };
-  // queued, paused or running -> cancelled (a running render winds down within one tile's time: kInProgress).
+  // queued, paused or running -> cancelled (a running render winds down within one tile's time: kInProgress). A job
+  // cancelled after a pass keeps the image of its last complete pass as its results (partial).
   Outcome cancel(const std::string& id);
   // queued or running -> paused (a running render ends its pass and keeps its checkpoint: kInProgress).
   Outcome pause(const std::string& id);
@@ -107,6 +108,10 @@ class Scheduler {
                        const std::string& error = "", const std::function<void()>& before = nullptr);
   bool record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused);
   void count_store_error();
+  // The outputs of a job cancelled after a pass, from its checkpoint (the film of its last complete pass), so that
+  // what it rendered stays viewable and downloadable. Best effort: nothing without a usable checkpoint; a file that
+  // cannot be written is logged, and the cancel goes on.
+  void write_partial_results(const JobRecord& job);
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
   void renew_leases_locked();
   void lose_lease_locked(RenderSlot& slot);

@@ -142,6 +142,8 @@ export const api = {
     const res = await request("POST", "/v1/jobs", { body: form });
     return res.json();
   },
+  // The document the job was accepted with.
+  document: (id) => getJson(`/v1/jobs/${encodeURIComponent(id)}/document`),
   // The job's log (text): loading, warnings, passes, how it ended.
   jobLog: async (id) => (await request("GET", `/v1/jobs/${encodeURIComponent(id)}/log`)).text(),
   action: (id, action) => sendJson("POST", `/v1/jobs/${encodeURIComponent(id)}/${action}`),
@@ -158,9 +160,11 @@ export const api = {
 };
 
 // Which actions a job's state allows: the daemon says, in the status's "actions" (its state table), so the buttons
-// never disagree with what it accepts. "result": the finished images exist.
+// never disagree with what it accepts. "result": result images exist (its links name them: a succeeded job's, or
+// the partial image of one cancelled after a pass); "result_png", "result_exr": that one exists.
 export const TERMINAL = new Set(["succeeded", "failed", "cancelled"]);
 export function allowed(job, action) {
-  if (action === "result") return job.state === "succeeded";
+  if (action === "result") return Boolean(job.links?.result_png || job.links?.result_exr);
+  if (action === "result_png" || action === "result_exr") return Boolean(job.links?.[action]);
   return Array.isArray(job.actions) && job.actions.includes(action);
 }

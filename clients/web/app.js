@@ -192,17 +192,42 @@ for (const ex of EXAMPLES) {
   o.textContent = ex.title;
   exampleSelect.append(o);
 }
-function fillRenderFields(render = {}) {
-  if (render.width) $("#width").value = render.width;
-  if (render.height) $("#height").value = render.height;
-  if (render.spp) $("#spp").value = render.spp;
-  $("#time-limit").value = render.time_limit_s ?? "";
-  $("#integrator").value = render.integrator ?? "path";
-  if (render.estimator) $("#estimator").value = render.estimator;
+// The render settings the form chooses from a list (the contract's enums), by their control.
+const SELECT_SETTINGS = [
+  ["#integrator", "integrator"],
+  ["#estimator", "estimator"],
+  ["#sampler", "sampler"],
+  ["#tonemap", "tonemap"],
+  ["#exr-precision", "exr_precision"],
+];
+// The render settings of a document in the form; a setting the document leaves out shows its default (the
+// contract's, render.schema.json).
+const RENDER_DEFAULTS = {
+  width: 512, height: 512, spp: 64, max_depth: 8, integrator: "path", estimator: "mis", seed: 0,
+  sampler: "sobol", exposure_ev: 0, tonemap: "clamp", exr_precision: "half",
+};
+function fillRenderFields(render = {}, outputs = ["png", "exr"]) {
+  const r = { ...RENDER_DEFAULTS, ...render };
+  $("#width").value = r.width;
+  $("#height").value = r.height;
+  $("#spp").value = r.spp;
+  $("#time-limit").value = r.time_limit_s || "";
+  $("#noise-target").value = r.noise_target || "";
+  $("#max-depth").value = r.max_depth;
+  $("#seed").value = r.seed;
+  $("#exposure-ev").value = r.exposure_ev;
+  for (const [sel, key] of SELECT_SETTINGS) {
+    const value = r[key];
+    const select = $(sel);
+    if (![...select.options].some((o) => o.value === value)) select.append(new Option(value, value));
+    select.value = value;
+  }
+  $("#output-png").checked = outputs.includes("png");
+  $("#output-exr").checked = outputs.includes("exr");
 }
-exampleSelect.addEventListener("change", () => fillRenderFields(currentExample().job.render));
+exampleSelect.addEventListener("change", () => fillRenderFields(currentExample().job.render, currentExample().job.outputs));
 const currentExample = () => EXAMPLES.find((e) => e.id === exampleSelect.value) || EXAMPLES[0];
-fillRenderFields(currentExample().job.render);
+fillRenderFields(currentExample().job.render, currentExample().job.outputs);
 
 function renderSettings(base = {}) {
   const render = { ...base };
@@ -212,15 +237,32 @@ function renderSettings(base = {}) {
     if (!Number.isInteger(v)) throw new Error(`${input.labels[0].textContent} must be a whole number`);
     return v;
   };
+  const number = (sel) => {
+    const input = $(sel);
+    const v = Number(input.value);
+    if (!Number.isFinite(v)) throw new Error(`${input.labels[0].textContent} must be a number`);
+    return v;
+  };
+  const optional = (sel, key) => {
+    if ($(sel).value.trim()) render[key] = number(sel);
+    else delete render[key];
+  };
   render.width = int("#width");
   render.height = int("#height");
   render.spp = int("#spp");
-  const limit = $("#time-limit").value.trim();
-  if (limit) render.time_limit_s = Number(limit);
-  else delete render.time_limit_s;
-  render.integrator = $("#integrator").value;
-  render.estimator = $("#estimator").value;
+  render.max_depth = int("#max-depth");
+  render.seed = int("#seed");
+  optional("#time-limit", "time_limit_s");
+  optional("#noise-target", "noise_target");
+  render.exposure_ev = number("#exposure-ev");
+  for (const [sel, key] of SELECT_SETTINGS) render[key] = $(sel).value;
   return render;
+}
+// The outputs ticked: at least one.
+function outputSettings() {
+  const outputs = ["png", "exr"].filter((o) => $(`#output-${o}`).checked);
+  if (!outputs.length) throw new Error("Tick at least one output (PNG or EXR)");
+  return outputs;
 }
 // The job's name: the one typed in the form, else `fallback` (the example's title, the uploaded file's name; the
 // daemon names a material job after its model).
@@ -228,6 +270,7 @@ function withCommon(doc, fallback) {
   const name = $("#job-name").value.trim() || fallback;
   if (name) doc.name = name;
   doc.render = renderSettings(doc.render);
+  doc.outputs = outputSettings();
   const priority = Number($("#priority").value || 0);
   if (priority) doc.priority = priority;
   else delete doc.priority;
@@ -292,12 +335,24 @@ $("#submit-form").addEventListener("submit", async (e) => {
       doc = withCommon(buildFromExample(), currentExample().name);
     } else if (source === "material") {
       if (!currentMaterialForm) throw new Error("No material model is loaded yet");
-      doc = withCommon({ kind: "material", material: currentMaterialForm.value(), outputs: ["png", "exr"] });
+      doc = withCommon({ kind: "material", material: currentMaterialForm.value() });
     } else if (source === "upload") {
       files = uploadFiles();
       const main = files.find((f) => /\.glb$/i.test(f.name)) || files.find((f) => /\.gltf$/i.test(f.name));
       if (!main) throw new Error("Choose a .glb file, or a .gltf file with its buffers and images");
-      doc = withCommon({ kind: "scene", scene: { gltf: main.name }, outputs: ["png", "exr"] }, main.name);
+      doc = withCommon({ kind: "scene", scene: { gltf: main.name } }, main.name);
+      // An environment map goes along as a file of the same request; the daemon stores it as an asset of its own.
+      const env = $("#env-map").files[0];
+      if (env) {
+        if (files.some((f) => f.name === env.name)) throw new Error(`${env.name} is chosen twice`);
+        const environment = { map: env.name };
+        const intensity = Number($("#env-intensity").value || 1);
+        const rotation = Number($("#env-rotation").value || 0);
+        if (intensity !== 1) environment.intensity = intensity;
+        if (rotation) environment.rotation_deg = rotation;
+        doc.scene.environment = environment;
+        files = [...files, env];
+      }
     } else {
       try {
         doc = JSON.parse($("#json-doc").value);
@@ -554,7 +609,10 @@ async function runAction(id, action) {
     } else {
       const job = await api.action(id, action);
       showNotice(`Job ${shortId(id)}: ${job?.state ?? action}.`);
-      if (job && id === selectedId) showJob(job);
+      // A render still winding down (202: cancel or pause of a running job) is shown by the events or the next poll,
+      // which may have brought its new state already: the answer's "running" is older than that.
+      const pending = (action === "cancel" || action === "pause") && job?.state === "running";
+      if (job && id === selectedId && !pending) showJob(job);
     }
   } catch (e) {
     showError(e, `${action[0].toUpperCase()}${action.slice(1)} refused`);
@@ -756,7 +814,7 @@ async function loadResult(job) {
     const image = await resultImage(job);
     if (seq !== previewSeq || job.id !== selectedId) return;
     viewer.show(image, { keepView: true });
-    $("#viewer").dataset.pass = "final";
+    $("#viewer").dataset.pass = job.state === "succeeded" ? "final" : "partial";
     $("#preview-placeholder").hidden = true;
   } catch (e) {
     if (job.id === selectedId) resultShown = null;
@@ -770,7 +828,7 @@ function updateCompareChoices() {
   const keep = select.value;
   const options = [new Option("none", "")];
   for (const j of jobs) {
-    if (j.id === selectedId || j.state !== "succeeded") continue;
+    if (j.id === selectedId || !allowed(j, "result")) continue;
     options.push(new Option(jobLabel(j), j.id));
   }
   // Rebuilt only when the choices change: rebuilding closes a list the user has open.
@@ -848,9 +906,11 @@ function showJob(job) {
     b.disabled = !allowed(job, b.dataset.action);
     b.onclick = () => runAction(job.id, b.dataset.action);
   }
-  const outputs = job.outputs || ["png", "exr"];
-  $("#download-png").disabled = !(allowed(job, "result") && outputs.includes("png"));
-  $("#download-exr").disabled = !(allowed(job, "result") && outputs.includes("exr"));
+  $("#download-png").disabled = !allowed(job, "result_png");
+  $("#download-exr").disabled = !allowed(job, "result_exr");
+  $("#duplicate").onclick = () => duplicate(job);
+  $("#rerender").disabled = !canRerender(job);
+  $("#rerender").onclick = () => rerender(job);
 
   const p = job.progress || {};
   const r = job.render || {};
@@ -859,7 +919,7 @@ function showJob(job) {
     $("#viewer .viewer-frame").style.aspectRatio = `${r.width} / ${r.height}`;
   }
   if (job.id !== previous?.id) viewer.settings(r.exposure_ev ?? 0, r.tonemap ?? "clamp");
-  if (job.state === "succeeded") loadResult(job);
+  if (allowed(job, "result")) loadResult(job);
   refreshLog(job);
   const dl = $("#job-stats");
   dl.replaceChildren();
@@ -886,7 +946,8 @@ function showJob(job) {
   if (job.stop_reason) stat(dl, "Stopped by", job.stop_reason.replace("_", " "));
   for (const w of job.warnings || []) stat(dl, "Warning", w);
   $("#preview-caption").textContent = p.passes
-    ? `Pass ${p.passes} · ${p.samples_done} spp${TERMINAL.has(job.state) ? " · final" : ""}`
+    ? `Pass ${p.passes} · ${p.samples_done} spp${
+      job.state === "cancelled" ? " · partial: cancelled" : TERMINAL.has(job.state) ? " · final" : ""}`
     : job.state === "queued"
       ? "Waiting in the queue"
       : "";
@@ -929,6 +990,43 @@ function refreshLog(job) {
   }, wait);
 }
 
+// Submitting a job again: Duplicate fills the form (the JSON tab, the name and the render settings) with the document
+// the job was accepted with; Re-render submits it as it is. A job that failed on its input would fail the same way:
+// it offers no Re-render (as it offers no Requeue).
+const canRerender = (job) => TERMINAL.has(job.state) && !(job.state === "failed" && !allowed(job, "requeue"));
+async function documentOf(job) {
+  const doc = await api.document(job.id);
+  if (!doc.name && job.name) doc.name = job.name;
+  return doc;
+}
+async function duplicate(job) {
+  try {
+    const doc = await documentOf(job);
+    $("#json-doc").value = JSON.stringify(doc, null, 2);
+    fillRenderFields(doc.render, doc.outputs);
+    $("#job-name").value = doc.name || "";
+    selectTab($("#tab-json"), true);
+    $("#submit-form").scrollIntoView({ block: "nearest" });
+    showNotice(`The form holds the document of job ${jobLabel(job)}: change it and submit.`);
+  } catch (e) {
+    showError(e, "Duplicate");
+  }
+}
+async function rerender(job) {
+  const b = $("#rerender");
+  b.disabled = true;
+  try {
+    const created = await api.submitJson(await documentOf(job));
+    showNotice(`Job ${jobLabel(job)} submitted again as ${shortId(created.id)}.`);
+    await refreshQueue();
+    select(created.id);
+  } catch (e) {
+    showError(e, "Re-render refused");
+  } finally {
+    if (currentJob?.id === job.id) b.disabled = !canRerender(currentJob);
+  }
+}
+
 async function download(ext) {
   if (!currentJob) return;
   const id = currentJob.id;
@@ -939,7 +1037,8 @@ async function download(ext) {
     const url = URL.createObjectURL(blob);
     const a = document.createElement("a");
     a.href = url;
-    a.download = `tessera-${shortId(id)}.${ext}`;
+    // A cancelled job's image is what it rendered before the cancel.
+    a.download = `tessera-${shortId(id)}${currentJob?.state === "cancelled" ? "-partial" : ""}.${ext}`;
     document.body.append(a);
     a.click();
     a.remove();
@@ -947,7 +1046,7 @@ async function download(ext) {
   } catch (e) {
     showError(e, `Download ${ext.toUpperCase()}`);
   } finally {
-    if (currentJob?.id === id) b.disabled = !allowed(currentJob, "result");
+    if (currentJob?.id === id) b.disabled = !allowed(currentJob, `result_${ext}`);
   }
 }
 $("#download-png").addEventListener("click", () => download("png"));
@@ -973,6 +1072,17 @@ async function loadRenderSchema() {
   const keep = select.value;
   select.replaceChildren(...tones.map((t) => new Option(t, t)));
   select.value = tones.includes(keep) ? keep : tones[0];
+  // The form's choices are the contract's (an integrator added to the daemon appears here), with the labels the
+  // page has for those it knows.
+  for (const [sel, key] of SELECT_SETTINGS) {
+    const values = renderSchema.properties?.[key]?.enum;
+    if (!values) continue;
+    const form = $(sel);
+    const chosen = form.value;
+    const labels = new Map([...form.options].map((o) => [o.value, o.textContent]));
+    form.replaceChildren(...values.map((v) => new Option(labels.get(v) || v, v)));
+    form.value = values.includes(chosen) ? chosen : renderSchema.properties[key].default ?? values[0];
+  }
 }
 
 loadMaterials();

@@ -2,7 +2,8 @@
 // driven headless by playwright-core. Submits the Cornell example, watches the preview change, cancels and deletes
 // another job, downloads the PNG, and saves a screenshot; submits every material model from the Material tab; checks
 // the image viewer against the daemon's images, a failed job's reason, errors that cover nothing and the queue at a
-// phone's width. Any failed step fails the test.
+// phone's width; jobs' names, their documents, Duplicate and Re-render, every render setting, an environment map from
+// the glTF tab and a cancelled job's partial image. Any failed step fails the test.
 //
 // node --test tests/browser/web_client_test.mjs   with   TESSERAD=path/to/tesserad  ARTIFACTS=dir
 //   (CTest passes both; CHROMIUM overrides /usr/bin/chromium)
@@ -295,7 +296,6 @@ test("every material model renders from the form as shown, with its defaults and
   await page.getByLabel("Width").fill("24");
   await page.getByLabel("Height").fill("24");
   await page.getByLabel("Samples per pixel").fill("4");
-  const render = { width: 24, height: 24, spp: 4 };
   const pngs = new Map();
   for (const model of materials) {
     await t.test(model.type, async () => {
@@ -323,7 +323,8 @@ test("every material model renders from the form as shown, with its defaults and
       assert.equal(plain.status.state, "succeeded", `${model.type} with the form's defaults: ${plain.status.error}`);
       assert.equal(plain.sent.material.type, model.type);
       const material = { ...defaults, ...plain.sent.material };
-      const explicit = await renderThroughApi({ kind: "material", material, render });
+      // The same render settings as the form sent (it shows a seed, a depth, ... too).
+      const explicit = await renderThroughApi({ kind: "material", material, render: plain.sent.render });
       assert.equal(explicit.status.state, "succeeded", explicit.status.error);
       assert.ok(plain.png.equals(explicit.png), `${model.type}: the form renders unlike its defaults written out`);
       pngs.set(model.type, plain.png);
@@ -362,7 +363,7 @@ test("every material model renders from the form as shown, with its defaults and
       const again = await renderThroughApi({
         kind: "material",
         material: { ...defaults, ...changed.sent.material },
-        render,
+        render: changed.sent.render,
       });
       assert.ok(changed.png.equals(again.png), `${model.type}: with ${name} changed, the form's render differs`);
     });
@@ -669,6 +670,175 @@ test("failures are shown, errors cover nothing, and the queue fits 390 px", asyn
     await assertToastCoversNothing("390 px");
     await page.getByRole("tab", { name: "Example" }).click();
     await page.setViewportSize({ width: 1440, height: 1000 });
+  });
+  assert.deepEqual(pageErrors, []);
+});
+
+// One triangle facing +z in a .gltf with its buffer inline (a data: URI), and a 8x4 Radiance .hdr of radiance 1.
+function triangleGltf() {
+  const buffer = Buffer.alloc(36);
+  [-1, -1, 0, 1, -1, 0, 0, 1, 0].forEach((v, i) => buffer.writeFloatLE(v, 4 * i));
+  return {
+    asset: { version: "2.0" },
+    scene: 0,
+    scenes: [{ nodes: [0] }],
+    nodes: [{ mesh: 0 }],
+    meshes: [{ primitives: [{ attributes: { POSITION: 0 } }] }],
+    buffers: [{ byteLength: 36, uri: `data:application/octet-stream;base64,${buffer.toString("base64")}` }],
+    bufferViews: [{ buffer: 0, byteOffset: 0, byteLength: 36 }],
+    accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: "VEC3", min: [-1, -1, 0], max: [1, 1, 0] }],
+  };
+}
+function flatHdr(width = 8, height = 4) {
+  const header = Buffer.from(`#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y ${height} +X ${width}\n`);
+  // Uncompressed scan lines (a width below 8 cannot be run-length encoded; 8 is read flat when it is not marked).
+  const pixels = Buffer.alloc(width * height * 4);
+  for (let i = 0; i < width * height; ++i) pixels.set([128, 128, 128, 129], 4 * i);
+  return Buffer.concat([header, pixels]);
+}
+
+// Item 11 and the rest of item 10: every render setting is in the form and reaches the job; a job's document is
+// what was submitted; Duplicate fills the form with it and Re-render submits it again (the same image: sampling is
+// deterministic); an environment map goes along from the glTF tab; a job cancelled after a pass shows and downloads
+// the image of its last pass.
+test("documents are seen and reused, every setting is in the form, and a cancelled job keeps its image", async (t) => {
+  await page.setViewportSize({ width: 1440, height: 1000 });
+  await page.goto(`${baseUrl}/`);
+  await page.locator('#connection[data-state="online"]').waitFor();
+  let first;
+
+  await t.test("every render setting in the form reaches the job", async () => {
+    await page.getByRole("tab", { name: "Example" }).click();
+    await page.getByLabel("Example scene").selectOption("material");
+    await page.getByLabel("Name", { exact: true }).fill("every setting");
+    await page.getByLabel("Width").fill("24");
+    await page.getByLabel("Height").fill("20");
+    await page.getByLabel("Samples per pixel").fill("8");
+    await page.getByLabel("Max depth").fill("3");
+    await page.getByLabel("Seed").fill("7");
+    await page.getByLabel("Noise target").fill("0.5");
+    await page.getByLabel("Sampler").selectOption("independent");
+    await page.getByLabel("Exposure (stops)").fill("1.5");
+    await page.getByLabel("Tone curve").selectOption("aces");
+    await page.getByLabel("EXR precision").selectOption("float");
+    await page.getByLabel("Integrator").selectOption("path");
+    await page.getByLabel("EXR", { exact: true }).uncheck();
+    first = await submitFromForm();
+    assert.equal(first.status.state, "succeeded", first.status.error);
+    const want = { width: 24, height: 20, spp: 8, max_depth: 3, seed: 7, noise_target: 0.5, sampler: "independent",
+      exposure_ev: 1.5, tonemap: "aces", exr_precision: "float", integrator: "path" };
+    for (const [k, v] of Object.entries(want)) {
+      assert.equal(first.sent.render[k], v, `the form sent render.${k}`);
+      assert.equal(first.status.render[k], v, `the job renders with ${k} ${v}`);
+    }
+    assert.deepEqual(first.sent.outputs, ["png"]);
+    assert.deepEqual(first.status.outputs, ["png"]);
+    assert.equal(first.status.name, "every setting");
+    await page.getByLabel("EXR", { exact: true }).check();
+  });
+
+  await t.test("the job's document is the one submitted", async () => {
+    const res = await page.request.get(`${baseUrl}/v1/jobs/${first.status.id}/document`);
+    assert.equal(res.status(), 200);
+    assert.deepEqual(await res.json(), first.sent);
+  });
+
+  await t.test("Re-render submits the document again: the same image", async () => {
+    await page.locator(`#jobs tr[data-id="${first.status.id}"] button.link`).click();
+    await page.locator('#job-state[data-state="succeeded"]').waitFor();
+    await page.waitForFunction(() => !document.querySelector("#rerender").disabled);
+    await page.getByRole("button", { name: "Re-render" }).click();
+    await page.waitForFunction((id) => {
+      const t = document.querySelector("#job-title")?.title;
+      return t && t !== id;
+    }, first.status.id);
+    const again = await finished(await page.locator("#job-title").getAttribute("title"));
+    assert.equal(again.status.state, "succeeded");
+    assert.equal(again.status.name, "every setting");
+    assert.deepEqual(again.status.render, first.status.render);
+    assert.ok(again.png.equals(first.png), "the re-render's PNG equals the first one's");
+  });
+
+  await t.test("Duplicate fills the form with the document", async () => {
+    await page.goto(`${baseUrl}/`);
+    await page.locator(`#jobs tr[data-id="${first.status.id}"] button.link`).click();
+    await page.locator('#job-state[data-state="succeeded"]').waitFor();
+    await page.getByRole("button", { name: "Duplicate" }).click();
+    await page.locator('#tab-json[aria-selected="true"]').waitFor();
+    assert.deepEqual(JSON.parse(await page.getByLabel("Job document").inputValue()), first.sent);
+    assert.equal(await page.getByLabel("Name", { exact: true }).inputValue(), "every setting");
+    assert.equal(await page.getByLabel("Max depth").inputValue(), "3");
+    assert.equal(await page.getByLabel("Seed").inputValue(), "7");
+    assert.equal(await page.getByLabel("Tone curve").inputValue(), "aces");
+    assert.ok(!(await page.getByLabel("EXR", { exact: true }).isChecked()), "the outputs as the job had them");
+    // Changed and submitted, it is a new job with the change.
+    const doc = JSON.parse(await page.getByLabel("Job document").inputValue());
+    doc.render.seed = 8;
+    doc.name = "duplicated";
+    await page.getByLabel("Job document").fill(JSON.stringify(doc));
+    const copy = await submitFromForm();
+    assert.equal(copy.status.state, "succeeded", copy.status.error);
+    assert.equal(copy.status.name, "duplicated");
+    assert.equal(copy.status.render.seed, 8);
+    assert.equal(copy.status.render.max_depth, 3);
+  });
+
+  await t.test("an environment map goes along from the glTF tab", async () => {
+    await page.goto(`${baseUrl}/`);
+    await page.getByRole("tab", { name: "glTF" }).click();
+    await page.getByLabel("glTF files").setInputFiles({
+      name: "triangle.gltf", mimeType: "model/gltf+json", buffer: Buffer.from(JSON.stringify(triangleGltf())),
+    });
+    await page.getByLabel("Environment map").setInputFiles({
+      name: "sky.hdr", mimeType: "image/vnd.radiance", buffer: flatHdr(),
+    });
+    await page.getByLabel("Environment intensity").fill("2");
+    await page.getByLabel("Width").fill("16");
+    await page.getByLabel("Height").fill("16");
+    await page.getByLabel("Samples per pixel").fill("2");
+    const [res] = await Promise.all([
+      page.waitForResponse((r) => r.request().method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
+      page.getByRole("button", { name: "Submit job" }).click(),
+    ]);
+    assert.equal(res.status(), 202, await res.text());
+    const done = await finished((await res.json()).id);
+    assert.equal(done.status.state, "succeeded", done.status.error);
+    assert.equal(done.status.name, "triangle.gltf");
+    const doc = await (await page.request.get(`${baseUrl}/v1/jobs/${done.status.id}/document`)).json();
+    const map = doc.scene.environment?.map;
+    assert.match(map || "", /^[0-9a-f]{64}$/, JSON.stringify(doc.scene));
+    assert.equal(doc.scene.environment.intensity, 2);
+    const asset = await (await page.request.get(`${baseUrl}/v1/assets/${map}`)).json();
+    assert.equal(asset.kind, "environment");
+    await page.getByRole("tab", { name: "Example" }).click();
+  });
+
+  await t.test("a job cancelled after a pass shows and downloads the image of its last pass", async () => {
+    const job = structuredClone(JSON.parse(fs.readFileSync(path.join(repo, "proto/examples/cornell.json"), "utf8")));
+    job.render = { ...job.render, width: 96, height: 64, spp: 65536 };
+    const res = await page.request.post(`${baseUrl}/v1/jobs`, { data: job });
+    assert.equal(res.status(), 202);
+    const id = (await res.json()).id;
+    for (const deadline = Date.now() + 60000; ; ) {
+      const s = await (await page.request.get(`${baseUrl}/v1/jobs/${id}`)).json();
+      if (s.progress.passes >= 2) break;
+      assert.ok(Date.now() < deadline, `no second pass: ${JSON.stringify(s)}`);
+      await page.waitForTimeout(100);
+    }
+    await page.goto(`${baseUrl}/`);
+    await page.locator(`#jobs tr[data-id="${id}"] button.link`).click();
+    await page.locator('#job-body [data-action="cancel"]:not([disabled])').click();
+    await page.locator('#job-state[data-state="cancelled"]').waitFor();
+    await page.locator('#viewer[data-pass="partial"]').waitFor();
+    assert.match(await page.locator("#preview-caption").textContent(), /partial: cancelled/);
+    await page.waitForFunction(() => !document.querySelector("#download-png").disabled);
+    const [download] = await Promise.all([page.waitForEvent("download"), page.locator("#download-png").click()]);
+    const bytes = fs.readFileSync(await download.path());
+    assert.deepEqual([...bytes.subarray(0, 8)], [0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a], "PNG signature");
+    assert.equal(bytes.readUInt32BE(16), 96);
+    assert.equal(bytes.readUInt32BE(20), 64);
+    assert.match(download.suggestedFilename(), /-partial\.png$/);
+    await page.waitForFunction(() => !document.querySelector("#download-exr").disabled);  // the EXR too
   });
   assert.deepEqual(pageErrors, []);
 });

@@ -220,6 +220,16 @@ TEST_F(ServiceTest, MultipartJobWithGltfAndBin) {
   EXPECT_EQ(wait_for(*client_, id, ended).value("state", ""), "succeeded");
   // A job is called by the glTF file it renders, as uploaded (its document gives no name).
   EXPECT_EQ(get_job(*client_, id).value("name", ""), "tri.gltf");
+  // Its document, as accepted, names the upload by its asset id: submitted again, it renders the same files.
+  auto document = client_->Get("/v1/jobs/" + id + "/document");
+  ASSERT_TRUE(document);
+  ASSERT_EQ(document->status, 200) << document->body;
+  const json accepted = json::parse(document->body);
+  const std::string asset = accepted["scene"].value("gltf", "");
+  EXPECT_EQ(asset.size(), 64u) << accepted.dump();
+  EXPECT_EQ(accepted["render"], json::parse(items[0].content)["render"]);
+  const std::string again = submit(*client_, accepted);
+  EXPECT_EQ(wait_for(*client_, again, ended).value("state", ""), "succeeded");
   // The files became one asset; uploading them again as an asset gives its id.
   httplib::MultipartFormDataItems files = {items[1], items[2]};
   res = client_->Post("/v1/assets", files);
@@ -288,6 +298,62 @@ TEST_F(ServiceTest, ImagesAreCheckedByTheirHeadersAtSubmissionAndByTheirPixelsAt
   EXPECT_EQ(client_->Get("/livez")->status, 200);
 }
 
+// A job cancelled after a pass keeps the image of its last complete pass as its results, whether it was rendering
+// or paused; one cancelled before a pass has none, and says so.
+TEST_F(ServiceTest, ACancelledJobKeepsTheImageOfItsLastPass) {
+  start(args({"--max-jobs", "1"}));
+  const auto png_size = [](const std::string& png) {
+    // The IHDR chunk: width and height, big-endian, at bytes 16 and 20.
+    auto be32 = [&](size_t at) {
+      return (static_cast<uint32_t>(static_cast<unsigned char>(png[at])) << 24) |
+             (static_cast<uint32_t>(static_cast<unsigned char>(png[at + 1])) << 16) |
+             (static_cast<uint32_t>(static_cast<unsigned char>(png[at + 2])) << 8) |
+             static_cast<uint32_t>(static_cast<unsigned char>(png[at + 3]));
+    };
+    return png.size() > 24 && png.compare(1, 3, "PNG") == 0 ? std::make_pair(be32(16), be32(20))
+                                                            : std::make_pair(0u, 0u);
+  };
+  const std::string running = submit(*client_, long_cornell_job());
+  wait_for(*client_, running, [](const json& s) { return s["progress"]["passes"].get<int>() >= 2; });
+  const std::string queued = submit(*client_, long_cornell_job());
+  expect_status(client_->Post("/v1/jobs/" + queued + "/cancel"), 200, "cancel a queued job");
+  expect_status(client_->Get("/v1/jobs/" + queued + "/result.png"), 404, "the results of a job cancelled unstarted");
+  EXPECT_NE(client_->Get("/v1/jobs/" + queued + "/result.png")->body.find("cancelled before it finished a pass"),
+            std::string::npos);
+  EXPECT_FALSE(get_job(*client_, queued)["links"].contains("result_png"));
+
+  client_->Post("/v1/jobs/" + running + "/cancel");
+  const json cancelled = wait_for(*client_, running, in_state("cancelled"));
+  EXPECT_EQ(cancelled["links"].value("result_png", ""), "/v1/jobs/" + running + "/result.png") << cancelled.dump();
+  EXPECT_EQ(cancelled["links"].value("result_exr", ""), "/v1/jobs/" + running + "/result.exr") << cancelled.dump();
+  auto png = client_->Get("/v1/jobs/" + running + "/result.png");
+  ASSERT_TRUE(png);
+  ASSERT_EQ(png->status, 200) << png->body;
+  EXPECT_EQ(png_size(png->body), std::make_pair(128u, 128u));
+  auto exr = client_->Get("/v1/jobs/" + running + "/result.exr");
+  ASSERT_TRUE(exr);
+  ASSERT_EQ(exr->status, 200) << exr->body;
+  EXPECT_EQ(exr->body.substr(0, 4), std::string("\x76\x2f\x31\x01", 4));  // the OpenEXR magic number
+  EXPECT_NE(client_->Get("/v1/jobs/" + running + "/log")->body.find("kept what it rendered"), std::string::npos);
+
+  // Paused after a pass, then cancelled: its checkpoint becomes its results.
+  const std::string paused = submit(*client_, long_cornell_job());
+  wait_for(*client_, paused, [](const json& s) { return s["progress"]["passes"].get<int>() >= 1; });
+  client_->Post("/v1/jobs/" + paused + "/pause");
+  wait_for(*client_, paused, in_state("paused"));
+  expect_status(client_->Post("/v1/jobs/" + paused + "/cancel"), 200, "cancel a paused job");
+  EXPECT_TRUE(get_job(*client_, paused)["links"].contains("result_png"));
+  auto paused_png = client_->Get("/v1/jobs/" + paused + "/result.png");
+  ASSERT_TRUE(paused_png);
+  EXPECT_EQ(paused_png->status, 200) << paused_png->body;
+  EXPECT_EQ(png_size(paused_png->body), std::make_pair(128u, 128u));
+  // A requeue starts over: the partial results go.
+  auto requeued = client_->Post("/v1/jobs/" + paused + "/requeue");  // 202 when it starts at once
+  ASSERT_TRUE(requeued && (requeued->status == 200 || requeued->status == 202));
+  EXPECT_FALSE(fs::exists(data_ / "jobs" / paused / "result.png"));
+  client_->Post("/v1/jobs/" + paused + "/cancel");
+}
+
 // A job's log tells what its renders did: loading, each pass, how and why it ended, the client's actions; empty
 // before it starts; it goes with the job.
 TEST_F(ServiceTest, AJobsLogTellsWhatItsRendersDid) {
@@ -317,7 +383,9 @@ TEST_F(ServiceTest, AJobsLogTellsWhatItsRendersDid) {
   const std::string cancelled = log_of(blocker);
   EXPECT_NE(cancelled.find("pass 1: "), std::string::npos) << cancelled;
   EXPECT_NE(cancelled.find("cancelled by a client at "), std::string::npos) << cancelled;
-  expect_status(client_->Post("/v1/jobs/" + blocker + "/requeue"), 200, "requeue");
+  // 200, or 202 when the requeued job was claimed at once and is starting.
+  auto requeued = client_->Post("/v1/jobs/" + blocker + "/requeue");
+  ASSERT_TRUE(requeued && (requeued->status == 200 || requeued->status == 202));
   EXPECT_NE(log_of(blocker).find("requeued by a client"), std::string::npos);
   client_->Post("/v1/jobs/" + blocker + "/cancel");
   expect_status(client_->Delete("/v1/jobs/" + done), 204, "delete");
@@ -585,6 +653,12 @@ TEST_F(ServiceTest, TokensIsolateUsersAdminsSeeAllCorsOnlyForConfiguredOrigins) 
   EXPECT_EQ(get_job(*client_, a, bearer(alice))["owner"], "alice");
   expect_status(client_->Get("/v1/jobs/" + a, bearer(bob)), 404, "bob reads alice's job");
   expect_status(client_->Get("/v1/jobs/" + a + "/log", bearer(bob)), 404, "bob reads alice's log");
+  expect_status(client_->Get("/v1/jobs/" + a + "/document", bearer(bob)), 404, "bob reads alice's document");
+  auto document = client_->Get("/v1/jobs/" + a + "/document", bearer(alice));
+  ASSERT_TRUE(document);
+  EXPECT_EQ(document->status, 200);
+  EXPECT_EQ(document->get_header_value("Content-Type"), "application/json");
+  EXPECT_EQ(json::parse(document->body), long_cornell_job());  // as submitted
   EXPECT_EQ(client_->Get("/v1/jobs/" + a + "/log", bearer(alice))->status, 200);
   expect_status(client_->Post("/v1/jobs/" + a + "/cancel", bearer(bob)), 404, "bob cancels alice's job");
   expect_status(client_->Delete("/v1/jobs/" + a, bearer(bob)), 404, "bob deletes alice's job");
