@@ -32,7 +32,9 @@
 // reflection lobe mirrored through the surface (no refraction). The half vector of a transmitted pair is that of
 // its mirrored pair, so every term is symmetric in wo and wi (reciprocal), and with Fresnel weights <= 1 and
 // single-scattering microfacet lobes the albedo is at most 1 (energy is lost, not gained, at high roughness).
-// Roughness below 0.045 (alpha 0.002) is clamped there: the model has no delta lobes.
+// Roughness below 0.045 (alpha 0.002) is clamped there: the model has no delta lobes. The transmission lobe's
+// roughness is scaled by clamp(2 ior - 2, 0, 1), as the Khronos glTF Sample Viewer does (applyIorToRoughness): at
+// IOR 1 nothing refracts, so a rough pane stays clear; at 1.5 the lobe is as rough as the reflection.
 #include "renderer/bsdf/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/sampling.h"
@@ -186,6 +188,7 @@ struct GltfLobes {
   Rgb f0_d{0.04f, 0.04f, 0.04f};
   float f90_d = 1;
   float transmission = 0;
+  float alpha_t = 1;  // the transmission lobe's
   float clearcoat = 0;
   float alpha_c = 0.002f;
   Rgb sheen_color{0, 0, 0};
@@ -197,6 +200,8 @@ class GltfPbrBsdf final : public Bsdf {
   explicit GltfPbrBsdf(const GltfLobes& l) : l_(l) {
     dist_.type = MicrofacetType::kGgx;
     dist_.alpha_x = dist_.alpha_y = l.alpha;
+    dist_t_.type = MicrofacetType::kGgx;
+    dist_t_.alpha_x = dist_t_.alpha_y = l.alpha_t;
     dist_c_.type = MicrofacetType::kGgx;
     dist_c_.alpha_x = dist_c_.alpha_y = l.alpha_c;
     float a1, a2;
@@ -223,7 +228,7 @@ class GltfPbrBsdf final : public Bsdf {
       if (!microfacet_reflection_sample(dist_, wo, u, 0.5f, &wi)) return std::nullopt;
       flags = kBsdfReflection | kBsdfGlossy;
     } else if (uc < p[0] + p[1] + p[2]) {
-      if (!microfacet_reflection_sample(dist_, wo, u, 0.5f, &wi)) return std::nullopt;
+      if (!microfacet_reflection_sample(dist_t_, wo, u, 0.5f, &wi)) return std::nullopt;
       wi.z = -wi.z;
       flags = kBsdfTransmission | kBsdfGlossy;
     } else {
@@ -268,7 +273,7 @@ class GltfPbrBsdf final : public Bsdf {
     if (!reflection_half_vector(wo, wr, &h)) return Rgb(0);
     const float vh = dot(wo, h);
     float specular_pdf;
-    const float dv = microfacet_reflection_eval_pdf(dist_, wo, wr, h, &specular_pdf);
+    const float dv = microfacet_reflection_eval_pdf(transmit ? dist_t_ : dist_, wo, wr, h, &specular_pdf);
     if (pdf_out) {
       const float* p = lobes_at(wo);
       if (transmit) {
@@ -360,7 +365,7 @@ class GltfPbrBsdf final : public Bsdf {
   }
 
   GltfLobes l_;
-  MicrofacetDistribution dist_, dist_c_;
+  MicrofacetDistribution dist_, dist_t_, dist_c_;
   // A BSDF belongs to one path vertex on one thread, so the cache needs no synchronisation. wo starts as a direction
   // no caller passes (not unit length).
   mutable struct {
@@ -377,6 +382,7 @@ class GltfPbrMaterial final : public Material {
   RgbParam base_color, specular_color, sheen_color;
   FloatParam metallic, roughness, specular, transmission, clearcoat, clearcoat_roughness, sheen_roughness;
   float f0_ior = 0.04f;
+  float transmission_roughness_scale = 1;  // clamp(2 ior - 2, 0, 1)
   // metallic's and roughness's textures as one RGB lookup, when they read channels of the same image.
   std::shared_ptr<const Texture> metallic_roughness;
   int metallic_channel = 0, roughness_channel = 0;
@@ -397,6 +403,8 @@ class GltfPbrMaterial final : public Material {
     l.metallic = clamp(metal, 0.0f, 1.0f);
     float r = clamp(rough, 0.045f, 1.0f);
     l.alpha = r * r;
+    const float rt = clamp(r * transmission_roughness_scale, 0.045f, 1.0f);
+    l.alpha_t = rt * rt;
     float spec = clamp(specular.eval(sp), 0.0f, 1.0f);
     l.f0_d = vmin(Rgb(f0_ior) * specular_color.eval(sp), Rgb(1)) * spec;
     l.f90_d = spec;
@@ -425,6 +433,7 @@ void register_gltf_pbr(MaterialRegistry& registry) {
                                                            &m->metallic_channel, &m->roughness_channel);
     float ior = params::number(j, "ior", ptr, 1.5f, 1.0f, 4.0f);
     m->f0_ior = f0_from_ior(ior);
+    m->transmission_roughness_scale = clamp(2 * ior - 2, 0.0f, 1.0f);
     m->specular = params::float_param(j, "specular", ptr, 1.0f, 0.0f, 1.0f, ctx);
     m->specular_color = params::rgb_param(j, "specular_color", ptr, Rgb(1), 0.0f, 1e3f, ctx);
     m->transmission = params::float_param(j, "transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);

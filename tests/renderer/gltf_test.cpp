@@ -764,6 +764,43 @@ TEST(GltfTextures, UnlitMaterialsShowTheirBaseColourExactly) {
   EXPECT_NEAR(red.z, 0, 1e-4);
 }
 
+// A rough transmissive pane of IOR 1 refracts nothing, so whatever its roughness it leaves a checker behind it sharp
+// (the transmission lobe's roughness scales with clamp(2 ior - 2, 0, 1)).
+TEST(GltfTextures, RoughTransmissionAtIor1StaysSharp) {
+  const json pane = {{"type", "gltf_pbr"}, {"base_color", {1, 1, 1}}, {"metallic", 0},
+                     {"roughness", 1},     {"transmission", 1},       {"ior", 1.0}};
+  const json job = {{"kind", "scene"},
+                    {"scene",
+                     {{"materials",
+                       {{"pane", pane},
+                        {"checker",
+                         {{"type", "lambert"},
+                          {"albedo", {0, 0, 0}},
+                          {"emission", {{"checker", {{"a", {1, 1, 1}}, {"b", {0, 0, 0}}, {"scale", 4}}}}}}}}},
+                      {"objects",
+                       {{{"shape", "rectangle"},
+                         {"corner", {-2, -2, 0}},
+                         {"edge1", {4, 0, 0}},
+                         {"edge2", {0, 4, 0}},
+                         {"material", "pane"}},
+                        {{"shape", "rectangle"},
+                         {"corner", {-1, -1, -1}},
+                         {"edge1", {2, 0, 0}},
+                         {"edge2", {0, 2, 0}},
+                         {"material", "checker"}}}},
+                      {"camera", {{"type", "orthographic"}, {"from", {0, 0, 5}}, {"to", {0, 0, 0}}, {"height", 2}}},
+                      {"environment", {{"color", {0, 0, 0}}}}}},
+                    {"render", {{"width", 32}, {"height", 32}, {"spp", 64}, {"max_depth", 4}}}};
+  Rendered img = render_job(job);
+  // Cells are 8 pixels wide: centres of neighbouring cells keep the checker's contrast.
+  for (int y : {4, 12, 20, 28})
+    for (int x : {4, 12, 20}) {
+      const float a = img.at(x, y).y, b = img.at(x + 8, y).y;
+      EXPECT_GT(std::max(a, b), 0.8f) << x << "," << y;
+      EXPECT_LT(std::min(a, b), 0.1f) << x << "," << y;
+    }
+}
+
 TEST(GltfTextures, BaseColourAlphaCutsOutUnderMask) {
   GltfBuilder b;
   int tex = b.texture_png(quad_texture(), {{"wrapS", 33071}, {"wrapT", 33071}});
