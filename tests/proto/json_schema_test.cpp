@@ -28,6 +28,20 @@ TEST(JsonSchema, CornellExampleIsValid) {
   EXPECT_FALSE(e) << e->pointer << ": " << e->message;
 }
 
+// Every job in proto/examples/ (the benchmark scenes among them) is valid as written.
+TEST(JsonSchema, EveryExampleIsValid) {
+  int checked = 0;
+  for (const auto& entry :
+       std::filesystem::directory_iterator(std::filesystem::path(TESSERA_SOURCE_DIR) / "proto/examples")) {
+    if (entry.path().extension() != ".json") continue;
+    std::ifstream in(entry.path());
+    auto e = validate_job(json::parse(in));
+    EXPECT_FALSE(e) << entry.path() << " " << e->pointer << ": " << e->message;
+    ++checked;
+  }
+  EXPECT_GE(checked, 3);
+}
+
 TEST(JsonSchema, MaterialJobIsValid) {
   json doc = {{"kind", "material"}, {"material", {{"type", "lambert"}, {"albedo", 0.5}}}, {"render", {{"spp", 4}}}};
   EXPECT_FALSE(validate_job(doc));
