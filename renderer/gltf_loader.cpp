@@ -26,7 +26,7 @@ namespace {
 const std::set<std::string> kSupportedExtensions = {
     "KHR_lights_punctual",   "KHR_materials_emissive_strength", "KHR_materials_ior",       "KHR_materials_transmission",
     "KHR_materials_volume",  "KHR_materials_specular",          "KHR_materials_clearcoat", "KHR_materials_sheen",
-    "KHR_texture_transform", "KHR_mesh_quantization",           "KHR_materials_unlit",
+    "KHR_texture_transform", "KHR_mesh_quantization",           "KHR_materials_unlit",     "EXT_mesh_gpu_instancing",
 };
 
 using Mat4 = std::array<double, 16>;  // column-major, as glTF stores matrices
@@ -910,6 +910,47 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     return out;
   };
 
+  // EXT_mesh_gpu_instancing: the node's mesh drawn once per instance, at the node's transform times the instance's
+  // TRANSLATION * ROTATION * SCALE (each attribute optional; the extension's specification). Empty without it.
+  uint64_t gpu_instances_made = 0;
+  auto gpu_instance_count = [&](const tinygltf::Node& node) -> size_t {
+    const json ext = parse_extensions(node.extensions_json_string);
+    if (!ext.contains("EXT_mesh_gpu_instancing")) return 0;
+    const json attrs = ext["EXT_mesh_gpu_instancing"].value("attributes", json::object());
+    for (const char* key : {"TRANSLATION", "ROTATION", "SCALE"})
+      if (attrs.contains(key) && attrs[key].is_number_integer()) return reader.count(attrs[key].get<int>());
+    return 0;
+  };
+  auto gpu_instances = [&](const tinygltf::Node& node, int node_index) -> std::vector<Mat4> {
+    const size_t n = gpu_instance_count(node);
+    if (n == 0) return {};
+    gpu_instances_made += n;
+    if (gpu_instances_made > options.max_instances)
+      throw SceneError(pointer, "EXT_mesh_gpu_instancing makes more than " + std::to_string(options.max_instances) +
+                                    " instances, the limit");
+    const json attrs = parse_extensions(node.extensions_json_string)["EXT_mesh_gpu_instancing"]["attributes"];
+    auto read = [&](const char* key, int components) {
+      std::vector<float> v;
+      if (!attrs.contains(key) || !attrs[key].is_number_integer()) return v;
+      if (reader.count(attrs[key].get<int>()) != n)
+        throw SceneError(pointer, "node " + std::to_string(node_index) + ": EXT_mesh_gpu_instancing's " + key +
+                                      " has another count than its other attributes");
+      v = reader.floats(attrs[key].get<int>(), components);
+      return v;
+    };
+    const std::vector<float> t = read("TRANSLATION", 3), r = read("ROTATION", 4), sc = read("SCALE", 3);
+    std::vector<Mat4> out(n);
+    for (size_t i = 0; i < n; ++i) {
+      check_stop();
+      tinygltf::Node trs;
+      if (!t.empty()) trs.translation = {t[3 * i], t[3 * i + 1], t[3 * i + 2]};
+      if (!r.empty()) trs.rotation = {r[4 * i], r[4 * i + 1], r[4 * i + 2], r[4 * i + 3]};
+      if (!sc.empty()) trs.scale = {sc[3 * i], sc[3 * i + 1], sc[3 * i + 2]};
+      out[i] = local_matrix(trs);
+    }
+    return out;
+  };
+
   std::function<void(int, const Mat4&, int)> visit = [&](int node_index, const Mat4& parent, int depth) {
     if (node_index < 0 || node_index >= static_cast<int>(model.nodes.size()))
       throw SceneError(pointer, "node " + std::to_string(node_index) + " does not exist");
@@ -925,37 +966,43 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       if (node.mesh >= static_cast<int>(model.meshes.size()))
         throw SceneError(pointer, "node " + std::to_string(node_index) + " names mesh " + std::to_string(node.mesh) +
                                       ", which does not exist");
-      if (instanced.count(node.mesh)) {
-        // Shared by several nodes: one object-space copy, one Embree instance per node.
-        auto [it, fresh] = group_of_mesh.try_emplace(node.mesh, static_cast<uint32_t>(scene.groups.size()));
-        if (fresh) {
-          MeshGroup group;
-          for (Mesh& m : build_meshes(node.mesh, identity())) {
-            m.prototype = true;
-            group.meshes.push_back(static_cast<uint32_t>(scene.meshes.size()));
+      // The mesh at transform `at`: an instance of its one object-space copy, or triangles of its own.
+      auto place = [&](const Mat4& at) {
+        if (instanced.count(node.mesh)) {
+          // Shared by several nodes: one object-space copy, one Embree instance per node.
+          auto [it, fresh] = group_of_mesh.try_emplace(node.mesh, static_cast<uint32_t>(scene.groups.size()));
+          if (fresh) {
+            MeshGroup group;
+            for (Mesh& m : build_meshes(node.mesh, identity())) {
+              m.prototype = true;
+              group.meshes.push_back(static_cast<uint32_t>(scene.meshes.size()));
+              scene.meshes.push_back(std::move(m));
+            }
+            scene.groups.push_back(std::move(group));
+          }
+          Instance inst;
+          inst.group = it->second;
+          inst.to_world = to_transform(at);
+          inst.normal_to_world = to_transform(normal_matrix(at));
+          inst.mirrored = det3(at) < 0;
+          for (uint32_t m : scene.groups[inst.group].meshes) {
+            if (!fresh) triangles += scene.meshes[m].triangle_count();  // build_meshes counted the first
+            for (const Vec3& p : scene.meshes[m].positions) result.bounds.extend(inst.to_world.point(p));
+          }
+          if (triangles > options.max_triangles)
+            throw SceneError(pointer,
+                             "the asset exceeds the limit of " + std::to_string(options.max_triangles) + " triangles");
+          scene.instances.push_back(inst);
+        } else {
+          for (Mesh& m : build_meshes(node.mesh, at)) {
+            for (const Vec3& p : m.positions) result.bounds.extend(p);
             scene.meshes.push_back(std::move(m));
           }
-          scene.groups.push_back(std::move(group));
         }
-        Instance inst;
-        inst.group = it->second;
-        inst.to_world = to_transform(world);
-        inst.normal_to_world = to_transform(normal_matrix(world));
-        inst.mirrored = det3(world) < 0;
-        for (uint32_t m : scene.groups[inst.group].meshes) {
-          if (!fresh) triangles += scene.meshes[m].triangle_count();  // build_meshes counted the first
-          for (const Vec3& p : scene.meshes[m].positions) result.bounds.extend(inst.to_world.point(p));
-        }
-        if (triangles > options.max_triangles)
-          throw SceneError(pointer,
-                           "the asset exceeds the limit of " + std::to_string(options.max_triangles) + " triangles");
-        scene.instances.push_back(inst);
-      } else {
-        for (Mesh& m : build_meshes(node.mesh, world)) {
-          for (const Vec3& p : m.positions) result.bounds.extend(p);
-          scene.meshes.push_back(std::move(m));
-        }
-      }
+      };
+      const std::vector<Mat4> copies = gpu_instances(node, node_index);
+      if (copies.empty()) place(world);
+      for (const Mat4& local : copies) place(multiply(world, local));
     }
 
     if (node.camera >= 0 && node.camera < static_cast<int>(model.cameras.size()) &&
@@ -1016,7 +1063,8 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   std::function<void(int, int)> census = [&](int n, int depth) {
     if (n < 0 || n >= static_cast<int>(model.nodes.size()) || depth > 256) return;
     check_stop();
-    if (model.nodes[n].mesh >= 0) ++references[model.nodes[n].mesh];
+    if (model.nodes[n].mesh >= 0)
+      references[model.nodes[n].mesh] += static_cast<int>(std::max<size_t>(1, gpu_instance_count(model.nodes[n])));
     for (int c : model.nodes[n].children) census(c, depth + 1);
   };
   for (int r : roots) census(r, 0);

@@ -479,6 +479,42 @@ TEST(Gltf, FeaturesNotAppliedAreWarnings) {
   EXPECT_NE(all.find("material \"coat\": clearcoatNormalTexture is not applied"), std::string::npos) << all;
 }
 
+// EXT_mesh_gpu_instancing: one node draws its mesh once per instance, at the node's transform times each instance's
+// TRANSLATION * ROTATION * SCALE.
+TEST(Gltf, GpuInstancingDrawsEveryInstance) {
+  GltfBuilder b;
+  b.doc["extensionsUsed"] = {"EXT_mesh_gpu_instancing"};
+  b.doc["extensionsRequired"] = {"EXT_mesh_gpu_instancing"};
+  int mesh = b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, -1);
+  std::vector<float> t, r, sc;
+  for (int i = 0; i < 125; ++i) {
+    t.insert(t.end(), {2.0f * (i % 5), 2.0f * (i / 5 % 5), 2.0f * (i / 25)});
+    const bool turned = i == 7;  // a quarter turn about z, scaled by 2
+    r.insert(r.end(), {0, 0, turned ? std::sqrt(0.5f) : 0.0f, turned ? std::sqrt(0.5f) : 1.0f});
+    sc.insert(sc.end(), {turned ? 2.0f : 1.0f, turned ? 2.0f : 1.0f, turned ? 2.0f : 1.0f});
+  }
+  const int ta = b.floats(t, "VEC3", 3), ra = b.floats(r, "VEC4", 4), sa = b.floats(sc, "VEC3", 3);
+  b.node({{"mesh", mesh},
+          {"translation", {0, 0, -10}},
+          {"extensions",
+           {{"EXT_mesh_gpu_instancing", {{"attributes", {{"TRANSLATION", ta}, {"ROTATION", ra}, {"SCALE", sa}}}}}}}},
+         true);
+  b.write(fixture_dir(), "gpu_instancing");
+  Scene scene;
+  GltfImport imp = import_gltf(fixture_dir() / "gpu_instancing.gltf", "/scene/gltf", scene, {});
+  EXPECT_TRUE(imp.warnings.empty()) << imp.warnings[0];
+  ASSERT_EQ(scene.instances.size(), 125u);
+  EXPECT_EQ(scene.meshes.size(), 1u);  // one object-space copy
+  const Vec3 last = scene.instances[124].to_world.point(Vec3(1, 0, 0));
+  EXPECT_NEAR(last.x, 9, 1e-5);
+  EXPECT_NEAR(last.y, 8, 1e-5);
+  EXPECT_NEAR(last.z, -2, 1e-5);
+  const Vec3 turned = scene.instances[7].to_world.point(Vec3(1, 0, 0));  // instance 7 at (4, 2, 0)
+  EXPECT_NEAR(turned.x, 4, 1e-5);
+  EXPECT_NEAR(turned.y, 4, 1e-5);
+  EXPECT_NEAR(turned.z, -10, 1e-5);
+}
+
 TEST(GltfHostile, RequiredUnsupportedExtensionFailsOptionalWarns) {
   GltfBuilder b = one_triangle();
   b.doc["extensionsUsed"] = {"EXT_unknown_thing"};
