@@ -103,7 +103,7 @@ int run(const Config& config) {
   tessera::ThreadPool pool(config.threads);
   // Loading (image decoding, mip levels, environment maps) borrows at most as many extra threads as render threads.
   tessera::limit_parallel_helpers(pool.size() - 1);
-  Metrics metrics;
+  Metrics metrics(node, shared_store ? "postgresql" : "sqlite");
 
   SchedulerOptions scheduler_options;
   scheduler_options.max_jobs = config.max_jobs;

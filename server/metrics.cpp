@@ -46,6 +46,10 @@ bool Metrics::record_job_end(double seconds, const std::function<bool()>& record
 
 std::string Metrics::render(const Gauges& g) const {
   std::ostringstream out;
+  if (!node_.empty())
+    out << "# HELP tessera_node_info The daemon: its node name and job store.\n"
+        << "# TYPE tessera_node_info gauge\n"
+        << "tessera_node_info{node=\"" << label_value(node_) << "\",store=\"" << label_value(store_) << "\"} 1\n";
   out << "# HELP tessera_job_store_up Whether the job store works (0: it could not be read for this scrape, or the end "
          "of a render waits for it to take a write; as /readyz's job_store_failing).\n"
          "# TYPE tessera_job_store_up gauge\n"

@@ -17,6 +17,11 @@ namespace tessera::server {
 
 class Metrics {
  public:
+  Metrics() = default;
+  // The daemon's node name and store ("sqlite", "postgresql"): tessera_node_info{node, store} 1, so that the metrics
+  // of several daemons on one store tell which daemon they come from.
+  Metrics(std::string node, std::string store) : node_(std::move(node)), store_(std::move(store)) {}
+
   void count_request(const std::string& route, int status);
   void add_samples(uint64_t pixel_samples) { samples_.fetch_add(pixel_samples, std::memory_order_relaxed); }
   // The end of a job and its render time in one step: `record` (the job store's state change; true when the store
@@ -43,6 +48,7 @@ class Metrics {
   static constexpr std::array<double, 12> kDurationBuckets = {0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60, 300, 1800, 7200};
 
  private:
+  std::string node_, store_;
   mutable std::mutex mutex_;
   std::map<std::pair<std::string, int>, uint64_t> requests_;
   mutable std::mutex durations_mutex_;  // the histogram's; held across a job's end (record_job_end)

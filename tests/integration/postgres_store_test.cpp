@@ -50,6 +50,11 @@ TEST(PostgresStore, ADaemonRendersAJobAndFindsItAgainAfterARestart) {
     auto png = c->Get("/v1/jobs/" + id + "/result.png");
     ASSERT_TRUE(png);
     EXPECT_EQ(png->status, 200);
+    // The metrics say which daemon they come from.
+    auto metrics = c->Get("/metrics");
+    ASSERT_TRUE(metrics);
+    EXPECT_NE(metrics->body.find("tessera_node_info{node=\"node-a\",store=\"postgresql\"} 1\n"), std::string::npos)
+        << metrics->body;
     EXPECT_EQ(d.stop(SIGTERM), 0);
   }
   // The row is PostgreSQL's: ended, and no longer any node's.
