@@ -813,14 +813,28 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
         result.warnings.push_back("mesh " + std::to_string(mesh_index) + ": points and lines are not rendered");
         continue;
       }
-      if (!prim.targets.empty())
-        result.warnings.push_back("mesh " + std::to_string(mesh_index) +
-                                  ": morph targets are not applied (it is drawn in its base shape)");
       auto pos_it = prim.attributes.find("POSITION");
       if (pos_it == prim.attributes.end()) continue;
       Mesh mesh;
       std::vector<float> pos = reader.floats(pos_it->second, 3);
       const size_t nv = pos.size() / 3;
+      // Morph targets at the mesh's default weights (glTF 2.0, 3.7.2.2): attribute + sum of weight_k * target_k's
+      // displacement, for POSITION, NORMAL and TANGENT (whose targets are 3-vectors added to xyz).
+      const std::vector<double>& weights = model.meshes[mesh_index].weights;
+      auto morph = [&](std::vector<float>& values, const char* name, int stride) {
+        for (size_t k = 0; k < prim.targets.size() && k < weights.size(); ++k) {
+          auto it = prim.targets[k].find(name);
+          if (it == prim.targets[k].end() || weights[k] == 0) continue;
+          if (reader.count(it->second) != nv)
+            throw SceneError(pointer, "mesh " + std::to_string(mesh_index) + ": morph target " + std::to_string(k) +
+                                          " " + name + " has another count than POSITION");
+          const std::vector<float> d = reader.floats(it->second, 3);
+          const float w = static_cast<float>(weights[k]);
+          for (size_t v = 0; v < nv; ++v)
+            for (int c = 0; c < 3; ++c) values[v * stride + c] += w * d[3 * v + c];
+        }
+      };
+      morph(pos, "POSITION", 3);
       mesh.positions.resize(nv);
       for (size_t v = 0; v < nv; ++v) {
         mesh.positions[v] = apply_point(world, Vec3(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]));
@@ -838,6 +852,7 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       if (int a = attr("NORMAL"); a >= 0) {
         check_count(a, "NORMAL");
         std::vector<float> n = reader.floats(a, 3);
+        morph(n, "NORMAL", 3);
         mesh.normals.resize(nv);
         for (size_t v = 0; v < nv; ++v) {
           Vec3 wn = apply_vector(nmat, Vec3(n[3 * v], n[3 * v + 1], n[3 * v + 2]));
@@ -848,6 +863,7 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       if (int a = attr("TANGENT"); a >= 0 && !mesh.normals.empty()) {
         check_count(a, "TANGENT");
         std::vector<float> t = reader.floats(a, 4);
+        morph(t, "TANGENT", 4);
         mesh.tangents.resize(nv);
         mesh.tangent_signs.resize(nv);
         for (size_t v = 0; v < nv; ++v) {
@@ -957,6 +973,10 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     if (depth > 256) throw SceneError(pointer, "the node hierarchy is deeper than 256 levels (a cycle?)");
     check_stop();
     const tinygltf::Node& node = model.nodes[node_index];
+    if (!node.weights.empty() && node.mesh >= 0 && node.mesh < static_cast<int>(model.meshes.size()) &&
+        node.weights != model.meshes[node.mesh].weights)
+      result.warnings.push_back("node " + std::to_string(node_index) +
+                                ": its own morph weights are not applied (the mesh's default weights are)");
     if (node.skin >= 0 && node.mesh >= 0)
       result.warnings.push_back("node " + std::to_string(node_index) +
                                 ": its skin is not applied (the mesh is drawn in its bind pose)");

@@ -454,11 +454,13 @@ TEST(GltfHostile, AStopTokenEndsALongLoad) {
   EXPECT_THROW(load_scene(json{{"gltf", "long.glb"}}, "/scene", scene_options), LoadStopped);
 }
 
-// What is not rendered as written says so, once, naming the mesh, node or material: morph targets, skins, a
+// What is not rendered as written says so, once, naming the node or material: a node's own morph weights, skins, a
 // clearcoat normal map.
 TEST(Gltf, FeaturesNotAppliedAreWarnings) {
   GltfBuilder b = one_triangle();
   b.doc["meshes"][0]["primitives"][0]["targets"] = {{{"POSITION", 0}}};
+  b.doc["meshes"][0]["weights"] = {0};
+  b.doc["nodes"][0]["weights"] = {0.5};
   b.doc["nodes"][0]["skin"] = 0;
   b.doc["skins"] = {{{"joints", {1}}}};
   b.node(json::object(), false);
@@ -473,10 +475,28 @@ TEST(Gltf, FeaturesNotAppliedAreWarnings) {
   GltfImport imp = import_gltf(fixture_dir() / "not_applied.gltf", "/scene/gltf", scene, {});
   std::string all;
   for (const std::string& w : imp.warnings) all += w + "\n";
-  EXPECT_NE(all.find("mesh 0: morph targets are not applied"), std::string::npos) << all;
-  EXPECT_EQ(all.find("morph targets"), all.rfind("morph targets")) << all;
+  EXPECT_NE(all.find("node 0: its own morph weights are not applied"), std::string::npos) << all;
   EXPECT_NE(all.find("node 0: its skin is not applied"), std::string::npos) << all;
   EXPECT_NE(all.find("material \"coat\": clearcoatNormalTexture is not applied"), std::string::npos) << all;
+}
+
+// Morph targets at the mesh's default weights: a vertex lands at its position plus the weighted displacements.
+TEST(Gltf, MorphTargetsAreAppliedAtTheDefaultWeights) {
+  GltfBuilder b = one_triangle();
+  const int up = b.floats({0, 1, 0, 0, 1, 0, 0, 1, 0}, "VEC3", 3),
+            right = b.floats({2, 0, 0, 0, 0, 0, 0, 0, 0}, "VEC3", 3);
+  b.doc["meshes"][0]["primitives"][0]["targets"] = {{{"POSITION", up}}, {{"POSITION", right}}};
+  b.doc["meshes"][0]["weights"] = {0.5, 0.25};
+  b.write(fixture_dir(), "morph");
+  Scene scene;
+  import_gltf(fixture_dir() / "morph.gltf", "/scene/gltf", scene, {});
+  ASSERT_EQ(scene.meshes.size(), 1u);
+  const std::vector<Vec3>& p = scene.meshes[0].positions;
+  EXPECT_NEAR(p[0].x, 0.5, 1e-6);  // (0, 0, 0) + 0.5 (0, 1, 0) + 0.25 (2, 0, 0)
+  EXPECT_NEAR(p[0].y, 0.5, 1e-6);
+  EXPECT_NEAR(p[1].x, 1, 1e-6);  // (1, 0, 0) + 0.5 (0, 1, 0)
+  EXPECT_NEAR(p[1].y, 0.5, 1e-6);
+  EXPECT_NEAR(p[2].y, 1.5, 1e-6);
 }
 
 // EXT_mesh_gpu_instancing: one node draws its mesh once per instance, at the node's transform times each instance's
