@@ -802,7 +802,9 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   std::map<int, size_t> camera_instances;
 
   // The triangles of glTF mesh `mesh_index` under transform `world` (identity for instanced prototypes).
-  auto build_meshes = [&](int mesh_index, const Mat4& world) {
+  // With `joints` (a skin's joint matrices: joint world transform times inverse bind matrix), each vertex is moved by
+  // the blend of its JOINTS_0 matrices by WEIGHTS_0 (glTF 2.0, 3.7.3 "Skins"), and `world` is not used.
+  auto build_meshes = [&](int mesh_index, const Mat4& world, const std::vector<Mat4>* joints = nullptr) {
     const bool flip = det3(world) < 0;  // a mirroring transform reverses the winding
     const Mat4 nmat = normal_matrix(world);
     std::vector<Mesh> out;
@@ -835,9 +837,33 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
         }
       };
       morph(pos, "POSITION", 3);
+      std::vector<Mat4> skin_at;  // per vertex, when skinned
+      if (joints) {
+        auto ji = prim.attributes.find("JOINTS_0"), wi = prim.attributes.find("WEIGHTS_0");
+        if (ji == prim.attributes.end() || wi == prim.attributes.end() || reader.count(ji->second) != nv ||
+            reader.count(wi->second) != nv)
+          throw SceneError(pointer, "mesh " + std::to_string(mesh_index) +
+                                        ": a skinned mesh needs JOINTS_0 and WEIGHTS_0 for every vertex");
+        const std::vector<float> jv = reader.floats(ji->second, 4), wv = reader.floats(wi->second, 4);
+        skin_at.resize(nv);
+        for (size_t v = 0; v < nv; ++v) {
+          Mat4 m{};
+          for (int k = 0; k < 4; ++k) {
+            const float w = wv[4 * v + k];
+            if (w == 0) continue;
+            const size_t j = static_cast<size_t>(jv[4 * v + k]);
+            if (j >= joints->size())
+              throw SceneError(pointer, "mesh " + std::to_string(mesh_index) + ": JOINTS_0 names joint " +
+                                            std::to_string(j) + " of a skin of " + std::to_string(joints->size()));
+            for (int e = 0; e < 16; ++e) m[e] += w * (*joints)[j][e];
+          }
+          skin_at[v] = m;
+        }
+      }
+      auto vertex_world = [&](size_t v) -> const Mat4& { return skin_at.empty() ? world : skin_at[v]; };
       mesh.positions.resize(nv);
       for (size_t v = 0; v < nv; ++v) {
-        mesh.positions[v] = apply_point(world, Vec3(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]));
+        mesh.positions[v] = apply_point(vertex_world(v), Vec3(pos[3 * v], pos[3 * v + 1], pos[3 * v + 2]));
       }
       auto attr = [&](const char* name) {
         auto it = prim.attributes.find(name);
@@ -855,7 +881,8 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
         morph(n, "NORMAL", 3);
         mesh.normals.resize(nv);
         for (size_t v = 0; v < nv; ++v) {
-          Vec3 wn = apply_vector(nmat, Vec3(n[3 * v], n[3 * v + 1], n[3 * v + 2]));
+          Vec3 wn = apply_vector(skin_at.empty() ? nmat : normal_matrix(skin_at[v]),
+                                 Vec3(n[3 * v], n[3 * v + 1], n[3 * v + 2]));
           float len = length(wn);
           mesh.normals[v] = len > 0 ? wn / len : Vec3(0, 0, 1);
         }
@@ -867,7 +894,7 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
         mesh.tangents.resize(nv);
         mesh.tangent_signs.resize(nv);
         for (size_t v = 0; v < nv; ++v) {
-          Vec3 wt = apply_vector(world, Vec3(t[4 * v], t[4 * v + 1], t[4 * v + 2]));
+          Vec3 wt = apply_vector(vertex_world(v), Vec3(t[4 * v], t[4 * v + 1], t[4 * v + 2]));
           float len = length(wt);
           mesh.tangents[v] = len > 0 ? wt / len : Vec3(1, 0, 0);
           mesh.tangent_signs[v] = (t[4 * v + 3] < 0 ? -1.0f : 1.0f) * (flip ? -1.0f : 1.0f);
@@ -967,6 +994,7 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
     return out;
   };
 
+  std::vector<Mat4> node_world;  // filled before the walk
   std::function<void(int, const Mat4&, int)> visit = [&](int node_index, const Mat4& parent, int depth) {
     if (node_index < 0 || node_index >= static_cast<int>(model.nodes.size()))
       throw SceneError(pointer, "node " + std::to_string(node_index) + " does not exist");
@@ -977,9 +1005,6 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
         node.weights != model.meshes[node.mesh].weights)
       result.warnings.push_back("node " + std::to_string(node_index) +
                                 ": its own morph weights are not applied (the mesh's default weights are)");
-    if (node.skin >= 0 && node.mesh >= 0)
-      result.warnings.push_back("node " + std::to_string(node_index) +
-                                ": its skin is not applied (the mesh is drawn in its bind pose)");
     const Mat4 world = multiply(parent, local_matrix(node));
 
     if (node.mesh >= 0) {
@@ -1021,7 +1046,33 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
         }
       };
       const std::vector<Mat4> copies = gpu_instances(node, node_index);
-      if (copies.empty()) place(world);
+      if (node.skin >= 0) {
+        // Posed by its joints' node transforms (the scene's, for a still image); the node's own transform is not
+        // used (glTF 2.0, 3.7.3).
+        if (node.skin >= static_cast<int>(model.skins.size()))
+          throw SceneError(pointer, "node " + std::to_string(node_index) + " names a skin that does not exist");
+        const tinygltf::Skin& skin = model.skins[node.skin];
+        std::vector<float> ibm;
+        if (skin.inverseBindMatrices >= 0) ibm = reader.floats(skin.inverseBindMatrices, 16);
+        if (!ibm.empty() && ibm.size() != skin.joints.size() * 16)
+          throw SceneError(pointer,
+                           "skin " + std::to_string(node.skin) + ": inverseBindMatrices has another count than joints");
+        std::vector<Mat4> joints(skin.joints.size());
+        for (size_t j = 0; j < joints.size(); ++j) {
+          const int jn = skin.joints[j];
+          if (jn < 0 || jn >= static_cast<int>(node_world.size()))
+            throw SceneError(pointer, "skin " + std::to_string(node.skin) + " names a joint that does not exist");
+          Mat4 inverse_bind = identity();
+          if (!ibm.empty()) std::copy(ibm.begin() + 16 * j, ibm.begin() + 16 * (j + 1), inverse_bind.begin());
+          joints[j] = multiply(node_world[jn], inverse_bind);
+        }
+        for (Mesh& m : build_meshes(node.mesh, identity(), &joints)) {
+          for (const Vec3& p : m.positions) result.bounds.extend(p);
+          scene.meshes.push_back(std::move(m));
+        }
+      } else if (copies.empty()) {
+        place(world);
+      }
       for (const Mat4& local : copies) place(multiply(world, local));
     }
 
@@ -1095,6 +1146,19 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
       if (prim.material >= 0 && prim.material < static_cast<int>(material_index.size()))
         emits = emits || scene.materials[material_index[prim.material]]->emissive();
     if (!emits) instanced.insert(mesh_index);
+  }
+  // Every node's world transform (of its first path from the scene), for the joints of skins, which need not be
+  // ancestors of the meshes they pose.
+  node_world.assign(model.nodes.size(), identity());
+  {
+    std::vector<bool> placed(model.nodes.size(), false);
+    std::function<void(int, const Mat4&, int)> walk = [&](int n, const Mat4& parent, int depth) {
+      if (n < 0 || n >= static_cast<int>(model.nodes.size()) || depth > 256 || placed[n]) return;
+      placed[n] = true;
+      node_world[n] = multiply(parent, local_matrix(model.nodes[n]));
+      for (int c : model.nodes[n].children) walk(c, node_world[n], depth + 1);
+    };
+    for (int r : roots) walk(r, identity(), 0);
   }
   for (int r : roots) visit(r, identity(), 0);
   if (!warn.empty()) result.warnings.push_back(warn);

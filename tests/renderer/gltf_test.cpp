@@ -454,16 +454,13 @@ TEST(GltfHostile, AStopTokenEndsALongLoad) {
   EXPECT_THROW(load_scene(json{{"gltf", "long.glb"}}, "/scene", scene_options), LoadStopped);
 }
 
-// What is not rendered as written says so, once, naming the node or material: a node's own morph weights, skins, a
-// clearcoat normal map.
+// What is not rendered as written says so, once, naming the node or material: a node's own morph weights, a clearcoat
+// normal map.
 TEST(Gltf, FeaturesNotAppliedAreWarnings) {
   GltfBuilder b = one_triangle();
   b.doc["meshes"][0]["primitives"][0]["targets"] = {{{"POSITION", 0}}};
   b.doc["meshes"][0]["weights"] = {0};
   b.doc["nodes"][0]["weights"] = {0.5};
-  b.doc["nodes"][0]["skin"] = 0;
-  b.doc["skins"] = {{{"joints", {1}}}};
-  b.node(json::object(), false);
   b.node({{"mesh", 0}}, true);  // the same mesh again: its warning comes once
   b.doc["extensionsUsed"] = {"KHR_materials_clearcoat"};
   b.material({{"name", "coat"},
@@ -476,7 +473,6 @@ TEST(Gltf, FeaturesNotAppliedAreWarnings) {
   std::string all;
   for (const std::string& w : imp.warnings) all += w + "\n";
   EXPECT_NE(all.find("node 0: its own morph weights are not applied"), std::string::npos) << all;
-  EXPECT_NE(all.find("node 0: its skin is not applied"), std::string::npos) << all;
   EXPECT_NE(all.find("material \"coat\": clearcoatNormalTexture is not applied"), std::string::npos) << all;
 }
 
@@ -497,6 +493,38 @@ TEST(Gltf, MorphTargetsAreAppliedAtTheDefaultWeights) {
   EXPECT_NEAR(p[1].x, 1, 1e-6);  // (1, 0, 0) + 0.5 (0, 1, 0)
   EXPECT_NEAR(p[1].y, 0.5, 1e-6);
   EXPECT_NEAR(p[2].y, 1.5, 1e-6);
+}
+
+// A skinned mesh is posed by its joints' node transforms times their inverse bind matrices, blended by WEIGHTS_0; the
+// skinned node's own transform is not used.
+TEST(Gltf, SkinsArePosedByTheirJoints) {
+  GltfBuilder b = one_triangle();
+  // Vertex 0 follows joint 0 alone, vertex 1 joint 1 alone, vertex 2 half of each.
+  const int joints = b.floats({0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0}, "VEC4", 4);
+  b.doc["accessors"][joints]["componentType"] = 5126;  // as floats here; the loader reads any component type
+  const int weights = b.floats({1, 0, 0, 0, 1, 0, 0, 0, 0.5, 0.5, 0, 0}, "VEC4", 4);
+  b.doc["meshes"][0]["primitives"][0]["attributes"]["JOINTS_0"] = joints;
+  b.doc["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"] = weights;
+  // Joint 0 at (0, 0, -5); joint 1 at (10, 0, -5) with an inverse bind matrix that undoes a bind at x = 1.
+  const int ibm = b.floats({1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0,  0, 0, 1,  //
+                            1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, -1, 0, 0, 1},
+                           "MAT4", 16);
+  b.doc["nodes"][0]["skin"] = 0;
+  b.doc["nodes"][0]["translation"] = {100, 100, 100};  // not used for a skinned mesh
+  const int j0 = b.node({{"translation", {0, 0, -5}}}, true), j1 = b.node({{"translation", {10, 0, -5}}}, true);
+  b.doc["skins"] = {{{"joints", {j0, j1}}, {"inverseBindMatrices", ibm}}};
+  b.write(fixture_dir(), "skin");
+  Scene scene;
+  import_gltf(fixture_dir() / "skin.gltf", "/scene/gltf", scene, {});
+  ASSERT_EQ(scene.meshes.size(), 1u);
+  const std::vector<Vec3>& p = scene.meshes[0].positions;
+  EXPECT_NEAR(p[0].x, 0, 1e-5);  // (0, 0, 0) by joint 0
+  EXPECT_NEAR(p[0].z, -5, 1e-5);
+  EXPECT_NEAR(p[1].x, 10, 1e-5);  // (1, 0, 0) by joint 1: -1, then +10
+  EXPECT_NEAR(p[1].z, -5, 1e-5);
+  EXPECT_NEAR(p[2].x, 4.5, 1e-5);  // (0, 1, 0): half (0, 1, -5), half (9, 1, -5)
+  EXPECT_NEAR(p[2].y, 1, 1e-5);
+  EXPECT_NEAR(p[2].z, -5, 1e-5);
 }
 
 // EXT_mesh_gpu_instancing: one node draws its mesh once per instance, at the node's transform times each instance's
