@@ -346,6 +346,13 @@ std::string image_label(const tinygltf::Image& image, size_t index) {
 // alone); returns an empty string, or what is wrong with the image messages call `what`.
 std::string decode_image(const std::vector<unsigned char>& bytes, const std::string& what, size_t max_pixels,
                          bool header_only, ImagePixels* out) {
+  // A KTX2 container (its 12-byte identifier, KTX 2.0 specification, 3.1), as KHR_texture_basisu uses: no decoder
+  // of Debian's reads it, so it is named for what it is rather than failing as a PNG.
+  static const unsigned char kKtx2[12] = {0xAB, 'K', 'T', 'X', ' ', '2', '0', 0xBB, '\r', '\n', 0x1A, '\n'};
+  if (bytes.size() >= 12 && std::equal(kKtx2, kKtx2 + 12, bytes.begin()))
+    return what +
+           " is a KTX2 (Basis Universal) image, which tessera cannot decode (KHR_texture_basisu is not "
+           "supported): give the asset PNG or JPEG images";
   if (bytes.size() >= 2 && bytes[0] == 0xFF && bytes[1] == 0xD8 && !jpeg_complete(bytes.data(), bytes.size()))
     return what + " is a truncated JPEG (its data ends before the end-of-image marker)";
   if (header_only) {

@@ -1043,6 +1043,13 @@ TEST(GltfHostile, UndecodableAndOversizedImagesAreRefused) {
     expect_refused(fixture_dir() / "undecodable.gltf", "image 2 cannot be decoded");
   }
   {
+    // A KTX2 image (KHR_texture_basisu's container) named without the extension: said for what it is.
+    GltfBuilder b = one_triangle();
+    b.texture_png({0xAB, 'K', 'T', 'X', ' ', '2', '0', 0xBB, '\r', '\n', 0x1A, '\n', 0, 0, 0, 0});
+    b.write(fixture_dir(), "ktx2");
+    expect_refused(fixture_dir() / "ktx2.gltf", "image 0 is a KTX2 (Basis Universal) image");
+  }
+  {
     // An image in a file of its own is named by its URI, as the asset writes it.
     GltfBuilder b = one_triangle();
     b.texture_png(good);
