@@ -453,7 +453,9 @@ int cmd_watch(std::vector<std::string> args) {
 const char* kFetchUsage =
     "usage: tessera fetch ID [-d DIR] [-o FILE.png|FILE.exr ...] [--url URL] [--token T]\n"
     "Downloads a finished job's results: to the -o files, else every output the job has into DIR (default .) as\n"
-    "ID.png and ID.exr. Exit code 75 while the job has not finished yet, 1 when it failed or was cancelled.\n";
+    "ID.png and ID.exr. A job cancelled after a pass has the image of that pass as its (partial) results.\n"
+    "Exit code 75 while the job has not finished yet, 1 when it has no results (it failed, or was cancelled before\n"
+    "its first pass).\n";
 
 int cmd_fetch(std::vector<std::string> args) {
   Remote remote = remote_options(&args);
@@ -481,16 +483,24 @@ int cmd_fetch(std::vector<std::string> args) {
   auto client = remote.client();
   const json job = expect_json(remote, client->Get(job_path(id).c_str()), "fetch");
   const std::string state = job.value("state", "");
+  if (!is_terminal(state)) retry("job " + id + " is " + state + ": results exist once it has succeeded");
+  // The status links the results there are: a succeeded job's outputs, and the image of the last complete pass of a
+  // job cancelled after one (its partial results).
+  const json links = job.value("links", json::object());
+  std::vector<std::string> linked;
+  for (const json& o : job.value("outputs", json::array()))
+    if (o.is_string() && links.contains("result_" + o.get<std::string>())) linked.push_back(o.get<std::string>());
+  if (linked.empty()) fatal("job " + id + " " + state + ": it has no results");
   if (state != "succeeded") {
-    if (is_terminal(state)) fatal("job " + id + " " + state + ": it has no results");
-    retry("job " + id + " is " + state + ": results exist once it has succeeded");
+    const json progress = job.value("progress", json::object());
+    std::fprintf(stderr, "tessera: job %s %s: its results are a partial image of %lld of %lld samples per pixel\n",
+                 id.c_str(), state.c_str(), progress.value("samples_done", 0LL), progress.value("samples_total", 0LL));
   }
   if (outputs.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(dir, ec);
     if (ec) fatal("cannot make the directory " + dir + ": " + ec.message());
-    for (const json& o : job.value("outputs", json::array()))
-      if (o.is_string()) outputs.push_back((std::filesystem::path(dir) / (id + "." + o.get<std::string>())).string());
+    for (const std::string& ext : linked) outputs.push_back((std::filesystem::path(dir) / (id + "." + ext)).string());
     for (const std::string& o : outputs) check_writable(o);
   }
   for (const std::string& out : outputs) {

@@ -38,6 +38,15 @@ png_signature() { [[ $(head -c 8 "$1" | od -An -tx1 | tr -d ' \n') == 89504e470d
 sums=$((64 + 48 * 40 * 32))
 same_sums() { cmp -s -n "$sums" "$1" "$2"; }
 same_pixels() { idiff -fail 0 -failpercent 0 -warn 0 "$1" "$2" >/dev/null 2>&1; }
+# wait_for_samples ID: until the job has rendered a pass (at most 30 s).
+wait_for_samples() {
+  for _ in $(seq 300); do
+    curl -sf "$TESSERA_URL/v1/jobs/$1" | python3 -c 'import json, sys; sys.exit(json.load(sys.stdin)["progress"]["samples_done"] == 0)' \
+      && return
+    sleep 0.1
+  done
+  not_ok "job $1 rendered no pass in 30 s"
+}
 cd "$tmp"
 
 # --- sample ranges and regions merge into exactly one render -----------------------------------------------------
@@ -312,10 +321,24 @@ PY
     "$TESSERA" list --state running | grep -q "$long" && break
     sleep 0.1
   done
+  # One job renders at a time (--max-jobs 1): a second is queued, and cancelled before a pass it has no results.
+  expect 0 "tessera submit a queued job" "$TESSERA" submit long.json
+  queued=$(cat "$tmp/out")
+  expect 0 "tessera cancel of a queued job" "$TESSERA" cancel "$queued"
+  expect 1 "fetch of a job cancelled before a pass is fatal" "$TESSERA" fetch "$queued" -d unrendered
+  grep -qF "job $queued cancelled: it has no results" "$tmp/err" && ok "fetch says it has no results" \
+    || not_ok "fetch of a job cancelled before a pass said: $(cat "$tmp/err")"
+  [[ ! -e unrendered ]] && ok "fetch made no directory for a job without results" || not_ok "unrendered/ made"
+  wait_for_samples "$long"
   expect 0 "tessera cancel of a running job" "$TESSERA" cancel "$long"
   grep -q "^cancelling" "$tmp/out" && ok "cancel says the running job is cancelling" || not_ok "cancel printed: $(cat "$tmp/out")"
   expect 1 "watch a cancelled job exits 1" "$TESSERA" watch "$long"
-  expect 1 "fetch of a cancelled job is fatal" "$TESSERA" fetch "$long" -d fetched
+  # A job cancelled after a pass keeps the image of its last complete pass, which fetch downloads as such.
+  expect 0 "fetch of a job cancelled after a pass" "$TESSERA" fetch "$long" -d partial
+  png_signature "partial/$long.png" && ok "fetch wrote the partial PNG" || not_ok "no partial PNG fetched"
+  [[ -s partial/$long.exr ]] && ok "fetch wrote the partial EXR" || not_ok "no partial EXR fetched"
+  grep -qE "job $long cancelled: its results are a partial image of [1-9][0-9]* of 65536 samples per pixel" \
+    "$tmp/err" && ok "fetch says the image is partial, and of how many samples" || not_ok "fetch said: $(cat "$tmp/err")"
   expect 1 "cancel of an ended job is refused (409)" "$TESSERA" cancel "$id"
   grep -q "409" "$tmp/err" && ok "the refusal quotes the status" || not_ok "no status in the refusal"
   expect 1 "watch of an unknown job is fatal" "$TESSERA" watch 0123456789abcdef0123456789abcdef
@@ -350,17 +373,27 @@ PY
     || not_ok "fetch.sh printed: $(cat "$tmp/out")"
   expect 0 "submit.sh a long job" "$curl_dir/submit.sh" long.json
   clong=$(cat "$tmp/out")
-  expect 1 "fetch.sh of an unfinished job fails" "$curl_dir/fetch.sh" "$clong" curl-long
+  expect 0 "submit.sh a queued job" "$curl_dir/submit.sh" long.json
+  cqueued=$(cat "$tmp/out")
+  expect 1 "fetch.sh of an unfinished job fails" "$curl_dir/fetch.sh" "$cqueued" curl-long
   grep -q "results exist once it has succeeded" "$tmp/err" && ok "fetch.sh says the job has not finished" \
     || not_ok "fetch.sh of an unfinished job said: $(cat "$tmp/err")"
-  expect 0 "cancel.sh" "$curl_dir/cancel.sh" "$clong"
-  expect 1 "fetch.sh of a cancelled job fails" "$curl_dir/fetch.sh" "$clong" curl-cancelled/
-  if grep -q "job $clong cancelled: it has no results" "$tmp/err" && ! grep -q "unbound" "$tmp/err"; then
+  expect 0 "cancel.sh" "$curl_dir/cancel.sh" "$cqueued"
+  expect 1 "fetch.sh of a job cancelled before a pass fails" "$curl_dir/fetch.sh" "$cqueued" curl-cancelled/
+  if grep -q "job $cqueued cancelled: it has no results" "$tmp/err" && ! grep -q "unbound" "$tmp/err"; then
     ok "fetch.sh says the cancelled job has no results, and nothing else"
   else
     not_ok "fetch.sh of a cancelled job said: $(cat "$tmp/err")"
   fi
   [[ ! -e curl-cancelled ]] && ok "fetch.sh made no directory for a job without results" || not_ok "curl-cancelled/ made"
+  wait_for_samples "$clong"
+  expect 0 "cancel.sh of a running job" "$curl_dir/cancel.sh" "$clong"
+  "$TESSERA" watch "$clong" >/dev/null 2>&1  # until it has stopped its pass
+  expect 0 "fetch.sh of a job cancelled after a pass" "$curl_dir/fetch.sh" "$clong" curl-partial
+  png_signature curl-partial/result.png && ok "fetch.sh wrote the partial PNG" || not_ok "fetch.sh wrote no partial PNG"
+  grep -qE "job $clong cancelled: its results are a partial image of [1-9][0-9]* of 65536 samples per pixel" \
+    "$tmp/err" && ok "fetch.sh says the image is partial, and of how many samples" \
+    || not_ok "fetch.sh of a partial job said: $(cat "$tmp/err")"
   expect 1 "cancel.sh of an ended job fails" "$curl_dir/cancel.sh" "$cid"
   grep -q "error: HTTP 409" "$tmp/err" && ok "cancel.sh says why" || not_ok "cancel.sh gave no reason"
   expect 1 "submit.sh of an invalid job fails" "$curl_dir/submit.sh" invalid.json
