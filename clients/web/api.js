@@ -14,6 +14,8 @@ export class ApiError extends Error {
     this.title = title;
     this.detail = detail;
     this.pointer = problem?.pointer ?? null;
+    // Every error of a refused document, [{pointer, detail}], when it has more than one (the first is detail).
+    this.errors = Array.isArray(problem?.errors) ? problem.errors.filter((e) => typeof e?.detail === "string") : [];
     this.problem = problem || null;
     this.retryAfterMs = retryAfterMs;
   }

@@ -71,9 +71,20 @@ function showError(err, context) {
   toast.setAttribute("role", "alert");
   const title = document.createElement("strong");
   const detail = document.createElement("span");
+  let list = null;
   if (err instanceof ApiError) {
     title.textContent = (context ? `${context}: ` : "") + err.title + (err.status ? ` (${err.status})` : "");
     detail.textContent = err.detail + (err.pointer ? ` — at ${err.pointer}` : "");
+    if (err.errors.length > 1) {
+      // A refused document's every error, one line each (the server sends at most 20).
+      detail.textContent = `${err.errors.length} errors:`;
+      list = document.createElement("ul");
+      for (const e of err.errors) {
+        const item = document.createElement("li");
+        item.textContent = `${e.pointer || "/"}: ${e.detail}`;
+        list.append(item);
+      }
+    }
     if (err.retryAfterMs)
       detail.textContent += ` (the server asks to retry in ${Math.ceil(err.retryAfterMs / 1000)} s)`;
     if (err.status === 401) showTokenForm(true);
@@ -86,7 +97,7 @@ function showError(err, context) {
   close.className = "ghost";
   close.textContent = "Dismiss";
   close.addEventListener("click", () => toast.remove());
-  toast.append(title, detail, close);
+  toast.append(title, detail, ...(list ? [list] : []), close);
   toasts.append(toast);
   while (toasts.children.length > 3) toasts.firstElementChild.remove();
   // On a narrow screen the bar scrolls with the page: bring the error into view.

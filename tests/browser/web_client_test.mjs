@@ -229,14 +229,19 @@ test("the web client submits, follows, cancels, deletes and downloads", async (t
     assert.match(await page.locator("#job-log").textContent(), /scene loaded in [\d.]+ s[\s\S]*pass 1: /);
   });
 
-  await step(t, "a refused document shows the problem's title and detail", async () => {
+  await step(t, "a refused document shows the problem's title and every error", async () => {
     await page.getByRole("tab", { name: "JSON" }).click();
-    await page.getByLabel("Job document").fill('{"kind": "scene", "scene": {"objects": []}, "render": {"width": 0}}');
+    await page
+      .getByLabel("Job document")
+      .fill('{"kind": "scene", "scene": {"objects": []}, "render": {"width": 0, "height": 0}}');
     await page.getByRole("button", { name: "Submit job" }).click();
     const toast = page.locator(".toast[role=alert]").last();
     await toast.waitFor();
     const text = await toast.textContent();
     assert.match(text, /422|Invalid/);
+    const errors = await toast.locator("li").allTextContents();
+    assert.ok(errors.some((e) => e.startsWith("/render/width: ")), `the width's error is listed: ${errors}`);
+    assert.ok(errors.some((e) => e.startsWith("/render/height: ")), `the height's error is listed: ${errors}`);
     await toast.getByRole("button", { name: "Dismiss" }).click();
     await page.getByRole("tab", { name: "Example" }).click();
   });
