@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "proto/did_you_mean.h"
+#include "proto/json_pointer.h"
 
 namespace tessera::proto {
 
@@ -17,16 +18,7 @@ namespace {
 constexpr int kMaxSchemaDepth = 200;
 
 std::string child(const std::string& pointer, const std::string& key) {
-  std::string out = pointer + "/";
-  for (char c : key) {
-    if (c == '~')
-      out += "~0";
-    else if (c == '/')
-      out += "~1";
-    else
-      out += c;
-  }
-  return out;
+  return pointer + "/" + json_pointer_token(key);
 }
 std::string child(const std::string& pointer, size_t index) {
   return pointer + "/" + std::to_string(index);

@@ -1,11 +1,28 @@
 #include "renderer/integrator.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
+#include "renderer/lights.h"
+#include "renderer/scene.h"
 #include "renderer/thread_pool.h"
 
 namespace tessera {
+
+Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls) {
+  Ray shadow;
+  shadow.origin = offset_ray_origin(p, ng, ls.wi);
+  if (std::isinf(ls.dist)) {
+    shadow.dir = ls.wi;
+    shadow.tmax = kInfinity;
+  } else {
+    const Vec3 target = is_black(ls.n_light) ? ls.p_light : offset_ray_origin(ls.p_light, ls.n_light, -ls.wi);
+    shadow.dir = target - shadow.origin;
+    shadow.tmax = 1 - 1e-5f;
+  }
+  return shadow;
+}
 
 const char* estimator_name(Estimator e) {
   switch (e) {

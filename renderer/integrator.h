@@ -26,6 +26,7 @@ namespace tessera {
 
 class Scene;
 class ThreadPool;
+struct LightSample;
 
 // How the path tracer estimates direct light at each path vertex.
 enum class Estimator {
@@ -87,6 +88,11 @@ struct IntegratorSetup {
   int tile_size = 32;
   ThreadPool* pool = nullptr;
 };
+
+// The shadow ray from a surface point (p, geometric normal ng) to a sampled light point: both ends offset clear of
+// self-intersection, the direction unnormalised so that t = 1 is the light's point; to infinity for a light at
+// infinity (ls.dist infinite).
+Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls);
 
 class Integrator {
  public:

@@ -4,6 +4,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "proto/json_pointer.h"
+
 namespace tessera {
 
 class SceneError : public std::runtime_error {
@@ -23,18 +25,7 @@ class LoadStopped : public std::runtime_error {
   LoadStopped() : std::runtime_error("the scene load was stopped") {}
 };
 
-// RFC 6901 escaping of one reference token.
-inline std::string json_pointer_token(const std::string& key) {
-  std::string out;
-  for (char c : key) {
-    if (c == '~')
-      out += "~0";
-    else if (c == '/')
-      out += "~1";
-    else
-      out += c;
-  }
-  return out;
-}
+// The documents' field pointers use the contract's one escaping of a key.
+using proto::json_pointer_token;
 
 }  // namespace tessera

@@ -555,16 +555,7 @@ Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, 
         pt.beta * vertex_f(pt, ls.wi, TransportMode::kRadiance) * sampled->beta * std::abs(dot(ls.wi, pt.frame.n));
     if (is_black(l)) return Rgb(0);
     ++counters.shadow;
-    Ray shadow;
-    shadow.origin = offset_ray_origin(pt.p, pt.ng, ls.wi);
-    if (sampled->infinite) {
-      shadow.dir = ls.wi;
-      shadow.tmax = kInfinity;
-    } else {
-      const Vec3 target = is_black(ls.n_light) ? ls.p_light : offset_ray_origin(ls.p_light, ls.n_light, -ls.wi);
-      shadow.dir = target - shadow.origin;
-      shadow.tmax = 1 - 1e-5f;
-    }
+    const Ray shadow = shadow_ray_to_light(pt.p, pt.ng, ls);
     if (scene.occluded(shadow)) return Rgb(0);
     return l;
   }

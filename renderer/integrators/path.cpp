@@ -26,19 +26,7 @@ Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& b
   float bsdf_pdf = 0;
   const Rgb f = (weigh ? bsdf.eval_pdf(wo, wi, &bsdf_pdf) : bsdf.eval(wo, wi)) * std::abs(wi.z);
   if (is_black(f)) return {};
-  Ray shadow;
-  shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, ls.wi);
-  shadow.tmin = 0;
-  if (std::isinf(ls.dist)) {
-    shadow.dir = ls.wi;
-    shadow.tmax = kInfinity;
-  } else {
-    // Aim from the offset origin at a target offset off the light's surface, with an unnormalised direction so that
-    // t = 1 is the target: both ends are clear of self-intersection.
-    const Vec3 target = is_black(ls.n_light) ? ls.p_light : offset_ray_origin(ls.p_light, ls.n_light, -ls.wi);
-    shadow.dir = target - shadow.origin;
-    shadow.tmax = 1 - 1e-5f;
-  }
+  const Ray shadow = shadow_ray_to_light(si.sp.p, si.sp.ng, ls);
   ++counters.shadow;
   if (scene.occluded(shadow)) return {};
   const float w = weigh ? power_heuristic(ls.pdf, bsdf_pdf) : 1.0f;
