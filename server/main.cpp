@@ -27,7 +27,9 @@
 #include "server/job_service.h"
 #include "server/log.h"
 #include "server/metrics.h"
+#include "server/postgres_event_bus.h"
 #include "server/postgres_job_store.h"
+#include "server/postgres_notifications.h"
 #include "server/retention.h"
 #include "server/scheduler.h"
 #include "server/sqlite_job_store.h"
@@ -99,7 +101,17 @@ int run(const Config& config) {
   asset_check.max_gltf_instances = config.max_gltf_instances;
   asset_check.stop = stopping.get_token();
   std::unique_ptr<AssetStore> assets = std::make_unique<DirectoryAssetStore>(data_dir, asset_check);
-  std::unique_ptr<EventBus> events = std::make_unique<EventHub>();
+  // On a shared store, what changes on one node reaches the others as it happens: a dedicated connection LISTENs for
+  // the jobs' changes (a render cancelled elsewhere stops at once) and the events clients stream, which are rows any
+  // node reads. One daemon alone keeps its events in memory.
+  std::unique_ptr<PostgresNotifications> notifications;
+  std::unique_ptr<EventBus> events;
+  if (shared_store) {
+    notifications = std::make_unique<PostgresNotifications>(config.store);
+    events = std::make_unique<PostgresEventBus>(config.store, *notifications);
+  } else {
+    events = std::make_unique<EventHub>();
+  }
   tessera::ThreadPool pool(config.threads);
   // Loading (image decoding, mip levels, environment maps) borrows at most as many extra threads as render threads.
   tessera::limit_parallel_helpers(pool.size() - 1);
@@ -118,6 +130,13 @@ int run(const Config& config) {
   service_options.max_user_priority = config.max_user_priority;
   service_options.max_queued_per_user = config.max_queued_per_user;
   JobService jobs(*store, *files, *assets, scheduler, *events, metrics, service_options);
+  // The notifications' handlers call the scheduler and the event bus: they stop first, however run() ends.
+  struct StopListening {
+    PostgresNotifications* n;
+    ~StopListening() {
+      if (n) n->stop();
+    }
+  } stop_listening{notifications.get()};
 
   SubmissionLimits limits;
   limits.render = scheduler_options.limits;
@@ -172,6 +191,13 @@ int run(const Config& config) {
                  error.c_str(),
                  errno == EADDRINUSE ? " (another process, perhaps another tesserad, has the port)" : "");
     return 1;
+  }
+  if (notifications) {
+    notifications->listen(kJobsChannel, [&scheduler](const std::string& payload) {
+      if (auto job = split_notification(payload)) scheduler.job_changed(job->first, job->second == "queued");
+    });
+    notifications->on_connected([&scheduler] { scheduler.recheck(); });
+    notifications->start();
   }
   scheduler.start();
   // Finished jobs older than --retain-finished go as DELETE /v1/jobs/{id} would delete them.
@@ -234,6 +260,7 @@ int run(const Config& config) {
   // to the queue and resume from the checkpoints on the next start.
   retention.stop();
   scheduler.shutdown(config.grace_s);
+  if (notifications) notifications->stop();
   events->close();
   log(LogLevel::kInfo, "stopped");
   return clean ? 0 : 1;

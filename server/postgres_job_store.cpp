@@ -1,10 +1,5 @@
 #include "server/postgres_job_store.h"
 
-#include <libpq-fe.h>
-
-#include <charconv>
-#include <cstdlib>
-
 #include "server/job_store_sql.h"
 
 namespace tessera::server {
@@ -55,15 +50,70 @@ constexpr const char* kMigration2 = R"sql(
   ALTER TABLE tessera_jobs ADD COLUMN lease_expires_at BIGINT;
 )sql";
 
-std::string to_text(int64_t v) {
-  return std::to_string(v);
-}
+// Version 3: what crosses nodes as it happens (PostgreSQL's LISTEN/NOTIFY; postgres_notifications.h).
+// A job added, deleted, or changed in its state, priority or epoch (a claim) is notified on tessera_jobs as
+// "ID STATE" ("ID deleted"), when its transaction commits: a node rendering it learns of a cancel, pause or delete
+// made elsewhere at once rather than at its next lease renewal, and an idle node of a job queued elsewhere.
+// The events clients stream (Server-Sent Events) are rows of tessera_events: `id` numbers every event (the global
+// stream), `job_seq` the events of one job (its stream), both counted in tessera_event_streams, whose global row
+// tessera_publish_event() locks until it commits, so that ids become visible in the order they are given (a reader
+// that has seen id N never sees a smaller one appear later). Each event is notified on tessera_events as "ID JOB":
+// the payload stays small, readers fetch the rows. Kept: the newest p_per_job events of each job and p_total overall.
+constexpr const char* kMigration3 = R"sql(
+  CREATE FUNCTION tessera_job_changed() RETURNS trigger LANGUAGE plpgsql AS $$
+  BEGIN
+    IF TG_OP = 'DELETE' THEN
+      PERFORM pg_notify('tessera_jobs', OLD.id || ' deleted');
+      RETURN OLD;
+    END IF;
+    PERFORM pg_notify('tessera_jobs', NEW.id || ' ' || NEW.state);
+    RETURN NEW;
+  END $$;
+  CREATE TRIGGER tessera_jobs_added_or_deleted AFTER INSERT OR DELETE ON tessera_jobs
+    FOR EACH ROW EXECUTE FUNCTION tessera_job_changed();
+  CREATE TRIGGER tessera_jobs_changed AFTER UPDATE ON tessera_jobs FOR EACH ROW
+    WHEN (OLD.state IS DISTINCT FROM NEW.state OR OLD.priority IS DISTINCT FROM NEW.priority
+          OR OLD.epoch IS DISTINCT FROM NEW.epoch)
+    EXECUTE FUNCTION tessera_job_changed();
 
-// The shortest text that reads back as the same double (PostgreSQL parses it exactly).
+  CREATE TABLE tessera_events (
+    id BIGINT PRIMARY KEY,    -- in the global stream
+    job_id TEXT NOT NULL,
+    job_seq BIGINT NOT NULL,  -- in the job's stream
+    owner TEXT NOT NULL,
+    type TEXT NOT NULL,
+    data TEXT NOT NULL,
+    terminal BOOLEAN NOT NULL
+  );
+  CREATE UNIQUE INDEX tessera_events_job ON tessera_events (job_id, job_seq);
+  CREATE TABLE tessera_event_streams (
+    job_id TEXT PRIMARY KEY,  -- '' is the global stream
+    last_seq BIGINT NOT NULL
+  );
+  INSERT INTO tessera_event_streams VALUES ('', 0);
+  CREATE FUNCTION tessera_publish_event(p_job TEXT, p_owner TEXT, p_type TEXT, p_data TEXT, p_terminal BOOLEAN,
+                                        p_per_job BIGINT, p_total BIGINT) RETURNS BIGINT LANGUAGE plpgsql AS $$
+  DECLARE
+    g BIGINT;
+    s BIGINT;
+  BEGIN
+    UPDATE tessera_event_streams SET last_seq = last_seq + 1 WHERE job_id = '' RETURNING last_seq INTO g;
+    INSERT INTO tessera_event_streams AS t VALUES (p_job, 1)
+      ON CONFLICT (job_id) DO UPDATE SET last_seq = t.last_seq + 1 RETURNING last_seq INTO s;
+    INSERT INTO tessera_events VALUES (g, p_job, s, p_owner, p_type, p_data, p_terminal);
+    DELETE FROM tessera_events WHERE job_id = p_job AND job_seq <= s - p_per_job;
+    DELETE FROM tessera_events WHERE id <= g - p_total;
+    PERFORM pg_notify('tessera_events', g || ' ' || p_job);
+    RETURN g;
+  END $$;
+)sql";
+
+// The text PostgreSQL reads back as the same number.
+std::string to_text(int64_t v) {
+  return pg_text(v);
+}
 std::string to_text(double v) {
-  char buf[64];
-  auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
-  return ec == std::errc() ? std::string(buf, end) : "0";
+  return pg_text(v);
 }
 
 // Appends a parameter; its placeholder ($N).
@@ -80,99 +130,33 @@ std::optional<std::string> text_or_null(const std::string& v) {
 
 }  // namespace
 
-// A result of one statement, freed with the object; read as read_job_record() reads a row (the current one).
-class PostgresJobStore::Result {
+// A result of one statement, whose rows read as job records (read_job_record()).
+class PostgresJobStore::Result : public PgResult {
  public:
-  explicit Result(PGresult* r) : r_(r) {}
-  ~Result() { PQclear(r_); }
-  Result(Result&& o) noexcept : r_(o.r_), row_(o.row_) { o.r_ = nullptr; }
-  Result(const Result&) = delete;
-  Result& operator=(const Result&) = delete;
-
-  int rows() const { return PQntuples(r_); }
-  // The number of rows an UPDATE or DELETE changed.
-  int affected() const { return std::atoi(PQcmdTuples(r_)); }
+  explicit Result(PgResult&& r) : PgResult(std::move(r)) {}
   Result& at(int row) {
-    row_ = row;
+    PgResult::at(row);
     return *this;
   }
-  bool is_null(int col) const { return PQgetisnull(r_, row_, col); }
-  std::string text(int col) const {
-    return std::string(PQgetvalue(r_, row_, col), static_cast<size_t>(PQgetlength(r_, row_, col)));
-  }
-  int64_t int64(int col) const { return std::strtoll(PQgetvalue(r_, row_, col), nullptr, 10); }
-  double real(int col) const {
-    const char* p = PQgetvalue(r_, row_, col);
-    double v = 0;
-    std::from_chars(p, p + PQgetlength(r_, row_, col), v);
-    return v;
-  }
   JobRecord record(bool with_document) const { return read_job_record(*this, with_document); }
-
- private:
-  PGresult* r_;
-  int row_ = 0;
 };
 
 PostgresJobStore::PostgresJobStore(const std::string& conninfo, std::string node)
-    : conninfo_(conninfo), node_(std::move(node)) {
+    : node_(std::move(node)), conn_(conninfo) {
   std::lock_guard lock(mutex_);
-  connect_locked();
+  conn_.connect();
   migrate();
 }
 
-PostgresJobStore::~PostgresJobStore() {
-  PQfinish(conn_);
-}
+PostgresJobStore::~PostgresJobStore() = default;
 
 const std::vector<const char*>& PostgresJobStore::migrations() {
-  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2};
+  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2, kMigration3};
   return kMigrations;
 }
 
-void PostgresJobStore::connect_locked() {
-  if (conn_ && PQstatus(conn_) == CONNECTION_OK) return;
-  PQfinish(conn_);
-  conn_ = PQconnectdb(conninfo_.c_str());
-  if (!conn_) throw JobStoreError("job store: cannot connect to PostgreSQL: out of memory", false);
-  if (PQstatus(conn_) != CONNECTION_OK) {
-    std::string msg = PQerrorMessage(conn_);
-    while (!msg.empty() && msg.back() == '\n') msg.pop_back();
-    PQfinish(conn_);
-    conn_ = nullptr;
-    throw JobStoreError("job store: cannot connect to PostgreSQL: " + msg, false);
-  }
-  // Notices (a table that exists already) are not news for the log.
-  PQsetNoticeProcessor(
-      conn_, [](void*, const char*) {}, nullptr);
-}
-
 PostgresJobStore::Result PostgresJobStore::exec(const std::string& sql, const Params& params) {
-  connect_locked();
-  std::vector<const char*> values;
-  values.reserve(params.size());
-  for (const auto& p : params) values.push_back(p ? p->c_str() : nullptr);
-  PGresult* r = params.empty() ? PQexec(conn_, sql.c_str())
-                               : PQexecParams(conn_, sql.c_str(), static_cast<int>(values.size()), nullptr,
-                                              values.data(), nullptr, nullptr, 0);
-  Result result(r);
-  const ExecStatusType status = r ? PQresultStatus(r) : PGRES_FATAL_ERROR;
-  if (status == PGRES_COMMAND_OK || status == PGRES_TUPLES_OK) return result;
-  std::string msg = r ? PQresultErrorMessage(r) : PQerrorMessage(conn_);
-  while (!msg.empty() && msg.back() == '\n') msg.pop_back();
-  // Class 53, insufficient resources: 53100 is a full disk.
-  const char* state = r ? PQresultErrorField(r, PG_DIAG_SQLSTATE) : nullptr;
-  const std::string_view sqlstate = state ? state : "";
-  const bool full = sqlstate == "53100";
-  // A connection that broke (libpq's own error, with no SQLSTATE: the server went away, which libpq does not always
-  // note in its status), or that the server ends (class 08, connection exception; 57, an operator's shutdown) is
-  // opened again at the next call.
-  if (PQstatus(conn_) != CONNECTION_OK || sqlstate.empty() || sqlstate.starts_with("08") ||
-      sqlstate.starts_with("57")) {
-    PQfinish(conn_);
-    conn_ = nullptr;
-  }
-  throw JobStoreError("job store: " + msg, full);
+  return Result(conn_.exec(sql, params));
 }
 
 void PostgresJobStore::migrate() {
@@ -193,12 +177,12 @@ void PostgresJobStore::migrate() {
         exec("INSERT INTO tessera_schema_version (version) VALUES (" + std::to_string(v) + ")");
         exec("COMMIT");
       } catch (...) {
-        if (conn_) PQclear(PQexec(conn_, "ROLLBACK"));
+        conn_.exec_quietly("ROLLBACK");
         throw;
       }
     }
   } catch (...) {
-    if (conn_) PQclear(PQexec(conn_, (std::string("SELECT pg_advisory_unlock(") + kMigrationLock + ")").c_str()));
+    conn_.exec_quietly(std::string("SELECT pg_advisory_unlock(") + kMigrationLock + ")");
     throw;
   }
   exec(std::string("SELECT pg_advisory_unlock(") + kMigrationLock + ")");

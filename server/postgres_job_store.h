@@ -15,8 +15,7 @@
 #include <vector>
 
 #include "server/job_store.h"
-
-struct pg_conn;
+#include "server/postgres_connection.h"
 
 namespace tessera::server {
 
@@ -53,19 +52,17 @@ class PostgresJobStore final : public JobStore {
 
  private:
   class Result;
-  using Params = std::vector<std::optional<std::string>>;
+  using Params = PgConnection::Params;
   // Runs one statement with text parameters ($1, $2, ...; nothing is NULL); throws JobStoreError on failure.
   Result exec(const std::string& sql, const Params& params = {});
   // transition() and end_run(): a move into `to` from `from_states` (an SQL list), of the run of `epoch` when given.
   bool move(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
             const std::string& error, const std::string& from_states, std::optional<int64_t> epoch);
-  void connect_locked();
   void migrate();
 
-  std::string conninfo_;
   std::string node_;
   std::mutex mutex_;
-  pg_conn* conn_ = nullptr;
+  PgConnection conn_;
 };
 
 }  // namespace tessera::server

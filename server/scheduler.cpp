@@ -30,6 +30,7 @@ class Scheduler::RenderSlot {
   bool delete_requested = false;     // by a client: the job is gone, its files go when the render stops
   std::optional<JobProgress> progress;
   bool awaiting_store = false;  // its end is rendered but the store failed to record it; retried
+  bool ending = false;          // its end is being recorded: its lease is no longer renewed nor checked
   int64_t epoch = 0;            // of its lease: every write of the run carries it
   bool lease_lost = false;      // the store refused the lease: the job was taken over or changed elsewhere
   std::chrono::steady_clock::time_point renewed_at = std::chrono::steady_clock::now();
@@ -191,18 +192,39 @@ void Scheduler::reap_finished_locked(std::unique_lock<std::mutex>& lock) {
 // one failed to renew in time). A store that fails leaves the render going: its lease may still be renewed in time.
 void Scheduler::renew_leases_locked() {
   const auto now = std::chrono::steady_clock::now();
-  for (auto& [id, slot] : running_) {
-    if (slot->done || slot->lease_lost || now - slot->renewed_at < options_.poll_interval) continue;
-    try {
-      if (store_.renew_lease(id, slot->epoch, now_ms(), options_.lease.count()))
-        slot->renewed_at = now;
-      else
-        lose_lease_locked(*slot);
-    } catch (const JobStoreError& e) {
-      count_store_error();
-      log(LogLevel::kWarn, "cannot renew the lease of a job; the render goes on", {{"job", id}, {"error", e.what()}});
-    }
+  for (auto& [id, slot] : running_)
+    if (now - slot->renewed_at >= options_.poll_interval) renew_lease_locked(*slot);
+}
+
+void Scheduler::renew_lease_locked(RenderSlot& slot) {
+  // A run recording its end has its outcome fenced by end_run(): the store's own change of state is no loss of lease.
+  if (slot.done || slot.lease_lost || slot.ending) return;
+  try {
+    if (store_.renew_lease(slot.id, slot.epoch, now_ms(), options_.lease.count()))
+      slot.renewed_at = std::chrono::steady_clock::now();
+    else
+      lose_lease_locked(slot);
+  } catch (const JobStoreError& e) {
+    count_store_error();
+    log(LogLevel::kWarn, "cannot renew the lease of a job; the render goes on",
+        {{"job", slot.id}, {"error", e.what()}});
   }
+}
+
+void Scheduler::job_changed(const std::string& id, bool claimable) {
+  {
+    std::lock_guard lock(mutex_);
+    if (auto it = running_.find(id); it != running_.end()) renew_lease_locked(*it->second);
+  }
+  if (claimable) cv_.notify_all();
+}
+
+void Scheduler::recheck() {
+  {
+    std::lock_guard lock(mutex_);
+    for (auto& [id, slot] : running_) renew_lease_locked(*slot);
+  }
+  cv_.notify_all();
 }
 
 void Scheduler::lose_lease_locked(RenderSlot& slot) {
@@ -485,6 +507,10 @@ bool Scheduler::record_end(RenderSlot& slot, const std::function<bool()>& write)
   int failures = 0;
   Clock::time_point logged_at;
   bool taken = false;
+  {
+    std::lock_guard lock(mutex_);
+    slot.ending = true;
+  }
   for (;;) {
     try {
       taken = write();

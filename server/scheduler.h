@@ -34,7 +34,7 @@ struct SchedulerOptions {
   uint64_t max_gltf_instances = 1'000'000;  // SceneLoadOptions::max_gltf_instances
   // How often the queue is looked at without being woken (jobs another process may have added), and the leases of
   // the renders under way renewed: a render whose job was cancelled, paused or deleted elsewhere (another daemon on
-  // the same store) finds out within this.
+  // the same store) finds out within this, when job_changed() does not tell it sooner.
   std::chrono::milliseconds poll_interval{1000};
   // How long a claim holds a job without being renewed (JobStore::claim_next): past it another daemon may take the
   // job over, and this one's writes for it are refused.
@@ -77,6 +77,14 @@ class Scheduler {
   void shutdown(double grace_s = 0);
   bool accepting() const;
 
+  // A job changed in the store, here or on another daemon (its state, priority or lease; PostgresNotifications): a
+  // render of it here checks its lease now, rather than at its next renewal, and stops within a tile's time if the
+  // job was cancelled, paused, deleted or taken over. `claimable` (it is queued): the queue is looked at now.
+  void job_changed(const std::string& id, bool claimable);
+  // Changes may have been missed (the store's notifications were down): every render checks its lease now, and the
+  // queue is looked at.
+  void recheck();
+
   // The progress of a job rendering here, fresher than the store's.
   std::optional<JobProgress> live_progress(const std::string& id) const;
   int running_count() const;
@@ -114,6 +122,7 @@ class Scheduler {
   void write_partial_results(const JobRecord& job);
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
   void renew_leases_locked();
+  void renew_lease_locked(RenderSlot& slot);
   void lose_lease_locked(RenderSlot& slot);
   void notify_state(const std::string& id);
 
