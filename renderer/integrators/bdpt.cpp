@@ -290,19 +290,16 @@ class Scoped {
 
 // The power-heuristic weight of strategy (s, t) for the path it made (Veach 1997, 10.3.4 and 9.2.4), from the
 // ratios p_i / p_s of the densities of the neighbouring strategies, each found from the one before by one vertex's
-// reverse and forward densities. `sampled` is the vertex strategies s = 1 and t = 1 sampled afresh.
-float mis_weight(const Context& c, Vertex* light, Vertex* camera, const Vertex& sampled, int s, int t) {
+// reverse and forward densities. `sampled` is the vertex strategies s = 1 and t = 1 sampled afresh: it stands in for
+// light[0] or camera[0]. The path's vertices are read in place; the few densities the join changes are replaced for
+// the weight's evaluation and restored after it (pbrt-v4, 13.4.4), so no vertex is copied.
+float mis_weight(const Context& c, Vertex* light, Vertex* camera, Vertex& sampled, int s, int t) {
   if (s + t == 2) return 1;
   auto remap0 = [](float f) { return f != 0 ? f : 1.0f; };
-  Vertex* qs = s > 0 ? &light[s - 1] : nullptr;
-  Vertex* pt = t > 0 ? &camera[t - 1] : nullptr;
+  Vertex* qs = s == 1 ? &sampled : s > 1 ? &light[s - 1] : nullptr;
+  Vertex* pt = t == 1 ? &sampled : t > 1 ? &camera[t - 1] : nullptr;
   Vertex* qs_minus = s > 1 ? &light[s - 2] : nullptr;
   Vertex* pt_minus = t > 1 ? &camera[t - 2] : nullptr;
-  Scoped<Vertex> a1;
-  if (s == 1)
-    a1 = Scoped<Vertex>(qs, sampled);
-  else if (t == 1)
-    a1 = Scoped<Vertex>(pt, sampled);
   // The joined vertices are joined, whatever they scattered by.
   Scoped<bool> a2, a3;
   if (pt) a2 = Scoped<bool>(&pt->delta, false);
@@ -315,6 +312,7 @@ float mis_weight(const Context& c, Vertex* light, Vertex* camera, const Vertex& 
     a5 = Scoped<float>(&pt_minus->pdf_rev, s > 0 ? vertex_pdf(c, *pt, qs, *pt_minus) : pdf_light(c, *pt, *pt_minus));
   if (qs) a6 = Scoped<float>(&qs->pdf_rev, vertex_pdf(c, *pt, pt_minus, *qs));
   if (qs_minus) a7 = Scoped<float>(&qs_minus->pdf_rev, vertex_pdf(c, *qs, pt, *qs_minus));
+  // The camera side's vertices 1..t-1 are all the subpath's own (sampled replaces only camera[0], which has no term).
   float sum = 0, r = 1;
   for (int i = t - 1; i > 0; --i) {
     r *= sqr(remap0(camera[i].pdf_rev) / remap0(camera[i].pdf_fwd));
@@ -322,9 +320,10 @@ float mis_weight(const Context& c, Vertex* light, Vertex* camera, const Vertex& 
   }
   r = 1;
   for (int i = s - 1; i >= 0; --i) {
-    r *= sqr(remap0(light[i].pdf_rev) / remap0(light[i].pdf_fwd));
-    const bool delta_before = i > 0 ? light[i - 1].delta : light[0].delta_light;
-    if (!light[i].delta && !delta_before) sum += r;
+    const Vertex& v = i == s - 1 ? *qs : light[i];
+    r *= sqr(remap0(v.pdf_rev) / remap0(v.pdf_fwd));
+    const bool delta_before = i > 0 ? light[i - 1].delta : v.delta_light;
+    if (!v.delta && !delta_before) sum += r;
   }
   return 1 / (1 + sum);
 }
@@ -464,6 +463,7 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
   }
   // Every strategy.
   Rgb l(0);
+  Vertex sampled;  // the vertex of s = 1 or t = 1, sampled afresh by connect
   const int t_max = light_only_ ? 1 : n_camera;
   for (int t = 1; t <= t_max; ++t) {
     for (int s = 0; s <= n_light; ++s) {
@@ -471,7 +471,6 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
       if (depth < 0 || depth > max_depth) continue;
       if (!light_only_ && s == 1 && t == 1) continue;  // the emitter seen directly: s = 0, t = 2 alone
       if (light_only_ && s == 0) continue;
-      Vertex sampled;
       Vec2 splat_at;
       Rgb contribution = connect(c, le, light, camera, s, t, sampler, &sampled, &splat_at, counters);
       if (is_black(contribution)) continue;
