@@ -186,19 +186,82 @@ struct RayCone {
   float width_at(float distance) const { return width + spread * distance; }
 };
 
-// 4x4 affine transform (row-major, last row implied 0 0 0 1).
-struct Transform {
-  float m[3][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}};
+// Affine transform: a 3x4 row-major matrix, the last row implied 0 0 0 1. Float for rendering (Transform); double
+// where transforms are composed before rendering (TransformD: a glTF node chain, a skin's joints), cast at the end.
+template <typename T>
+struct BasicTransform {
+  T m[3][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}};
   Vec3 point(const Vec3& p) const {
-    return {m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3],
-            m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3],
-            m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3]};
+    return {static_cast<float>(m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3]),
+            static_cast<float>(m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3]),
+            static_cast<float>(m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3])};
   }
   Vec3 vector(const Vec3& v) const {
-    return {m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z, m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
-            m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z};
+    return {static_cast<float>(m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z),
+            static_cast<float>(m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z),
+            static_cast<float>(m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z)};
+  }
+  // This transform after `b` (this * b).
+  BasicTransform operator*(const BasicTransform& b) const {
+    BasicTransform r;
+    for (int row = 0; row < 3; ++row)
+      for (int col = 0; col < 4; ++col) {
+        T s = 0;
+        for (int k = 0; k < 3; ++k) s += m[row][k] * b.m[k][col];
+        if (col == 3) s += m[row][3];
+        r.m[row][col] = s;
+      }
+    return r;
+  }
+  // The determinant of the linear part: negative for a mirroring transform.
+  T determinant() const {
+    return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+           m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+  }
+  // The inverse transpose of the linear part, without translation: what normals are transformed by (cofactors over
+  // the determinant); the identity for a singular transform.
+  BasicTransform normal_transform() const {
+    const T d = determinant();
+    BasicTransform n;
+    if (d == 0) return n;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) {
+        const int r1 = (r + 1) % 3, r2 = (r + 2) % 3, c1 = (c + 1) % 3, c2 = (c + 2) % 3;
+        n.m[r][c] = (m[r1][c1] * m[r2][c2] - m[r1][c2] * m[r2][c1]) / d;
+      }
+    for (int r = 0; r < 3; ++r) n.m[r][3] = 0;
+    return n;
+  }
+  // From a column-major 4x4 matrix (glTF's and OpenGL's layout), whose last row is dropped.
+  static BasicTransform from_column_major(const T* c) {
+    BasicTransform t;
+    for (int row = 0; row < 3; ++row)
+      for (int col = 0; col < 4; ++col) t.m[row][col] = c[col * 4 + row];
+    return t;
+  }
+  // Translation * rotation * scale, the rotation a unit quaternion (x, y, z, w) (glTF 2.0, 5.25 node.rotation).
+  static BasicTransform from_trs(const T translation[3], const T quaternion[4], const T scale[3]) {
+    const T x = quaternion[0], y = quaternion[1], z = quaternion[2], w = quaternion[3];
+    const T r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)},
+                       {2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)},
+                       {2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)}};
+    BasicTransform t;
+    for (int row = 0; row < 3; ++row) {
+      for (int col = 0; col < 3; ++col) t.m[row][col] = r[row][col] * scale[col];
+      t.m[row][3] = translation[row];
+    }
+    return t;
+  }
+  template <typename U>
+  BasicTransform<U> cast() const {
+    BasicTransform<U> t;
+    for (int row = 0; row < 3; ++row)
+      for (int col = 0; col < 4; ++col) t.m[row][col] = static_cast<U>(m[row][col]);
+    return t;
   }
 };
+using Transform = BasicTransform<float>;
+using TransformD = BasicTransform<double>;
 
 template <typename T>
 constexpr T clamp(T v, T lo, T hi) {

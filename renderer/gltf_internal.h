@@ -1,0 +1,121 @@
+// The parts of the glTF importer (import_gltf, renderer/gltf_loader.h), one file each by concern: reading the asset
+// (gltf_files.cpp: container, confined URIs, extensions, images), materials (gltf_materials.cpp), meshes
+// (gltf_meshes.cpp: accessors, morph targets, skins) and nodes (gltf_nodes.cpp: the scene graph, instancing, cameras,
+// lights). Internal to the renderer.
+#pragma once
+
+#include <tiny_gltf.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "renderer/gltf_loader.h"
+#include "renderer/math.h"
+#include "renderer/scene.h"
+#include "renderer/scene_error.h"
+#include "renderer/texture.h"
+
+namespace tessera::gltf {
+
+using nlohmann::json;
+
+// One import's shared state: where it reads from, what it adds to, and what it counts against the limits.
+struct Import {
+  Import(const std::filesystem::path& path_, const std::string& pointer_, Scene& scene_,
+         const GltfImportOptions& options_, GltfImport& result_)
+      : path(path_), pointer(pointer_), scene(scene_), options(options_), result(result_) {}
+  const std::filesystem::path& path;
+  const std::string& pointer;
+  Scene& scene;
+  const GltfImportOptions& options;
+  GltfImport& result;
+  json doc;  // the asset's JSON, with its URIs as tinygltf was given them
+  tinygltf::Model model;
+  size_t triangles = 0;           // in the scene so far, instances counted
+  std::string tinygltf_warnings;  // what tinygltf said while parsing, reported last
+
+  void check_stop() const {
+    if (options.stop.stop_requested()) throw LoadStopped();
+  }
+  [[noreturn]] void fail(const std::string& what) const { throw SceneError(pointer, what); }
+  void warn(std::string what) { result.warnings.push_back(std::move(what)); }
+  // Throws once the scene holds more triangles than the limit.
+  void check_triangles() const {
+    if (triangles > options.max_triangles)
+      fail("the asset exceeds the limit of " + std::to_string(options.max_triangles) + " triangles");
+  }
+};
+
+// An object's "extensions" as stored by tinygltf (its original JSON text), or {} when absent or unreadable.
+json parse_extensions(const std::string& text);
+
+// ---- gltf_files.cpp ----
+
+// Reads the asset at import.path into import.doc and import.model: the container's framing, every URI confined to
+// the asset's folder (proto/asset_path.h), the required extensions supported (unsupported used ones are warnings),
+// images kept encoded. Throws SceneError.
+void read_asset(Import& import);
+
+// Decodes the model's images (in parallel; headers only with options.headers_only) as "image<i>" for materials.
+std::map<std::string, std::shared_ptr<const ImagePixels>> decode_images(Import& import);
+
+// ---- gltf_materials.cpp ----
+
+struct Materials {
+  std::vector<uint32_t> index;        // scene material of each glTF material
+  uint32_t default_index = kNoLight;  // the glTF default material, made when first used
+  // The glTF default material (spec 3.9.6) in the scene, made on first use.
+  uint32_t default_material(Import& import);
+};
+
+// Makes the glTF materials (replaced by the job's of the same name) in the scene, textures from `images`.
+Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<const ImagePixels>> images);
+
+// ---- gltf_meshes.cpp ----
+
+// Reads accessors with every offset checked against the bytes that exist; SceneError at `pointer` otherwise.
+class AccessorReader {
+ public:
+  AccessorReader(const tinygltf::Model& model, const std::string& pointer) : model_(model), pointer_(pointer) {}
+  // Accessor `index` as floats, `components` per element (normalised integers mapped to [0,1] / [-1,1]).
+  std::vector<float> floats(int index, int components) const;
+  // Accessor `index` as triangle indices, each below `vertex_count`.
+  std::vector<uint32_t> indices(int index, size_t vertex_count) const;
+  size_t count(int index) const;
+
+ private:
+  [[noreturn]] void fail(int index, const std::string& what) const;
+  const tinygltf::Accessor& accessor(int index) const;
+  template <typename Fn>
+  void read(const tinygltf::Accessor& acc, int index, Fn&& fn) const;
+  void view(int view_index, int accessor_index, const unsigned char** base, size_t* length, size_t* stride) const;
+
+  const tinygltf::Model& model_;
+  std::string pointer_;
+};
+
+// The triangles of glTF mesh `mesh_index` under transform `world` (identity for instanced prototypes), one Mesh per
+// triangle primitive, counted into import.triangles. With `joints` (a skin's joint matrices: joint world transform
+// times inverse bind matrix), each vertex is moved by the blend of its JOINTS_0 matrices by WEIGHTS_0 (glTF 2.0,
+// 3.7.3 "Skins"), and `world` is not used.
+std::vector<Mesh> build_meshes(Import& import, const AccessorReader& reader, Materials& materials, int mesh_index,
+                               const TransformD& world, const std::vector<TransformD>* joints = nullptr);
+
+// ---- gltf_nodes.cpp ----
+
+// The root nodes of the default scene (or, without scenes, every node that is nobody's child), after checking that
+// walking them makes at most options.max_instances node instances.
+std::vector<int> scene_roots(const Import& import);
+
+// Walks the node hierarchy from `roots`: meshes placed (instanced when several nodes share one), skins posed,
+// EXT_mesh_gpu_instancing expanded, cameras and KHR_lights_punctual lights into import.result.
+void place_nodes(Import& import, Materials& materials, const std::vector<int>& roots);
+
+}  // namespace tessera::gltf

@@ -1,0 +1,232 @@
+// glTF materials (glTF 2.0, 3.9 and appendix B; the KHR_materials_* extensions) onto tessera's gltf_pbr model, with
+// their textures, coverage, normal maps and volume absorption.
+#include <algorithm>
+#include <cmath>
+
+#include "renderer/gltf_internal.h"
+#include "renderer/material.h"
+
+namespace tessera::gltf {
+
+namespace {
+
+// A glTF textureInfo as a tessera texture parameter: {"texture": "#image<i>", uv set, sampler wrap modes,
+// KHR_texture_transform, channel, colour space, factor}. Null when the reference is unusable.
+json texture_param(const json& doc, const json& info, int channel, bool srgb, const json& factor,
+                   std::vector<std::string>* warnings) {
+  if (!info.is_object() || !info.contains("index") || !info["index"].is_number_integer()) return nullptr;
+  const int index = info["index"].get<int>();
+  const json& textures = doc.contains("textures") ? doc["textures"] : json::array();
+  if (index < 0 || index >= static_cast<int>(textures.size())) return nullptr;
+  const json& tex = textures[index];
+  int source = tex.value("source", -1);
+  if (tex.contains("extensions") && !tex.contains("source")) {
+    if (warnings) warnings->push_back("texture " + std::to_string(index) + " uses only an extension image source");
+    return nullptr;
+  }
+  if (source < 0) return nullptr;
+  json p = {
+      {"texture", "#image" + std::to_string(source)}, {"factor", factor}, {"colorspace", srgb ? "srgb" : "linear"}};
+  if (channel >= 0) p["channel"] = channel;
+  int uv = info.value("texCoord", 0);
+  auto wrap_name = [](int mode) {
+    switch (mode) {
+      case 33071:
+        return "clamp";
+      case 33648:
+        return "mirror";
+      default:
+        return "repeat";
+    }
+  };
+  if (tex.contains("sampler") && tex["sampler"].is_number_integer() && doc.contains("samplers")) {
+    int si = tex["sampler"].get<int>();
+    if (si >= 0 && si < static_cast<int>(doc["samplers"].size())) {
+      const json& sampler = doc["samplers"][si];
+      p["wrap"] = wrap_name(sampler.value("wrapS", 10497));
+      p["wrap_t"] = wrap_name(sampler.value("wrapT", 10497));
+    }
+  }
+  if (info.contains("extensions") && info["extensions"].contains("KHR_texture_transform")) {
+    const json& t = info["extensions"]["KHR_texture_transform"];
+    if (t.contains("offset")) p["offset"] = t["offset"];
+    if (t.contains("scale")) p["scale"] = t["scale"];
+    if (t.contains("rotation")) p["rotation"] = t["rotation"];
+    if (t.contains("texCoord")) uv = t.value("texCoord", uv);
+  }
+  if (uv < 0 || uv > 1) {
+    if (warnings) warnings->push_back("TEXCOORD_" + std::to_string(uv) + " is not supported; using TEXCOORD_0");
+    uv = 0;
+  }
+  p["uv"] = uv;
+  return p;
+}
+
+json number_or(const json& obj, const char* key, double fallback) {
+  auto it = obj.find(key);
+  return it != obj.end() && it->is_number() ? *it : json(fallback);
+}
+json rgb_or(const json& obj, const char* key, const json& fallback) {
+  auto it = obj.find(key);
+  return it != obj.end() && it->is_array() && it->size() >= 3 ? json{(*it)[0], (*it)[1], (*it)[2]} : fallback;
+}
+
+// gltf_pbr parameters for glTF material `m` (spec 3.9, appendix B; the KHR_materials_* extensions), textures included.
+json material_params(const json& doc, const json& m, std::vector<std::string>* warnings) {
+  json p = {{"type", "gltf_pbr"}};
+  const json pbr = m.value("pbrMetallicRoughness", json::object());
+  const json ext = m.value("extensions", json::object());
+  // A parameter that is a constant, or the texture scaled by that constant.
+  auto set = [&](const char* key, const json& factor, const json& info, int channel, bool srgb) {
+    json tex = texture_param(doc, info, channel, srgb, factor, warnings);
+    p[key] = tex.is_null() ? factor : tex;
+  };
+  if (ext.contains("KHR_materials_unlit")) {
+    // KHR_materials_unlit: the surface shows its base colour as it is, lit by nothing. A path tracer gives it that
+    // radiance as emission on a surface that reflects nothing (black, no specular), so the camera sees the colour
+    // exactly; as an emitter it also lights what is around it, which a viewer's unlit shading does not.
+    p["base_color"] = json{0, 0, 0};
+    p["metallic"] = 0.0;
+    p["specular"] = 0.0;
+    set("emission", rgb_or(pbr, "baseColorFactor", {1, 1, 1}), pbr.value("baseColorTexture", json()), -1, true);
+    p["one_sided"] = !m.value("doubleSided", false);
+    if (warnings)
+      warnings->push_back("material \"" + m.value("name", std::string()) +
+                          "\": KHR_materials_unlit is rendered as emission of its base colour (it lights its "
+                          "surroundings too)");
+    return p;
+  }
+  set("base_color", rgb_or(pbr, "baseColorFactor", {1, 1, 1}), pbr.value("baseColorTexture", json()), -1, true);
+  const json mr = pbr.value("metallicRoughnessTexture", json());
+  set("metallic", number_or(pbr, "metallicFactor", 1.0), mr, 2, false);
+  set("roughness", number_or(pbr, "roughnessFactor", 1.0), mr, 1, false);
+  double strength = 1;
+  if (ext.contains("KHR_materials_emissive_strength"))
+    strength = number_or(ext["KHR_materials_emissive_strength"], "emissiveStrength", 1.0).get<double>();
+  json emissive = rgb_or(m, "emissiveFactor", {0, 0, 0});
+  if (emissive[0].get<double>() > 0 || emissive[1].get<double>() > 0 || emissive[2].get<double>() > 0) {
+    for (auto& c : emissive) c = c.get<double>() * strength;
+    set("emission", emissive, m.value("emissiveTexture", json()), -1, true);
+    p["one_sided"] = !m.value("doubleSided", false);
+  }
+  if (ext.contains("KHR_materials_ior")) p["ior"] = number_or(ext["KHR_materials_ior"], "ior", 1.5);
+  if (ext.contains("KHR_materials_transmission")) {
+    const json& t = ext["KHR_materials_transmission"];
+    set("transmission", number_or(t, "transmissionFactor", 0.0), t.value("transmissionTexture", json()), 0, false);
+  }
+  if (ext.contains("KHR_materials_specular")) {
+    const json& t = ext["KHR_materials_specular"];
+    set("specular", number_or(t, "specularFactor", 1.0), t.value("specularTexture", json()), 3, false);
+    set("specular_color", rgb_or(t, "specularColorFactor", {1, 1, 1}), t.value("specularColorTexture", json()), -1,
+        true);
+  }
+  if (ext.contains("KHR_materials_clearcoat")) {
+    const json& t = ext["KHR_materials_clearcoat"];
+    set("clearcoat", number_or(t, "clearcoatFactor", 0.0), t.value("clearcoatTexture", json()), 0, false);
+    set("clearcoat_roughness", number_or(t, "clearcoatRoughnessFactor", 0.0),
+        t.value("clearcoatRoughnessTexture", json()), 1, false);
+    if (t.contains("clearcoatNormalTexture") && warnings)
+      warnings->push_back("material \"" + m.value("name", std::string()) +
+                          "\": clearcoatNormalTexture is not applied (the clearcoat follows the surface's normal)");
+  }
+  if (ext.contains("KHR_materials_sheen")) {
+    const json& t = ext["KHR_materials_sheen"];
+    set("sheen_color", rgb_or(t, "sheenColorFactor", {0, 0, 0}), t.value("sheenColorTexture", json()), -1, true);
+    set("sheen_roughness", number_or(t, "sheenRoughnessFactor", 0.0), t.value("sheenRoughnessTexture", json()), 3,
+        false);
+  }
+  return p;
+}
+
+}  // namespace
+
+Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<const ImagePixels>> images) {
+  const json& doc = import.doc;
+  const tinygltf::Model& model = import.model;
+  const std::string& pointer = import.pointer;
+  Scene& scene = import.scene;
+  MaterialContext mctx;
+  mctx.images = std::move(images);
+  Materials out;
+  const MaterialRegistry& registry = MaterialRegistry::builtin();
+  const json no_materials = json::array();
+  const json& gltf_materials =
+      doc.contains("materials") && doc["materials"].is_array() ? doc["materials"] : no_materials;
+  std::vector<uint32_t>& material_index = out.index;
+  material_index.resize(model.materials.size());
+  for (size_t i = 0; i < model.materials.size(); ++i) {
+    import.check_stop();
+    const tinygltf::Material& m = model.materials[i];
+    if (auto it = import.options.material_overrides.find(m.name);
+        !m.name.empty() && it != import.options.material_overrides.end()) {
+      material_index[i] = it->second;
+      continue;
+    }
+    const json& mj = i < gltf_materials.size() && gltf_materials[i].is_object() ? gltf_materials[i] : json::object();
+    json params = material_params(doc, mj, &import.result.warnings);
+    if (!registry.has("gltf_pbr")) {
+      // Without the metallic-roughness model, keep colour and emission on a diffuse surface.
+      json lambert = {{"type", "lambert"}, {"albedo", params.value("base_color", json{0.8, 0.8, 0.8})}};
+      for (const char* key : {"emission", "one_sided"})
+        if (params.contains(key)) lambert[key] = params[key];
+      params = lambert;
+    }
+    material_index[i] = static_cast<uint32_t>(scene.materials.size());
+    const std::string mp = pointer + "/materials/" + std::to_string(i);
+    std::unique_ptr<Material> material = registry.create(params, mp, mctx);
+    // Coverage (spec 3.9.4): base colour alpha (factor times texture alpha); MASK against alphaCutoff, BLEND
+    // stochastically.
+    if (m.alphaMode == "MASK" || m.alphaMode == "BLEND") {
+      material->alpha_mode = m.alphaMode == "MASK" ? Material::AlphaMode::kMask : Material::AlphaMode::kBlend;
+      material->alpha_cutoff = static_cast<float>(m.alphaCutoff);
+      const json pbr = mj.value("pbrMetallicRoughness", json::object());
+      double a = pbr.contains("baseColorFactor") && pbr["baseColorFactor"].size() == 4
+                     ? pbr["baseColorFactor"][3].get<double>()
+                     : 1.0;
+      json tex = texture_param(doc, pbr.value("baseColorTexture", json()), 3, false, std::clamp(a, 0.0, 1.0), nullptr);
+      json holder = {{"alpha", tex.is_null() ? json(std::clamp(a, 0.0, 1.0)) : tex}};
+      material->alpha = params::float_param(holder, "alpha", mp, 1.0f, 0.0f, 1.0f, mctx);
+    }
+    // Normal map (spec 3.9.3): tangent-space, linear, scaled in x and y.
+    if (mj.contains("normalTexture")) {
+      json tex = texture_param(doc, mj["normalTexture"], -1, false, json{1, 1, 1}, &import.result.warnings);
+      if (!tex.is_null()) {
+        json holder = {{"normal", tex}};
+        material->normal_map = params::rgb_param(holder, "normal", mp, Rgb(1), 0.0f, 1.0f, mctx).texture;
+        material->normal_scale = static_cast<float>(mj["normalTexture"].value("scale", 1.0));
+      }
+    }
+    // KHR_materials_volume: absorption through the object (thickness is a rasteriser's stand-in; a path tracer
+    // measures the real distance travelled inside the geometry).
+    json ext = parse_extensions(m.extensions_json_string);
+    if (ext.contains("KHR_materials_volume")) {
+      const json& v = ext["KHR_materials_volume"];
+      double distance = v.value("attenuationDistance", 0.0);
+      json color = v.value("attenuationColor", json{1, 1, 1});
+      if (distance > 0 && color.is_array() && color.size() == 3)
+        for (int c = 0; c < 3; ++c) {
+          double col = color[c].is_number() ? std::clamp(color[c].get<double>(), 1e-6, 1.0) : 1.0;
+          material->volume_sigma_a[c] = static_cast<float>(-std::log(col) / distance);
+        }
+    }
+    scene.materials.push_back(std::move(material));
+    scene.material_names.push_back(m.name.empty() ? "gltf:" + std::to_string(i) : m.name);
+  }
+  return out;
+}
+
+// The glTF default material (spec 3.9.6): white, fully rough, and metallic 1 by the spec's defaults.
+uint32_t Materials::default_material(Import& import) {
+  if (default_index == kNoLight) {
+    const MaterialRegistry& registry = MaterialRegistry::builtin();
+    json params = registry.has("gltf_pbr")
+                      ? json{{"type", "gltf_pbr"}, {"base_color", {1, 1, 1}}, {"metallic", 1.0}, {"roughness", 1.0}}
+                      : json{{"type", "lambert"}, {"albedo", {1, 1, 1}}};
+    default_index = static_cast<uint32_t>(import.scene.materials.size());
+    import.scene.materials.push_back(registry.create(params, import.pointer, MaterialContext{}));
+    import.scene.material_names.push_back("gltf:default");
+  }
+  return default_index;
+}
+
+}  // namespace tessera::gltf
