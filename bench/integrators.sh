@@ -4,6 +4,7 @@
 #
 #   bench/integrators.sh [SCENE.json...]      (default: the Cornell box, the caustic and the room lit through a gap)
 #   env: BUILD=build SECONDS_EACH=10 REF_SECONDS=300 REF_INTEGRATOR=bdpt SIZE=256 THREADS=<all> INTEGRATORS="path bdpt light"
+#        SEED=7 REF_SEED=99 (other seeds give another sample of the figures, for their spread)
 #
 # The reference is one long render by REF_INTEGRATOR at another seed; a time limit ends a render after the pass that
 # crosses it, so each line also says how many samples per pixel it reached and how long it took.
@@ -15,6 +16,8 @@ REF_SECONDS=${REF_SECONDS:-300}
 REF_INTEGRATOR=${REF_INTEGRATOR:-bdpt}
 SIZE=${SIZE:-256}
 INTEGRATORS=${INTEGRATORS:-path bdpt light}
+SEED=${SEED:-7}
+REF_SEED=${REF_SEED:-99}
 TESSERA=$BUILD/clients/cli/tessera
 threads=()
 [[ -n ${THREADS:-} ]] && threads=(--threads "$THREADS")
@@ -37,11 +40,11 @@ rmse() { { idiff -v -a "$1" "$2" 2>/dev/null || true; } | sed -n 's/^ *RMS error
 printf '%-12s %-6s %8s %8s %12s %10s\n' scene integ spp seconds rmse vs_path
 for scene in "${scenes[@]}"; do
   name=$(basename "$scene" .json)
-  read -r ref_spp ref_s < <(render "$name-ref" "$REF_INTEGRATOR" "$REF_SECONDS" 99)
+  read -r ref_spp ref_s < <(render "$name-ref" "$REF_INTEGRATOR" "$REF_SECONDS" "$REF_SEED")
   printf '%-12s %-6s %8s %8.1f %12s\n' "$name" "ref:$REF_INTEGRATOR" "$ref_spp" "$ref_s" "-"
   path_rmse=
   for integ in $INTEGRATORS; do
-    read -r spp s < <(render "$name-$integ" "$integ" "$SECONDS_EACH" 7)
+    read -r spp s < <(render "$name-$integ" "$integ" "$SECONDS_EACH" "$SEED")
     e=$(rmse "$tmp/$name-ref.exr" "$tmp/$name-$integ.exr")
     [[ $integ == path ]] && path_rmse=$e
     ratio=-
