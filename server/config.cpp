@@ -192,6 +192,10 @@ const std::vector<Option>& options() {
       {"--lease-s", "TESSERA_LEASE_S", "S",
        "seconds a job's claim lasts unless renewed (every second); past it another daemon takes the job over (30)",
        real(&Config::lease_s, 1, 3600)},
+      {"--unit-pixel-samples", "TESSERA_UNIT_PIXEL_SAMPLES", "N",
+       "on a PostgreSQL store, split a job's samples into units of about N pixel samples (width x height x samples) "
+       "that the nodes render at once; 0: never split (100000000, tens of seconds of one thread)",
+       integer(&Config::unit_pixel_samples, 0, 1ll << 50)},
       {"--threads", "TESSERA_THREADS", "N", "render threads (default 0: every hardware thread)",
        integer(&Config::threads, 0, 4096)},
       {"--max-jobs", "TESSERA_MAX_JOBS", "N", "jobs rendering at once, sharing the threads (default 1)",

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "server/log.h"
+#include "server/work_units.h"
 
 namespace tessera::server {
 
@@ -24,8 +25,10 @@ struct Config {
   std::string store = "sqlite";
   std::string node;     // this daemon's name in a shared store (the jobs it claims); empty: the host name
   double lease_s = 30;  // a claim not renewed for this long may be taken over by another daemon
-  int threads = 0;      // render threads; 0: every hardware thread
-  int max_jobs = 1;     // jobs rendering at once, sharing the render threads
+  // On a shared store, jobs are split into work units of about this many pixel samples (work_units.h); 0: never.
+  uint64_t unit_pixel_samples = kDefaultUnitPixelSamples;
+  int threads = 0;   // render threads; 0: every hardware thread
+  int max_jobs = 1;  // jobs rendering at once, sharing the render threads
   size_t max_body_bytes = 64u << 20;
   int max_width = 8192;
   int max_height = 8192;

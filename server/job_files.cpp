@@ -42,8 +42,8 @@ int fsync_file(const fs::path& p) {
   return error;
 }
 
-[[noreturn]] void write_failed(JobFile f, int error) {
-  throw std::system_error(error, std::generic_category(), std::string("cannot write ") + job_file_name(f));
+[[noreturn]] void write_failed(const char* name, int error) {
+  throw std::system_error(error, std::generic_category(), std::string("cannot write ") + name);
 }
 
 // A file opened once: its entity tag from the same open file (inode, size, modification time), so that a version
@@ -125,16 +125,21 @@ void DirectoryJobFiles::write(const std::string& id, JobFile f, std::string_view
   publish(
       id, f,
       [&](const std::string& temp) {
-        if (int error = write_file_synced(temp, bytes); error != 0) write_failed(f, error);
+        if (int error = write_file_synced(temp, bytes); error != 0) write_failed(job_file_name(f), error);
       },
       true);
 }
 
 void DirectoryJobFiles::publish(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer,
                                 bool writer_synced) const {
-  const fs::path final_path = path(id, f);
+  publish_path(path(id, f), job_file_name(f), writer, writer_synced);
+}
+
+void DirectoryJobFiles::publish_path(const fs::path& final_path, const char* name,
+                                     const std::function<void(const std::string&)>& writer, bool writer_synced) const {
   // The folder is made when the job starts rendering; if it is gone, the job was deleted: write nothing.
-  if (!fs::is_directory(final_path.parent_path())) throw std::runtime_error("job " + id + " has no folder (deleted)");
+  if (!fs::is_directory(final_path.parent_path()))
+    throw std::runtime_error("job " + final_path.parent_path().filename().string() + " has no folder (deleted)");
   // "result.tmp-<pid>-<n>.exr": unique per writer, and the extension still names the format.
   const fs::path temp =
       final_path.parent_path() / (final_path.stem().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
@@ -142,7 +147,7 @@ void DirectoryJobFiles::publish(const std::string& id, JobFile f, const std::fun
   try {
     writer(temp.string());
     if (!writer_synced)
-      if (int error = fsync_file(temp); error != 0) write_failed(f, error);
+      if (int error = fsync_file(temp); error != 0) write_failed(name, error);
     fs::rename(temp, final_path);
   } catch (...) {
     std::error_code ignored;
@@ -184,6 +189,38 @@ void DirectoryJobFiles::remove(const std::string& id) const {
 void DirectoryJobFiles::remove(const std::string& id, JobFile f) const {
   std::error_code ignored;
   fs::remove(path(id, f), ignored);
+}
+
+fs::path DirectoryJobFiles::unit_path(const std::string& id, int unit, int64_t epoch) const {
+  return dir(id) / ("unit-" + std::to_string(unit) + ".e" + std::to_string(epoch) + ".ckpt");
+}
+
+void DirectoryJobFiles::write_unit(const std::string& id, int unit, int64_t epoch, std::string_view bytes) const {
+  const fs::path p = unit_path(id, unit, epoch);
+  const std::string name = p.filename().string();
+  publish_path(
+      p, name.c_str(),
+      [&](const std::string& temp) {
+        if (int error = write_file_synced(temp, bytes); error != 0) write_failed(name.c_str(), error);
+      },
+      true);
+}
+
+std::optional<std::string> DirectoryJobFiles::read_unit(const std::string& id, int unit, int64_t epoch) const {
+  std::ifstream in(unit_path(id, unit, epoch), std::ios::binary);
+  if (!in) return std::nullopt;
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return std::move(ss).str();
+}
+
+void DirectoryJobFiles::remove_units(const std::string& id) const {
+  std::error_code ec;
+  for (fs::directory_iterator it(dir(id), ec), end; !ec && it != end; it.increment(ec))
+    if (it->path().filename().string().starts_with("unit-")) {
+      std::error_code ignored;
+      fs::remove(it->path(), ignored);
+    }
 }
 
 }  // namespace tessera::server

@@ -53,6 +53,15 @@ class JobFiles {
   // Every file of the job, and its place.
   virtual void remove(const std::string& id) const = 0;
   virtual void remove(const std::string& id, JobFile f) const = 0;
+
+  // The checkpoint of one work unit of a job (work_units.h), named by the epoch of the run that writes it: a run
+  // writes only its own epoch's file, and the store records which one is the unit's (JobStore::update_progress), so a
+  // node that lost its lease cannot overwrite the checkpoint or film of the run that took the unit over. Written as
+  // write() writes; nothing when it does not exist.
+  virtual void write_unit(const std::string& id, int unit, int64_t epoch, std::string_view bytes) const = 0;
+  virtual std::optional<std::string> read_unit(const std::string& id, int unit, int64_t epoch) const = 0;
+  // Every unit file of the job (a job requeued from scratch, or merged).
+  virtual void remove_units(const std::string& id) const = 0;
 };
 
 // The files in the data directory (of one machine, or a volume every node mounts).
@@ -74,10 +83,17 @@ class DirectoryJobFiles final : public JobFiles {
   std::unique_ptr<FileReader> open(const std::string& id, JobFile f) const override;
   void remove(const std::string& id) const override;
   void remove(const std::string& id, JobFile f) const override;
+  // <data>/jobs/<id>/unit-<unit>.e<epoch>.ckpt
+  void write_unit(const std::string& id, int unit, int64_t epoch, std::string_view bytes) const override;
+  std::optional<std::string> read_unit(const std::string& id, int unit, int64_t epoch) const override;
+  void remove_units(const std::string& id) const override;
 
  private:
   void publish(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer,
                bool writer_synced) const;
+  void publish_path(const std::filesystem::path& final_path, const char* name,
+                    const std::function<void(const std::string&)>& writer, bool writer_synced) const;
+  std::filesystem::path unit_path(const std::string& id, int unit, int64_t epoch) const;
 
   std::filesystem::path root_;
 };

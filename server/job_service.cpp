@@ -7,6 +7,7 @@
 #include "server/job_json.h"
 #include "server/log.h"
 #include "server/time_format.h"
+#include "server/work_units.h"
 
 namespace tessera::server {
 
@@ -149,6 +150,8 @@ std::variant<Submitted, Problem> JobService::submit(const Caller& caller, Submit
   job.settings = accepted.settings.dump();
   job.outputs = accepted.outputs.dump();
   job.progress.samples_total = accepted.spp;
+  // On a store several nodes share, a large job is split into units they render at once (work_units.h).
+  job.units = store_.splits_jobs() ? unit_count(job.settings, options_.unit_pixel_samples) : 1;
   job.owner = caller.name;
   job.warnings = json(accepted.warnings).dump();
   job.idempotency_key = key;

@@ -31,6 +31,8 @@ namespace tessera::server {
 struct JobServiceOptions {
   int max_user_priority = 100;  // above it, only an admin may set a priority
   int max_queued_per_user = 0;  // queued jobs a user may have; 0: no cap
+  // Work units (work_units.h): about this many pixel samples each, on a store that splits jobs; 0: never split.
+  uint64_t unit_pixel_samples = 0;
 };
 
 struct SubmitRequest {

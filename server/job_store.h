@@ -50,6 +50,15 @@ struct JobRecord {
   int64_t epoch = 0;
   std::string node;
   std::optional<int64_t> lease_expires_at_ms;
+  // Work units (work_units.h): how many the job's samples are split into (1: the job renders whole), set at
+  // submission. A claim of one unit fills the rest: its index (units itself: the merge of the others' films), its
+  // sample range, and the epoch of the run whose checkpoint is the unit's authoritative one (0: none yet). Its
+  // `epoch` is then the unit run's: the job's epoch counter hands out the fencing tokens of all its units.
+  int units = 1;
+  int unit = -1;  // -1: the claim is of the whole job
+  uint32_t unit_first_sample = 0;
+  uint32_t unit_samples = 0;
+  int64_t unit_checkpoint_epoch = 0;
 
   // It failed because the renderer refused its input (job_state.h): running it again would fail the same way.
   bool input_refused() const { return state == JobState::kFailed && stop_reason == kInputRefused; }
@@ -78,6 +87,15 @@ class JobStoreError : public std::runtime_error {
 
 // How long a claim holds a job without being renewed; a render renews its lease about every second.
 inline constexpr int64_t kDefaultLeaseMs = 30000;
+
+// One unit of a split job, as the merge and the preview read them.
+struct UnitRecord {
+  int index = 0;
+  uint32_t first_sample = 0;
+  uint32_t samples = 0;
+  bool done = false;
+  int64_t checkpoint_epoch = 0;  // the run whose checkpoint (a done unit's: its film) is authoritative; 0: none
+};
 
 class JobStore {
  public:
@@ -120,6 +138,15 @@ class JobStore {
   virtual bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt) = 0;
   // Puts jobs left running by a previous process back in the queue; returns how many.
   virtual int requeue_running() = 0;
+
+  // Work units (JobRecord::units). A store that splits jobs creates a job's units with it (job.units of them, their
+  // samples as split_samples() spreads them, and the merge unit), claims them in claim_next() as it claims jobs, and
+  // fences each unit run by its epoch in renew_lease(), update_progress() (which also records the run's checkpoint as
+  // the unit's authoritative one) and end_run() (succeeded: the unit is done; the merge unit's end is the job's).
+  // A store that does not split renders every job whole.
+  virtual bool splits_jobs() const { return false; }
+  // The units of a job (not its merge unit), by index; empty for a job rendered whole.
+  virtual std::vector<UnitRecord> units(const std::string& /*id*/) { return {}; }
 };
 
 }  // namespace tessera::server

@@ -1,6 +1,10 @@
 #include "server/postgres_job_store.h"
 
+#include <algorithm>
+#include <cstdlib>
+
 #include "server/job_store_sql.h"
+#include "server/work_units.h"
 
 namespace tessera::server {
 
@@ -108,6 +112,32 @@ constexpr const char* kMigration3 = R"sql(
   END $$;
 )sql";
 
+// Version 4: work units (work_units.h). A split job (units > 1) has one row per sample range and one more, its merge
+// (idx = units, no samples), claimable once the others are done. A unit run's epoch comes from its job's epoch
+// counter, so (job, epoch) names one run of one unit; checkpoint_epoch names the run whose checkpoint file is the
+// unit's (a done unit's: its film).
+constexpr const char* kMigration4 = R"sql(
+  ALTER TABLE tessera_jobs ADD COLUMN units INTEGER NOT NULL DEFAULT 1;
+  CREATE TABLE tessera_units (
+    job_id TEXT NOT NULL REFERENCES tessera_jobs (id) ON DELETE CASCADE,
+    idx INTEGER NOT NULL,
+    first_sample BIGINT NOT NULL,
+    samples BIGINT NOT NULL,
+    state TEXT NOT NULL DEFAULT 'queued' CHECK (state IN ('queued','running','done')),
+    epoch BIGINT NOT NULL DEFAULT 0,
+    node TEXT,
+    lease_expires_at BIGINT,
+    passes BIGINT NOT NULL DEFAULT 0,
+    samples_done BIGINT NOT NULL DEFAULT 0,
+    elapsed_s DOUBLE PRECISION NOT NULL DEFAULT 0,
+    samples_per_s DOUBLE PRECISION NOT NULL DEFAULT 0,
+    checkpoint_epoch BIGINT NOT NULL DEFAULT 0,
+    finished_at BIGINT,
+    PRIMARY KEY (job_id, idx)
+  );
+  CREATE INDEX tessera_units_claim ON tessera_units (state, job_id);
+)sql";
+
 // The text PostgreSQL reads back as the same number.
 std::string to_text(int64_t v) {
   return pg_text(v);
@@ -151,7 +181,7 @@ PostgresJobStore::PostgresJobStore(const std::string& conninfo, std::string node
 PostgresJobStore::~PostgresJobStore() = default;
 
 const std::vector<const char*>& PostgresJobStore::migrations() {
-  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2, kMigration3};
+  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2, kMigration3, kMigration4};
   return kMigrations;
 }
 
@@ -188,64 +218,195 @@ void PostgresJobStore::migrate() {
   exec(std::string("SELECT pg_advisory_unlock(") + kMigrationLock + ")");
 }
 
+template <typename F>
+auto PostgresJobStore::in_transaction(F&& body) {
+  exec("BEGIN");
+  try {
+    auto out = body();
+    exec("COMMIT");
+    return out;
+  } catch (...) {
+    conn_.exec_quietly("ROLLBACK");
+    throw;
+  }
+}
+
 void PostgresJobStore::create(const JobRecord& job) {
   std::lock_guard lock(mutex_);
-  exec(
-      "INSERT INTO tessera_jobs (id, kind, state, priority, created_at, document, settings, outputs, samples_total, "
-      "owner, warnings, idempotency_key, request_hash, name) "
-      "VALUES ($1, $2, 'queued', $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13)",
-      {job.id, job.kind, to_text(static_cast<int64_t>(job.priority)), to_text(job.created_at_ms), job.document,
-       job.settings, job.outputs, to_text(static_cast<int64_t>(job.progress.samples_total)), job.owner,
-       job.warnings.empty() ? std::string("[]") : job.warnings, text_or_null(job.idempotency_key),
-       text_or_null(job.request_hash), job.name});
+  const int units = std::max(job.units, 1);
+  in_transaction([&] {
+    exec(
+        "INSERT INTO tessera_jobs (id, kind, state, priority, created_at, document, settings, outputs, "
+        "samples_total, owner, warnings, idempotency_key, request_hash, name, units) "
+        "VALUES ($1, $2, 'queued', $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14)",
+        {job.id, job.kind, to_text(static_cast<int64_t>(job.priority)), to_text(job.created_at_ms), job.document,
+         job.settings, job.outputs, to_text(static_cast<int64_t>(job.progress.samples_total)), job.owner,
+         job.warnings.empty() ? std::string("[]") : job.warnings, text_or_null(job.idempotency_key),
+         text_or_null(job.request_hash), job.name, to_text(static_cast<int64_t>(units))});
+    if (units > 1) {
+      // The sample ranges, then the merge; numbers this store computed, the id a parameter.
+      std::string values;
+      int idx = 0;
+      for (const SampleRange& r : split_samples(job.progress.samples_total, units))
+        values += "($1," + std::to_string(idx++) + "," + std::to_string(r.first) + "," + std::to_string(r.count) + "),";
+      values += "($1," + std::to_string(units) + ",0,0)";
+      exec("INSERT INTO tessera_units (job_id, idx, first_sample, samples) VALUES " + values, {job.id});
+    }
+    return 0;
+  });
 }
 
 std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms, int64_t lease_ms) {
   std::lock_guard lock(mutex_);
-  // The row is locked as it is chosen; rows other daemons are claiming are skipped, not waited for.
-  Result r = exec(std::string("UPDATE tessera_jobs SET state = 'running', started_at = $1, node = $2, passes = 0, "
-                              "samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0, epoch = epoch + 1, "
-                              "lease_expires_at = $1::bigint + $3::bigint "
-                              "WHERE seq = (SELECT seq FROM tessera_jobs WHERE state = 'queued' OR (state = 'running' "
-                              "AND lease_expires_at < $1) ORDER BY priority DESC, seq LIMIT 1 FOR UPDATE SKIP LOCKED) "
-                              "RETURNING ") +
-                      kJobColumns + ", document",
-                  {to_text(now_ms), node_, to_text(lease_ms)});
-  if (r.rows() == 0) return std::nullopt;
-  return r.record(true);
+  const std::string now = to_text(now_ms), lease = to_text(lease_ms);
+  return in_transaction([&]() -> std::optional<JobRecord> {
+    // The best job rendered whole and the best unit of a split one, each row locked as it is chosen, rows other
+    // daemons are claiming skipped, not waited for; the better of the two (priority, then first come) is taken and
+    // the other's lock released with the transaction. A unit: queued, or running under a lease that expired; the
+    // merge only once every range is done.
+    Result whole = exec(
+        "SELECT seq, priority FROM tessera_jobs WHERE units = 1 AND (state = 'queued' OR (state = 'running' AND "
+        "lease_expires_at < $1)) ORDER BY priority DESC, seq LIMIT 1 FOR UPDATE SKIP LOCKED",
+        {now});
+    Result unit = exec(
+        "SELECT u.job_id, u.idx, j.seq, j.priority FROM tessera_units u JOIN tessera_jobs j ON j.id = u.job_id "
+        "WHERE j.state IN ('queued', 'running') AND (u.state = 'queued' OR (u.state = 'running' AND "
+        "u.lease_expires_at < $1)) AND (u.idx < j.units OR NOT EXISTS (SELECT 1 FROM tessera_units d WHERE "
+        "d.job_id = u.job_id AND d.idx < j.units AND d.state <> 'done')) ORDER BY j.priority DESC, j.seq, u.idx LIMIT "
+        "1 "
+        "FOR UPDATE OF u SKIP LOCKED",
+        {now});
+    bool take_unit = unit.rows() > 0;
+    if (take_unit && whole.rows() > 0) {
+      const int64_t wp = whole.int64(1), up = unit.int64(3);
+      take_unit = up > wp || (up == wp && unit.int64(2) < whole.int64(0));
+    }
+    if (!take_unit) {
+      if (whole.rows() == 0) return std::nullopt;
+      Result r = exec(std::string("UPDATE tessera_jobs SET state = 'running', started_at = $1, node = $2, passes = 0, "
+                                  "samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0, "
+                                  "epoch = epoch + 1, lease_expires_at = $1::bigint + $3::bigint WHERE seq = $4 "
+                                  "RETURNING ") +
+                          kJobColumns + ", document",
+                      {now, node_, lease, whole.text(0)});
+      return r.record(true);
+    }
+    const std::string job_id = unit.text(0), idx = unit.text(1);
+    // The job's epoch counter hands out the unit run's fencing token; the job runs from its first unit's claim.
+    Result j = exec(std::string("UPDATE tessera_jobs SET epoch = epoch + 1, state = 'running', "
+                                "started_at = COALESCE(started_at, $2) WHERE id = $1 RETURNING ") +
+                        kJobColumns + ", document",
+                    {job_id, now});
+    JobRecord record = j.record(true);
+    Result u = exec(
+        "UPDATE tessera_units SET state = 'running', epoch = $3, node = $4, lease_expires_at = $5::bigint + "
+        "$6::bigint WHERE job_id = $1 AND idx = $2 RETURNING first_sample, samples, checkpoint_epoch, "
+        "(SELECT units FROM tessera_jobs WHERE id = $1)",
+        {job_id, idx, to_text(record.epoch), node_, now, lease});
+    record.unit = static_cast<int>(std::strtol(idx.c_str(), nullptr, 10));
+    record.unit_first_sample = static_cast<uint32_t>(u.int64(0));
+    record.unit_samples = static_cast<uint32_t>(u.int64(1));
+    record.unit_checkpoint_epoch = u.int64(2);
+    record.units = static_cast<int>(u.int64(3));
+    record.node = node_;
+    return record;
+  });
 }
 
 bool PostgresJobStore::renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) {
   std::lock_guard lock(mutex_);
+  // A unit run of a running job, or a job rendered whole: (id, epoch) names one of them at most.
   return exec(
-             "UPDATE tessera_jobs SET lease_expires_at = $3::bigint + $4::bigint WHERE id = $1 AND "
-             "state = 'running' AND epoch = $2",
+             "WITH u AS (UPDATE tessera_units u SET lease_expires_at = $3::bigint + $4::bigint FROM tessera_jobs j "
+             "WHERE u.job_id = $1 AND u.epoch = $2 AND u.state = 'running' AND j.id = u.job_id AND "
+             "j.state = 'running' RETURNING 1), w AS (UPDATE tessera_jobs SET lease_expires_at = $3::bigint + "
+             "$4::bigint WHERE id = $1 AND state = 'running' AND epoch = $2 AND units = 1 RETURNING 1) "
+             "SELECT (SELECT COUNT(*) FROM u) + (SELECT COUNT(*) FROM w)",
              {id, to_text(epoch), to_text(now_ms), to_text(lease_ms)})
-             .affected() > 0;
+             .int64(0) > 0;
 }
 
 bool PostgresJobStore::update_progress(const std::string& id, int64_t epoch, const JobProgress& p) {
   std::lock_guard lock(mutex_);
+  const Params params{id,
+                      to_text(static_cast<int64_t>(p.passes)),
+                      to_text(static_cast<int64_t>(p.samples_done)),
+                      to_text(static_cast<int64_t>(p.samples_total)),
+                      to_text(p.elapsed_s),
+                      p.eta_s ? std::optional<std::string>(to_text(*p.eta_s)) : std::nullopt,
+                      to_text(p.samples_per_s),
+                      to_text(epoch)};
+  // A unit run: its own row (the checkpoint it just wrote becomes the unit's), then the job's progress over all its
+  // units and nodes.
+  if (exec("UPDATE tessera_units u SET passes = $2, samples_done = $3, elapsed_s = $4, samples_per_s = $5, "
+           "checkpoint_epoch = $6 FROM tessera_jobs j WHERE u.job_id = $1 AND u.epoch = $6 AND u.state = 'running' "
+           "AND j.id = u.job_id AND j.state = 'running'",
+           {id, params[1], params[2], params[4], params[6], params[7]})
+          .affected() > 0) {
+    aggregate_units(id);
+    return true;
+  }
   return exec(
              "UPDATE tessera_jobs SET passes = $2, samples_done = $3, samples_total = $4, elapsed_s = $5, "
-             "eta_s = $6, samples_per_s = $7 WHERE id = $1 AND state = 'running' AND epoch = $8",
-             {id, to_text(static_cast<int64_t>(p.passes)), to_text(static_cast<int64_t>(p.samples_done)),
-              to_text(static_cast<int64_t>(p.samples_total)), to_text(p.elapsed_s),
-              p.eta_s ? std::optional<std::string>(to_text(*p.eta_s)) : std::nullopt, to_text(p.samples_per_s),
-              to_text(epoch)})
+             "eta_s = $6, samples_per_s = $7 WHERE id = $1 AND state = 'running' AND epoch = $8 AND units = 1",
+             params)
              .affected() > 0;
+}
+
+// The progress of a split job over all its units: samples and passes done, render time summed over nodes, the rate
+// of the units rendering now, and the time left at that rate.
+void PostgresJobStore::aggregate_units(const std::string& id) {
+  exec(
+      "UPDATE tessera_jobs j SET passes = a.passes, samples_done = a.done, elapsed_s = a.elapsed, "
+      "samples_per_s = a.rate, eta_s = CASE WHEN a.spp_rate > 0 THEN GREATEST(j.samples_total - a.done, 0) / "
+      "a.spp_rate END FROM (SELECT COALESCE(SUM(passes), 0) AS passes, COALESCE(SUM(samples_done), 0) AS done, "
+      "COALESCE(SUM(elapsed_s), 0) AS elapsed, COALESCE(SUM(samples_per_s) FILTER (WHERE state = 'running'), 0) "
+      "AS rate, COALESCE(SUM(samples_done / elapsed_s) FILTER (WHERE state = 'running' AND elapsed_s > 0), 0) AS "
+      "spp_rate FROM tessera_units WHERE job_id = $1) a WHERE j.id = $1 AND j.state = 'running'",
+      {id});
 }
 
 bool PostgresJobStore::transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                                   const std::string& error, std::optional<JobState> only_from) {
   std::lock_guard lock(mutex_);
-  return move(id, to, now_ms, stop_reason, error, sql_states_into(to, only_from), std::nullopt);
+  return in_transaction(
+      [&] { return move(id, to, now_ms, stop_reason, error, sql_states_into(to, only_from), std::nullopt); });
 }
 
 bool PostgresJobStore::end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms,
                                const std::string& stop_reason, const std::string& error) {
   std::lock_guard lock(mutex_);
-  return move(id, to, now_ms, stop_reason, error, sql_states_into(to, JobState::kRunning), epoch);
+  return in_transaction([&] {
+    // A unit run of this epoch, of a job still running (both rows locked until the end of the move)?
+    Result u = exec(
+        "SELECT u.idx, j.units FROM tessera_units u JOIN tessera_jobs j ON j.id = u.job_id WHERE u.job_id = $1 AND "
+        "u.epoch = $2 AND u.state = 'running' AND j.state = 'running' FOR UPDATE",
+        {id, to_text(epoch)});
+    if (u.rows() == 0) return move(id, to, now_ms, stop_reason, error, sql_states_into(to, JobState::kRunning), epoch);
+    const bool merge = u.int64(0) == u.int64(1);
+    const Params unit{id, u.text(0), to_text(now_ms)};
+    if (to == JobState::kQueued) {
+      // Stopping: the unit waits for the next node, its checkpoint kept.
+      exec(
+          "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL WHERE job_id = $1 AND "
+          "idx = $2",
+          {id, u.text(0)});
+      return true;
+    }
+    if (to == JobState::kSucceeded) {
+      // Its film is this run's last checkpoint, written before; the node that rendered it stays named.
+      exec(
+          "UPDATE tessera_units SET state = 'done', lease_expires_at = NULL, finished_at = $3, "
+          "samples_done = samples, checkpoint_epoch = epoch WHERE job_id = $1 AND idx = $2",
+          unit);
+      if (!merge) {
+        aggregate_units(id);
+        return true;
+      }
+    }
+    // The merge's success, or a failure, pause or cancel by the node rendering a unit: the job's move.
+    return move(id, to, now_ms, stop_reason, error, sql_states_into(to, JobState::kRunning), std::nullopt);
+  });
 }
 
 bool PostgresJobStore::move(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
@@ -254,9 +415,17 @@ bool PostgresJobStore::move(const std::string& id, JobState to, int64_t now_ms, 
   Params params{id};
   std::string where = " WHERE id = $1 AND state IN (" + from_states + ")";
   auto param = [&](std::string value) { return placeholder(params, std::move(value)); };
-  if (epoch) where += " AND epoch = " + param(to_text(*epoch));
+  // A run's epoch fences a job rendered whole; a unit's run is fenced by its unit row (end_run).
+  if (epoch) where += " AND units = 1 AND epoch = " + param(to_text(*epoch));
   // Out of running, the lease ends with the run.
-  if (to == JobState::kQueued)
+  if (to == JobState::kQueued) {
+    // Back to the queue from an end (a requeue): its units start over too. From paused (a resume) they are kept.
+    exec(
+        "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL, passes = 0, "
+        "samples_done = 0, elapsed_s = 0, samples_per_s = 0, checkpoint_epoch = 0, finished_at = NULL "
+        "WHERE job_id = $1 AND (SELECT state FROM tessera_jobs WHERE id = $1) IN (" +
+            sql_terminal_states() + ") AND (SELECT state FROM tessera_jobs WHERE id = $1) IN (" + from_states + ")",
+        {id});
     return exec(
                "UPDATE tessera_jobs SET state = 'queued', node = NULL, lease_expires_at = NULL, started_at = NULL, "
                "finished_at = NULL, stop_reason = NULL, error = NULL, passes = 0, samples_done = 0, elapsed_s = 0, "
@@ -264,6 +433,7 @@ bool PostgresJobStore::move(const std::string& id, JobState to, int64_t now_ms, 
                    where,
                params)
                .affected() > 0;
+  }
   if (to == JobState::kRunning) {
     const std::string started = param(to_text(now_ms));
     return exec("UPDATE tessera_jobs SET state = 'running', node = " + param(node_) + ", started_at = " + started +
@@ -271,10 +441,19 @@ bool PostgresJobStore::move(const std::string& id, JobState to, int64_t now_ms, 
                 params)
                .affected() > 0;
   }
-  if (to == JobState::kPaused)
-    return exec("UPDATE tessera_jobs SET state = 'paused', node = NULL, lease_expires_at = NULL, eta_s = NULL" + where,
-                params)
-               .affected() > 0;
+  if (to == JobState::kPaused) {
+    const bool moved =
+        exec("UPDATE tessera_jobs SET state = 'paused', node = NULL, lease_expires_at = NULL, eta_s = NULL" + where,
+             params)
+            .affected() > 0;
+    // Its units' runs end with it (their renewals now fail): each waits, with its checkpoint, for the resume.
+    if (moved)
+      exec(
+          "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL WHERE job_id = $1 AND "
+          "state = 'running'",
+          {id});
+    return moved;
+  }
   const std::string finished = param(to_text(now_ms));
   const std::string state = param(job_state_name(to));
   const std::string reason = param(stop_reason);
@@ -367,14 +546,36 @@ bool PostgresJobStore::remove(const std::string& id, std::optional<int64_t> only
   return exec("DELETE FROM tessera_jobs WHERE id = $1", {id}).affected() > 0;
 }
 
+std::vector<UnitRecord> PostgresJobStore::units(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  Result r = exec(
+      "SELECT u.idx, u.first_sample, u.samples, u.state, u.checkpoint_epoch FROM tessera_units u JOIN tessera_jobs j "
+      "ON j.id = u.job_id WHERE u.job_id = $1 AND u.idx < j.units ORDER BY u.idx",
+      {id});
+  std::vector<UnitRecord> out;
+  for (int i = 0; i < r.rows(); ++i) {
+    r.at(i);
+    out.push_back({static_cast<int>(r.int64(0)), static_cast<uint32_t>(r.int64(1)), static_cast<uint32_t>(r.int64(2)),
+                   r.text(3) == "done", r.int64(4)});
+  }
+  return out;
+}
+
 int PostgresJobStore::requeue_running() {
   std::lock_guard lock(mutex_);
-  return exec(
+  // The units this node was rendering wait for any node, with their checkpoints.
+  const int units = exec(
+                        "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL "
+                        "WHERE state = 'running' AND node = $1",
+                        {node_})
+                        .affected();
+  return units +
+         exec(
              "UPDATE tessera_jobs SET state = 'queued', node = NULL, lease_expires_at = NULL, started_at = NULL, "
              "passes = 0, samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0 "
              "WHERE state = 'running' AND node = $1",
              {node_})
-      .affected();
+             .affected();
 }
 
 }  // namespace tessera::server

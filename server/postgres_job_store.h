@@ -45,6 +45,8 @@ class PostgresJobStore final : public JobStore {
   std::vector<JobRecord> list(const JobFilter& filter) override;
   bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt) override;
   int requeue_running() override;
+  bool splits_jobs() const override { return true; }
+  std::vector<UnitRecord> units(const std::string& id) override;
 
   // The migrations, in order: schema version N is reached by running kMigrations[N - 1].
   static const std::vector<const char*>& migrations();
@@ -59,6 +61,10 @@ class PostgresJobStore final : public JobStore {
   bool move(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
             const std::string& error, const std::string& from_states, std::optional<int64_t> epoch);
   void migrate();
+  // Runs `body` in one transaction: committed when it returns, rolled back when it throws.
+  template <typename F>
+  auto in_transaction(F&& body);
+  void aggregate_units(const std::string& id);
 
   std::string node_;
   std::mutex mutex_;

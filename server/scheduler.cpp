@@ -23,6 +23,7 @@ using nlohmann::json;
 class Scheduler::RenderSlot {
  public:
   std::string id;
+  int unit = -1;                     // the work unit it renders (JobRecord::unit); -1: the whole job
   RenderSession* session = nullptr;  // set while the render runs
   std::stop_source load_stop;        // asked to stop with the render: ends the scene's load (LoadStopped)
   bool cancel_requested = false;     // by a client: the job ends cancelled
@@ -62,6 +63,12 @@ std::string stop_explained(StopReason r) {
       break;
   }
   return stop_reason_name(r);
+}
+
+// What a unit's checkpoints are checked against: the job's render settings and the unit, so that one unit's film is
+// never read as another's.
+uint64_t unit_settings_hash(const std::string& settings, int unit) {
+  return fnv1a64(std::to_string(unit), fnv1a64(settings));
 }
 
 JobProgress to_job_progress(const RenderProgress& p) {
@@ -214,7 +221,7 @@ void Scheduler::renew_lease_locked(RenderSlot& slot) {
 void Scheduler::job_changed(const std::string& id, bool claimable) {
   {
     std::lock_guard lock(mutex_);
-    if (auto it = running_.find(id); it != running_.end()) renew_lease_locked(*it->second);
+    for (RenderSlot* slot : slots_locked(id)) renew_lease_locked(*slot);
   }
   if (claimable) cv_.notify_all();
 }
@@ -251,8 +258,10 @@ void Scheduler::dispatch_loop() {
       if (!record) break;
       auto slot = std::make_shared<RenderSlot>();
       slot->id = record->id;
+      slot->unit = record->unit;
       slot->epoch = record->epoch;
-      running_[slot->id] = slot;
+      // A slot per job rendered whole, per unit of a split one (units of one job may render here side by side).
+      running_[slot->unit < 0 ? slot->id : slot->id + "/" + std::to_string(slot->unit)] = slot;
       slot->thread = std::thread([this, slot, rec = std::move(*record)] { run_job(slot, rec); });
     }
     renew_leases_locked();
@@ -275,6 +284,34 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     std::lock_guard lock(mutex_);
     slot->session = nullptr;
   };
+  // The slot's last step, whatever the run's end: the files of a job deleted meanwhile go; the dispatcher, woken,
+  // reaps the slot (and may claim what the end made claimable: a split job's merge).
+  const auto finish = [&] {
+    bool deleted;
+    {
+      std::lock_guard lock(mutex_);
+      deleted = slot->delete_requested;
+    }
+    if (deleted)
+      files_.remove(id);
+    else
+      notify_state(id);
+    {
+      std::lock_guard lock(mutex_);
+      slot->done = true;
+    }
+    cv_.notify_all();
+  };
+  const bool is_unit = record.unit >= 0;
+  if (is_unit && record.unit >= record.units) {
+    try {
+      merge_units(*slot, record);
+    } catch (const std::exception& e) {
+      record_failure(*slot, std::string("cannot merge its units: ") + e.what(), 0, false);
+    }
+    finish();
+    return;
+  }
   double render_s = 0;
   // A render (or a load) that stopped before its end: the job is deleted, cancelled, paused or (the daemon stopping)
   // back in the queue, to resume from its last checkpoint.
@@ -330,7 +367,12 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     options.scene.stop = slot->load_stop.get_token();
     log_.add(id, "loading the scene");
     const auto load_start = std::chrono::steady_clock::now();
-    const RenderJob job = load_job(doc, options);
+    RenderJob job = load_job(doc, options);
+    if (is_unit) {
+      // One unit: its range of the job's sample indices (work_units.h).
+      job.settings.first_sample += record.unit_first_sample;
+      job.settings.spp = record.unit_samples;
+    }
     log_.add(id, printf_string("scene loaded in %.3f s",
                                std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count()));
     for (const std::string& w : job.scene->warnings) log_.add(id, "warning: " + w);
@@ -344,8 +386,15 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       }
     }
     RenderSession session(job.scene, job.settings, pool_);
-    const uint64_t settings_hash = fnv1a64(record.settings);
-    if (auto bytes = files_.read(id, JobFile::kCheckpoint)) {
+    const uint64_t settings_hash =
+        is_unit ? unit_settings_hash(record.settings, record.unit) : fnv1a64(record.settings);
+    // A unit resumes from the checkpoint the store names as its own (of the last run that recorded one).
+    std::optional<std::string> checkpoint;
+    if (!is_unit)
+      checkpoint = files_.read(id, JobFile::kCheckpoint);
+    else if (record.unit_checkpoint_epoch > 0)
+      checkpoint = files_.read_unit(id, record.unit, record.unit_checkpoint_epoch);
+    if (auto& bytes = checkpoint) {
       if (auto cp = decode_checkpoint(*bytes, job.settings.width, job.settings.height, settings_hash)) {
         log(LogLevel::kInfo, "job resumed from its checkpoint",
             {{"job", id}, {"samples_done", cp->film.samples()}, {"passes", cp->passes}});
@@ -357,10 +406,20 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
         log_.add(id, "warning: its checkpoint is unusable (damaged, or of other settings); the render starts over");
       }
     }
-    log(LogLevel::kInfo, "job started", {{"job", id}, {"samples_done", session.progress().samples_done}});
-    log_.add(id, printf_string("rendering %dx%d, %u spp, integrator %s, on %d threads", job.settings.width,
-                               job.settings.height, static_cast<unsigned>(job.settings.spp),
-                               job.settings.integrator.name.c_str(), pool_.size()));
+    log(LogLevel::kInfo, "job started",
+        {{"job", id}, {"samples_done", session.progress().samples_done}, {"unit", record.unit}});
+    if (is_unit)
+      log_.add(id,
+               printf_string("unit %d of %d: rendering samples %u..%u of %dx%d, integrator %s, on %d threads (epoch "
+                             "%lld)",
+                             record.unit + 1, record.units, static_cast<unsigned>(job.settings.first_sample),
+                             static_cast<unsigned>(job.settings.first_sample + job.settings.spp), job.settings.width,
+                             job.settings.height, job.settings.integrator.name.c_str(), pool_.size(),
+                             static_cast<long long>(slot->epoch)));
+    else
+      log_.add(id, printf_string("rendering %dx%d, %u spp, integrator %s, on %d threads", job.settings.width,
+                                 job.settings.height, static_cast<unsigned>(job.settings.spp),
+                                 job.settings.integrator.name.c_str(), pool_.size()));
     {
       std::lock_guard lock(mutex_);
       slot->session = &session;
@@ -368,6 +427,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       if (slot->pause_requested || stopping_) session.stop();
     }
     uint32_t samples_before = session.progress().samples_done;
+    uint32_t checkpointed_samples = 0;  // of a unit: its last checkpoint written (its film, once it is done)
     const uint64_t pixels = static_cast<uint64_t>(job.settings.width) * static_cast<uint64_t>(job.settings.height);
     const StopReason reason = session.run([&](const RenderProgress& p, const Film& film) {
       const JobProgress jp = to_job_progress(p);
@@ -376,25 +436,38 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       try {
         // Files first, then the news: once the progress says N samples, a crash resumes from N and the preview of
         // that pass can be fetched.
-        files_.write(id, JobFile::kCheckpoint, encode_checkpoint(film, p.pass, p.elapsed_s, settings_hash));
-        files_.write(id, JobFile::kPreviewPng, [&] {
-          std::vector<uint8_t> png = encode_png(film.resolve(), film.width(), film.height(), job.settings.display);
-          return std::string(png.begin(), png.end());
-        }());
+        // A unit's checkpoint is named by its run's epoch: the store's update below makes it the unit's. A split
+        // job's preview is the merge of its done units (finish_unit).
+        if (is_unit) {
+          files_.write_unit(id, record.unit, slot->epoch, encode_checkpoint(film, p.pass, p.elapsed_s, settings_hash));
+          checkpointed_samples = p.samples_done;
+        } else {
+          files_.write(id, JobFile::kCheckpoint, encode_checkpoint(film, p.pass, p.elapsed_s, settings_hash));
+          files_.write(id, JobFile::kPreviewPng, [&] {
+            std::vector<uint8_t> png = encode_png(film.resolve(), film.width(), film.height(), job.settings.display);
+            return std::string(png.begin(), png.end());
+          }());
+        }
         {
           std::lock_guard lock(mutex_);
           slot->progress = jp;
         }
-        log_.add(id, printf_string("pass %u: %u/%u spp, %.2f s, %.3g samples/s", static_cast<unsigned>(p.pass),
-                                   static_cast<unsigned>(p.samples_done), static_cast<unsigned>(p.samples_total),
-                                   p.elapsed_s, p.samples_per_s));
+        log_.add(id, printf_string("%spass %u: %u/%u spp, %.2f s, %.3g samples/s",
+                                   is_unit ? printf_string("unit %d: ", record.unit + 1).c_str() : "",
+                                   static_cast<unsigned>(p.pass), static_cast<unsigned>(p.samples_done),
+                                   static_cast<unsigned>(p.samples_total), p.elapsed_s, p.samples_per_s));
         if (!store_.update_progress(id, slot->epoch, jp)) {
           std::lock_guard lock(mutex_);
           lose_lease_locked(*slot);
           return;
         }
-        if (hooks_.progress) hooks_.progress(id, jp);
-        if (hooks_.preview) hooks_.preview(id, p.pass);
+        if (!is_unit) {
+          if (hooks_.progress) hooks_.progress(id, jp);
+          if (hooks_.preview) hooks_.preview(id, p.pass);
+        } else if (hooks_.progress) {
+          // The job's progress over every unit and node, as the store sums it.
+          if (auto now = store_.get(id)) hooks_.progress(id, now->progress);
+        }
       } catch (const std::exception& e) {
         {
           std::lock_guard lock(mutex_);
@@ -432,6 +505,30 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     }
     if (deleted || interrupted || lease_lost) {
       end_interrupted(session.progress().samples_done);
+    } else if (is_unit) {
+      // The unit's film is its last checkpoint; written again if the last pass's could not be.
+      const RenderProgress& p = session.progress();
+      if (checkpointed_samples != p.samples_done)
+        files_.write_unit(id, record.unit, slot->epoch,
+                          encode_checkpoint(session.film(), p.pass, p.elapsed_s, settings_hash));
+      log_.add(id, printf_string("unit %d of %d done: samples %u..%u in %.2f s", record.unit + 1, record.units,
+                                 static_cast<unsigned>(job.settings.first_sample),
+                                 static_cast<unsigned>(job.settings.first_sample + job.settings.spp), p.elapsed_s));
+      if (record_end(*slot, [&] { return store_.end_run(id, slot->epoch, JobState::kSucceeded, now_ms()); })) {
+        log(LogLevel::kInfo, "unit done",
+            {{"job", id}, {"unit", record.unit}, {"epoch", slot->epoch}, {"elapsed_s", p.elapsed_s}});
+        // The preview refines as units finish: the merge of those done so far. Best effort.
+        try {
+          if (auto film = merge_unit_films(record, job.settings.width, job.settings.height, false)) {
+            std::vector<uint8_t> png = encode_png(film->resolve(), film->width(), film->height(), job.settings.display);
+            files_.write(id, JobFile::kPreviewPng,
+                         std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+            if (hooks_.preview) hooks_.preview(id, film->samples());
+          }
+        } catch (const std::exception& e) {
+          log(LogLevel::kWarn, "cannot write the preview of a split job", {{"job", id}, {"error", e.what()}});
+        }
+      }
     } else {
       // The outputs first: a file that cannot be written (a full disk) fails the job, as it should.
       const Film& film = session.film();
@@ -477,20 +574,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     detach();
     record_failure(*slot, "unknown error", render_s, false);
   }
-  bool deleted;
-  {
-    std::lock_guard lock(mutex_);
-    deleted = slot->delete_requested;
-  }
-  if (deleted)
-    files_.remove(id);
-  else
-    notify_state(id);
-  {
-    std::lock_guard lock(mutex_);
-    slot->done = true;
-  }
-  cv_.notify_all();
+  finish();
 }
 
 // A failing store is no fault of the job: the render's outcome stands and is written again, after 100 ms doubling up
@@ -578,44 +662,122 @@ bool Scheduler::record_failure(RenderSlot& slot, const std::string& message, dou
   }
 }
 
+std::string Scheduler::write_outputs(const JobRecord& job, const Film& film) {
+  const json settings = json::parse(job.settings);
+  DisplaySettings display;
+  display.exposure_ev = settings.value("exposure_ev", 0.0f);
+  parse_tonemap(settings.value("tonemap", "clamp"), &display.tonemap);
+  const std::vector<float> rgb = film.resolve();
+  std::string written;
+  for (const json& format : json::parse(job.outputs)) {
+    if (format == "png") {
+      std::vector<uint8_t> png = encode_png(rgb, film.width(), film.height(), display);
+      files_.write(job.id, JobFile::kResultPng,
+                   std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+      written += " result.png";
+    } else if (format == "exr") {
+      files_.write_with(job.id, JobFile::kResultExr, [&](const std::string& temp) {
+        write_exr(temp, rgb, film.width(), film.height(), settings.value("exr_precision", "half") == "half");
+      });
+      written += " result.exr";
+    }
+  }
+  return written;
+}
+
+std::optional<Film> Scheduler::merge_unit_films(const JobRecord& job, int width, int height, bool in_progress) const {
+  std::optional<Film> merged;
+  for (const UnitRecord& u : store_.units(job.id)) {
+    if ((!u.done && !in_progress) || u.checkpoint_epoch == 0) continue;
+    auto bytes = files_.read_unit(job.id, u.index, u.checkpoint_epoch);
+    auto cp =
+        bytes ? decode_checkpoint(*bytes, width, height, unit_settings_hash(job.settings, u.index)) : std::nullopt;
+    if (!cp || (u.done && cp->film.samples() != u.samples)) {
+      if (!u.done) continue;  // a checkpoint being replaced; the next one will do
+      throw std::runtime_error(printf_string("the film of unit %d is missing or damaged", u.index + 1));
+    }
+    if (!merged) merged.emplace(width, height);
+    merged->merge(cp->film);  // integer sums: exact in any order (film.h)
+  }
+  return merged;
+}
+
+void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
+  const std::string& id = record.id;
+  const json settings = json::parse(record.settings);
+  const int width = settings.at("width"), height = settings.at("height");
+  const auto start = std::chrono::steady_clock::now();
+  std::optional<Film> film = merge_unit_films(record, width, height, false);
+  if (!film || film->samples() != record.progress.samples_total)
+    throw std::runtime_error(printf_string("its units' films hold %u of its %u samples per pixel",
+                                           static_cast<unsigned>(film ? film->samples() : 0),
+                                           static_cast<unsigned>(record.progress.samples_total)));
+  // Outputs land where every node reads them: is the merge still this node's? (A merge taken over writes the same
+  // bits: the films it reads are the units' authoritative ones, and a done unit is never rendered again.)
+  if (!store_.renew_lease(id, slot.epoch, now_ms(), options_.lease.count())) {
+    std::lock_guard lock(mutex_);
+    lose_lease_locked(slot);
+    return;
+  }
+  const std::string written = write_outputs(record, *film);
+  {
+    DisplaySettings display;
+    display.exposure_ev = settings.value("exposure_ev", 0.0f);
+    parse_tonemap(settings.value("tonemap", "clamp"), &display.tonemap);
+    std::vector<uint8_t> png = encode_png(film->resolve(), width, height, display);
+    files_.write(id, JobFile::kPreviewPng, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+  }
+  const double merge_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  log_.add(id, printf_string("succeeded: its %d units merged in %.3f s, %u spp; wrote%s", record.units, merge_s,
+                             static_cast<unsigned>(film->samples()), written.c_str()));
+  if (record_terminal(slot, JobState::kSucceeded, merge_s, stop_reason_name(StopReason::kSamples))) {
+    files_.remove_units(id);
+    log(LogLevel::kInfo, "job succeeded", {{"job", id}, {"units", record.units}, {"merge_s", merge_s}});
+  }
+}
+
 void Scheduler::write_partial_results(const JobRecord& job) {
   try {
     const json settings = json::parse(job.settings);
     const int width = settings.at("width"), height = settings.at("height");
-    auto bytes = files_.read(job.id, JobFile::kCheckpoint);
-    if (!bytes) return;
-    auto cp = decode_checkpoint(*bytes, width, height, fnv1a64(job.settings));
-    if (!cp || cp->film.samples() == 0) return;
-    DisplaySettings display;
-    display.exposure_ev = settings.value("exposure_ev", 0.0f);
-    parse_tonemap(settings.value("tonemap", "clamp"), &display.tonemap);
-    const std::vector<float> rgb = cp->film.resolve();
-    std::string written;
-    for (const json& format : json::parse(job.outputs)) {
-      if (format == "png") {
-        std::vector<uint8_t> png = encode_png(rgb, width, height, display);
-        files_.write(job.id, JobFile::kResultPng,
-                     std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
-        written += " result.png";
-      } else if (format == "exr") {
-        files_.write_with(job.id, JobFile::kResultExr, [&](const std::string& temp) {
-          write_exr(temp, rgb, width, height, settings.value("exr_precision", "half") == "half");
-        });
-        written += " result.exr";
+    std::optional<Film> film;
+    uint32_t passes = 0;
+    if (auto bytes = files_.read(job.id, JobFile::kCheckpoint)) {
+      if (auto cp = decode_checkpoint(*bytes, width, height, fnv1a64(job.settings))) {
+        film = std::move(cp->film);
+        passes = cp->passes;
       }
+    } else {
+      // A split job: what its units rendered.
+      film = merge_unit_films(job, width, height, true);
     }
-    log_.add(job.id, printf_string("kept what it rendered, %u spp in %u passes, as its partial results:%s",
-                                   static_cast<unsigned>(cp->film.samples()), static_cast<unsigned>(cp->passes),
-                                   written.c_str()));
+    if (!film || film->samples() == 0) return;
+    const std::string written = write_outputs(job, *film);
+    log_.add(job.id,
+             printf_string("kept what it rendered, %u spp in %u passes, as its partial results:%s",
+                           static_cast<unsigned>(film->samples()), static_cast<unsigned>(passes), written.c_str()));
   } catch (const std::exception& e) {
     log(LogLevel::kWarn, "cannot write the partial results of a cancelled job", {{"job", job.id}, {"error", e.what()}});
     log_.add(job.id, std::string("warning: its partial results cannot be written: ") + e.what());
   }
 }
 
+std::vector<Scheduler::RenderSlot*> Scheduler::slots_locked(const std::string& id) const {
+  std::vector<RenderSlot*> out;
+  for (const auto& [key, slot] : running_)
+    if (slot->id == id) out.push_back(slot.get());
+  return out;
+}
+
+std::vector<Scheduler::RenderSlot*> Scheduler::rendering_locked(const std::string& id) const {
+  std::vector<RenderSlot*> out = slots_locked(id);
+  std::erase_if(out, [](RenderSlot* slot) { return slot->done; });
+  return out;
+}
+
 std::optional<JobProgress> Scheduler::live_progress(const std::string& id) const {
   std::lock_guard lock(mutex_);
-  auto it = running_.find(id);
+  auto it = running_.find(id);  // a job rendered whole; a split job's progress is its units' in the store
   if (it == running_.end()) return std::nullopt;
   return it->second->progress;
 }
@@ -623,10 +785,12 @@ std::optional<JobProgress> Scheduler::live_progress(const std::string& id) const
 Scheduler::Outcome Scheduler::cancel(const std::string& id) {
   {
     std::lock_guard lock(mutex_);
-    if (auto it = running_.find(id); it != running_.end() && !it->second->done) {
-      it->second->cancel_requested = true;
-      it->second->load_stop.request_stop();
-      if (it->second->session) it->second->session->cancel();
+    if (auto slots = rendering_locked(id); !slots.empty()) {
+      for (RenderSlot* slot : slots) {
+        slot->cancel_requested = true;
+        slot->load_stop.request_stop();
+        if (slot->session) slot->session->cancel();
+      }
       return Outcome::kInProgress;
     }
     // Not rendering here, and claims happen under this lock: a queued job stays queued until we are done.
@@ -648,11 +812,14 @@ Scheduler::Outcome Scheduler::cancel(const std::string& id) {
 Scheduler::Outcome Scheduler::pause(const std::string& id) {
   {
     std::lock_guard lock(mutex_);
-    if (auto it = running_.find(id); it != running_.end() && !it->second->done) {
-      if (it->second->cancel_requested || it->second->delete_requested) return Outcome::kConflict;
-      it->second->pause_requested = true;
-      it->second->load_stop.request_stop();
-      if (it->second->session) it->second->session->stop();
+    if (auto slots = rendering_locked(id); !slots.empty()) {
+      for (RenderSlot* slot : slots)
+        if (slot->cancel_requested || slot->delete_requested) return Outcome::kConflict;
+      for (RenderSlot* slot : slots) {
+        slot->pause_requested = true;
+        slot->load_stop.request_stop();
+        if (slot->session) slot->session->stop();
+      }
       return Outcome::kInProgress;
     }
     // Not rendering here (claims happen under this lock): queued, or running in a process that is gone.
@@ -697,14 +864,16 @@ Scheduler::Outcome Scheduler::requeue(const std::string& id) {
 
 bool Scheduler::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
   std::lock_guard lock(mutex_);
-  if (auto it = running_.find(id); it != running_.end()) {
+  if (auto slots = slots_locked(id); !slots.empty()) {
     if (only_finished_before_ms) return false;  // still (or again) rendering, or not yet reaped: not expired
     // The store first: one that fails (JobStoreError) leaves the render going and the job whole. The other way
     // round, the render would stop and its files go while the store kept the job running, with no render behind it.
     store_.remove(id);
-    it->second->delete_requested = true;
-    it->second->load_stop.request_stop();
-    if (it->second->session) it->second->session->cancel();
+    for (RenderSlot* slot : slots) {
+      slot->delete_requested = true;
+      slot->load_stop.request_stop();
+      if (slot->session) slot->session->cancel();
+    }
     return true;  // the render's thread removes the files once it has stopped writing them
   }
   if (!store_.remove(id, only_finished_before_ms)) return false;

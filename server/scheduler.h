@@ -17,6 +17,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "renderer/scene_loader.h"
 #include "renderer/thread_pool.h"
@@ -125,6 +126,18 @@ class Scheduler {
   void renew_lease_locked(RenderSlot& slot);
   void lose_lease_locked(RenderSlot& slot);
   void notify_state(const std::string& id);
+  // The slots of a job here (several for the units of a split job); those still rendering.
+  std::vector<RenderSlot*> slots_locked(const std::string& id) const;
+  std::vector<RenderSlot*> rendering_locked(const std::string& id) const;
+  // A split job's units rendered: merges their films (each a unit's authoritative checkpoint) into the job's outputs
+  // and records its end (the merge unit's run, fenced by its epoch).
+  void merge_units(RenderSlot& slot, const JobRecord& record);
+  // The film of a split job's units: the done ones, with `in_progress` also the last checkpoints of the others
+  // (samples rendered, not a contiguous range: an unbiased, noisier image). Nothing for a job rendered whole or when
+  // no unit has a film; throws when a done unit's film is missing or damaged.
+  std::optional<Film> merge_unit_films(const JobRecord& job, int width, int height, bool in_progress) const;
+  // The outputs the job asked for (result.png, result.exr), from `film`; the names written, for its log.
+  std::string write_outputs(const JobRecord& job, const Film& film);
 
   JobStore& store_;
   const JobFiles& files_;

@@ -83,6 +83,85 @@ TEST(PostgresJobStore, ARestartRequeuesOnlyItsOwnNodesJobs) {
   EXPECT_EQ(a_again.get(theirs.id, false)->state, JobState::kRunning);
 }
 
+// A split job's units (work_units.h): claimed one by one across nodes, each run under its own epoch from the job's
+// counter; a stale epoch's renewal, progress and end are refused; a unit whose lease ran out is re-leased under the
+// next epoch with its checkpoint; the merge is claimable only once every range is done, and its end is the job's.
+TEST(PostgresJobStore, UnitsAreLeasedFencedAndMergedOnce) {
+  const std::string uri = PostgresCluster::shared().create_database();
+  PostgresJobStore a(uri, "node-a"), b(uri, "node-b");
+  JobRecord job = make_job(0, 1);
+  job.units = 2;  // samples 0..8 and 8..16
+  a.create(job);
+  auto u0 = a.claim_next(10, 1000);
+  auto u1 = b.claim_next(10, 1000);
+  ASSERT_TRUE(u0 && u1);
+  EXPECT_EQ(u0->unit, 0);
+  EXPECT_EQ(u1->unit, 1);
+  EXPECT_EQ(u0->units, 2);
+  EXPECT_EQ(u1->unit_first_sample, 8u);
+  EXPECT_EQ(u1->unit_samples, 8u);
+  EXPECT_NE(u0->epoch, u1->epoch);
+  EXPECT_EQ(a.get(job.id, false)->state, JobState::kRunning);
+  EXPECT_FALSE(a.claim_next(20, 1000)) << "the merge was claimable before its units were done";
+  // Progress of unit 0 records its checkpoint; the job's progress sums its units.
+  JobProgress p;
+  p.passes = 1;
+  p.samples_done = 4;
+  p.elapsed_s = 1;
+  EXPECT_TRUE(a.update_progress(job.id, u0->epoch, p));
+  EXPECT_EQ(a.get(job.id, false)->progress.samples_done, 4u);
+  // Node a stops renewing: past the lease, b takes unit 0 over under a newer epoch, with a's checkpoint.
+  auto again = b.claim_next(2000, 1000);
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->unit, 0);
+  EXPECT_GT(again->epoch, u1->epoch);
+  EXPECT_EQ(again->unit_checkpoint_epoch, u0->epoch);
+  // a's stale run: every write refused.
+  EXPECT_FALSE(a.renew_lease(job.id, u0->epoch, 2001, 1000));
+  EXPECT_FALSE(a.update_progress(job.id, u0->epoch, p));
+  EXPECT_FALSE(a.end_run(job.id, u0->epoch, JobState::kSucceeded, 2001));
+  EXPECT_TRUE(b.end_run(job.id, u1->epoch, JobState::kSucceeded, 2002));
+  EXPECT_FALSE(a.claim_next(2003, 1000)) << "the merge was claimable before its units were done";
+  EXPECT_TRUE(b.end_run(job.id, again->epoch, JobState::kSucceeded, 2004));
+  const auto units = a.units(job.id);
+  ASSERT_EQ(units.size(), 2u);
+  EXPECT_TRUE(units[0].done && units[1].done);
+  EXPECT_EQ(units[0].checkpoint_epoch, again->epoch);
+  EXPECT_EQ(a.get(job.id, false)->state, JobState::kRunning);
+  auto merge = a.claim_next(2005, 1000);
+  ASSERT_TRUE(merge);
+  EXPECT_EQ(merge->unit, 2);
+  EXPECT_FALSE(b.claim_next(2006, 1000));
+  EXPECT_TRUE(a.end_run(job.id, merge->epoch, JobState::kSucceeded, 2007, "samples"));
+  EXPECT_EQ(a.get(job.id, false)->state, JobState::kSucceeded);
+  EXPECT_FALSE(b.claim_next(5000, 1000));
+}
+
+// A whole job of a higher priority goes before the units of a split one; a split job of a higher priority before a
+// whole one; a paused split job's running units wait, unclaimable, until it is resumed.
+TEST(PostgresJobStore, UnitsAndWholeJobsAreClaimedByPriorityThenAge) {
+  const std::string uri = PostgresCluster::shared().create_database();
+  PostgresJobStore a(uri, "node-a");
+  JobRecord split = make_job(0, 1), urgent = make_job(5, 2), later = make_job(0, 3);
+  split.units = 2;
+  a.create(split);
+  a.create(urgent);
+  a.create(later);
+  EXPECT_EQ(a.claim_next(10, 1000)->id, urgent.id);
+  auto u0 = a.claim_next(10, 1000);
+  ASSERT_TRUE(u0);
+  EXPECT_EQ(u0->id, split.id);
+  EXPECT_TRUE(a.transition(split.id, JobState::kPaused, 11, "", ""));
+  EXPECT_FALSE(a.renew_lease(split.id, u0->epoch, 12, 1000));
+  EXPECT_EQ(a.claim_next(13, 1000)->id, later.id);
+  EXPECT_FALSE(a.claim_next(14, 1000));
+  EXPECT_TRUE(a.transition(split.id, JobState::kQueued, 15, "", "", JobState::kPaused));
+  auto resumed = a.claim_next(16, 1000);
+  ASSERT_TRUE(resumed);
+  EXPECT_EQ(resumed->unit, 0);
+  EXPECT_GT(resumed->epoch, u0->epoch);
+}
+
 // The server restarted (an upgrade, a failover): the call that finds the connection broken fails as the store
 // failing, and the next one connects again; nothing committed is lost.
 TEST(PostgresJobStore, ReconnectsAfterTheServerRestarted) {

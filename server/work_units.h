@@ -1,0 +1,32 @@
+// Work units: a job's samples per pixel split into ranges that different nodes render at once. Sampling is
+// deterministic in (seed, pixel, sample index) and the film's sums are fixed point (film.h), so the films of disjoint
+// sample ranges merge into exactly the image one render of all of them gives, whatever the order or the node.
+//
+// The rule: a unit is about `unit_pixel_samples` pixel samples (width x height x samples), so that it takes tens of
+// seconds on one thread (10^8 by default: the path-traced Cornell box runs at 2-4 x 10^6 pixel samples per second per
+// thread on the machines we measured), and a job is split into ceil(width x height x spp / unit_pixel_samples) units,
+// at most one per sample. A job that stops on a time limit or a noise target is one unit: its stop is a property of
+// the whole render, not of a sample range. Samples are spread evenly, the first units taking one more when the
+// division leaves a remainder.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace tessera::server {
+
+inline constexpr uint64_t kDefaultUnitPixelSamples = 100'000'000;
+
+// How many units a job of these render settings (the JSON of JobRecord::settings) is split into; 1 when
+// `unit_pixel_samples` is 0 (never split) or the job is small, stops on time or noise, or cannot be read.
+int unit_count(const std::string& settings_json, uint64_t unit_pixel_samples);
+
+struct SampleRange {
+  uint32_t first = 0;
+  uint32_t count = 0;
+};
+// The sample ranges of `units` units of `spp` samples: contiguous, in order, covering [0, spp).
+std::vector<SampleRange> split_samples(uint32_t spp, int units);
+
+}  // namespace tessera::server

@@ -1,0 +1,184 @@
+// One frame, many nodes: three tesserad on loopback ports share one throw-away PostgreSQL and one data directory, a
+// job's samples are split into work units (--unit-pixel-samples) that the nodes render at once, and the merge of the
+// units' films is the EXR one node renders alone, byte for byte: with all nodes up, with one killed (SIGKILL) in the
+// middle of a unit (re-leased, resumed from its checkpoint elsewhere), and with one frozen (SIGSTOP) past its lease
+// and continued (its late writes refused, as the epoch of its unit run is stale).
+#include <signal.h>
+
+#include <gtest/gtest.h>
+
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "tests/integration/daemon.h"
+#include "tests/server/postgres_cluster.h"
+#include "tests/server/test_util.h"
+
+namespace tessera::server::test {
+namespace {
+
+using nlohmann::json;
+
+// 64x64 pixels, 9 units of 128 samples: a unit takes one to a few seconds of one thread here.
+constexpr int kSize = 64;
+constexpr int kSpp = 1152;
+constexpr int kUnits = 9;
+const std::string kUnitPixelSamples = std::to_string(kSize * kSize * kSpp / kUnits);
+
+std::string submit(httplib::Client& c, const json& doc) {
+  auto res = c.Post("/v1/jobs", doc.dump(), "application/json");
+  if (!res || res->status != 202) {
+    ADD_FAILURE() << "submission refused: " << (res ? res->body : "no answer");
+    return "";
+  }
+  return json::parse(res->body).value("id", "");
+}
+
+std::string state_of(httplib::Client& c, const std::string& id) {
+  auto res = c.Get("/v1/jobs/" + id);
+  return res && res->status == 200 ? json::parse(res->body).value("state", "") : "";
+}
+
+std::string exr_of(httplib::Client& c, const std::string& id) {
+  auto res = c.Get("/v1/jobs/" + id + "/result.exr");
+  return res && res->status == 200 ? res->body : "";
+}
+
+json job() {
+  json doc = cornell_job(kSize, kSpp);
+  doc["outputs"] = {"exr"};
+  doc["render"]["exr_precision"] = "float";
+  return doc;
+}
+
+// The EXR of the job rendered whole by one daemon alone (SQLite, one thread): what every cluster render must equal.
+const std::string& one_node_exr() {
+  static const std::string exr = [] {
+    TempDir dir;
+    Daemon alone(dir.path() / "alone", {"--threads", "1"});
+    auto c = alone.client();
+    const std::string id = submit(*c, job());
+    EXPECT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 300)) << alone.log();
+    return exr_of(*c, id);
+  }();
+  return exr;
+}
+
+class Cluster {
+ public:
+  Cluster() : pg_(PostgresCluster::shared()), uri_(pg_.create_database()) {
+    for (const char* name : {"n1", "n2", "n3"})
+      nodes_.push_back(std::make_unique<Daemon>(
+          dir_.path() / "shared",
+          std::vector<std::string>{"--store", uri_, "--node", name, "--lease-s", "2", "--threads", "1",
+                                   "--unit-pixel-samples", kUnitPixelSamples}));
+  }
+  Daemon& node(int i) { return *nodes_[i]; }
+  std::string sql(const std::string& query) { return pg_.psql(PostgresCluster::database_of(uri_), query); }
+  std::string logs() {
+    std::string out;
+    for (auto& n : nodes_)
+      if (n) out += n->log();
+    return out;
+  }
+
+ private:
+  TempDir dir_;
+  PostgresCluster& pg_;
+  std::string uri_;
+  std::vector<std::unique_ptr<Daemon>> nodes_;
+};
+
+TEST(ClusterUnits, AJobSplitAcrossThreeNodesIsByteIdenticalToTheOneNodeRender) {
+  const std::string& reference = one_node_exr();
+  ASSERT_FALSE(reference.empty());
+  Cluster cluster;
+  auto c = cluster.node(0).client();
+  const std::string id = submit(*c, job());
+  ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 300)) << cluster.logs();
+  EXPECT_EQ(cluster.sql("SELECT units FROM tessera_jobs WHERE id = '" + id + "'"), std::to_string(kUnits));
+  // Every node rendered some of its units.
+  EXPECT_EQ(cluster.sql("SELECT COUNT(DISTINCT node) FROM tessera_units WHERE job_id = '" + id + "' AND idx < " +
+                        std::to_string(kUnits)),
+            "3");
+  // Any node serves it, and it is the one-node render's file, byte for byte.
+  for (int i = 0; i < 3; ++i) {
+    auto ci = cluster.node(i).client();
+    EXPECT_TRUE(exr_of(*ci, id) == reference) << "node " << i + 1 << "'s EXR differs from the one-node render";
+  }
+}
+
+// The node rendering a unit is killed once the unit has a checkpoint: past its lease another node claims the unit
+// under the next epoch and resumes it from that checkpoint; the image is still the one-node render's.
+TEST(ClusterUnits, AKilledNodesUnitResumesElsewhereAndTheImageIsStillExact) {
+  const std::string& reference = one_node_exr();
+  ASSERT_FALSE(reference.empty());
+  Cluster cluster;
+  auto c = cluster.node(0).client();
+  const std::string id = submit(*c, job());
+  const std::string unit_of_n3 = "SELECT idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id +
+                                 "' AND node = 'n3' AND state = 'running' AND checkpoint_epoch = epoch LIMIT 1";
+  std::string held;
+  ASSERT_TRUE(eventually(
+      [&] {
+        held = cluster.sql(unit_of_n3);
+        return !held.empty();
+      },
+      120))
+      << cluster.logs();
+  cluster.node(2).stop(SIGKILL);
+  const std::string idx = held.substr(0, held.find(','));
+  ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 300)) << cluster.logs();
+  // The unit was taken over (a later epoch, another node) and resumed from the dead node's checkpoint.
+  EXPECT_NE(cluster.sql("SELECT idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx),
+            held);
+  EXPECT_NE(cluster.sql("SELECT node FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx), "n3");
+  EXPECT_NE(cluster.logs().find("job resumed from its checkpoint"), std::string::npos) << cluster.logs();
+  EXPECT_TRUE(exr_of(*c, id) == reference) << "the EXR differs from the one-node render";
+}
+
+// A node frozen (SIGSTOP) in the middle of a unit for longer than its lease: the unit is re-leased to another node
+// under the next epoch. Continued (SIGCONT) while the job still renders, the frozen node's writes for its stale epoch
+// are refused (it stops and records nothing), and the image is still the one-node render's.
+TEST(ClusterUnits, ANodeFrozenPastItsLeaseHasItsLateWritesRefused) {
+  const std::string& reference = one_node_exr();
+  ASSERT_FALSE(reference.empty());
+  Cluster cluster;
+  auto c = cluster.node(0).client();
+  const std::string id = submit(*c, job());
+  std::string held;
+  ASSERT_TRUE(eventually(
+      [&] {
+        held = cluster.sql("SELECT idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id +
+                           "' AND node = 'n3' AND state = 'running' AND checkpoint_epoch = epoch LIMIT 1");
+        return !held.empty();
+      },
+      120))
+      << cluster.logs();
+  kill(cluster.node(2).pid(), SIGSTOP);
+  const std::string idx = held.substr(0, held.find(','));
+  const std::string unit = "SELECT idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx;
+  // Taken over by another node under a newer epoch.
+  ASSERT_TRUE(eventually([&] { return cluster.sql(unit) != held; }, 60)) << cluster.logs();
+  kill(cluster.node(2).pid(), SIGCONT);
+  ASSERT_TRUE(eventually(
+      [&] { return cluster.node(2).log().find("changed or taken over elsewhere") != std::string::npos; }, 30))
+      << cluster.node(2).log();
+  ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 300)) << cluster.logs();
+  // The unit's film is the run that took it over; the frozen node recorded no end of it.
+  EXPECT_NE(cluster.sql("SELECT node FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx), "n3");
+  EXPECT_NE(cluster.sql("SELECT checkpoint_epoch FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx),
+            held.substr(held.find(',') + 1));
+  const std::string stale_epoch = held.substr(held.find(',') + 1);
+  std::istringstream lines(cluster.node(2).log());
+  for (std::string line; std::getline(lines, line);)
+    EXPECT_FALSE(line.find("unit done") != std::string::npos &&
+                 line.find("\"epoch\":" + stale_epoch + ",") != std::string::npos)
+        << "the frozen node recorded the end of its stale run: " << line;
+  EXPECT_TRUE(exr_of(*c, id) == reference) << "the EXR differs from the one-node render";
+}
+
+}  // namespace
+}  // namespace tessera::server::test

@@ -1,0 +1,41 @@
+// The work-unit rule (work_units.h): how many units a job is split into, and their sample ranges.
+#include "server/work_units.h"
+
+#include <gtest/gtest.h>
+
+namespace tessera::server {
+namespace {
+
+TEST(WorkUnits, AJobIsSplitByItsPixelSamples) {
+  const std::string settings = R"({"width":100,"height":100,"spp":64,"time_limit_s":0,"noise_target":0})";
+  EXPECT_EQ(unit_count(settings, 0), 1);       // never split
+  EXPECT_EQ(unit_count(settings, 640000), 1);  // exactly one unit's worth
+  EXPECT_EQ(unit_count(settings, 639999), 2);  // a little more
+  EXPECT_EQ(unit_count(settings, 80000), 8);   // 8 samples each
+  EXPECT_EQ(unit_count(settings, 1), 64);      // at most one unit per sample
+  EXPECT_EQ(unit_count(settings, kDefaultUnitPixelSamples), 1);
+  // 1920 x 1080 at 1024 spp: about 2.1e9 pixel samples, 22 units of 46 or 47 samples.
+  EXPECT_EQ(unit_count(R"({"width":1920,"height":1080,"spp":1024})", kDefaultUnitPixelSamples), 22);
+}
+
+TEST(WorkUnits, AJobThatStopsOnTimeOrNoiseIsOneUnit) {
+  EXPECT_EQ(unit_count(R"({"width":100,"height":100,"spp":64,"time_limit_s":10})", 1000), 1);
+  EXPECT_EQ(unit_count(R"({"width":100,"height":100,"spp":64,"noise_target":0.01})", 1000), 1);
+  EXPECT_EQ(unit_count("not json", 1000), 1);
+}
+
+TEST(WorkUnits, SampleRangesAreContiguousAndCoverTheBudget) {
+  const auto ranges = split_samples(10, 4);
+  ASSERT_EQ(ranges.size(), 4u);
+  uint32_t next = 0;
+  for (const SampleRange& r : ranges) {
+    EXPECT_EQ(r.first, next);
+    next += r.count;
+  }
+  EXPECT_EQ(next, 10u);
+  EXPECT_EQ(ranges[0].count, 3u);
+  EXPECT_EQ(ranges[3].count, 2u);
+}
+
+}  // namespace
+}  // namespace tessera::server
