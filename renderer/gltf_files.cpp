@@ -18,9 +18,13 @@ namespace {
 
 // Extensions whose meaning tessera renders (or, for KHR_materials_variants-like metadata, safely ignores).
 const std::set<std::string> kSupportedExtensions = {
-    "KHR_lights_punctual",   "KHR_materials_emissive_strength", "KHR_materials_ior",       "KHR_materials_transmission",
-    "KHR_materials_volume",  "KHR_materials_specular",          "KHR_materials_clearcoat", "KHR_materials_sheen",
-    "KHR_texture_transform", "KHR_mesh_quantization",           "KHR_materials_unlit",     "EXT_mesh_gpu_instancing",
+    "KHR_lights_punctual",        "KHR_materials_emissive_strength",
+    "KHR_materials_ior",          "KHR_materials_transmission",
+    "KHR_materials_volume",       "KHR_materials_specular",
+    "KHR_materials_clearcoat",    "KHR_materials_sheen",
+    "KHR_texture_transform",      "KHR_mesh_quantization",
+    "KHR_draco_mesh_compression", "EXT_meshopt_compression",
+    "KHR_materials_unlit",        "EXT_mesh_gpu_instancing",
 };
 
 // ---- confined file access for tinygltf ----
@@ -222,9 +226,35 @@ void read_asset(Import& import) {
   import.doc = container_json(bytes, &binary, pointer);
   json& doc = import.doc;
 
+  // EXT_meshopt_compression's fallback buffers (the extension's specification, "Fallback buffers") hold data only
+  // for loaders without the extension, and may have no URI: they are not read (a one-byte stand-in for tinygltf), and
+  // nothing may read them but the compressed views that replace them (decode_compressed_geometry).
+  if (doc.contains("buffers") && doc["buffers"].is_array())
+    for (size_t i = 0; i < doc["buffers"].size(); ++i) {
+      json& item = doc["buffers"][i];
+      if (!item.is_object() || !item.contains("extensions") || !item["extensions"].is_object()) continue;
+      const json& ext = item["extensions"].value("EXT_meshopt_compression", json::object());
+      if (!ext.is_object() || ext.value("fallback", false) != true) continue;
+      item["uri"] = "data:application/octet-stream;base64,AA==";  // one zero byte: tinygltf wants at least one
+      item["byteLength"] = 1;
+      import.meshopt_fallbacks.insert(static_cast<int>(i));
+    }
+  bool rewritten = !import.meshopt_fallbacks.empty();
+  // A KHR_draco_mesh_compression primitive's indices are the faces Draco decodes (decode_compressed_geometry); its
+  // indices accessor has no data, which tinygltf refuses for indices: the reference is dropped before tinygltf reads
+  // the document.
+  if (doc.contains("meshes") && doc["meshes"].is_array())
+    for (json& mesh : doc["meshes"])
+      if (mesh.is_object() && mesh.contains("primitives") && mesh["primitives"].is_array())
+        for (json& prim : mesh["primitives"])
+          if (prim.is_object() && prim.contains("indices") && prim.contains("extensions") &&
+              prim["extensions"].is_object() && prim["extensions"].contains("KHR_draco_mesh_compression")) {
+            prim.erase("indices");
+            rewritten = true;
+          }
+
   // Every file the asset names must be inside its own folder (proto/asset_path.h), before tinygltf resolves any: the
   // URIs are decoded and normalised here, and handed to tinygltf encoded as it decodes them.
-  bool rewritten = false;
   for (const char* section : {"buffers", "images"}) {
     if (!doc.contains(section) || !doc[section].is_array()) continue;
     for (size_t i = 0; i < doc[section].size(); ++i) {

@@ -38,8 +38,9 @@ struct Import {
   GltfImport& result;
   json doc;  // the asset's JSON, with its URIs as tinygltf was given them
   tinygltf::Model model;
-  size_t triangles = 0;           // in the scene so far, instances counted
-  std::string tinygltf_warnings;  // what tinygltf said while parsing, reported last
+  size_t triangles = 0;             // in the scene so far, instances counted
+  std::string tinygltf_warnings;    // what tinygltf said while parsing, reported last
+  std::set<int> meshopt_fallbacks;  // buffers EXT_meshopt_compression marks as fallbacks (not read)
 
   void check_stop() const {
     if (options.stop.stop_requested()) throw LoadStopped();
@@ -65,6 +66,12 @@ void read_asset(Import& import);
 
 // Decodes the model's images (in parallel; headers only with options.headers_only) as "image<i>" for materials.
 std::map<std::string, std::shared_ptr<const ImagePixels>> decode_images(Import& import);
+
+// ---- gltf_compression.cpp ----
+
+// Decodes EXT_meshopt_compression buffer views and KHR_draco_mesh_compression primitives in import.model into
+// buffers of their own, which the views and the primitives' accessors then read. Throws SceneError.
+void decode_compressed_geometry(Import& import);
 
 // ---- gltf_materials.cpp ----
 
