@@ -18,13 +18,21 @@ namespace {
 
 // Extensions whose meaning tessera renders (or, for KHR_materials_variants-like metadata, safely ignores).
 const std::set<std::string> kSupportedExtensions = {
-    "KHR_lights_punctual",        "KHR_materials_emissive_strength",
-    "KHR_materials_ior",          "KHR_materials_transmission",
-    "KHR_materials_volume",       "KHR_materials_specular",
-    "KHR_materials_clearcoat",    "KHR_materials_sheen",
-    "KHR_texture_transform",      "KHR_mesh_quantization",
-    "KHR_draco_mesh_compression", "EXT_meshopt_compression",
-    "KHR_materials_unlit",        "EXT_mesh_gpu_instancing",
+    "KHR_lights_punctual",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_ior",
+    "KHR_materials_transmission",
+    "KHR_materials_volume",
+    "KHR_materials_specular",
+    "KHR_materials_clearcoat",
+    "KHR_materials_sheen",
+    "KHR_texture_transform",
+    "KHR_mesh_quantization",
+    "KHR_draco_mesh_compression",
+    "EXT_meshopt_compression",
+    "KHR_materials_pbrSpecularGlossiness",
+    "KHR_materials_unlit",
+    "EXT_mesh_gpu_instancing",
 };
 
 // ---- confined file access for tinygltf ----

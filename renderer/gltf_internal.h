@@ -82,6 +82,13 @@ struct Materials {
   uint32_t default_material(Import& import);
 };
 
+// glTF material `material` with KHR_materials_pbrSpecularGlossiness as a metallic-roughness material (the
+// extension's conversion example); a specular-glossiness texture is baked into a metallic-roughness image added to
+// `images` and to doc's images and textures. A warning says it is approximated.
+json spec_gloss_to_metal_rough(json& doc, const json& material,
+                               std::map<std::string, std::shared_ptr<const ImagePixels>>& images,
+                               std::vector<std::string>* warnings);
+
 // Makes the glTF materials (replaced by the job's of the same name) in the scene, textures from `images`.
 Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<const ImagePixels>> images);
 

@@ -138,10 +138,137 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
   return p;
 }
 
+// KHR_materials_pbrSpecularGlossiness onto metallic-roughness, as the extension's own conversion example does
+// (Khronos glTF repository, extensions/2.0/Archived/KHR_materials_pbrSpecularGlossiness, "convert-between-workflows"):
+// metallic solved from the perceived brightness of diffuse and specular against a dielectric's 4 % reflectance, base
+// colour blended between the diffuse and the specular colour by metallic squared, roughness = 1 - glossiness.
+namespace specgloss {
+
+constexpr double kDielectricSpecular = 0.04;
+
+double perceived_brightness(const double c[3]) {
+  return std::sqrt(0.299 * c[0] * c[0] + 0.587 * c[1] * c[1] + 0.114 * c[2] * c[2]);
+}
+
+double solve_metallic(double diffuse, double specular, double one_minus_specular_strength) {
+  if (specular < kDielectricSpecular) return 0;
+  const double a = kDielectricSpecular;
+  const double b =
+      diffuse * one_minus_specular_strength / (1 - kDielectricSpecular) + specular - 2 * kDielectricSpecular;
+  const double c = kDielectricSpecular - specular;
+  const double d = std::max(0.0, b * b - 4 * a * c);
+  return std::clamp((-b + std::sqrt(d)) / (2 * a), 0.0, 1.0);
+}
+
+// Metallic, roughness and base colour of one diffuse, specular (linear RGB) and glossiness.
+void convert(const double diffuse[3], const double specular[3], double glossiness, double* metallic, double* roughness,
+             double base[3]) {
+  const double one_minus = 1 - std::max({specular[0], specular[1], specular[2]});
+  *metallic = solve_metallic(perceived_brightness(diffuse), perceived_brightness(specular), one_minus);
+  *roughness = std::clamp(1 - glossiness, 0.0, 1.0);
+  constexpr double kEpsilon = 1e-6;
+  for (int c = 0; c < 3; ++c) {
+    const double from_diffuse =
+        diffuse[c] * (one_minus / (1 - kDielectricSpecular) / std::max(1 - *metallic, kEpsilon));
+    const double from_specular =
+        (specular[c] - kDielectricSpecular * (1 - *metallic)) * (1 / std::max(*metallic, kEpsilon));
+    const double t = *metallic * *metallic;
+    base[c] = std::clamp(from_diffuse + (from_specular - from_diffuse) * t, 0.0, 1.0);
+  }
+}
+
+double srgb_to_linear(double v) {
+  return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
+}
+
+}  // namespace specgloss
+
 }  // namespace
 
+json spec_gloss_to_metal_rough(json& doc, const json& material,
+                               std::map<std::string, std::shared_ptr<const ImagePixels>>& images,
+                               std::vector<std::string>* warnings) {
+  const json& ext = material["extensions"]["KHR_materials_pbrSpecularGlossiness"];
+  auto factor = [&](const char* key, int n, double fallback) {
+    std::vector<double> v(static_cast<size_t>(n), fallback);
+    if (ext.contains(key) && ext[key].is_array() && static_cast<int>(ext[key].size()) >= n)
+      for (int i = 0; i < n; ++i) v[i] = ext[key][i].is_number() ? ext[key][i].get<double>() : fallback;
+    else if (n == 1 && ext.contains(key) && ext[key].is_number())
+      v[0] = ext[key].get<double>();
+    return v;
+  };
+  const std::vector<double> diffuse = factor("diffuseFactor", 4, 1.0), specular = factor("specularFactor", 3, 1.0),
+                            gloss = factor("glossinessFactor", 1, 1.0);
+  double metallic, roughness, base[3];
+  specgloss::convert(diffuse.data(), specular.data(), gloss[0], &metallic, &roughness, base);
+  json out = material;
+  out["extensions"].erase("KHR_materials_pbrSpecularGlossiness");
+  json pbr = {{"baseColorFactor", {base[0], base[1], base[2], diffuse[3]}},
+              {"metallicFactor", metallic},
+              {"roughnessFactor", roughness}};
+  // The diffuse texture is the base colour's, scaled by the factors' conversion (exact where metallic is 0).
+  if (ext.contains("diffuseTexture")) {
+    pbr["baseColorTexture"] = ext["diffuseTexture"];
+    for (int c = 0; c < 3; ++c)
+      pbr["baseColorFactor"][c] = diffuse[c] > 0 ? std::clamp(base[c] / diffuse[c], 0.0, 1.0) : 0.0;
+  }
+  // The specular-glossiness texture: metallic and roughness solved per texel into a metallic-roughness image of the
+  // same size (G roughness, B metallic, as glTF's), the diffuse taken as its factor there.
+  const json& info = ext.value("specularGlossinessTexture", json());
+  if (info.is_object() && info.contains("index") && info["index"].is_number_integer() && doc.contains("textures") &&
+      doc["textures"].is_array() && info["index"].get<int>() >= 0 &&
+      info["index"].get<int>() < static_cast<int>(doc["textures"].size())) {
+    const json tex = doc["textures"][info["index"].get<int>()];
+    const int source = tex.value("source", -1);
+    auto it = images.find("image" + std::to_string(source));
+    if (source >= 0 && it != images.end() && it->second) {
+      const ImagePixels& in = *it->second;
+      auto baked = std::make_shared<ImagePixels>();
+      baked->width = in.width;
+      baked->height = in.height;
+      baked->channels = 4;
+      const size_t texels = static_cast<size_t>(in.width) * static_cast<size_t>(in.height);
+      baked->data.resize(texels * 4);
+      for (size_t i = 0; i < texels; ++i) {
+        const uint8_t* p = &in.data[i * static_cast<size_t>(in.channels)];
+        double spec[3];
+        for (int c = 0; c < 3; ++c)
+          spec[c] = specgloss::srgb_to_linear(p[std::min(c, in.channels - 1)] / 255.0) * specular[c];
+        const double g = (in.channels == 4 ? p[3] / 255.0 : 1.0) * gloss[0];
+        double m, r, b[3];
+        specgloss::convert(diffuse.data(), spec, g, &m, &r, b);
+        uint8_t* o = &baked->data[i * 4];
+        o[0] = 0;
+        o[1] = static_cast<uint8_t>(std::lround(r * 255));
+        o[2] = static_cast<uint8_t>(std::lround(m * 255));
+        o[3] = 255;
+      }
+      if (!doc.contains("images") || !doc["images"].is_array()) doc["images"] = json::array();
+      const size_t image = doc["images"].size();
+      doc["images"].push_back(json::object());
+      images["image" + std::to_string(image)] = std::move(baked);
+      json baked_tex = {{"source", image}};
+      if (tex.contains("sampler")) baked_tex["sampler"] = tex["sampler"];
+      doc["textures"].push_back(baked_tex);
+      json mr_info = info;
+      mr_info["index"] = doc["textures"].size() - 1;
+      pbr["metallicRoughnessTexture"] = mr_info;
+      pbr["metallicFactor"] = 1.0;
+      pbr["roughnessFactor"] = 1.0;
+    }
+  }
+  out["pbrMetallicRoughness"] = pbr;
+  if (warnings)
+    warnings->push_back("material \"" + material.value("name", std::string()) +
+                        "\": KHR_materials_pbrSpecularGlossiness is approximated by metallic-roughness (Khronos' "
+                        "conversion; a textured diffuse does not enter the per-texel metalness)");
+  return out;
+}
+
+namespace {}  // namespace
+
 Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<const ImagePixels>> images) {
-  const json& doc = import.doc;
+  json& doc = import.doc;
   const tinygltf::Model& model = import.model;
   const std::string& pointer = import.pointer;
   Scene& scene = import.scene;
@@ -162,7 +289,11 @@ Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<c
       material_index[i] = it->second;
       continue;
     }
-    const json& mj = i < gltf_materials.size() && gltf_materials[i].is_object() ? gltf_materials[i] : json::object();
+    json mj = i < gltf_materials.size() && gltf_materials[i].is_object() ? gltf_materials[i] : json::object();
+    if (mj.contains("extensions") && mj["extensions"].is_object() &&
+        mj["extensions"].contains("KHR_materials_pbrSpecularGlossiness") &&
+        mj["extensions"]["KHR_materials_pbrSpecularGlossiness"].is_object())
+      mj = spec_gloss_to_metal_rough(doc, mj, mctx.images, &import.result.warnings);
     json params = material_params(doc, mj, &import.result.warnings);
     if (!registry.has("gltf_pbr")) {
       // Without the metallic-roughness model, keep colour and emission on a diffuse surface.

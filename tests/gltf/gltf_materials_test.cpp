@@ -1,0 +1,98 @@
+// glTF material extensions mapped onto tessera's models: KHR_materials_pbrSpecularGlossiness converted to
+// metallic-roughness as the extension's conversion example does, textures included.
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include "renderer/gltf_internal.h"
+#include "tests/renderer/gltf_fixture.h"
+
+namespace tessera {
+namespace {
+
+using nlohmann::json;
+
+json spec_gloss(const json& ext) {
+  return {{"name", "sg"}, {"extensions", {{"KHR_materials_pbrSpecularGlossiness", ext}}}};
+}
+
+TEST(GltfMaterials, SpecularGlossinessFactorsBecomeMetallicRoughness) {
+  json doc = json::object();
+  std::map<std::string, std::shared_ptr<const ImagePixels>> images;
+  std::vector<std::string> warnings;
+  // A metal: no diffuse, a gold specular colour. Metallic 1, base colour the specular colour, roughness 1 - 0.8.
+  json gold = gltf::spec_gloss_to_metal_rough(
+      doc,
+      spec_gloss({{"diffuseFactor", {0, 0, 0, 1}}, {"specularFactor", {1.0, 0.766, 0.336}}, {"glossinessFactor", 0.8}}),
+      images, &warnings);
+  const json& g = gold["pbrMetallicRoughness"];
+  EXPECT_NEAR(g["metallicFactor"].get<double>(), 1.0, 1e-9);
+  EXPECT_NEAR(g["roughnessFactor"].get<double>(), 0.2, 1e-9);
+  EXPECT_NEAR(g["baseColorFactor"][0].get<double>(), 1.0, 1e-6);
+  EXPECT_NEAR(g["baseColorFactor"][1].get<double>(), 0.766, 1e-6);
+  EXPECT_NEAR(g["baseColorFactor"][2].get<double>(), 0.336, 1e-6);
+  EXPECT_FALSE(gold["extensions"].contains("KHR_materials_pbrSpecularGlossiness"));
+  // A plastic: the dielectric 4 % specular. Metallic 0, base colour the diffuse colour, its alpha kept.
+  json plastic = gltf::spec_gloss_to_metal_rough(
+      doc,
+      spec_gloss(
+          {{"diffuseFactor", {0.5, 0.2, 0.1, 0.7}}, {"specularFactor", {0.04, 0.04, 0.04}}, {"glossinessFactor", 0.4}}),
+      images, &warnings);
+  const json& p = plastic["pbrMetallicRoughness"];
+  EXPECT_NEAR(p["metallicFactor"].get<double>(), 0.0, 1e-9);
+  EXPECT_NEAR(p["roughnessFactor"].get<double>(), 0.6, 1e-9);
+  EXPECT_NEAR(p["baseColorFactor"][0].get<double>(), 0.5, 1e-9);
+  EXPECT_NEAR(p["baseColorFactor"][1].get<double>(), 0.2, 1e-9);
+  EXPECT_NEAR(p["baseColorFactor"][3].get<double>(), 0.7, 1e-9);
+  ASSERT_EQ(warnings.size(), 2u);
+  EXPECT_NE(warnings[0].find("approximated"), std::string::npos) << warnings[0];
+}
+
+TEST(GltfMaterials, SpecularGlossinessTextureIsBakedPerTexel) {
+  // Texel 0: white specular, fully glossy (a smooth metal); texel 1: the dielectric 4 % (sRGB 56), glossiness 0.
+  auto sg = std::make_shared<ImagePixels>();
+  sg->width = 2;
+  sg->height = 1;
+  sg->channels = 4;
+  sg->data.assign({255, 255, 255, 255, 56, 56, 56, 0});
+  std::map<std::string, std::shared_ptr<const ImagePixels>> images = {{"image0", sg}};
+  json doc = {{"images", {json::object()}}, {"textures", {{{"source", 0}, {"sampler", 0}}}}};
+  json m = gltf::spec_gloss_to_metal_rough(
+      doc, spec_gloss({{"diffuseFactor", {0.5, 0.5, 0.5, 1}}, {"specularGlossinessTexture", {{"index", 0}}}}), images,
+      nullptr);
+  const json& pbr = m["pbrMetallicRoughness"];
+  ASSERT_TRUE(pbr.contains("metallicRoughnessTexture"));
+  const int tex = pbr["metallicRoughnessTexture"]["index"].get<int>();
+  ASSERT_EQ(tex, 1);
+  EXPECT_EQ(doc["textures"][tex]["sampler"], 0);
+  const int source = doc["textures"][tex]["source"].get<int>();
+  ASSERT_TRUE(images.count("image" + std::to_string(source)));
+  const ImagePixels& baked = *images["image" + std::to_string(source)];
+  ASSERT_EQ(baked.width, 2);
+  EXPECT_EQ(baked.data[1], 0);    // roughness of texel 0 (G)
+  EXPECT_EQ(baked.data[2], 255);  // metallic of texel 0 (B)
+  EXPECT_EQ(baked.data[5], 255);  // roughness of texel 1
+  EXPECT_EQ(baked.data[6], 0);    // metallic of texel 1
+  EXPECT_EQ(pbr["metallicFactor"], 1.0);
+  EXPECT_EQ(pbr["roughnessFactor"], 1.0);
+}
+
+TEST(GltfMaterials, SpecularGlossinessAssetsImportWithAWarningSayingItIsApproximated) {
+  test::GltfBuilder b;
+  const int mat =
+      b.material(spec_gloss({{"diffuseFactor", {0.5, 0.2, 0.1, 1}}, {"specularFactor", {0.04, 0.04, 0.04}}}));
+  b.node({{"mesh", b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, mat)}}, true);
+  b.doc["extensionsUsed"] = {"KHR_materials_pbrSpecularGlossiness"};
+  b.doc["extensionsRequired"] = {"KHR_materials_pbrSpecularGlossiness"};
+  const auto dir = std::filesystem::temp_directory_path() / ("tessera-gltf-materials-" + std::to_string(::getpid()));
+  const auto path = b.write(dir, "specgloss");
+  Scene scene;
+  const GltfImport imported = import_gltf(path, "/scene/gltf", scene, {});
+  std::filesystem::remove_all(dir);
+  ASSERT_EQ(imported.warnings.size(), 1u);
+  EXPECT_NE(imported.warnings[0].find("KHR_materials_pbrSpecularGlossiness is approximated"), std::string::npos)
+      << imported.warnings[0];
+}
+
+}  // namespace
+}  // namespace tessera
