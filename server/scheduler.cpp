@@ -200,17 +200,17 @@ void Scheduler::reap_finished_locked(std::unique_lock<std::mutex>& lock) {
 void Scheduler::renew_leases_locked() {
   const auto now = std::chrono::steady_clock::now();
   for (auto& [id, slot] : running_)
-    if (now - slot->renewed_at >= options_.poll_interval) renew_lease_locked(*slot);
+    if (now - slot->renewed_at >= options_.poll_interval) renew_lease_locked(*slot, "its lease renewal");
 }
 
-void Scheduler::renew_lease_locked(RenderSlot& slot) {
+void Scheduler::renew_lease_locked(RenderSlot& slot, const char* noticed_by) {
   // A run recording its end has its outcome fenced by end_run(): the store's own change of state is no loss of lease.
   if (slot.done || slot.lease_lost || slot.ending) return;
   try {
     if (store_.renew_lease(slot.id, slot.epoch, now_ms(), options_.lease.count()))
       slot.renewed_at = std::chrono::steady_clock::now();
     else
-      lose_lease_locked(slot);
+      lose_lease_locked(slot, noticed_by);
   } catch (const JobStoreError& e) {
     count_store_error();
     log(LogLevel::kWarn, "cannot renew the lease of a job; the render goes on",
@@ -221,7 +221,7 @@ void Scheduler::renew_lease_locked(RenderSlot& slot) {
 void Scheduler::job_changed(const std::string& id, bool claimable) {
   {
     std::lock_guard lock(mutex_);
-    for (RenderSlot* slot : slots_locked(id)) renew_lease_locked(*slot);
+    for (RenderSlot* slot : slots_locked(id)) renew_lease_locked(*slot, "the store's notification");
   }
   if (claimable) cv_.notify_all();
 }
@@ -229,18 +229,18 @@ void Scheduler::job_changed(const std::string& id, bool claimable) {
 void Scheduler::recheck() {
   {
     std::lock_guard lock(mutex_);
-    for (auto& [id, slot] : running_) renew_lease_locked(*slot);
+    for (auto& [id, slot] : running_) renew_lease_locked(*slot, "a look afresh once notifications were back");
   }
   cv_.notify_all();
 }
 
-void Scheduler::lose_lease_locked(RenderSlot& slot) {
+void Scheduler::lose_lease_locked(RenderSlot& slot, const char* noticed_by) {
   if (slot.lease_lost) return;
   slot.lease_lost = true;
   slot.load_stop.request_stop();
   if (slot.session) slot.session->cancel();
   log(LogLevel::kInfo, "the job was changed or taken over elsewhere; its render here stops and records nothing",
-      {{"job", slot.id}, {"epoch", slot.epoch}});
+      {{"job", slot.id}, {"epoch", slot.epoch}, {"noticed_by", noticed_by}});
 }
 
 void Scheduler::dispatch_loop() {
@@ -332,6 +332,8 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       // Whoever holds the job now owns its end. Its files go only if the job is gone.
       log_.add(id, printf_string("stopped at %u spp: the job was changed or taken over elsewhere",
                                  static_cast<unsigned>(samples_done)));
+      log(LogLevel::kInfo, "render stopped: the job was changed or taken over elsewhere",
+          {{"job", id}, {"samples_done", samples_done}});
       try {
         if (!store_.get(id)) files_.remove(id);
       } catch (const JobStoreError& e) {
@@ -458,7 +460,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
                                    static_cast<unsigned>(p.samples_total), p.elapsed_s, p.samples_per_s));
         if (!store_.update_progress(id, slot->epoch, jp)) {
           std::lock_guard lock(mutex_);
-          lose_lease_locked(*slot);
+          lose_lease_locked(*slot, "its progress refused");
           return;
         }
         if (!is_unit) {
@@ -496,7 +498,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       try {
         if (!store_.renew_lease(id, slot->epoch, now_ms(), options_.lease.count())) {
           std::lock_guard lock(mutex_);
-          lose_lease_locked(*slot);
+          lose_lease_locked(*slot, "its lease checked before its outputs");
           lease_lost = true;
         }
       } catch (const JobStoreError&) {
@@ -716,7 +718,7 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
   // bits: the films it reads are the units' authoritative ones, and a done unit is never rendered again.)
   if (!store_.renew_lease(id, slot.epoch, now_ms(), options_.lease.count())) {
     std::lock_guard lock(mutex_);
-    lose_lease_locked(slot);
+    lose_lease_locked(slot, "its lease checked before the merge");
     return;
   }
   const std::string written = write_outputs(record, *film);

@@ -123,8 +123,9 @@ class Scheduler {
   void write_partial_results(const JobRecord& job);
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
   void renew_leases_locked();
-  void renew_lease_locked(RenderSlot& slot);
-  void lose_lease_locked(RenderSlot& slot);
+  // `noticed_by`: what found the lease gone, for the log (a notification, a renewal, a refused write).
+  void renew_lease_locked(RenderSlot& slot, const char* noticed_by);
+  void lose_lease_locked(RenderSlot& slot, const char* noticed_by);
   void notify_state(const std::string& id);
   // The slots of a job here (several for the units of a split job); those still rendering.
   std::vector<RenderSlot*> slots_locked(const std::string& id) const;

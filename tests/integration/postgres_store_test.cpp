@@ -14,6 +14,7 @@
 
 #include "renderer/image_io.h"
 #include "tests/integration/daemon.h"
+#include "tests/integration/postgres_nodes.h"
 #include "tests/server/postgres_cluster.h"
 #include "tests/server/test_util.h"
 
@@ -21,20 +22,6 @@ namespace tessera::server::test {
 namespace {
 
 using nlohmann::json;
-
-std::string submit(httplib::Client& c, const json& doc) {
-  auto res = c.Post("/v1/jobs", doc.dump(), "application/json");
-  if (!res || res->status != 202) {
-    ADD_FAILURE() << "submission refused: " << (res ? res->body : "no answer");
-    return "";
-  }
-  return json::parse(res->body).value("id", "");
-}
-
-std::string state_of(httplib::Client& c, const std::string& id) {
-  auto res = c.Get("/v1/jobs/" + id);
-  return res && res->status == 200 ? json::parse(res->body).value("state", "") : "";
-}
 
 TEST(PostgresStore, ADaemonRendersAJobAndFindsItAgainAfterARestart) {
   PostgresCluster& pg = PostgresCluster::shared();
@@ -75,10 +62,6 @@ TEST(PostgresStore, AnUnreachableDatabaseStopsTheStartWithItsReason) {
     EXPECT_NE(std::string(e.what()).find("cannot connect to PostgreSQL"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("no_such_database"), std::string::npos) << e.what();
   }
-}
-
-std::string row_of(PostgresCluster& pg, const std::string& uri, const std::string& id, const std::string& columns) {
-  return pg.psql(PostgresCluster::database_of(uri), "SELECT " + columns + " FROM tessera_jobs WHERE id = '" + id + "'");
 }
 
 // Another node (here: an UPDATE made directly, as another daemon's cancel would) cancels a job while this daemon
@@ -187,9 +170,11 @@ TEST(PostgresStore, NodesSharingADataDirectoryServeEachOthersJobsAndResumeATaken
       << "the image rendered across two nodes differs from the one-node render";
 }
 
-// Three nodes on one store and one volume, 200 jobs submitted to them at once, one node killed (SIGKILL) on the way:
-// every job ends succeeded, none is lost, none is claimed twice except those the killed node held (taken over once
-// its lease ran out), and each node took its share.
+// Three nodes on one store and one volume, 200 jobs of five priorities submitted to them at once, one node killed
+// (SIGKILL) on the way: every job ends succeeded, none is lost, none is claimed twice except those the killed node
+// held (taken over once its lease ran out), each node took its share, and the claims of all three kept the priority
+// order: no job was claimed while one of a higher priority had been waiting for it, unless that one was being claimed
+// at the same moment by another node (SKIP LOCKED passes over it).
 TEST(PostgresStore, ThreeNodesRunTwoHundredJobsAndLoseNoneWhenOneIsKilled) {
   PostgresCluster& pg = PostgresCluster::shared();
   const std::string uri = pg.create_database();
@@ -200,6 +185,19 @@ TEST(PostgresStore, ThreeNodesRunTwoHundredJobsAndLoseNoneWhenOneIsKilled) {
   };
   Daemon n1(shared, node("n1")), n2(shared, node("n2"));
   auto n3 = std::make_unique<Daemon>(shared, node("n3"));
+  // The database notes, with its own clock and sequence, when each job was queued and claimed.
+  pg.psql(PostgresCluster::database_of(uri), R"sql(
+    CREATE TABLE test_queued (id TEXT, priority INT, at TIMESTAMPTZ DEFAULT clock_timestamp());
+    CREATE TABLE test_claims (n BIGSERIAL, id TEXT, priority INT, at TIMESTAMPTZ DEFAULT clock_timestamp());
+    CREATE FUNCTION test_note() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN
+      IF TG_OP = 'INSERT' THEN INSERT INTO test_queued (id, priority) VALUES (NEW.id, NEW.priority);
+      ELSIF NEW.state = 'running' AND OLD.state <> 'running' THEN
+        INSERT INTO test_claims (id, priority) VALUES (NEW.id, NEW.priority);
+      END IF;
+      RETURN NEW;
+    END $$;
+    CREATE TRIGGER test_note AFTER INSERT OR UPDATE ON tessera_jobs FOR EACH ROW EXECUTE FUNCTION test_note();
+  )sql");
   std::vector<std::unique_ptr<httplib::Client>> clients;
   clients.push_back(n1.client());
   clients.push_back(n2.client());
@@ -209,7 +207,11 @@ TEST(PostgresStore, ThreeNodesRunTwoHundredJobsAndLoseNoneWhenOneIsKilled) {
   for (int t = 0; t < 3; ++t) {
     submitters.emplace_back([&, t] {
       auto c = t == 0 ? n1.client() : t == 1 ? n2.client() : n3->client();  // a connection of its own each
-      for (int i = t; i < kJobs; i += 3) ids[i] = submit(*c, cornell_job(8, 2));
+      for (int i = t; i < kJobs; i += 3) {
+        json doc = cornell_job(16, 16);
+        doc["priority"] = (i * 7) % 5;
+        ids[i] = submit(*c, doc);
+      }
     });
   }
   for (auto& t : submitters) t.join();
@@ -232,6 +234,23 @@ TEST(PostgresStore, ThreeNodesRunTwoHundredJobsAndLoseNoneWhenOneIsKilled) {
   // Claimed more than once: only jobs n3 held when it died (one at a time: --max-jobs 1).
   EXPECT_LE(std::stoi(pg.psql(PostgresCluster::database_of(uri), "SELECT COUNT(*) FROM tessera_jobs WHERE epoch > 1")),
             1);
+  // Priority order across nodes: pairs (a, b) where b was claimed while a, of a higher priority, had been queued for
+  // 100 ms (committed, then), yet a was claimed later, and not among the two claims next to b's (the other nodes'
+  // claims under way at that moment).
+  const std::string inversions = pg.psql(PostgresCluster::database_of(uri), R"sql(
+    SELECT COUNT(*) FROM test_claims b JOIN test_queued qa ON qa.priority > b.priority
+      AND qa.at < b.at - interval '100 milliseconds'
+      JOIN test_claims a ON a.id = qa.id AND a.n > b.n + 2
+  )sql");
+  EXPECT_EQ(inversions, "0") << pg.psql(PostgresCluster::database_of(uri),
+                                        "SELECT n, priority, at FROM test_claims ORDER BY n");
+  // And the order mattered: jobs of different priorities were waiting together.
+  EXPECT_NE(pg.psql(PostgresCluster::database_of(uri), R"sql(
+    SELECT COUNT(*) FROM test_claims a JOIN test_claims b ON a.priority > b.priority
+      JOIN test_queued qa ON qa.id = a.id JOIN test_queued qb ON qb.id = b.id
+      WHERE GREATEST(qa.at, qb.at) < LEAST(a.at, b.at) - interval '100 milliseconds'
+  )sql"),
+            "0");
   // Both survivors rendered some, and either answers for any job.
   EXPECT_NE(n1.log().find("job succeeded"), std::string::npos);
   EXPECT_NE(n2.log().find("job succeeded"), std::string::npos);
