@@ -635,6 +635,7 @@ std::vector<Route> routes(ApiContext* ctx) {
          g.render_threads = ctx->pool ? ctx->pool->size() : 0;
          g.render_threads_busy = ctx->pool ? ctx->pool->busy() : 0;
          g.event_watchers = ctx->events.watchers();
+         if (ctx->store_notifications_up) g.store_notifications_up = ctx->store_notifications_up();
          if (ctx->transport) {
            const TransportStats t = ctx->transport->stats();
            g.http_connections = t.connections;

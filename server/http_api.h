@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -43,6 +44,9 @@ struct ApiContext {
   uint64_t min_free_disk_bytes = 0;
   std::filesystem::path data_dir;
   const HttpTransport* transport = nullptr;  // for the connection gauges (none when served by a plain httplib::Server)
+  // Whether the store's notifications arrive (PostgresNotifications::connected), for its gauge; unset on a store
+  // that has none (SQLite).
+  std::function<bool()> store_notifications_up;
 };
 
 // Every route the API serves, as OpenAPI names it ("/v1/jobs/{id}"), for the test that holds the two in step.

@@ -175,6 +175,7 @@ int run(const Config& config) {
   transport.is_long_lived = is_event_stream_target;
   HttpTransport http(transport);
   ctx.transport = &http;
+  if (notifications) ctx.store_notifications_up = [n = notifications.get()] { return n->connected(); };
   install_api(http, ctx);
   // SO_REUSEADDR only: a restart binds at once over connections in TIME_WAIT, but a second daemon on the port of a
   // running one fails to bind (cpp-httplib's default adds SO_REUSEPORT, with which the kernel would share the port

@@ -54,6 +54,11 @@ std::string Metrics::render(const Gauges& g) const {
          "of a render waits for it to take a write; as /readyz's job_store_failing).\n"
          "# TYPE tessera_job_store_up gauge\n"
       << "tessera_job_store_up " << (g.job_store_up ? 1 : 0) << "\n";
+  if (g.store_notifications_up)
+    out << "# HELP tessera_store_notifications_up Whether this node hears the other nodes' changes and events as they "
+           "happen (PostgreSQL LISTEN); 0: it polls the store instead, and they reach it within about a second.\n"
+           "# TYPE tessera_store_notifications_up gauge\n"
+        << "tessera_store_notifications_up " << (*g.store_notifications_up ? 1 : 0) << "\n";
   if (g.jobs) {
     // Counts the store could not give are left out rather than reported as zero.
     out << "# HELP tessera_jobs Jobs in the store by state.\n# TYPE tessera_jobs gauge\n";

@@ -37,6 +37,7 @@ class Metrics {
     int render_threads = 0;
     int render_threads_busy = 0;
     size_t event_watchers = 0;
+    std::optional<bool> store_notifications_up;  // nothing on a store without notifications
     // The connection layer's, when the daemon serves through it: open connections, connections refused at accept
     // (429, 503) and requests or transfers that missed a deadline.
     std::optional<int64_t> http_connections, http_refused_total, http_timed_out_total;

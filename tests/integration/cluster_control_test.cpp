@@ -244,6 +244,11 @@ TEST(Cluster, PostgresRestartedMidRenderTheNodesReconnectAndLoseNothing) {
   };
   EXPECT_TRUE(eventually([&] { return listenings(a.log()) >= 2 && listenings(b.log()) >= 2; }, 10))
       << a.log() << b.log();
+  for (auto* c : {ca.get(), cb.get()}) {
+    auto metrics = c->Get("/metrics");
+    ASSERT_TRUE(metrics);
+    EXPECT_NE(metrics->body.find("\ntessera_store_notifications_up 1\n"), std::string::npos) << metrics->body;
+  }
   const auto s = stop_through_the_other_node(pg, uri, a, "node-a", b, "cancel");
   ASSERT_TRUE(s);
   EXPECT_LT(*s, 1.0);
