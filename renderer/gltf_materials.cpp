@@ -114,6 +114,10 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
     const json& t = ext["KHR_materials_transmission"];
     set("transmission", number_or(t, "transmissionFactor", 0.0), t.value("transmissionTexture", json()), 0, false);
   }
+  // KHR_materials_volume: a thicknessFactor above 0 makes the object a solid dielectric (refracting in and out);
+  // thickness 0, or no volume, keeps the surface thin-walled (the extension's "thin-walled" rule).
+  if (ext.contains("KHR_materials_volume") && number_or(ext["KHR_materials_volume"], "thicknessFactor", 0.0) > 0)
+    p["thin_walled"] = false;
   if (ext.contains("KHR_materials_specular")) {
     const json& t = ext["KHR_materials_specular"];
     set("specular", number_or(t, "specularFactor", 1.0), t.value("specularTexture", json()), 3, false);
@@ -125,9 +129,6 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
     set("clearcoat", number_or(t, "clearcoatFactor", 0.0), t.value("clearcoatTexture", json()), 0, false);
     set("clearcoat_roughness", number_or(t, "clearcoatRoughnessFactor", 0.0),
         t.value("clearcoatRoughnessTexture", json()), 1, false);
-    if (t.contains("clearcoatNormalTexture") && warnings)
-      warnings->push_back("material \"" + m.value("name", std::string()) +
-                          "\": clearcoatNormalTexture is not applied (the clearcoat follows the surface's normal)");
   }
   if (ext.contains("KHR_materials_sheen")) {
     const json& t = ext["KHR_materials_sheen"];
@@ -325,6 +326,17 @@ Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<c
         json holder = {{"normal", tex}};
         material->normal_map = params::rgb_param(holder, "normal", mp, Rgb(1), 0.0f, 1.0f, mctx).texture;
         material->normal_scale = static_cast<float>(mj["normalTexture"].value("scale", 1.0));
+      }
+    }
+    // KHR_materials_clearcoat's clearcoatNormalTexture: the coat's own normal map, read like normalTexture.
+    if (const json ext_cc = parse_extensions(m.extensions_json_string).value("KHR_materials_clearcoat", json());
+        ext_cc.is_object() && ext_cc.contains("clearcoatNormalTexture")) {
+      json tex =
+          texture_param(doc, ext_cc["clearcoatNormalTexture"], -1, false, json{1, 1, 1}, &import.result.warnings);
+      if (!tex.is_null()) {
+        json holder = {{"normal", tex}};
+        material->coat_normal_map = params::rgb_param(holder, "normal", mp, Rgb(1), 0.0f, 1.0f, mctx).texture;
+        material->coat_normal_scale = static_cast<float>(ext_cc["clearcoatNormalTexture"].value("scale", 1.0));
       }
     }
     // KHR_materials_volume: absorption through the object (thickness is a rasteriser's stand-in; a path tracer

@@ -49,6 +49,10 @@ class Material {
   // shading frame at every hit.
   std::shared_ptr<const Texture> normal_map;
   float normal_scale = 1;
+  // A coating layer's own tangent-space normal map (glTF KHR_materials_clearcoat's clearcoatNormalTexture), read
+  // from the frame before normal_map bends it; hits get it as ShadingPoint::coat_normal.
+  std::shared_ptr<const Texture> coat_normal_map;
+  float coat_normal_scale = 1;
 
   // True when the BSDF looks the same under any rotation of the tangent frame about the normal (and the material
   // has no normal map): hits then get a frame built from the normal alone, without deriving a tangent from the

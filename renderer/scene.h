@@ -105,8 +105,21 @@ class Scene {
   double build_seconds_ = 0;
 };
 
-// Bends the shading frame of `sp` by the material's normal map.
-void apply_normal_map(const Material& material, ShadingPoint* sp);
+// Bends the shading frame of `sp` by the material's normal map, seen from direction `wo` (world, towards where the
+// ray came from; any length), and keeps the mirror reflection of wo above the surface
+// (keep_reflection_above_surface).
+void apply_normal_map(const Material& material, const Vec3& wo, ShadingPoint* sp);
+// The normal `map` (tangent space, x and y scaled by `scale`) gives at `sp`, in world space, from sp's frame; zero
+// where the map's normal is unusable or points under the surface.
+Vec3 mapped_normal(const Texture& map, float scale, const ShadingPoint& sp);
+
+// A shading normal bent so that the mirror reflection of `wo` about it stays above the geometric surface (normal
+// `ng`), on wo's side: where a normal map tilts the normal so far that the reflection would point into the surface,
+// the reflection is raised to just above the horizon and the normal becomes the half vector of wo and that
+// reflection. Otherwise paths die there and strong normal maps on metals show black crescents. This is the shading
+// normal adaption of Keller et al. 2017, "The Iray Light Transport Simulation and Rendering System" (also Blender
+// Cycles' ensure_valid_reflection); `n` is returned unchanged where its reflection is valid.
+Vec3 keep_reflection_above_surface(const Vec3& n, const Vec3& ng, const Vec3& wo);
 
 // Offsets a ray origin off the surface at `p` along the geometric normal towards `dir`, against self-intersection.
 Vec3 offset_ray_origin(const Vec3& p, const Vec3& ng, const Vec3& dir);

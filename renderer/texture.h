@@ -26,6 +26,9 @@ struct ShadingPoint {
   // image textures average their texels over it (mip-mapping). 0 reads the finest texels.
   float uv_footprint = 0;
   bool front_face = true;  // the ray arrived on the side ng points to
+  // The normal of a coating layer with its own normal map (Material::coat_normal_map), world; zero when the coat
+  // follows frame.n.
+  Vec3 coat_normal{0, 0, 0};
 };
 
 class Texture {

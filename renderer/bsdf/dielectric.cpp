@@ -9,38 +9,94 @@
 // 1/eta'^2 with eta' = eta_(wi side) / eta_(wo side), and BsdfSample::eta = eta' lets the integrator take that factor
 // out of Russian roulette.
 //
-// Rough (Walter et al. 2007, "Microfacet Models for Refraction through Rough Surfaces"): reflection by eq. 20 and
-// transmission by eq. 21, with Walter's i = wi, o = wo and eta_i, eta_o the indices on their sides,
-//   f_t = |wi.m| |wo.m| / (|wi.n| |wo.n|) * eta_o^2 (1 - F) G D / (eta_i (wi.m) + eta_o (wo.m))^2,
-// which is the radiance form (the 1/eta'^2 above); m is the generalised half vector ~ eta_i wi + eta_o wo
-// (eq. 16). Sampling draws a visible normal of wo (microfacet.h), chooses reflection or refraction by F(wo.m), and
-// converts by the Jacobians 1/(4 |wo.m|) (eq. 14) and eta_i^2 |wi.m| / (eta_i wi.m + eta_o wo.m)^2 (eq. 17).
+// Rough: the microfacet interface of Walter et al. 2007 (rough_dielectric.h), its reflected and transmitted parts
+// tinted by "reflectance" and "transmittance".
 //
 // Local frame: +z points outside; "ior" is eta_inside / eta_outside.
 #include "renderer/bsdf/common.h"
 #include "renderer/bsdf/fresnel.h"
+#include "renderer/bsdf/rough_dielectric.h"
 #include "renderer/scene_error.h"
 
 namespace tessera {
+
+bool RoughDielectric::half_vector(const Vec3& wo, const Vec3& wi, Vec3* wm, float* etap) const {
+  const float cos_o = wo.z, cos_i = wi.z;
+  if (cos_o == 0 || cos_i == 0) return false;
+  const bool reflect = cos_o * cos_i > 0;
+  *etap = reflect ? 1.0f : (cos_o > 0 ? eta : 1 / eta);
+  Vec3 m = wi * *etap + wo;
+  float len2 = length_squared(m);
+  if (!(len2 > 0)) return false;
+  m = m / std::sqrt(len2);
+  if (m.z < 0) m = -m;
+  // Microfacets seen from behind by either direction contribute nothing.
+  if (dot(m, wi) * cos_i <= 0 || dot(m, wo) * cos_o <= 0) return false;
+  *wm = m;
+  return true;
+}
+
+float RoughDielectric::eval(const Vec3& wo, const Vec3& wi, bool* transmitted) const {
+  *transmitted = wo.z * wi.z < 0;
+  Vec3 wm;
+  float etap;
+  if (!half_vector(wo, wi, &wm, &etap)) return 0;
+  const float cos_o = wo.z, cos_i = wi.z;
+  const float F = fresnel_dielectric(dot(wo, wm), eta);
+  const float dg = dist.d(wm) * dist.g(wo, wi, wm);
+  if (!*transmitted) return dg * F / std::abs(4 * cos_i * cos_o);
+  const float denom = sqr(dot(wi, wm) + dot(wo, wm) / etap) * cos_i * cos_o;
+  return dg * (1 - F) * std::abs(dot(wi, wm) * dot(wo, wm) / denom) / sqr(etap);
+}
+
+float RoughDielectric::pdf(const Vec3& wo, const Vec3& wi) const {
+  Vec3 wm;
+  float etap;
+  if (!half_vector(wo, wi, &wm, &etap)) return 0;
+  const float R = fresnel_dielectric(dot(wo, wm), eta);
+  const float pr = R * weight_r, pt = (1 - R) * weight_t;
+  if (pr + pt <= 0) return 0;
+  const float dvis = dist.d_visible(wo, wm);
+  if (wo.z * wi.z > 0) return dvis / (4 * std::abs(dot(wo, wm))) * pr / (pr + pt);
+  const float dwm_dwi = std::abs(dot(wi, wm)) / sqr(dot(wi, wm) + dot(wo, wm) / etap);
+  return dvis * dwm_dwi * pt / (pr + pt);
+}
+
+bool RoughDielectric::sample(const Vec3& wo, float uc, Vec2 u, Vec3* wi, bool* transmitted, float* etap) const {
+  if (wo.z == 0) return false;
+  // Visible normal of wo (from below: of the flipped configuration), on the upper side.
+  const Vec3 wm = dist.sample_visible(wo.z > 0 ? wo : -wo, u, uc);
+  const float om = dot(wo, wm);
+  const float R = fresnel_dielectric(om, eta);
+  const float pr = R * weight_r, pt = (1 - R) * weight_t;
+  if (pr + pt <= 0) return false;
+  if (uc * (pr + pt) < pr) {
+    *wi = wm * (2 * om) - wo;
+    *transmitted = false;
+    *etap = 1;
+    return wi->z * wo.z > 0;
+  }
+  if (!refract(wo, om > 0 ? wm : -wm, om > 0 ? eta : 1 / eta, wi)) return false;
+  *transmitted = true;
+  *etap = wo.z > 0 ? eta : 1 / eta;
+  return wi->z * wo.z < 0;
+}
+
 namespace {
 
 class DielectricBsdf final : public Bsdf {
  public:
   DielectricBsdf(const MicrofacetDistribution& dist, float eta, const Rgb& reflectance, const Rgb& transmittance)
-      : dist_(dist), eta_(eta), kr_(reflectance), kt_(transmittance) {}
+      : lobe_{dist, eta, max_component(reflectance), max_component(transmittance)},
+        eta_(eta),
+        kr_(reflectance),
+        kt_(transmittance) {}
 
   Rgb eval(const Vec3& wo, const Vec3& wi) const override {
     if (smooth()) return Rgb(0);
-    Vec3 wm;
-    float etap;
-    if (!half_vector(wo, wi, &wm, &etap)) return Rgb(0);
-    const float cos_o = wo.z, cos_i = wi.z;
-    const float F = fresnel_dielectric(dot(wo, wm), eta_);
-    const float dg = dist_.d(wm) * dist_.g(wo, wi, wm);
-    if (cos_o * cos_i > 0) return kr_ * (dg * F / std::abs(4 * cos_i * cos_o));
-    const float denom = sqr(dot(wi, wm) + dot(wo, wm) / etap) * cos_i * cos_o;
-    const float ft = dg * (1 - F) * std::abs(dot(wi, wm) * dot(wo, wm) / denom) / sqr(etap);
-    return kt_ * ft;
+    bool transmitted;
+    const float f = lobe_.eval(wo, wi, &transmitted);
+    return (transmitted ? kt_ : kr_) * f;
   }
 
   std::optional<BsdfSample> sample(const Vec3& wo, float uc, Vec2 u) const override {
@@ -59,42 +115,17 @@ class DielectricBsdf final : public Bsdf {
       Rgb f = kt_ * ((1 - R) / std::abs(wi.z) / sqr(etap_t));
       return BsdfSample{f, wi, pt / (pr + pt), kBsdfTransmission | kBsdfSpecular, etap_t};
     }
-    // Visible normal of wo (from below: of the flipped configuration), on the upper side.
-    Vec3 wm = dist_.sample_visible(wo.z > 0 ? wo : -wo, u, uc);
-    const float om = dot(wo, wm);
-    const float R = fresnel_dielectric(om, eta_);
-    const float pr = R * max_component(kr_), pt = (1 - R) * max_component(kt_);
-    if (pr + pt <= 0) return std::nullopt;
     Vec3 wi;
-    uint32_t flags;
-    if (uc * (pr + pt) < pr) {
-      wi = wm * (2 * om) - wo;
-      if (wi.z * wo.z <= 0) return std::nullopt;
-      flags = kBsdfReflection | kBsdfGlossy;
-    } else {
-      if (!refract(wo, om > 0 ? wm : -wm, om > 0 ? eta_ : 1 / eta_, &wi)) return std::nullopt;
-      if (wi.z * wo.z >= 0 || wi.z == 0) return std::nullopt;
-      flags = kBsdfTransmission | kBsdfGlossy;
-    }
+    bool transmitted;
+    float etap;
+    if (!lobe_.sample(wo, uc, u, &wi, &transmitted, &etap)) return std::nullopt;
     float pdf_value = pdf(wo, wi);
     Rgb f = eval(wo, wi);
     if (!(pdf_value > 0) || is_black(f)) return std::nullopt;
-    return BsdfSample{f, wi, pdf_value, flags, (flags & kBsdfTransmission) ? etap_t : 1.0f};
+    return BsdfSample{f, wi, pdf_value, (transmitted ? kBsdfTransmission : kBsdfReflection) | kBsdfGlossy, etap};
   }
 
-  float pdf(const Vec3& wo, const Vec3& wi) const override {
-    if (smooth()) return 0;
-    Vec3 wm;
-    float etap;
-    if (!half_vector(wo, wi, &wm, &etap)) return 0;
-    const float R = fresnel_dielectric(dot(wo, wm), eta_);
-    const float pr = R * max_component(kr_), pt = (1 - R) * max_component(kt_);
-    if (pr + pt <= 0) return 0;
-    const float dvis = dist_.d_visible(wo, wm);
-    if (wo.z * wi.z > 0) return dvis / (4 * std::abs(dot(wo, wm))) * pr / (pr + pt);
-    const float dwm_dwi = std::abs(dot(wi, wm)) / sqr(dot(wi, wm) + dot(wo, wm) / etap);
-    return dvis * dwm_dwi * pt / (pr + pt);
-  }
+  float pdf(const Vec3& wo, const Vec3& wi) const override { return smooth() ? 0 : lobe_.pdf(wo, wi); }
 
   // The adjoint: the radiance form's 1/eta'^2 of transmission taken out again (f*(wo, wi) = f(wi, wo)).
   Rgb eval_adjoint(const Vec3& wo, const Vec3& wi) const override {
@@ -113,27 +144,9 @@ class DielectricBsdf final : public Bsdf {
   Rgb albedo_hint() const override { return kt_; }
 
  private:
-  bool smooth() const { return dist_.effectively_smooth(); }
+  bool smooth() const { return lobe_.dist.effectively_smooth(); }
 
-  // The generalised half vector of (wo, wi) on the upper side (Walter 2007, eq. 16), with eta' = eta_(wi side) /
-  // eta_(wo side) (1 for reflection); false for degenerate or back-facing configurations.
-  bool half_vector(const Vec3& wo, const Vec3& wi, Vec3* wm, float* etap) const {
-    const float cos_o = wo.z, cos_i = wi.z;
-    if (cos_o == 0 || cos_i == 0) return false;
-    const bool reflect = cos_o * cos_i > 0;
-    *etap = reflect ? 1.0f : (cos_o > 0 ? eta_ : 1 / eta_);
-    Vec3 m = wi * *etap + wo;
-    float len2 = length_squared(m);
-    if (!(len2 > 0)) return false;
-    m = m / std::sqrt(len2);
-    if (m.z < 0) m = -m;
-    // Microfacets seen from behind by either direction contribute nothing.
-    if (dot(m, wi) * cos_i <= 0 || dot(m, wo) * cos_o <= 0) return false;
-    *wm = m;
-    return true;
-  }
-
-  MicrofacetDistribution dist_;
+  RoughDielectric lobe_;
   float eta_;
   Rgb kr_, kt_;
 };

@@ -18,7 +18,9 @@
 //           grazing angles, so tessera divides it by max(1, E_sh(mu_o), E_sh(mu_i)) and caps E_sh at 1 in the
 //           scaling: reciprocal, and the sum stays at most 1
 //   coated: f min(1 - clearcoat E_c(mu_o), 1 - clearcoat E_c(mu_i)) + clearcoat F_c(V.H) D_c V_c,
-//           F_c = Schlick(0.04, 1, V.H), alpha_c = clearcoat_roughness^2   (KHR_materials_clearcoat, "fresnel_coat")
+//           F_c = Schlick(0.04, 1, V.H), alpha_c = clearcoat_roughness^2   (KHR_materials_clearcoat, "fresnel_coat");
+//           the coat's cosines, D_c and V_c taken about its own normal (clearcoatNormalTexture), which may differ
+//           from the base's
 // Energy: the appendix's diffuse weight W = 1 - max(F_d(V.H)) gains energy at grazing angles (measured here: albedo
 // up to 1.34 for a white rough dielectric at 88 degrees), because the specular lobe's albedo E_s(mu) grows faster
 // than the average of F over the diffuse directions falls. tessera therefore couples the diffuse lobe to the
@@ -32,11 +34,22 @@
 // reflection lobe mirrored through the surface (no refraction). The half vector of a transmitted pair is that of
 // its mirrored pair, so every term is symmetric in wo and wi (reciprocal), and with Fresnel weights <= 1 and
 // single-scattering microfacet lobes the albedo is at most 1 (energy is lost, not gained, at high roughness).
-// Roughness below 0.045 (alpha 0.002) is clamped there: the model has no delta lobes. The transmission lobe's
-// roughness is scaled by clamp(2 ior - 2, 0, 1), as the Khronos glTF Sample Viewer does (applyIorToRoughness): at
-// IOR 1 nothing refracts, so a rough pane stays clear; at 1.5 the lobe is as rough as the reflection.
+// Roughness below 0.045 (alpha 0.002) is clamped there: the model has no delta lobes.
+// Solid transmission ("thin_walled": false; glTF KHR_materials_volume with a thicknessFactor above 0): the object is
+// a dielectric volume, and the transmission lobe is the rough dielectric interface of Walter et al. 2007
+// (rough_dielectric.h) at the material's IOR, its transmitted part tinted by the base colour: glTF's
+//   dielectric_brdf = mix(fresnel_mix(ior, diffuse, specular_brdf), fresnel_mix(ior, specular_btdf, specular_brdf),
+//                         transmission)
+// (KHR_materials_transmission, "Implementation"; KHR_materials_volume, "Refraction"), with the second fresnel_mix
+// the interface itself: rays refract in by Snell's law (on average over the microfacets), travel inside, and refract
+// out or reflect totally from inside. Its reflection takes the place of the (1 - metallic) transmission share of the
+// F_d D V lobe. Across it the BSDF is the radiance form (1/eta'^2, Veach 1997, 5.2); the adjoint takes that out. The
+// transmission lobe's roughness is scaled by clamp(2 ior - 2, 0, 1), as the Khronos glTF Sample Viewer does
+// (applyIorToRoughness): at IOR 1 nothing refracts, so a rough pane stays clear; at 1.5 the lobe is as rough as the
+// reflection.
 #include "renderer/bsdf/common.h"
 #include "renderer/bsdf/fresnel.h"
+#include "renderer/bsdf/rough_dielectric.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"
 #include "renderer/thread_pool.h"
@@ -188,9 +201,12 @@ struct GltfLobes {
   Rgb f0_d{0.04f, 0.04f, 0.04f};
   float f90_d = 1;
   float transmission = 0;
-  float alpha_t = 1;  // the transmission lobe's
+  float alpha_t = 1;   // the transmission lobe's
+  bool solid = false;  // transmission through a dielectric volume (refracting), not a thin wall
+  float eta = 1.5f;    // the volume's IOR, for solid transmission
   float clearcoat = 0;
   float alpha_c = 0.002f;
+  Vec3 coat_n{0, 0, 1};  // the clearcoat's normal in the shading frame
   Rgb sheen_color{0, 0, 0};
   float alpha_sheen = 0.01f;
 };
@@ -204,6 +220,13 @@ class GltfPbrBsdf final : public Bsdf {
     dist_t_.alpha_x = dist_t_.alpha_y = l.alpha_t;
     dist_c_.type = MicrofacetType::kGgx;
     dist_c_.alpha_x = dist_c_.alpha_y = l.alpha_c;
+    coat_tilted_ = l.coat_n.z < 1;
+    if (coat_tilted_) {
+      coat_frame_ = Frame::from_normal(l.coat_n);
+      // The back side (wo below): the mirrored configuration of the coat seen from behind, normal -c mirrored.
+      coat_frame_back_ = Frame::from_normal(Vec3(-l.coat_n.x, -l.coat_n.y, l.coat_n.z));
+    }
+    if (solid()) interface_ = RoughDielectric{dist_t_, l.eta, 1.0f, max_component(l.base_color)};
     float a1, a2;
     SchlickAlbedoTable::get().average(l.alpha, &a1, &a2);
     specular_average_ = std::min(max_component(l.f0_d * a1 + Rgb(l.f90_d * a2)), 0.999f);
@@ -218,7 +241,7 @@ class GltfPbrBsdf final : public Bsdf {
     Vec3 wo = wo_in;
     const bool flip = wo.z < 0;
     if (flip) wo.z = -wo.z;
-    const float* p = lobes_at(wo);
+    const float* p = lobes_at(wo, flip);
     Vec3 wi;
     uint32_t flags;
     if (uc < p[0] || uc >= p[0] + p[1] + p[2] + p[3]) {  // diffuse or sheen: cosine-weighted
@@ -228,11 +251,24 @@ class GltfPbrBsdf final : public Bsdf {
       if (!microfacet_reflection_sample(dist_, wo, u, 0.5f, &wi)) return std::nullopt;
       flags = kBsdfReflection | kBsdfGlossy;
     } else if (uc < p[0] + p[1] + p[2]) {
+      if (solid()) {
+        // The interface, in the unmirrored frame: refraction in from outside, out (or total reflection) from inside.
+        bool transmitted;
+        float etap;
+        if (!interface_.sample(wo_in, (uc - p[0] - p[1]) / p[2], u, &wi, &transmitted, &etap)) return std::nullopt;
+        float pdf_value;
+        const Rgb f = evaluate(wo_in, wi, &pdf_value);
+        if (!(pdf_value > 0)) return std::nullopt;
+        return BsdfSample{f, wi, pdf_value, (transmitted ? kBsdfTransmission : kBsdfReflection) | kBsdfGlossy, etap};
+      }
       if (!microfacet_reflection_sample(dist_t_, wo, u, 0.5f, &wi)) return std::nullopt;
       wi.z = -wi.z;
       flags = kBsdfTransmission | kBsdfGlossy;
     } else {
-      if (!microfacet_reflection_sample(dist_c_, wo, u, 0.5f, &wi)) return std::nullopt;
+      const Frame& cf = coat_frame(flip);
+      if (!microfacet_reflection_sample(dist_c_, to_coat(cf, wo), u, 0.5f, &wi)) return std::nullopt;
+      wi = from_coat(cf, wi);
+      if (wi.z <= 0) return std::nullopt;  // a coat direction under the base: not a reflection the model has
       flags = kBsdfReflection | kBsdfGlossy;
     }
     if (flip) wi.z = -wi.z;
@@ -246,6 +282,17 @@ class GltfPbrBsdf final : public Bsdf {
     float p;
     evaluate(wo, wi, &p);  // one formula for the pdf; pdf alone is not on the render loop's path
     return p;
+  }
+
+  // The adjoint (bsdf.h): solid transmission refracts, and its radiance form's 1/eta'^2 is taken out again.
+  Rgb eval_adjoint(const Vec3& wo, const Vec3& wi) const override {
+    const Rgb f = eval(wo, wi);
+    return solid() && wo.z * wi.z < 0 ? f * sqr(wo.z > 0 ? l_.eta : 1 / l_.eta) : f;
+  }
+  std::optional<BsdfSample> sample_adjoint(const Vec3& wo, float uc, Vec2 u) const override {
+    std::optional<BsdfSample> s = sample(wo, uc, u);
+    if (s && (s->flags & kBsdfTransmission)) s->f *= sqr(s->eta);
+    return s;
   }
 
   uint32_t flags() const override {
@@ -269,31 +316,49 @@ class GltfPbrBsdf final : public Bsdf {
     const bool transmit = wi.z < 0;
     if (transmit && l_.transmission <= 0) return Rgb(0);
     const Vec3 wr(wi.x, wi.y, std::abs(wi.z));  // the mirrored pair for transmission
-    Vec3 h;
-    if (!reflection_half_vector(wo, wr, &h)) return Rgb(0);
-    const float vh = dot(wo, h);
-    float specular_pdf;
-    const float dv = microfacet_reflection_eval_pdf(transmit ? dist_t_ : dist_, wo, wr, h, &specular_pdf);
-    if (pdf_out) {
-      const float* p = lobes_at(wo);
-      if (transmit) {
-        *pdf_out = p[2] * specular_pdf;
-      } else {
-        *pdf_out = (p[0] + p[4]) * cosine_hemisphere_pdf(wr.z) + p[1] * specular_pdf;
-        if (p[3] > 0) *pdf_out += p[3] * microfacet_reflection_pdf(dist_c_, wo, wr);
-      }
-    }
-    const Rgb fd = fresnel_schlick(l_.f0_d, Rgb(l_.f90_d), vh);
-    const float fd_max = max_component(fd);
     const float m = l_.metallic;
-    Rgb f;
-    if (transmit) {
-      f = l_.base_color * ((1 - m) * l_.transmission * (1 - fd_max) * dv);
-    } else {
-      lobes_at(wo);  // fills cache_.albedo_o
-      const float w = (1 - cache_.albedo_o) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
-      f = l_.base_color * ((1 - m) * (1 - l_.transmission) * w * kInvPi) + fd * ((1 - m) * dv);
-      if (m > 0) f += fresnel_schlick(l_.base_color, Rgb(1), vh) * (m * dv);
+    Rgb f(0);
+    // Solid transmission: the dielectric interface, on the pair as given (its two sides differ).
+    if (solid()) {
+      bool transmitted;
+      const float fi = interface_.eval(wo_in, wi_in, &transmitted);
+      const float share = (1 - m) * l_.transmission;
+      f = (transmitted ? l_.base_color : Rgb(1)) * (share * fi);
+      if (pdf_out) *pdf_out = lobes_at(wo, wo_in.z < 0)[2] * interface_.pdf(wo_in, wi_in);
+    }
+    Vec3 h;
+    float vh = 1;
+    const bool thin_transmit = transmit && !solid();
+    if ((!transmit || thin_transmit) && reflection_half_vector(wo, wr, &h)) {
+      vh = dot(wo, h);
+      float specular_pdf;
+      const float dv = microfacet_reflection_eval_pdf(transmit ? dist_t_ : dist_, wo, wr, h, &specular_pdf);
+      if (pdf_out) {
+        const float* p = lobes_at(wo, wo_in.z < 0);
+        if (transmit) {
+          *pdf_out = p[2] * specular_pdf;
+        } else {
+          *pdf_out += (p[0] + p[4]) * cosine_hemisphere_pdf(wr.z) + p[1] * specular_pdf;
+          if (p[3] > 0) {
+            const Frame& cf = coat_frame(wo_in.z < 0);
+            *pdf_out += p[3] * microfacet_reflection_pdf(dist_c_, to_coat(cf, wo), to_coat(cf, wr));
+          }
+        }
+      }
+      const Rgb fd = fresnel_schlick(l_.f0_d, Rgb(l_.f90_d), vh);
+      const float fd_max = max_component(fd);
+      if (transmit) {
+        f = l_.base_color * ((1 - m) * l_.transmission * (1 - fd_max) * dv);
+      } else {
+        lobes_at(wo, wo_in.z < 0);  // fills cache_.albedo_o
+        const float w = (1 - cache_.albedo_o) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
+        // With solid transmission the interface reflects for its share of the surface.
+        const float specular_share = solid() ? (1 - m) * (1 - l_.transmission) : 1 - m;
+        f += l_.base_color * ((1 - m) * (1 - l_.transmission) * w * kInvPi) + fd * (specular_share * dv);
+        if (m > 0) f += fresnel_schlick(l_.base_color, Rgb(1), vh) * (m * dv);
+      }
+    } else if (!solid()) {
+      return Rgb(0);
     }
     if (sheen_max_ > 0) {
       const float eo = sheen_albedo(wo.z), ei = sheen_albedo(wr.z);
@@ -303,10 +368,14 @@ class GltfPbrBsdf final : public Bsdf {
       if (!transmit) f += l_.sheen_color * (sheen_eval(wo, wr, l_.alpha_sheen) / std::max(1.0f, std::max(eo, ei)));
     }
     if (l_.clearcoat > 0) {
-      f = f * std::min(1 - l_.clearcoat * coat_albedo(wo.z), 1 - l_.clearcoat * coat_albedo(wr.z));
+      const Frame& cf = coat_frame(wo_in.z < 0);
+      const Vec3 wo_c = to_coat(cf, wo), wr_c = to_coat(cf, wr);
+      f = f * std::min(1 - l_.clearcoat * coat_albedo(wo_c.z), 1 - l_.clearcoat * coat_albedo(wr_c.z));
       if (!transmit) {
-        const float fc = l_.clearcoat * fresnel_schlick(0.04f, vh);
-        f += Rgb(fc * microfacet_reflection_eval(dist_c_, wo, wr));
+        // V.H: the half vector of the pair is the same in either frame.
+        Vec3 hc;
+        const float fc = reflection_half_vector(wo, wr, &hc) ? l_.clearcoat * fresnel_schlick(0.04f, dot(wo, hc)) : 0;
+        f += Rgb(fc * microfacet_reflection_eval(dist_c_, wo_c, wr_c));
       }
     }
     return f;
@@ -314,26 +383,38 @@ class GltfPbrBsdf final : public Bsdf {
 
   // The lobe probabilities and the specular albedo at wo (upper side), kept for the wo of the last call: a path
   // vertex asks for them up to three times (light sample, BSDF sample, its evaluation) with the same wo.
-  const float* lobes_at(const Vec3& wo) const {
-    if (!(wo.x == cache_.wo.x && wo.y == cache_.wo.y && wo.z == cache_.wo.z)) {
-      lobe_probabilities(wo, cache_.p);
+  // `back`: wo was mirrored from the back side (the coat's own normal then differs).
+  const float* lobes_at(const Vec3& wo, bool back) const {
+    if (!(wo.x == cache_.wo.x && wo.y == cache_.wo.y && wo.z == cache_.wo.z && back == cache_.back)) {
+      lobe_probabilities(wo, back, cache_.p);
       cache_.albedo_o = specular_albedo(wo.z);
       cache_.wo = wo;
+      cache_.back = back;
     }
     return cache_.p;
   }
 
   // Probabilities of the diffuse, specular, transmission, clearcoat and sheen lobes, from their weights at wo with
   // the Fresnel terms taken at the normal (Schlick at N.V).
-  void lobe_probabilities(const Vec3& wo, float p[5]) const {
+  void lobe_probabilities(const Vec3& wo, bool back, float p[5]) const {
     const float m = l_.metallic;
     const Rgb fd = fresnel_schlick(l_.f0_d, Rgb(l_.f90_d), wo.z);
     const float fd_max = max_component(fd);
     const float base = luminance(l_.base_color);
-    const float fc = l_.clearcoat * fresnel_schlick(0.04f, wo.z);
+    // The coat's weight from the cosine about its own normal; none where wo is under the coat.
+    const float coat_cos = to_coat(coat_frame(back), wo).z;
+    const float fc = coat_cos > 0 ? l_.clearcoat * fresnel_schlick(0.04f, coat_cos) : 0;
     p[0] = (1 - fc) * (1 - m) * (1 - l_.transmission) * (1 - fd_max) * base;
-    p[1] = (1 - fc) * ((1 - m) * luminance(fd) + m * luminance(fresnel_schlick(l_.base_color, Rgb(1), wo.z)));
-    p[2] = (1 - fc) * (1 - m) * l_.transmission * (1 - fd_max) * base;
+    const float t = l_.transmission;
+    if (solid()) {
+      // The interface reflects and transmits: its share of the surface, by what it reflects and what it passes.
+      p[1] =
+          (1 - fc) * ((1 - m) * (1 - t) * luminance(fd) + m * luminance(fresnel_schlick(l_.base_color, Rgb(1), wo.z)));
+      p[2] = (1 - fc) * (1 - m) * t * (fd_max + (1 - fd_max) * base);
+    } else {
+      p[1] = (1 - fc) * ((1 - m) * luminance(fd) + m * luminance(fresnel_schlick(l_.base_color, Rgb(1), wo.z)));
+      p[2] = (1 - fc) * (1 - m) * t * (1 - fd_max) * base;
+    }
     p[3] = fc;
     p[4] = 0;
     if (sheen_max_ > 0) {
@@ -364,14 +445,24 @@ class GltfPbrBsdf final : public Bsdf {
     return std::min(0.04f * e1 + e2, 1.0f);
   }
 
+  bool solid() const { return l_.solid && l_.transmission > 0 && l_.metallic < 1; }
+  // The clearcoat's frame in the (mirrored-to-front) shading frame, for wo on the front or (`back`) the back side.
+  const Frame& coat_frame(bool back) const { return back ? coat_frame_back_ : coat_frame_; }
+  Vec3 to_coat(const Frame& cf, const Vec3& w) const { return coat_tilted_ ? cf.to_local(w) : w; }
+  Vec3 from_coat(const Frame& cf, const Vec3& w) const { return coat_tilted_ ? cf.to_world(w) : w; }
+
   GltfLobes l_;
   MicrofacetDistribution dist_, dist_t_, dist_c_;
+  RoughDielectric interface_;  // solid transmission's
+  bool coat_tilted_ = false;   // the coat has its own normal
+  Frame coat_frame_, coat_frame_back_;
   // A BSDF belongs to one path vertex on one thread, so the cache needs no synchronisation. wo starts as a direction
   // no caller passes (not unit length).
   mutable struct {
     Vec3 wo{0, 0, 0};
     float p[5] = {0, 0, 0, 0, 0};
     float albedo_o = 0;
+    bool back = false;
   } cache_;
   float specular_average_ = 0;
   float sheen_max_ = 0;
@@ -383,6 +474,8 @@ class GltfPbrMaterial final : public Material {
   FloatParam metallic, roughness, specular, transmission, clearcoat, clearcoat_roughness, sheen_roughness;
   float f0_ior = 0.04f;
   float transmission_roughness_scale = 1;  // clamp(2 ior - 2, 0, 1)
+  float ior = 1.5f;
+  bool solid = false;  // "thin_walled": false, and an index that refracts
   // metallic's and roughness's textures as one RGB lookup, when they read channels of the same image.
   std::shared_ptr<const Texture> metallic_roughness;
   int metallic_channel = 0, roughness_channel = 0;
@@ -409,9 +502,12 @@ class GltfPbrMaterial final : public Material {
     l.f0_d = vmin(Rgb(f0_ior) * specular_color.eval(sp), Rgb(1)) * spec;
     l.f90_d = spec;
     l.transmission = clamp(transmission.eval(sp), 0.0f, 1.0f);
+    l.solid = solid;
+    l.eta = ior;
     l.clearcoat = clamp(clearcoat.eval(sp), 0.0f, 1.0f);
     float rc = clamp(clearcoat_roughness.eval(sp), 0.045f, 1.0f);
     l.alpha_c = rc * rc;
+    if (l.clearcoat > 0 && length_squared(sp.coat_normal) > 0) l.coat_n = normalize(sp.frame.to_local(sp.coat_normal));
     l.sheen_color = vmin(vmax(sheen_color.eval(sp), Rgb(0)), Rgb(1));
     float rs = clamp(sheen_roughness.eval(sp), 0.0f, 1.0f);
     l.alpha_sheen = std::max(rs * rs, SheenAlbedoTable::kMinAlpha);
@@ -434,6 +530,10 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     float ior = params::number(j, "ior", ptr, 1.5f, 1.0f, 4.0f);
     m->f0_ior = f0_from_ior(ior);
     m->transmission_roughness_scale = clamp(2 * ior - 2, 0.0f, 1.0f);
+    m->ior = ior;
+    // An index within 0.1 % of 1 bends rays by less than a few hundredths of a degree and makes the refraction half
+    // vector (Walter 2007, eq. 16) degenerate: such a volume is drawn thin-walled.
+    m->solid = !params::boolean(j, "thin_walled", ptr, true) && ior > 1.001f;
     m->specular = params::float_param(j, "specular", ptr, 1.0f, 0.0f, 1.0f, ctx);
     m->specular_color = params::rgb_param(j, "specular_color", ptr, Rgb(1), 0.0f, 1e3f, ctx);
     m->transmission = params::float_param(j, "transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);

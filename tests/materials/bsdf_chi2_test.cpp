@@ -16,7 +16,7 @@ class BsdfCaseTest : public ::testing::TestWithParam<BsdfCase> {};
 
 TEST_P(BsdfCaseTest, SampleMatchesPdfChiSquare) {
   const BsdfCase& c = GetParam();
-  BsdfInstance inst(c.material);
+  BsdfInstance inst(c);
   // Sidak correction: the probability that any of the chi2_test_count() tests rejects a correct model is 0.01.
   const double alpha = 1 - std::pow(1 - kSignificance, 1.0 / chi2_test_count());
   int k = 0;
@@ -36,7 +36,7 @@ TEST_P(BsdfCaseTest, SampleMatchesPdfChiSquare) {
 
 TEST_P(BsdfCaseTest, SampleAgreesWithEvalAndPdf) {
   const BsdfCase& c = GetParam();
-  BsdfInstance inst(c.material);
+  BsdfInstance inst(c);
   const Bsdf& bsdf = inst.bsdf();
   std::mt19937_64 rng(12345);
   int checked = 0;
@@ -69,7 +69,7 @@ TEST_P(BsdfCaseTest, SampleAgreesWithEvalAndPdf) {
 TEST(BsdfOneLobe, SamplesIgnoreTheLobeChoice) {
   int one_lobe = 0;
   for (const BsdfCase& c : bsdf_cases()) {
-    BsdfInstance inst(c.material);
+    BsdfInstance inst(c);
     const Bsdf& bsdf = inst.bsdf();
     if (c.material.value("type", "") == "mix") {
       EXPECT_FALSE(bsdf.flags() & kBsdfOneLobe) << c.name;

@@ -61,6 +61,15 @@ const std::vector<BsdfCase>& bsdf_cases() {
       {"gltf_rough", {{"type", "gltf_pbr"}, {"metallic", 0.5}, {"roughness", 1.0}}},
       {"gltf_transmission",
        {{"type", "gltf_pbr"}, {"metallic", 0}, {"roughness", 0.3}, {"transmission", 0.8}, {"ior", 1.45}}},
+      {"gltf_solid_transmission",
+       {{"type", "gltf_pbr"},
+        {"metallic", 0.1},
+        {"roughness", 0.3},
+        {"transmission", 0.9},
+        {"ior", 1.5},
+        {"base_color", {0.9, 0.7, 0.5}},
+        {"thin_walled", false}},
+       true},
       {"gltf_clearcoat_specular",
        {{"type", "gltf_pbr"},
         {"metallic", 0},
@@ -69,6 +78,15 @@ const std::vector<BsdfCase>& bsdf_cases() {
         {"clearcoat_roughness", 0.1},
         {"specular", 0.5},
         {"specular_color", {1, 0.5, 0.5}}}},
+      {"gltf_tilted_clearcoat",
+       {{"type", "gltf_pbr"},
+        {"metallic", 0.3},
+        {"roughness", 0.5},
+        {"clearcoat", 0.8},
+        {"clearcoat_roughness", 0.2},
+        {"base_color", {0.5, 0.6, 0.7}}},
+       false,
+       normalize(Vec3(0.5f, 0.2f, 1))},
       {"gltf_sheen",
        {{"type", "gltf_pbr"},
         {"metallic", 0},
@@ -139,12 +157,13 @@ int chi2_test_count() {
   return n;
 }
 
-BsdfInstance::BsdfInstance(const json& material) {
+BsdfInstance::BsdfInstance(const json& material, const Vec3& coat_normal) {
   MaterialContext ctx;
   material_ = MaterialRegistry::builtin().create(material, "/material", ctx);
   sp_.frame = Frame();
   sp_.ng = Vec3(0, 0, 1);
   sp_.uv = sp_.uv1 = Vec2(0.5f, 0.5f);
+  sp_.coat_normal = coat_normal;
   bsdf_ = material_->bsdf(sp_, arena_);
 }
 

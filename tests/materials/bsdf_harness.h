@@ -21,6 +21,8 @@ struct BsdfCase {
   std::string name;         // unique, for test names
   nlohmann::json material;  // the material document
   bool transmissive = false;
+  // A coating layer's own normal at the shading point (ShadingPoint::coat_normal), zero for none.
+  Vec3 coat_normal{0, 0, 0};
 };
 
 void PrintTo(const BsdfCase& c, std::ostream* os);
@@ -46,7 +48,8 @@ int chi2_test_count();
 // Holds a material and the BSDF it builds at a default shading point (local frame = world frame).
 class BsdfInstance {
  public:
-  explicit BsdfInstance(const nlohmann::json& material);
+  explicit BsdfInstance(const nlohmann::json& material, const Vec3& coat_normal = Vec3(0, 0, 0));
+  explicit BsdfInstance(const BsdfCase& c) : BsdfInstance(c.material, c.coat_normal) {}
   const Bsdf& bsdf() const { return *bsdf_; }
   bool has_bsdf() const { return bsdf_ != nullptr; }
 
