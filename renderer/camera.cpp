@@ -1,5 +1,7 @@
 #include "renderer/camera.h"
 
+#include <algorithm>
+
 #include "renderer/sampling.h"
 
 namespace tessera {
@@ -50,8 +52,9 @@ Ray Camera::generate_ray(Vec2 film, Vec2 u_lens) const {
   return ray;
 }
 
-RayCone Camera::pixel_cone() const {
-  const float pixel = 2 * half_h_ / static_cast<float>(height_);
+RayCone Camera::pixel_cone(uint32_t samples_per_pixel) const {
+  const float share = 1 / std::sqrt(static_cast<float>(std::clamp<uint32_t>(samples_per_pixel, 1, 256)));
+  const float pixel = 2 * half_h_ / static_cast<float>(height_) * share;
   if (desc_.projection == CameraDesc::Projection::kOrthographic) return {pixel, 0};
   return {0, pixel};
 }

@@ -33,10 +33,14 @@ class Camera {
   Camera(const CameraDesc& desc, int width, int height);
   // `film` in pixels: (0,0) is the top-left corner of the image, (width,height) the bottom-right.
   Ray generate_ray(Vec2 film, Vec2 u_lens) const;
-  // The cone of a pixel's rays: a pinhole's start at a point and widen by one pixel's angle (at the image centre) per
-  // unit of distance; an orthographic camera's are a pixel wide and do not widen. (A thin lens's are treated as a
+  // The cone of one of `samples_per_pixel` rays of a pixel: a pinhole's start at a point and widen by one pixel's
+  // angle (at the image centre) per unit of distance, an orthographic camera's are a pixel wide and do not widen
+  // (Akenine-Möller et al. 2019), each narrowed by 1 / sqrt(samples_per_pixel). The pixel's box filter already averages
+  // its samples over the pixel, so each sample stands for its 1/N share of the pixel's area, a patch 1/sqrt(N) of its
+  // width (the stratum of a stratified sampler); a whole pixel's footprint per sample would blur twice. Narrowed at
+  // most 16x (256 samples): finer than that the finest mip level is read anyway. (A thin lens's rays are treated as a
   // pinhole's: the cone is for texture filtering, not depth of field.)
-  RayCone pixel_cone() const;
+  RayCone pixel_cone(uint32_t samples_per_pixel = 1) const;
   // Pixel position where the world point `p` projects (for tests); false if behind the camera.
   bool project(const Vec3& p, Vec2* film) const;
   const CameraDesc& desc() const { return desc_; }

@@ -85,6 +85,7 @@ struct IntegratorSetup {
   uint64_t seed = 0;
   SamplerKind sampler = SamplerKind::kSobol;
   IntegratorSettings settings;
+  uint32_t samples_per_pixel = 1;  // the whole job's, for the rays' cones (Camera::pixel_cone)
   int tile_size = 32;
   ThreadPool* pool = nullptr;
 };

@@ -162,11 +162,13 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
   sp.front_face = dot(ray.dir, sp.ng) < 0;
   sp.uv_footprint = 0;
   if (cone && uv_per_world > 0) {
-    // The cone's width where it hits, widened as the surface turns away from it (at most 8x, past which isotropic
-    // filtering would blur more than it removes aliasing).
+    // The cone's width where it hits, widened as the surface turns away from it. Its footprint is an ellipse, the
+    // width across and width / cos along the turn; an isotropic filter takes the width of the circle of the same area,
+    // width / sqrt(cos) (the major axis, as Akenine-Möller et al. 2019 take, blurs across by up to 8x at grazing
+    // angles: measured by bench/texture_lod.sh), at most 8x.
     const float dir_len = length(ray.dir);
     const float cos_hit = std::abs(dot(ray.dir, sp.ng)) / dir_len;
-    sp.uv_footprint = cone->width_at(hit.t * dir_len) / std::max(cos_hit, 0.125f) * uv_per_world;
+    sp.uv_footprint = cone->width_at(hit.t * dir_len) / std::sqrt(std::max(cos_hit, 1.0f / 64)) * uv_per_world;
   }
   sp.coat_normal = Vec3(0, 0, 0);
   if (si->material->coat_normal_map) {

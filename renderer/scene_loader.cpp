@@ -394,7 +394,7 @@ RenderSettings parse_render_settings(const json& render, const std::string& poin
   };
   s.width = static_cast<int>(integer("width", 512, 1, limits.max_width));
   s.height = static_cast<int>(integer("height", 512, 1, limits.max_height));
-  s.spp = static_cast<uint32_t>(integer("spp", 64, 1, limits.max_spp));
+  s.spp = static_cast<uint32_t>(integer("spp", kDefaultSpp, 1, limits.max_spp));
   s.integrator.max_depth = static_cast<int>(integer("max_depth", 8, 0, limits.max_depth));
   s.seed = static_cast<uint64_t>(integer("seed", 0, 0, (int64_t{1} << 53)));
   if (auto it = render.find("integrator"); it != render.end()) {

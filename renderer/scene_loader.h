@@ -35,6 +35,9 @@ struct SceneLoadOptions {
 std::shared_ptr<Scene> load_scene(const nlohmann::json& scene, const std::string& pointer,
                                   const SceneLoadOptions& options);
 
+// render.spp when the job does not say (the contract's default).
+constexpr uint32_t kDefaultSpp = 64;
+
 struct RenderLimits {
   int max_width = 8192;
   int max_height = 8192;

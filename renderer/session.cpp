@@ -47,6 +47,7 @@ RenderSession::RenderSession(std::shared_ptr<const Scene> scene, const RenderSet
   setup.seed = settings.seed;
   setup.sampler = settings.sampler;
   setup.settings = settings.integrator;
+  setup.samples_per_pixel = settings.job_spp ? settings.job_spp : settings.spp;
   setup.tile_size = settings.tile_size;
   setup.pool = &pool;
   integrator_ = IntegratorRegistry::builtin().create(setup);

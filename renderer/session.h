@@ -25,6 +25,7 @@ struct RenderSettings {
   int height = 512;
   uint32_t spp = 64;          // samples per pixel budget
   uint32_t first_sample = 0;  // render sample indices [first_sample, first_sample + spp): a range of a larger job
+  uint32_t job_spp = 0;       // that larger job's samples per pixel (rays' texture footprints depend on it); 0: spp
   // Crop window in pixels (render only these; the film keeps the full size). Empty (w or h 0): the whole image.
   using Region = PixelRegion;
   Region region;

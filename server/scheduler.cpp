@@ -373,6 +373,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     if (is_unit) {
       // One unit: its range of the job's sample indices (work_units.h).
       job.settings.first_sample += record.unit_first_sample;
+      job.settings.job_spp = job.settings.spp;  // every unit's rays have the whole job's texture footprints
       job.settings.spp = record.unit_samples;
     }
     log_.add(id, printf_string("scene loaded in %.3f s",

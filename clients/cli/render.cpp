@@ -35,7 +35,8 @@ const char* kRenderUsage =
     "                         raw state, for `tessera merge`)\n"
     "  --spp N                samples per pixel (overrides render.spp)\n"
     "  --samples START:COUNT  render only sample indices [START, START+COUNT) of the job (a render farm task);\n"
-    "                         parts merge into exactly the image of one render of all samples\n"
+    "                         parts merge into exactly the image of one render of all samples (render.spp is\n"
+    "                         the whole job's: textures are filtered for that many samples)\n"
     "  --region X,Y,W,H       render only this pixel rectangle (the image keeps its full size)\n"
     "  --width N, --height N  resolution (override render.width/height)\n"
     "  --time-limit S         stop after the pass that crosses S seconds\n"
@@ -345,11 +346,18 @@ int cmd_render(int argc, char** argv) {
     const std::string p = pointer.rfind(unwrap, 0) == 0 ? pointer.substr(unwrap.size()) : pointer;
     return input + ": at " + (p.empty() ? std::string("/") : p) + ": ";
   };
+  uint64_t job_spp = 0;  // with --samples: the whole job's samples per pixel
   if (doc.is_object()) {
     if (!doc.contains("render")) doc["render"] = json::object();
     if (doc["render"].is_object()) doc["render"].update(overrides);
-    // A sample range is a part of the job's budget: the whole of it must be there for the settings to load.
-    if (samples && doc["render"].is_object()) doc["render"]["spp"] = samples->first + samples->second;
+    // A sample range is a part of the job's budget: the whole of it must be there for the settings to load. The
+    // job's own budget is kept: every slice's rays have the whole job's texture footprints (Camera::pixel_cone).
+    if (samples && doc["render"].is_object()) {
+      const json& spp = doc["render"].value("spp", json());
+      job_spp = std::max<uint64_t>(spp.is_number_unsigned() ? spp.get<uint64_t>() : tessera::kDefaultSpp,
+                                   static_cast<uint64_t>(samples->first) + samples->second);
+      doc["render"]["spp"] = samples->first + samples->second;
+    }
   }
 
   // The daemon's own check, with its messages: the contract's schema (an unknown property such as "albdo" is
@@ -389,6 +397,7 @@ int cmd_render(int argc, char** argv) {
 
   if (samples) {
     job.settings.first_sample = static_cast<uint32_t>(samples->first);
+    job.settings.job_spp = static_cast<uint32_t>(std::min<uint64_t>(job_spp, UINT32_MAX));
     job.settings.spp = static_cast<uint32_t>(samples->second);
   }
   if (region) {

@@ -207,7 +207,7 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
   const Scene& scene = *setup_.scene;
   const Camera& camera = setup_.camera;
   const bool uses_lens = camera.uses_lens();
-  const RayCone cone = camera.pixel_cone();
+  const RayCone cone = camera.pixel_cone(setup_.samples_per_pixel);
   // Camera rays of up to kGroup neighbouring pixels in a row, at the same sample index, go to Embree as one packet:
   // they are coherent, and a packet traces them several times faster than one by one. Each pixel still gets its
   // samples in order, and its paths are those it would trace alone (up to Embree's rounding of sphere hits).
