@@ -194,7 +194,7 @@ const std::vector<Option>& options() {
        real(&Config::lease_s, 1, 3600)},
       {"--unit-pixel-samples", "TESSERA_UNIT_PIXEL_SAMPLES", "N",
        "on a PostgreSQL store, split a job's samples into units of about N pixel samples (width x height x samples) "
-       "that the nodes render at once; 0: never split (100000000, tens of seconds of one thread)",
+       "that the nodes render at once; 0: never split (20000000, tens of seconds of one thread)",
        integer(&Config::unit_pixel_samples, 0, 1ll << 50)},
       {"--threads", "TESSERA_THREADS", "N", "render threads (default 0: every hardware thread)",
        integer(&Config::threads, 0, 4096)},

@@ -3,8 +3,9 @@
 // sample ranges merge into exactly the image one render of all of them gives, whatever the order or the node.
 //
 // The rule: a unit is about `unit_pixel_samples` pixel samples (width x height x samples), so that it takes tens of
-// seconds on one thread (10^8 by default: the path-traced Cornell box runs at 2-4 x 10^6 pixel samples per second per
-// thread on the machines we measured), and a job is split into ceil(width x height x spp / unit_pixel_samples) units,
+// seconds on one thread (2 x 10^7 by default: the path-traced Cornell box runs at 3-6 x 10^5 pixel samples per second
+// per thread on the 2-vCPU machine we measured, bench/cluster_scaling.sh; nodes of many threads want it larger), and a
+// job is split into ceil(width x height x spp / unit_pixel_samples) units,
 // at most one per sample. A job that stops on a time limit or a noise target is one unit: its stop is a property of
 // the whole render, not of a sample range. Samples are spread evenly, the first units taking one more when the
 // division leaves a remainder.
@@ -16,7 +17,7 @@
 
 namespace tessera::server {
 
-inline constexpr uint64_t kDefaultUnitPixelSamples = 100'000'000;
+inline constexpr uint64_t kDefaultUnitPixelSamples = 20'000'000;
 
 // How many units a job of these render settings (the JSON of JobRecord::settings) is split into; 1 when
 // `unit_pixel_samples` is 0 (never split) or the job is small, stops on time or noise, or cannot be read.

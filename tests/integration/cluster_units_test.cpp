@@ -60,7 +60,7 @@ const std::string& one_node_exr() {
     Daemon alone(dir.path() / "alone", {"--threads", "1"});
     auto c = alone.client();
     const std::string id = submit(*c, job());
-    EXPECT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 300)) << alone.log();
+    EXPECT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 180)) << alone.log();
     return exr_of(*c, id);
   }();
   return exr;
@@ -97,7 +97,7 @@ TEST(ClusterUnits, AJobSplitAcrossThreeNodesIsByteIdenticalToTheOneNodeRender) {
   Cluster cluster;
   auto c = cluster.node(0).client();
   const std::string id = submit(*c, job());
-  ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 300)) << cluster.logs();
+  ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 180)) << cluster.logs();
   EXPECT_EQ(cluster.sql("SELECT units FROM tessera_jobs WHERE id = '" + id + "'"), std::to_string(kUnits));
   // Every node rendered some of its units.
   EXPECT_EQ(cluster.sql("SELECT COUNT(DISTINCT node) FROM tessera_units WHERE job_id = '" + id + "' AND idx < " +
@@ -110,69 +110,75 @@ TEST(ClusterUnits, AJobSplitAcrossThreeNodesIsByteIdenticalToTheOneNodeRender) {
   }
 }
 
-// The node rendering a unit is killed once the unit has a checkpoint: past its lease another node claims the unit
-// under the next epoch and resumes it from that checkpoint; the image is still the one-node render's.
+// A node other than the one answering (n2 or n3) is killed once a unit it renders has a checkpoint: past its lease
+// another node claims the unit under the next epoch and resumes it from that checkpoint; the image is still the
+// one-node render's.
 TEST(ClusterUnits, AKilledNodesUnitResumesElsewhereAndTheImageIsStillExact) {
   const std::string& reference = one_node_exr();
   ASSERT_FALSE(reference.empty());
   Cluster cluster;
   auto c = cluster.node(0).client();
   const std::string id = submit(*c, job());
-  const std::string unit_of_n3 = "SELECT idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id +
-                                 "' AND node = 'n3' AND state = 'running' AND checkpoint_epoch = epoch LIMIT 1";
-  std::string held;
+  std::string held;  // node,idx,epoch
   ASSERT_TRUE(eventually(
       [&] {
-        held = cluster.sql(unit_of_n3);
+        held = cluster.sql("SELECT node || ',' || idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id +
+                           "' AND node IN ('n2', 'n3') AND state = 'running' AND checkpoint_epoch = epoch LIMIT 1");
         return !held.empty();
       },
       120))
       << cluster.logs();
-  cluster.node(2).stop(SIGKILL);
-  const std::string idx = held.substr(0, held.find(','));
-  ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 300)) << cluster.logs();
+  const std::string victim = held.substr(0, held.find(','));
+  const std::string idx = held.substr(victim.size() + 1, held.rfind(',') - victim.size() - 1);
+  cluster.node(victim == "n2" ? 1 : 2).stop(SIGKILL);
+  ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 180)) << cluster.logs();
   // The unit was taken over (a later epoch, another node) and resumed from the dead node's checkpoint.
-  EXPECT_NE(cluster.sql("SELECT idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx),
+  EXPECT_NE(cluster.sql("SELECT node || ',' || idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id +
+                        "' AND idx = " + idx),
             held);
-  EXPECT_NE(cluster.sql("SELECT node FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx), "n3");
+  EXPECT_NE(cluster.sql("SELECT node FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx), victim);
   EXPECT_NE(cluster.logs().find("job resumed from its checkpoint"), std::string::npos) << cluster.logs();
   EXPECT_TRUE(exr_of(*c, id) == reference) << "the EXR differs from the one-node render";
 }
 
-// A node frozen (SIGSTOP) in the middle of a unit for longer than its lease: the unit is re-leased to another node
-// under the next epoch. Continued (SIGCONT) while the job still renders, the frozen node's writes for its stale epoch
-// are refused (it stops and records nothing), and the image is still the one-node render's.
+// A node (n2 or n3) frozen (SIGSTOP) in the middle of a unit for longer than its lease: the unit is re-leased to
+// another node under the next epoch. Continued (SIGCONT) while the job still renders, the frozen node's writes for its
+// stale epoch are refused (it stops and records nothing), and the image is still the one-node render's.
 TEST(ClusterUnits, ANodeFrozenPastItsLeaseHasItsLateWritesRefused) {
   const std::string& reference = one_node_exr();
   ASSERT_FALSE(reference.empty());
   Cluster cluster;
   auto c = cluster.node(0).client();
   const std::string id = submit(*c, job());
-  std::string held;
+  std::string owner;  // n2 or n3: a node other than the one answering
+  std::string held;   // idx,epoch
   ASSERT_TRUE(eventually(
       [&] {
-        held = cluster.sql("SELECT idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id +
-                           "' AND node = 'n3' AND state = 'running' AND checkpoint_epoch = epoch LIMIT 1");
-        return !held.empty();
+        const std::string row =
+            cluster.sql("SELECT node || ',' || idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id +
+                        "' AND node IN ('n2', 'n3') AND state = 'running' AND checkpoint_epoch = epoch LIMIT 1");
+        owner = row.substr(0, row.find(','));
+        held = row.empty() ? "" : row.substr(owner.size() + 1);
+        return !row.empty();
       },
       120))
       << cluster.logs();
-  kill(cluster.node(2).pid(), SIGSTOP);
+  Daemon& frozen = cluster.node(owner == "n2" ? 1 : 2);
+  kill(frozen.pid(), SIGSTOP);
   const std::string idx = held.substr(0, held.find(','));
+  const std::string stale_epoch = held.substr(held.find(',') + 1);
   const std::string unit = "SELECT idx || ',' || epoch FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx;
   // Taken over by another node under a newer epoch.
   ASSERT_TRUE(eventually([&] { return cluster.sql(unit) != held; }, 60)) << cluster.logs();
-  kill(cluster.node(2).pid(), SIGCONT);
-  ASSERT_TRUE(eventually(
-      [&] { return cluster.node(2).log().find("changed or taken over elsewhere") != std::string::npos; }, 30))
-      << cluster.node(2).log();
-  ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 300)) << cluster.logs();
+  kill(frozen.pid(), SIGCONT);
+  ASSERT_TRUE(eventually([&] { return frozen.log().find("changed or taken over elsewhere") != std::string::npos; }, 30))
+      << frozen.log();
+  ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 180)) << cluster.logs();
   // The unit's film is the run that took it over; the frozen node recorded no end of it.
-  EXPECT_NE(cluster.sql("SELECT node FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx), "n3");
+  EXPECT_NE(cluster.sql("SELECT node FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx), owner);
   EXPECT_NE(cluster.sql("SELECT checkpoint_epoch FROM tessera_units WHERE job_id = '" + id + "' AND idx = " + idx),
-            held.substr(held.find(',') + 1));
-  const std::string stale_epoch = held.substr(held.find(',') + 1);
-  std::istringstream lines(cluster.node(2).log());
+            stale_epoch);
+  std::istringstream lines(frozen.log());
   for (std::string line; std::getline(lines, line);)
     EXPECT_FALSE(line.find("unit done") != std::string::npos &&
                  line.find("\"epoch\":" + stale_epoch + ",") != std::string::npos)

@@ -14,8 +14,9 @@ TEST(WorkUnits, AJobIsSplitByItsPixelSamples) {
   EXPECT_EQ(unit_count(settings, 80000), 8);   // 8 samples each
   EXPECT_EQ(unit_count(settings, 1), 64);      // at most one unit per sample
   EXPECT_EQ(unit_count(settings, kDefaultUnitPixelSamples), 1);
-  // 1920 x 1080 at 1024 spp: about 2.1e9 pixel samples, 22 units of 46 or 47 samples.
-  EXPECT_EQ(unit_count(R"({"width":1920,"height":1080,"spp":1024})", kDefaultUnitPixelSamples), 22);
+  // 1920 x 1080 at 1024 spp: about 2.1e9 pixel samples, 107 units of 9 or 10 samples; 512 x 512 at 64 spp, one.
+  EXPECT_EQ(unit_count(R"({"width":1920,"height":1080,"spp":1024})", kDefaultUnitPixelSamples), 107);
+  EXPECT_EQ(unit_count(R"({"width":512,"height":512,"spp":64})", kDefaultUnitPixelSamples), 1);
 }
 
 TEST(WorkUnits, AJobThatStopsOnTimeOrNoiseIsOneUnit) {
