@@ -818,10 +818,16 @@ Scheduler::Outcome Scheduler::pause(const std::string& id) {
     if (auto slots = rendering_locked(id); !slots.empty()) {
       for (RenderSlot* slot : slots)
         if (slot->cancel_requested || slot->delete_requested) return Outcome::kConflict;
+      // A job rendered whole ends its pass and keeps it. A work unit gives up its pass under way (its last
+      // checkpoint stays): the job reads as paused only once this run ends, and until then the other nodes go on
+      // rendering its other units, which they stop within a tile's time once it does.
       for (RenderSlot* slot : slots) {
         slot->pause_requested = true;
         slot->load_stop.request_stop();
-        if (slot->session) slot->session->stop();
+        if (slot->session && slot->unit >= 0)
+          slot->session->cancel();
+        else if (slot->session)
+          slot->session->stop();
       }
       return Outcome::kInProgress;
     }

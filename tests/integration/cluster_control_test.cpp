@@ -35,7 +35,8 @@ bool render_stopped(const Daemon& d, const std::string& id) {
   return false;
 }
 
-// Submits a long job through `a`, waits until one of the nodes renders it or one of its units (a pass done), then
+// Submits a long job through `a`, waits until one of the nodes has rendered it or one of its units for 3 s (its passes
+// then take about 2 s each: its next progress write is no quicker way to learn of the change than a renewal), then
 // makes `action` ("cancel", "pause" or "delete") through the other node. The seconds from that node's answer to the
 // render's stop on the node that ran it (nothing when it did not stop within 10 s).
 std::optional<double> stop_through_the_other_node(PostgresCluster& pg, const std::string& uri, Daemon& a,
@@ -50,9 +51,9 @@ std::optional<double> stop_through_the_other_node(PostgresCluster& pg, const std
             // A node rendering the job whole, or one of its work units (a long job is split among the nodes).
             node = pg.psql(PostgresCluster::database_of(uri),
                            "SELECT node FROM tessera_jobs WHERE id = '" + id +
-                               "' AND state = 'running' AND units = 1 AND passes >= 1 UNION ALL SELECT node FROM "
+                               "' AND state = 'running' AND units = 1 AND elapsed_s >= 3 UNION ALL SELECT node FROM "
                                "tessera_units WHERE job_id = '" +
-                               id + "' AND state = 'running' AND passes >= 1 LIMIT 1");
+                               id + "' AND state = 'running' AND elapsed_s >= 3 LIMIT 1");
             return !node.empty();
           },
           60)) {
