@@ -107,8 +107,8 @@ int run(const Config& config) {
   std::unique_ptr<PostgresNotifications> notifications;
   std::unique_ptr<EventBus> events;
   if (shared_store) {
-    notifications = std::make_unique<PostgresNotifications>(config.store);
-    events = std::make_unique<PostgresEventBus>(config.store, *notifications);
+    notifications = std::make_unique<PostgresNotifications>(config.store, node);
+    events = std::make_unique<PostgresEventBus>(config.store, node, *notifications);
   } else {
     events = std::make_unique<EventHub>();
   }

@@ -54,8 +54,9 @@ void PgConnection::connect() {
   if (conn_ && PQstatus(conn_) == CONNECTION_OK) return;
   close();
   // The conninfo (a URI or key=value string) is expanded in place of dbname; the keys after it add to it.
-  const char* keys[] = {"dbname", "keepalives", "keepalives_idle", "keepalives_interval", "keepalives_count", nullptr};
-  const char* values[] = {conninfo_.c_str(), "1", "10", "5", "3", nullptr};
+  const char* keys[] = {"fallback_application_name", "dbname",           "keepalives", "keepalives_idle",
+                        "keepalives_interval",       "keepalives_count", nullptr};
+  const char* values[] = {application_name_.c_str(), conninfo_.c_str(), "1", "10", "5", "3", nullptr};
   conn_ = PQconnectdbParams(keys, values, 1);
   if (!conn_) throw JobStoreError("job store: cannot connect to PostgreSQL: out of memory", false);
   if (PQstatus(conn_) != CONNECTION_OK) {

@@ -46,8 +46,10 @@ class PgConnection {
   using Params = std::vector<std::optional<std::string>>;
 
   // Connects at the first statement (or connect()). TCP keepalives are on, so that a server that vanished without
-  // closing the connection is noticed within about half a minute.
-  explicit PgConnection(std::string conninfo) : conninfo_(std::move(conninfo)) {}
+  // closing the connection is noticed within about half a minute. `application_name` names the connection in the
+  // server's pg_stat_activity ("tesserad NODE notifications"), unless the conninfo names it.
+  explicit PgConnection(std::string conninfo, std::string application_name = "tesserad")
+      : conninfo_(std::move(conninfo)), application_name_(std::move(application_name)) {}
   ~PgConnection();
   PgConnection(const PgConnection&) = delete;
   PgConnection& operator=(const PgConnection&) = delete;
@@ -65,6 +67,7 @@ class PgConnection {
 
  private:
   std::string conninfo_;
+  std::string application_name_;
   pg_conn* conn_ = nullptr;
 };
 

@@ -15,12 +15,12 @@ constexpr size_t kRecentNotifications = 1024;
 
 }  // namespace
 
-PostgresEventBus::PostgresEventBus(const std::string& conninfo, PostgresNotifications& notifications,
-                                   size_t per_job_capacity, size_t total_capacity)
+PostgresEventBus::PostgresEventBus(const std::string& conninfo, const std::string& node,
+                                   PostgresNotifications& notifications, size_t per_job_capacity, size_t total_capacity)
     : notifications_(notifications),
       per_job_capacity_(per_job_capacity),
       total_capacity_(total_capacity),
-      conn_(conninfo) {
+      conn_(conninfo, "tesserad " + node + " events") {
   notifications_.listen(kEventsChannel, [this](const std::string& payload) {
     if (auto parts = split_notification(payload)) notified(parts->second);
   });

@@ -19,9 +19,9 @@ namespace tessera::server {
 class PostgresEventBus final : public EventBus {
  public:
   // Listens to kEventsChannel through `notifications` (before it starts). Keeps the newest `per_job_capacity` events
-  // of each job and `total_capacity` in all.
-  PostgresEventBus(const std::string& conninfo, PostgresNotifications& notifications, size_t per_job_capacity = 256,
-                   size_t total_capacity = 65536);
+  // of each job and `total_capacity` in all. `node` names its connection.
+  PostgresEventBus(const std::string& conninfo, const std::string& node, PostgresNotifications& notifications,
+                   size_t per_job_capacity = 256, size_t total_capacity = 65536);
 
   void publish(const std::string& job_id, const std::string& owner, const std::string& type, const std::string& data,
                bool terminal = false) override;

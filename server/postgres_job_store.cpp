@@ -172,7 +172,7 @@ class PostgresJobStore::Result : public PgResult {
 };
 
 PostgresJobStore::PostgresJobStore(const std::string& conninfo, std::string node)
-    : node_(std::move(node)), conn_(conninfo) {
+    : node_(std::move(node)), conn_(conninfo, "tesserad " + node_) {
   std::lock_guard lock(mutex_);
   conn_.connect();
   migrate();

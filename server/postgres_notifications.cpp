@@ -18,7 +18,8 @@ std::optional<std::pair<std::string, std::string>> split_notification(std::strin
   return std::make_pair(std::string(payload.substr(0, space)), std::string(payload.substr(space + 1)));
 }
 
-PostgresNotifications::PostgresNotifications(std::string conninfo) : conninfo_(std::move(conninfo)) {}
+PostgresNotifications::PostgresNotifications(std::string conninfo, std::string node)
+    : conninfo_(std::move(conninfo)), node_(std::move(node)) {}
 
 PostgresNotifications::~PostgresNotifications() {
   stop();
@@ -74,7 +75,7 @@ void PostgresNotifications::run() {
 // One connection's life: LISTEN to every channel, then hand over notifications until the connection breaks (throws)
 // or the daemon stops (returns).
 void PostgresNotifications::listen_once() {
-  PgConnection conn(conninfo_);
+  PgConnection conn(conninfo_, "tesserad " + node_ + " notifications");
   for (const auto& [channel, handlers] : handlers_) conn.exec("LISTEN " + channel);  // our own constant names
   connected_ = true;
   log(LogLevel::kInfo, "listening to the store's notifications");

@@ -33,7 +33,8 @@ class PostgresNotifications {
  public:
   using Handler = std::function<void(const std::string& payload)>;
 
-  explicit PostgresNotifications(std::string conninfo);
+  // `node` names its connection (pg_stat_activity).
+  PostgresNotifications(std::string conninfo, std::string node);
   ~PostgresNotifications();
   PostgresNotifications(const PostgresNotifications&) = delete;
   PostgresNotifications& operator=(const PostgresNotifications&) = delete;
@@ -54,6 +55,7 @@ class PostgresNotifications {
   bool sleep_unless_stopped(std::chrono::milliseconds d);
 
   std::string conninfo_;
+  std::string node_;
   std::map<std::string, std::vector<Handler>> handlers_;
   std::vector<std::function<void()>> connected_handlers_;
   std::atomic<bool> stop_{false};

@@ -47,10 +47,15 @@ TEST(PostgresNotifications, ANodeHearsTheJobChangesMadeThroughAnother) {
   PostgresCluster& pg = PostgresCluster::shared();
   const std::string uri = pg.create_database();
   PostgresJobStore a(uri, "node-a");
-  PostgresNotifications b(uri);
+  PostgresNotifications b(uri, "node-b");
   Heard heard(b, kJobsChannel);
   b.start();
   ASSERT_TRUE(eventually([&] { return b.connected(); }, 10));
+  // Each connection says whose and what it is, for the operator's pg_stat_activity.
+  EXPECT_EQ(pg.psql(PostgresCluster::database_of(uri),
+                    "SELECT string_agg(application_name, ',' ORDER BY application_name) FROM pg_stat_activity "
+                    "WHERE application_name LIKE 'tesserad%'"),
+            "tesserad node-a,tesserad node-b notifications");
   const JobRecord j = make_job(0, 1);
   a.create(j);
   EXPECT_TRUE(eventually([&] { return heard.has(j.id + " queued"); }, 5));
@@ -77,7 +82,7 @@ TEST(PostgresNotifications, ListenAgainAfterTheServerRestarted) {
   PostgresCluster& pg = PostgresCluster::shared();
   const std::string uri = pg.create_database();
   PostgresJobStore a(uri, "node-a");
-  PostgresNotifications b(uri);
+  PostgresNotifications b(uri, "node-b");
   Heard heard(b, kJobsChannel);
   std::atomic<int> connections{0};
   b.on_connected([&] { ++connections; });
@@ -99,7 +104,7 @@ TEST(PostgresNotifications, ListenAgainAfterTheServerRestarted) {
 // A node's bus and its notification connection.
 struct Node {
   explicit Node(const std::string& uri, size_t per_job = 256, size_t total = 65536, bool listen = true)
-      : notifications(uri), bus(uri, notifications, per_job, total) {
+      : notifications(uri, "node"), bus(uri, "node", notifications, per_job, total) {
     if (listen) notifications.start();
   }
   PostgresNotifications notifications;
