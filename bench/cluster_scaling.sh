@@ -52,20 +52,21 @@ new_database() {
 }
 psql_in() { "${as_pg[@]}" "$bindir/psql" -h "$work/pg" -U tessera -d "bench$db" -qAtc "$1"; }
 
-# Starts a daemon: start DATA_DIR ARGS...; sets $url (of the last one started).
+# Starts a daemon: start NAME DATA_DIR ARGS...; sets $url (of the last one started). Its output in $work/NAME.*.
 start() {
-  local dir=$1; shift
+  local name=$1 dir=$2; shift 2
   mkdir -p "$dir"
+  : >"$work/$name.out"
   "$tesserad" --listen 127.0.0.1 --port 0 --data-dir "$dir" --grace-s 2 --log-level info "$@" \
-    >"$dir.out" 2>"$dir.log" &
+    >"$work/$name.out" 2>"$work/$name.log" &
   pids+=($!)
   url=""
   for _ in $(seq 100); do
-    url=$(sed -n 's/.*listening on \(http:[^ ]*\).*/\1/p' "$dir.out")
+    url=$(sed -n 's/.*listening on \(http:[^ ]*\).*/\1/p' "$work/$name.out")
     [[ -n $url ]] && break
     sleep 0.1
   done
-  [[ -n $url ]] || { cat "$dir.log" >&2; echo "cluster_scaling: tesserad did not start" >&2; exit 1; }
+  [[ -n $url ]] || { cat "$work/$name.log" >&2; echo "cluster_scaling: tesserad did not start" >&2; exit 1; }
   url=${url%/}
 }
 stop_all() {
@@ -106,12 +107,12 @@ median() { sort -g | awk '{a[NR] = $1} END {print (NR % 2) ? a[(NR + 1) / 2] : (
 echo "frame: Cornell box ${size}x${size}, $spp spp, path tracer; $units units of $((spp / units)) spp on the cluster"
 one=(); two=()
 for r in $(seq "$rounds"); do
-  start "$work/one-$r" --threads 2
+  start one-$r "$work/one-$r" --threads 2
   one+=("$(render one)")
   stop_all
   new_database
-  start "$work/shared-$r" --store "$uri" --node a --threads 1 --unit-pixel-samples "$unit_pixel_samples"
-  start "$work/shared-$r" --store "$uri" --node b --threads 1 --unit-pixel-samples "$unit_pixel_samples"
+  start a-$r "$work/shared-$r" --store "$uri" --node a --threads 1 --unit-pixel-samples "$unit_pixel_samples"
+  start b-$r "$work/shared-$r" --store "$uri" --node b --threads 1 --unit-pixel-samples "$unit_pixel_samples"
   two+=("$(render two)")
   cmp -s "$work/one.exr" "$work/two.exr" || { echo "cluster_scaling: the two-node EXR differs" >&2; exit 1; }
   # From the last unit's end to the job's result; per node, the units it rendered.
@@ -137,14 +138,14 @@ new_database
 # end, and the merge. (The frame rendered whole is timed too, for reference: on a busy machine the difference of two
 # runs is noisier than this.)
 new_database
-start "$work/whole" --store "$uri" --node w --threads 1 --unit-pixel-samples 0
+start whole "$work/whole" --store "$uri" --node w --threads 1 --unit-pixel-samples 0
 tw=$(render whole)
 stop_all
 new_database
-start "$work/split" --store "$uri" --node s --threads 1 --unit-pixel-samples "$unit_pixel_samples"
+start split "$work/split" --store "$uri" --node s --threads 1 --unit-pixel-samples "$unit_pixel_samples"
 ts=$(render split)
 stop_all
-rendering=$(psql_in "SELECT SUM(u.elapsed_s) FROM tessera_units u JOIN tessera_jobs j ON j.id = u.job_id \
+rendering=$(psql_in "SELECT ROUND(SUM(u.elapsed_s)::numeric, 2) FROM tessera_units u JOIN tessera_jobs j ON j.id = u.job_id \
   WHERE u.idx < j.units")
 echo "one node, 1 thread: whole ${tw} s; in $units units ${ts} s, of which ${rendering} s rendering: overhead per unit" \
   "$(echo "($ts - $rendering) * 1000 / $units" | bc -l | xargs printf '%.0f') ms"

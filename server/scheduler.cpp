@@ -1,6 +1,7 @@
 #include "server/scheduler.h"
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cstdio>
 
@@ -520,9 +521,17 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       if (record_end(*slot, [&] { return store_.end_run(id, slot->epoch, JobState::kSucceeded, now_ms()); })) {
         log(LogLevel::kInfo, "unit done",
             {{"job", id}, {"unit", record.unit}, {"epoch", slot->epoch}, {"elapsed_s", p.elapsed_s}});
-        // The preview refines as units finish: the merge of those done so far. Best effort.
+        // The preview refines as units finish: the merge of those done so far, when 1, 2, 4, 8, ... are done, so
+        // that the films all previews read stay under twice those of the job's merge (a merge reads every done
+        // unit's film; after each unit, a job of n units would read n^2 / 2). Best effort.
         try {
-          if (auto film = merge_unit_films(record, job.settings.width, job.settings.height, false)) {
+          const std::vector<UnitRecord> units = store_.units(id);
+          const auto done = static_cast<unsigned>(
+              std::count_if(units.begin(), units.end(), [](const UnitRecord& u) { return u.done; }));
+          std::optional<Film> film;
+          if (std::has_single_bit(done) && done < units.size())
+            film = merge_unit_films(record, job.settings.width, job.settings.height, false);
+          if (film) {
             std::vector<uint8_t> png = encode_png(film->resolve(), film->width(), film->height(), job.settings.display);
             files_.write(id, JobFile::kPreviewPng,
                          std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));

@@ -97,6 +97,13 @@ TEST(ClusterUnits, AJobSplitAcrossThreeNodesIsByteIdenticalToTheOneNodeRender) {
   Cluster cluster;
   auto c = cluster.node(0).client();
   const std::string id = submit(*c, job());
+  // The preview refines as units finish: there is one (the merge of the units done) while the job still renders.
+  EXPECT_TRUE(eventually(
+      [&] {
+        auto preview = c->Get("/v1/jobs/" + id + "/preview.png");
+        return preview && preview->status == 200 && state_of(*c, id) == "running";
+      },
+      60));
   ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 180)) << cluster.logs();
   EXPECT_EQ(cluster.sql("SELECT units FROM tessera_jobs WHERE id = '" + id + "'"), std::to_string(kUnits));
   // Every node rendered some of its units.
