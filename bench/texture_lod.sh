@@ -1,18 +1,21 @@
 #!/usr/bin/env bash
 # How sharp minified textures come out: a text-like panel (a 1024x1024 texture of random 5x7 glyphs, strokes two
-# texels wide) rendered at SIZE pixels with the ray-cone level of detail, against the same view rendered at 4 x SIZE
-# and box-filtered down to SIZE (the supersampled reference, each output pixel the mean of its 4x4 subpixels). Prints
+# texels wide) rendered at SIZE pixels with the ray-cone level of detail, against the same view rendered at
+# REF_SCALE x SIZE and box-filtered down to SIZE (the supersampled reference, each output pixel the mean of its
+# REF_SCALE^2 subpixels: at 8x the reference's own texture footprints are an eighth of an output pixel or less, so it
+# is close to the exact box-filtered image whatever level-of-detail rule made it). Prints
 # the RMSE of each against the reference (linear radiance, every pixel and channel, by OpenImageIO's idiff), for the
 # panel facing the camera (about 4 texels a pixel) and as a floor seen at a grazing angle (about 13 degrees).
 #
 #   bench/texture_lod.sh
-#   env: BUILD=build SIZE=256 SPP=16 REF_SPP=16 THREADS=<all>
+#   env: BUILD=build SIZE=256 SPP=16 REF_SCALE=8 REF_SPP=16 THREADS=<all>
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD=${BUILD:-build}
 SIZE=${SIZE:-256}
 SPP=${SPP:-16}
 REF_SPP=${REF_SPP:-16}
+REF_SCALE=${REF_SCALE:-8}
 TESSERA=$BUILD/clients/cli/tessera
 threads=()
 [[ -n ${THREADS:-} ]] && threads=(--threads "$THREADS")
@@ -62,7 +65,7 @@ rmse() { { idiff -v -a "$1" "$2" 2>/dev/null || true; } | sed -n 's/^ *RMS error
 
 printf '%-8s %6s %6s %12s\n' view size spp rmse_vs_ref
 for view in facing grazing; do
-  big=$((4 * SIZE))
+  big=$((REF_SCALE * SIZE))
   "$TESSERA" render "$tmp/$view.json" --width "$big" --height "$big" --spp "$REF_SPP" --seed 99 "${threads[@]}" -q 2>"$tmp/log" \
     -o "$tmp/$view-big.exr"
   oiiotool "$tmp/$view-big.exr" --resize:filter=box "${SIZE}x${SIZE}" -o "$tmp/$view-ref.exr"
