@@ -872,6 +872,7 @@ Scheduler::Outcome Scheduler::requeue(const std::string& id) {
     // From scratch: nothing of the last run survives.
     for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng, JobFile::kResultPng, JobFile::kResultExr})
       files_.remove(id, f);
+    files_.remove_units(id);  // a split job's units start over too (the store forgot their checkpoints)
   }
   log(LogLevel::kInfo, "job requeued", {{"job", id}});
   log_.add(id, "requeued by a client: the render starts over");

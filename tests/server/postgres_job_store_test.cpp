@@ -162,6 +162,37 @@ TEST(PostgresJobStore, UnitsAndWholeJobsAreClaimedByPriorityThenAge) {
   EXPECT_GT(resumed->epoch, u0->epoch);
 }
 
+// A split job requeued after its end starts over: its units are queued again and forget their checkpoints; a pause
+// and a resume keep them.
+TEST(PostgresJobStore, ARequeuedSplitJobStartsItsUnitsOver) {
+  const std::string uri = PostgresCluster::shared().create_database();
+  PostgresJobStore a(uri, "node-a");
+  JobRecord job = make_job(0, 1);
+  job.units = 2;
+  a.create(job);
+  auto u0 = a.claim_next(10, 1000);
+  ASSERT_TRUE(u0);
+  JobProgress p;
+  p.samples_done = 4;
+  ASSERT_TRUE(a.update_progress(job.id, u0->epoch, p));
+  ASSERT_TRUE(a.transition(job.id, JobState::kPaused, 11, "", ""));
+  ASSERT_TRUE(a.transition(job.id, JobState::kQueued, 12, "", "", JobState::kPaused));
+  auto resumed = a.claim_next(13, 1000);
+  ASSERT_TRUE(resumed);
+  EXPECT_EQ(resumed->unit, 0);
+  EXPECT_EQ(resumed->unit_checkpoint_epoch, u0->epoch);  // resumed from its checkpoint
+  ASSERT_TRUE(a.transition(job.id, JobState::kCancelled, 14, "cancelled", ""));
+  ASSERT_TRUE(a.transition(job.id, JobState::kQueued, 15, "", "", JobState::kCancelled));
+  for (const UnitRecord& u : a.units(job.id)) {
+    EXPECT_FALSE(u.done);
+    EXPECT_EQ(u.checkpoint_epoch, 0);
+  }
+  auto again = a.claim_next(16, 1000);
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->unit, 0);
+  EXPECT_EQ(again->unit_checkpoint_epoch, 0);  // from its first sample
+}
+
 // The server restarted (an upgrade, a failover): the call that finds the connection broken fails as the store
 // failing, and the next one connects again; nothing committed is lost.
 TEST(PostgresJobStore, ReconnectsAfterTheServerRestarted) {
