@@ -31,6 +31,7 @@ const std::set<std::string> kSupportedExtensions = {
     "KHR_draco_mesh_compression",
     "EXT_meshopt_compression",
     "KHR_materials_pbrSpecularGlossiness",
+    "KHR_materials_variants",
     "KHR_materials_unlit",
     "EXT_mesh_gpu_instancing",
 };

@@ -89,6 +89,9 @@ json spec_gloss_to_metal_rough(json& doc, const json& material,
                                std::map<std::string, std::shared_ptr<const ImagePixels>>& images,
                                std::vector<std::string>* warnings);
 
+// Sets each primitive's material to its KHR_materials_variants mapping for options.variant, if one is chosen.
+void apply_variant(Import& import);
+
 // Makes the glTF materials (replaced by the job's of the same name) in the scene, textures from `images`.
 Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<const ImagePixels>> images);
 

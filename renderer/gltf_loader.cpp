@@ -17,6 +17,7 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   const std::vector<int> roots = gltf::scene_roots(import);
   import.check_stop();
   gltf::decode_compressed_geometry(import);
+  gltf::apply_variant(import);
   // Images, decoded once, shared by every texture that uses them (as "#image<i>").
   gltf::Materials materials = gltf::make_materials(import, gltf::decode_images(import));
   import.triangles = scene.triangle_count();

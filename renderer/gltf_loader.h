@@ -37,6 +37,11 @@ struct GltfImportOptions {
   uint64_t max_instances = 1'000'000;
   // Asked to stop (shutdown, cancel), the import ends soon with LoadStopped.
   std::stop_token stop;
+  // The KHR_materials_variants variant to render, by name: each primitive takes the material its mapping gives that
+  // variant (the default material where none does). Empty: the default materials. An unknown name is a SceneError at
+  // `variant_pointer` naming the asset's variants.
+  std::string variant;
+  std::string variant_pointer;
   // Images are checked from their headers (they open, within max_texture_pixels) and stand in as 1x1 white: for a
   // scene that is checked, not rendered.
   bool headers_only = false;

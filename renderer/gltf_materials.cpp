@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "proto/did_you_mean.h"
 #include "renderer/gltf_internal.h"
 #include "renderer/material.h"
 
@@ -370,6 +371,45 @@ uint32_t Materials::default_material(Import& import) {
     import.scene.material_names.push_back("gltf:default");
   }
   return default_index;
+}
+
+// KHR_materials_variants (the extension's specification): the asset's variants are named in its root extension; a
+// primitive's mappings give, for some variants, another material than its own. Choosing a variant sets every mapped
+// primitive's material; an asset without variants, or a name it does not have, is an error at the variant's pointer.
+void apply_variant(Import& import) {
+  const std::string& name = import.options.variant;
+  if (name.empty()) return;
+  const std::string& at = import.options.variant_pointer.empty() ? import.pointer : import.options.variant_pointer;
+  const json root = import.doc.contains("extensions") && import.doc["extensions"].is_object() ? import.doc["extensions"]
+                                                                                              : json::object();
+  std::vector<std::string> names;
+  if (root.contains("KHR_materials_variants") && root["KHR_materials_variants"].is_object())
+    for (const json& v : root["KHR_materials_variants"].value("variants", json::array()))
+      names.push_back(v.is_object() && v.contains("name") && v["name"].is_string() ? v["name"].get<std::string>() : "");
+  if (names.empty()) throw SceneError(at, "the glTF asset has no KHR_materials_variants variants");
+  const auto it = std::find(names.begin(), names.end(), name);
+  if (it == names.end()) {
+    std::string known;
+    for (const std::string& n : names) known += (known.empty() ? "\"" : ", \"") + n + "\"";
+    throw SceneError(at, "the glTF asset has no variant \"" + name + "\"" + proto::did_you_mean(name, names) +
+                             "; its variants: " + known);
+  }
+  const int variant = static_cast<int>(it - names.begin());
+  for (tinygltf::Mesh& mesh : import.model.meshes)
+    for (tinygltf::Primitive& prim : mesh.primitives) {
+      const json ext = parse_extensions(prim.extensions_json_string);
+      if (!ext.contains("KHR_materials_variants") || !ext["KHR_materials_variants"].is_object()) continue;
+      for (const json& mapping : ext["KHR_materials_variants"].value("mappings", json::array())) {
+        if (!mapping.is_object() || !mapping.contains("material") || !mapping["material"].is_number_integer()) continue;
+        const json variants = mapping.value("variants", json::array());
+        if (std::find(variants.begin(), variants.end(), json(variant)) == variants.end()) continue;
+        const int material = mapping["material"].get<int>();
+        if (material < 0 || material >= static_cast<int>(import.model.materials.size()))
+          import.fail("a KHR_materials_variants mapping names material " + std::to_string(material) +
+                      ", which does not exist");
+        prim.material = material;
+      }
+    }
 }
 
 }  // namespace tessera::gltf

@@ -230,10 +230,19 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     gopts.headers_only = !options.build;
     gopts.max_instances = options.max_gltf_instances;
     gopts.stop = options.stop;
+    if (auto v = doc.find("gltf_variant"); v != doc.end()) {
+      gopts.variant_pointer = at(pointer, "gltf_variant");
+      if (!v->is_string() || v->get<std::string>().empty() || v->get<std::string>().size() > 256)
+        throw SceneError(gopts.variant_pointer, "must be a variant's name (1 to 256 characters)");
+      gopts.variant = v->get<std::string>();
+    }
     gltf = import_gltf(resolve(options, *it, gp), gp, *scene, gopts);
     has_gltf = true;
     for (const std::string& w : gltf.warnings) scene->warnings.push_back(w);
   }
+
+  if (!has_gltf && doc.contains("gltf_variant"))
+    throw SceneError(at(pointer, "gltf_variant"), "a variant is chosen only for a glTF asset (scene.gltf)");
 
   // Objects.
   static const json kNoObjects = json::array();

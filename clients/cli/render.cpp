@@ -45,6 +45,7 @@ const char* kRenderUsage =
     "  --estimator NAME       mis | area | hemisphere (the path tracer's)\n"
     "  --seed N               random seed\n"
     "  --max-depth N          maximum bounces\n"
+    "  --variant NAME         the glTF asset's KHR_materials_variants variant (scene.gltf_variant)\n"
     "  -q, --quiet            no progress bar\n"
     "\n"
     "exit codes: 0 done, 1 bad input (fatal), 2 usage, 75 transient failure (retry)\n";
@@ -274,6 +275,7 @@ int cmd_render(int argc, char** argv) {
   bool quiet = !isatty(2);
   std::optional<std::pair<long long, long long>> samples;
   std::optional<std::vector<long long>> region;
+  std::optional<std::string> variant;
   for (int i = 0; i < argc; ++i) {
     std::string a = argv[i];
     auto value = [&]() -> std::string {
@@ -311,11 +313,14 @@ int cmd_render(int argc, char** argv) {
       overrides["seed"] = parse_integer(a, value());
     else if (a == "--max-depth")
       overrides["max_depth"] = parse_integer(a, value());
+    else if (a == "--variant")
+      variant = value();
     else if (a == "-q" || a == "--quiet")
       quiet = true;
     else if (!a.empty() && a[0] == '-')
-      unknown_option(a, {"--output", "--spp", "--samples", "--region", "--width", "--height", "--time-limit",
-                         "--threads", "--integrator", "--estimator", "--seed", "--max-depth", "--quiet", "--help"});
+      unknown_option(a,
+                     {"--output", "--spp", "--samples", "--region", "--width", "--height", "--time-limit", "--threads",
+                      "--integrator", "--estimator", "--seed", "--max-depth", "--variant", "--quiet", "--help"});
     else if (input.empty())
       input = a;
     else
@@ -358,6 +363,7 @@ int cmd_render(int argc, char** argv) {
                                    static_cast<uint64_t>(samples->first) + samples->second);
       doc["render"]["spp"] = samples->first + samples->second;
     }
+    if (variant && doc.contains("scene") && doc["scene"].is_object()) doc["scene"]["gltf_variant"] = *variant;
   }
 
   // The daemon's own check, with its messages: the contract's schema (an unknown property such as "albdo" is

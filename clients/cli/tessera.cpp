@@ -219,9 +219,10 @@ void require_args(const std::vector<std::string>& args, size_t lo, size_t hi, co
 
 const char* kSubmitUsage =
     "usage: tessera submit JOB.json|SCENE.glb|SCENE.gltf [FILE...] [--priority N] [--spp N] [--width N] [--height N]\n"
-    "                      [--watch] [--url URL] [--token T]\n"
+    "                      [--variant NAME] [--watch] [--url URL] [--token T]\n"
     "Submits a job and prints its id. With a .glb/.gltf (and the .bin and images a .gltf needs) the job goes as\n"
     "multipart/form-data; a job document whose scene.gltf names a file beside it takes that file along.\n"
+    "--variant chooses the glTF asset's KHR_materials_variants variant (scene.gltf_variant).\n"
     "--watch follows the job until it ends (exit code as for watch).\n";
 
 int cmd_watch_remote(const Remote& remote, const std::string& id, bool quiet);
@@ -231,6 +232,7 @@ int cmd_submit(std::vector<std::string> args) {
   std::vector<std::string> files;
   json overrides = json::object();
   std::optional<long long> priority;
+  std::optional<std::string> variant;
   bool watch = false;
   for (size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
@@ -246,10 +248,13 @@ int cmd_submit(std::vector<std::string> args) {
       priority = parse_integer(a, value());
     else if (a == "--spp" || a == "--width" || a == "--height")
       overrides[a.substr(2)] = parse_integer(a, value());
+    else if (a == "--variant")
+      variant = value();
     else if (a == "--watch")
       watch = true;
     else if (!a.empty() && a[0] == '-')
-      unknown_option(a, {"--priority", "--spp", "--width", "--height", "--watch", "--url", "--token", "--help"});
+      unknown_option(
+          a, {"--priority", "--spp", "--width", "--height", "--variant", "--watch", "--url", "--token", "--help"});
     else
       files.push_back(a);
   }
@@ -280,6 +285,7 @@ int cmd_submit(std::vector<std::string> args) {
     doc["render"].update(overrides);
   }
   if (priority) doc["priority"] = *priority;
+  if (variant && doc.contains("scene") && doc["scene"].is_object()) doc["scene"]["gltf_variant"] = *variant;
   // A job is called by the file it was submitted from, unless its document names it.
   if (const std::string file = std::filesystem::path(main).filename().string();
       main != "-" && !doc.contains("name") && file.size() <= 200)

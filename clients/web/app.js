@@ -352,6 +352,8 @@ $("#submit-form").addEventListener("submit", async (e) => {
       const main = files.find((f) => /\.glb$/i.test(f.name)) || files.find((f) => /\.gltf$/i.test(f.name));
       if (!main) throw new Error("Choose a .glb file, or a .gltf file with its buffers and images");
       doc = withCommon({ kind: "scene", scene: { gltf: main.name } }, main.name);
+      const variant = $("#gltf-variant").value.trim();
+      if (variant) doc.scene.gltf_variant = variant;
       // An environment map goes along as a file of the same request; the daemon stores it as an asset of its own.
       const env = $("#env-map").files[0];
       if (env) {

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include "renderer/gltf_internal.h"
+#include "renderer/job.h"
 #include "tests/renderer/gltf_fixture.h"
 
 namespace tessera {
@@ -92,6 +93,56 @@ TEST(GltfMaterials, SpecularGlossinessAssetsImportWithAWarningSayingItIsApproxim
   ASSERT_EQ(imported.warnings.size(), 1u);
   EXPECT_NE(imported.warnings[0].find("KHR_materials_pbrSpecularGlossiness is approximated"), std::string::npos)
       << imported.warnings[0];
+}
+
+// One triangle with material "plain" (0), and variants "midnight_blue" (material "blue", 1) and "crimson" (material
+// "red", 2) mapped on its primitive; material "unused" (3) is no variant's.
+std::filesystem::path write_variants(const std::filesystem::path& dir) {
+  test::GltfBuilder b;
+  for (const char* name : {"plain", "blue", "red", "unused"}) b.material({{"name", name}});
+  b.node({{"mesh", b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, 0)}}, true);
+  b.doc["meshes"][0]["primitives"][0]["extensions"] = {
+      {"KHR_materials_variants",
+       {{"mappings", {{{"material", 1}, {"variants", {0}}}, {{"material", 2}, {"variants", {1}}}}}}}};
+  b.doc["extensions"] = {
+      {"KHR_materials_variants", {{"variants", {{{"name", "midnight_blue"}}, {{"name", "crimson"}}}}}}};
+  b.doc["extensionsUsed"] = {"KHR_materials_variants"};
+  return b.write(dir, "variants");
+}
+
+std::string material_of_first_mesh(const Scene& scene) {
+  return scene.material_names.at(scene.meshes.at(0).material);
+}
+
+TEST(GltfMaterials, AVariantChosenByNameGivesItsMaterials) {
+  const auto dir = std::filesystem::temp_directory_path() / ("tessera-gltf-variants-" + std::to_string(::getpid()));
+  const auto path = write_variants(dir);
+  for (const auto& [variant, material] :
+       std::vector<std::pair<std::string, std::string>>{{"", "plain"}, {"midnight_blue", "blue"}, {"crimson", "red"}}) {
+    Scene scene;
+    GltfImportOptions options;
+    options.variant = variant;
+    const GltfImport imported = import_gltf(path, "/scene/gltf", scene, options);
+    EXPECT_EQ(material_of_first_mesh(scene), material) << "variant \"" << variant << "\"";
+    EXPECT_TRUE(imported.warnings.empty()) << imported.warnings.front();
+  }
+  // Through a job document: the field is scene.gltf_variant; an unknown name is refused there, naming the closest.
+  JobLoadOptions opts;
+  opts.scene.asset_root = dir;
+  json job = {{"kind", "scene"},
+              {"scene", {{"gltf", "variants.gltf"}, {"gltf_variant", "crimson"}}},
+              {"render", {{"width", 8}, {"height", 8}, {"spp", 1}}}};
+  EXPECT_EQ(material_of_first_mesh(*load_job(job, opts).scene), "red");
+  job["scene"]["gltf_variant"] = "midnight_blu";
+  try {
+    load_job(job, opts);
+    ADD_FAILURE() << "an unknown variant was accepted";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.pointer(), "/scene/gltf_variant");
+    EXPECT_NE(std::string(e.what()).find("(did you mean \"midnight_blue\"?)"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("\"crimson\""), std::string::npos) << e.what();
+  }
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
