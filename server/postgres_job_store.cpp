@@ -380,7 +380,7 @@ bool PostgresJobStore::end_run(const std::string& id, int64_t epoch, JobState to
     // A unit run of this epoch, of a job still running (both rows locked until the end of the move)?
     Result u = exec(
         "SELECT u.idx, j.units FROM tessera_units u JOIN tessera_jobs j ON j.id = u.job_id WHERE u.job_id = $1 AND "
-        "u.epoch = $2 AND u.state = 'running' AND j.state = 'running' FOR UPDATE",
+        "u.epoch = $2 AND u.state = 'running' AND j.state = 'running' FOR UPDATE OF u",
         {id, to_text(epoch)});
     if (u.rows() == 0) return move(id, to, now_ms, stop_reason, error, sql_states_into(to, JobState::kRunning), epoch);
     const bool merge = u.int64(0) == u.int64(1);
@@ -442,6 +442,8 @@ bool PostgresJobStore::move(const std::string& id, JobState to, int64_t now_ms, 
                .affected() > 0;
   }
   if (to == JobState::kPaused) {
+    // Units before the job, in the order a claim locks them (a unit, then its job): no deadlock.
+    exec("SELECT 1 FROM tessera_units WHERE job_id = $1 FOR UPDATE", {id});
     const bool moved =
         exec("UPDATE tessera_jobs SET state = 'paused', node = NULL, lease_expires_at = NULL, eta_s = NULL" + where,
              params)
@@ -538,12 +540,17 @@ std::vector<JobRecord> PostgresJobStore::list(const JobFilter& filter) {
 
 bool PostgresJobStore::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
   std::lock_guard lock(mutex_);
-  if (only_finished_before_ms)
-    return exec("DELETE FROM tessera_jobs WHERE id = $1 AND state IN (" + sql_terminal_states() +
-                    ") AND finished_at < $2",
-                {id, to_text(*only_finished_before_ms)})
-               .affected() > 0;
-  return exec("DELETE FROM tessera_jobs WHERE id = $1", {id}).affected() > 0;
+  return in_transaction([&] {
+    // A split job's units first, as a claim locks them (a unit, then its job), then the job and, by cascade, its
+    // units: no deadlock with a node claiming one of them.
+    exec("SELECT 1 FROM tessera_units WHERE job_id = $1 FOR UPDATE", {id});
+    if (only_finished_before_ms)
+      return exec("DELETE FROM tessera_jobs WHERE id = $1 AND state IN (" + sql_terminal_states() +
+                      ") AND finished_at < $2",
+                  {id, to_text(*only_finished_before_ms)})
+                 .affected() > 0;
+    return exec("DELETE FROM tessera_jobs WHERE id = $1", {id}).affected() > 0;
+  });
 }
 
 std::vector<UnitRecord> PostgresJobStore::units(const std::string& id) {
