@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdlib>
 
 #include "renderer/gltf_loader.h"
 #include "renderer/scene_error.h"
@@ -22,15 +23,18 @@ namespace {
 using nlohmann::json;
 using test::GltfBuilder;
 
-// One folder per test process, removed when the process ends.
+// One folder per test process, removed when the process ends; TESSERA_GLTF_FIXTURES keeps them in a given folder
+// (for the Khronos validator test, tests/gltf/CMakeLists.txt).
 std::filesystem::path fixture_dir() {
   static const struct Folder {
+    const char* keep = std::getenv("TESSERA_GLTF_FIXTURES");
     std::filesystem::path path =
-        std::filesystem::temp_directory_path() / ("tessera-gltf-compression-" + std::to_string(::getpid()));
+        keep ? std::filesystem::path(keep)
+             : std::filesystem::temp_directory_path() / ("tessera-gltf-compression-" + std::to_string(::getpid()));
     Folder() { std::filesystem::create_directories(path); }
     ~Folder() {
       std::error_code ec;
-      std::filesystem::remove_all(path, ec);
+      if (!keep) std::filesystem::remove_all(path, ec);
     }
   } folder;
   return folder.path;
