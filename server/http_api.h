@@ -46,7 +46,7 @@ struct ApiContext {
   const HttpTransport* transport = nullptr;  // for the connection gauges (none when served by a plain httplib::Server)
   // Whether the store's notifications arrive (PostgresNotifications::connected), for its gauge; unset on a store
   // that has none (SQLite).
-  std::function<bool()> store_notifications_up;
+  std::function<bool()> store_notifications_up{};
 };
 
 // Every route the API serves, as OpenAPI names it ("/v1/jobs/{id}"), for the test that holds the two in step.
