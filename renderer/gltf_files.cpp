@@ -34,6 +34,7 @@ const std::set<std::string> kSupportedExtensions = {
     "KHR_materials_variants",
     "KHR_materials_unlit",
     "EXT_mesh_gpu_instancing",
+    "KHR_materials_anisotropy",
 };
 
 // ---- confined file access for tinygltf ----

@@ -82,6 +82,9 @@ struct Materials {
   uint32_t default_material(Import& import);
 };
 
+// gltf_pbr parameters for glTF material `m` (spec 3.9, appendix B; the KHR_materials_* extensions), textures included.
+json material_params(const json& doc, const json& m, std::vector<std::string>* warnings);
+
 // glTF material `material` with KHR_materials_pbrSpecularGlossiness as a metallic-roughness material (the
 // extension's conversion example); a specular-glossiness texture is baked into a metallic-roughness image added to
 // `images` and to doc's images and textures. A warning says it is approximated.

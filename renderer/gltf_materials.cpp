@@ -72,7 +72,8 @@ json rgb_or(const json& obj, const char* key, const json& fallback) {
   return it != obj.end() && it->is_array() && it->size() >= 3 ? json{(*it)[0], (*it)[1], (*it)[2]} : fallback;
 }
 
-// gltf_pbr parameters for glTF material `m` (spec 3.9, appendix B; the KHR_materials_* extensions), textures included.
+}  // namespace
+
 json material_params(const json& doc, const json& m, std::vector<std::string>* warnings) {
   json p = {{"type", "gltf_pbr"}};
   const json pbr = m.value("pbrMetallicRoughness", json::object());
@@ -137,8 +138,20 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
     set("sheen_roughness", number_or(t, "sheenRoughnessFactor", 0.0), t.value("sheenRoughnessTexture", json()), 3,
         false);
   }
+  if (ext.contains("KHR_materials_anisotropy")) {
+    // KHR_materials_anisotropy: strength (times the texture's B), rotation (radians, counter-clockwise from the
+    // tangent) and the texture's RG direction in tangent space (linear).
+    const json& t = ext["KHR_materials_anisotropy"];
+    const json info = t.value("anisotropyTexture", json());
+    set("anisotropy", number_or(t, "anisotropyStrength", 0.0), info, 2, false);
+    p["anisotropy_rotation"] = number_or(t, "anisotropyRotation", 0.0);
+    json dir = texture_param(doc, info, -1, false, json{1, 1, 1}, nullptr);
+    if (!dir.is_null()) p["anisotropy_direction"] = dir;
+  }
   return p;
 }
+
+namespace {
 
 // KHR_materials_pbrSpecularGlossiness onto metallic-roughness, as the extension's own conversion example does
 // (Khronos glTF repository, extensions/2.0/Archived/KHR_materials_pbrSpecularGlossiness, "convert-between-workflows"):

@@ -47,6 +47,12 @@
 // transmission lobe's roughness is scaled by clamp(2 ior - 2, 0, 1), as the Khronos glTF Sample Viewer does
 // (applyIorToRoughness): at IOR 1 nothing refracts, so a rough pane stays clear; at 1.5 the lobe is as rough as the
 // reflection.
+// KHR_materials_anisotropy: the specular and metal lobes are anisotropic GGX with alpha_t = mix(alpha, 1,
+// strength^2) along the anisotropy direction and alpha_b = alpha across it (the extension's "Implementation"); the
+// direction is the tangent rotated in the tangent plane by the rotation (and by the texture's RG direction). The BSDF
+// works in that direction's frame (every other lobe is isotropic about the normal; the coat's normal is turned with
+// it). The albedo tables keep the isotropic alpha_b: the specular albedo they give is then at least the anisotropic
+// lobe's, so the diffuse lobe's coupling weight errs towards losing energy, not gaining it.
 #include "renderer/bsdf/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/bsdf/rough_dielectric.h"
@@ -209,6 +215,8 @@ struct GltfLobes {
   Vec3 coat_n{0, 0, 1};  // the clearcoat's normal in the shading frame
   Rgb sheen_color{0, 0, 0};
   float alpha_sheen = 0.01f;
+  float anisotropy = 0;                // KHR_materials_anisotropy's strength, in [0, 1]
+  float aniso_cos = 1, aniso_sin = 0;  // its direction in the shading frame's tangent plane
 };
 
 class GltfPbrBsdf final : public Bsdf {
@@ -216,15 +224,20 @@ class GltfPbrBsdf final : public Bsdf {
   explicit GltfPbrBsdf(const GltfLobes& l) : l_(l) {
     dist_.type = MicrofacetType::kGgx;
     dist_.alpha_x = dist_.alpha_y = l.alpha;
+    if (l.anisotropy > 0) {
+      dist_.alpha_x = l.alpha + (1 - l.alpha) * sqr(l.anisotropy);  // alpha_t = mix(alpha, 1, strength^2)
+      aniso_ = true;
+    }
     dist_t_.type = MicrofacetType::kGgx;
     dist_t_.alpha_x = dist_t_.alpha_y = l.alpha_t;
     dist_c_.type = MicrofacetType::kGgx;
     dist_c_.alpha_x = dist_c_.alpha_y = l.alpha_c;
     coat_tilted_ = l.coat_n.z < 1;
     if (coat_tilted_) {
-      coat_frame_ = Frame::from_normal(l.coat_n);
+      const Vec3 c = to_aniso(l.coat_n);
+      coat_frame_ = Frame::from_normal(c);
       // The back side (wo below): the mirrored configuration of the coat seen from behind, normal -c mirrored.
-      coat_frame_back_ = Frame::from_normal(Vec3(-l.coat_n.x, -l.coat_n.y, l.coat_n.z));
+      coat_frame_back_ = Frame::from_normal(Vec3(-c.x, -c.y, c.z));
     }
     if (solid()) interface_ = RoughDielectric{dist_t_, l.eta, 1.0f, max_component(l.base_color)};
     float a1, a2;
@@ -233,10 +246,52 @@ class GltfPbrBsdf final : public Bsdf {
     sheen_max_ = max_component(l.sheen_color);
   }
 
-  Rgb eval(const Vec3& wo, const Vec3& wi) const override { return evaluate(wo, wi, nullptr); }
-  Rgb eval_pdf(const Vec3& wo, const Vec3& wi, float* pdf_out) const override { return evaluate(wo, wi, pdf_out); }
+  Rgb eval(const Vec3& wo, const Vec3& wi) const override { return evaluate(to_aniso(wo), to_aniso(wi), nullptr); }
+  Rgb eval_pdf(const Vec3& wo, const Vec3& wi, float* pdf_out) const override {
+    return evaluate(to_aniso(wo), to_aniso(wi), pdf_out);
+  }
 
-  std::optional<BsdfSample> sample(const Vec3& wo_in, float uc, Vec2 u) const override {
+  std::optional<BsdfSample> sample(const Vec3& wo, float uc, Vec2 u) const override {
+    std::optional<BsdfSample> s = sample_local(to_aniso(wo), uc, u);
+    if (s) s->wi = from_aniso(s->wi);
+    return s;
+  }
+
+  float pdf(const Vec3& wo, const Vec3& wi) const override {
+    float p;
+    evaluate(to_aniso(wo), to_aniso(wi), &p);  // one formula for the pdf; pdf alone is not on the render loop's path
+    return p;
+  }
+
+  // The adjoint (bsdf.h): solid transmission refracts, and its radiance form's 1/eta'^2 is taken out again.
+  Rgb eval_adjoint(const Vec3& wo, const Vec3& wi) const override {
+    const Rgb f = eval(wo, wi);
+    return solid() && wo.z * wi.z < 0 ? f * sqr(wo.z > 0 ? l_.eta : 1 / l_.eta) : f;
+  }
+  std::optional<BsdfSample> sample_adjoint(const Vec3& wo, float uc, Vec2 u) const override {
+    std::optional<BsdfSample> s = sample(wo, uc, u);
+    if (s && (s->flags & kBsdfTransmission)) s->f *= sqr(s->eta);
+    return s;
+  }
+
+  uint32_t flags() const override {
+    uint32_t f = kBsdfReflection | kBsdfDiffuse | kBsdfGlossy;
+    if (l_.transmission > 0 && l_.metallic < 1) f |= kBsdfTransmission;
+    return f;
+  }
+  Rgb albedo_hint() const override { return l_.base_color; }
+
+ private:
+  // The shading frame turned about the normal so that +x is the anisotropy direction, and back.
+  Vec3 to_aniso(const Vec3& w) const {
+    return aniso_ ? Vec3(l_.aniso_cos * w.x + l_.aniso_sin * w.y, l_.aniso_cos * w.y - l_.aniso_sin * w.x, w.z) : w;
+  }
+  Vec3 from_aniso(const Vec3& w) const {
+    return aniso_ ? Vec3(l_.aniso_cos * w.x - l_.aniso_sin * w.y, l_.aniso_sin * w.x + l_.aniso_cos * w.y, w.z) : w;
+  }
+
+  // sample() in the anisotropy frame.
+  std::optional<BsdfSample> sample_local(const Vec3& wo_in, float uc, Vec2 u) const {
     if (wo_in.z == 0) return std::nullopt;
     Vec3 wo = wo_in;
     const bool flip = wo.z < 0;
@@ -278,31 +333,6 @@ class GltfPbrBsdf final : public Bsdf {
     return BsdfSample{f, wi, pdf_value, flags, 1.0f};
   }
 
-  float pdf(const Vec3& wo, const Vec3& wi) const override {
-    float p;
-    evaluate(wo, wi, &p);  // one formula for the pdf; pdf alone is not on the render loop's path
-    return p;
-  }
-
-  // The adjoint (bsdf.h): solid transmission refracts, and its radiance form's 1/eta'^2 is taken out again.
-  Rgb eval_adjoint(const Vec3& wo, const Vec3& wi) const override {
-    const Rgb f = eval(wo, wi);
-    return solid() && wo.z * wi.z < 0 ? f * sqr(wo.z > 0 ? l_.eta : 1 / l_.eta) : f;
-  }
-  std::optional<BsdfSample> sample_adjoint(const Vec3& wo, float uc, Vec2 u) const override {
-    std::optional<BsdfSample> s = sample(wo, uc, u);
-    if (s && (s->flags & kBsdfTransmission)) s->f *= sqr(s->eta);
-    return s;
-  }
-
-  uint32_t flags() const override {
-    uint32_t f = kBsdfReflection | kBsdfDiffuse | kBsdfGlossy;
-    if (l_.transmission > 0 && l_.metallic < 1) f |= kBsdfTransmission;
-    return f;
-  }
-  Rgb albedo_hint() const override { return l_.base_color; }
-
- private:
   // f(wo, wi), and with `pdf_out` also the density with which `sample` picks wi: one pass shares the half vector,
   // D, Lambda and the lobe weights between the two.
   Rgb evaluate(const Vec3& wo_in, const Vec3& wi_in, float* pdf_out) const {
@@ -455,6 +485,7 @@ class GltfPbrBsdf final : public Bsdf {
   MicrofacetDistribution dist_, dist_t_, dist_c_;
   RoughDielectric interface_;  // solid transmission's
   bool coat_tilted_ = false;   // the coat has its own normal
+  bool aniso_ = false;         // KHR_materials_anisotropy: dist_ is anisotropic along the frame's +x
   Frame coat_frame_, coat_frame_back_;
   // A BSDF belongs to one path vertex on one thread, so the cache needs no synchronisation. wo starts as a direction
   // no caller passes (not unit length).
@@ -472,6 +503,9 @@ class GltfPbrMaterial final : public Material {
  public:
   RgbParam base_color, specular_color, sheen_color;
   FloatParam metallic, roughness, specular, transmission, clearcoat, clearcoat_roughness, sheen_roughness;
+  FloatParam anisotropy;                       // KHR_materials_anisotropy: anisotropyStrength (times the texture's B)
+  RgbParam anisotropy_direction;               // its texture's RG: the direction in tangent space, mapped to [-1, 1]
+  float aniso_rot_cos = 1, aniso_rot_sin = 0;  // anisotropyRotation, counter-clockwise from the tangent
   float f0_ior = 0.04f;
   float transmission_roughness_scale = 1;  // clamp(2 ior - 2, 0, 1)
   float ior = 1.5f;
@@ -511,6 +545,26 @@ class GltfPbrMaterial final : public Material {
     l.sheen_color = vmin(vmax(sheen_color.eval(sp), Rgb(0)), Rgb(1));
     float rs = clamp(sheen_roughness.eval(sp), 0.0f, 1.0f);
     l.alpha_sheen = std::max(rs * rs, SheenAlbedoTable::kMinAlpha);
+    l.anisotropy = clamp(anisotropy.eval(sp), 0.0f, 1.0f);
+    if (l.anisotropy > 0) {
+      // KHR_materials_anisotropy: direction = rotation(anisotropyRotation) * (texture.rg * 2 - 1), in the tangent
+      // frame (tangent, bitangent = sign * n x t); tessera's frame has t = n x s, hence the sign on y.
+      float dx = 1, dy = 0;
+      if (anisotropy_direction.texture) {
+        const Rgb d = anisotropy_direction.eval(sp);
+        dx = 2 * d[0] - 1;
+        dy = 2 * d[1] - 1;
+      }
+      const float rx = aniso_rot_cos * dx - aniso_rot_sin * dy,
+                  ry = (aniso_rot_sin * dx + aniso_rot_cos * dy) * sp.tangent_sign;
+      const float len = std::sqrt(rx * rx + ry * ry);
+      if (len > 0) {
+        l.aniso_cos = rx / len;
+        l.aniso_sin = ry / len;
+      } else {
+        l.anisotropy = 0;
+      }
+    }
     return arena.make<GltfPbrBsdf>(l);
   }
 };
@@ -520,7 +574,7 @@ class GltfPbrMaterial final : public Material {
 void register_gltf_pbr(MaterialRegistry& registry) {
   registry.add("gltf_pbr", [](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
     auto m = std::make_unique<GltfPbrMaterial>();
-    m->isotropic = true;  // every lobe is isotropic; a normal map (set later by the loader) still gets a tangent
+    m->isotropic = true;  // isotropic unless anisotropic (below); a normal map (set later by the loader) gets a tangent
     m->base_color = params::rgb_param(j, "base_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
     m->metallic = params::float_param(j, "metallic", ptr, 1.0f, 0.0f, 1.0f, ctx);
     m->roughness = params::float_param(j, "roughness", ptr, 1.0f, 0.0f, 1.0f, ctx);
@@ -541,6 +595,13 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     m->clearcoat_roughness = params::float_param(j, "clearcoat_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
     m->sheen_color = params::rgb_param(j, "sheen_color", ptr, Rgb(0), 0.0f, 1.0f, ctx);
     m->sheen_roughness = params::float_param(j, "sheen_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    m->anisotropy = params::float_param(j, "anisotropy", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    m->anisotropy_direction = params::rgb_param(j, "anisotropy_direction", ptr, Rgb(1, 0.5f, 1), 0.0f, 1.0f, ctx);
+    const float rotation = params::number(j, "anisotropy_rotation", ptr, 0.0f, -1e3f, 1e3f);
+    m->aniso_rot_cos = std::cos(rotation);
+    m->aniso_rot_sin = std::sin(rotation);
+    // An anisotropic lobe needs the hit's tangent.
+    if (m->anisotropy.texture || m->anisotropy.value > 0) m->isotropic = false;
     // The albedo tables are computed once per process (0.1 s, and 0.2 s for sheen's): here, while the scene loads,
     // rather than on a render thread in the first pass, where the other render threads would wait for them.
     SchlickAlbedoTable::get();

@@ -95,6 +95,48 @@ TEST(GltfMaterials, SpecularGlossinessAssetsImportWithAWarningSayingItIsApproxim
       << imported.warnings[0];
 }
 
+// KHR_materials_anisotropy (the extension's specification): strength, rotation and the texture, whose B scales the
+// strength and whose RG is the direction in tangent space.
+TEST(GltfMaterials, AnisotropyParametersAreRead) {
+  const json doc = {{"images", {json::object()}}, {"textures", {{{"source", 0}}}}};
+  const json m = {
+      {"extensions",
+       {{"KHR_materials_anisotropy",
+         {{"anisotropyStrength", 0.6}, {"anisotropyRotation", 0.5}, {"anisotropyTexture", {{"index", 0}}}}}}}};
+  std::vector<std::string> warnings;
+  const json p = gltf::material_params(doc, m, &warnings);
+  EXPECT_TRUE(warnings.empty());
+  ASSERT_TRUE(p.contains("anisotropy")) << p.dump();
+  EXPECT_EQ(p["anisotropy"]["texture"], "#image0");
+  EXPECT_EQ(p["anisotropy"]["channel"], 2);
+  EXPECT_EQ(p["anisotropy"]["factor"], 0.6);
+  EXPECT_EQ(p["anisotropy"]["colorspace"], "linear");
+  EXPECT_EQ(p["anisotropy_rotation"], 0.5);
+  ASSERT_TRUE(p.contains("anisotropy_direction")) << p.dump();
+  EXPECT_EQ(p["anisotropy_direction"]["texture"], "#image0");
+  EXPECT_EQ(p["anisotropy_direction"]["colorspace"], "linear");
+  EXPECT_FALSE(p["anisotropy_direction"].contains("channel"));
+}
+
+TEST(GltfMaterials, AnAnisotropicAssetImportsWithoutAWarningAndAsksForTangents) {
+  test::GltfBuilder b;
+  const int mat = b.material(
+      {{"name", "brushed"},
+       {"pbrMetallicRoughness", {{"metallicFactor", 1.0}, {"roughnessFactor", 0.3}}},
+       {"extensions", {{"KHR_materials_anisotropy", {{"anisotropyStrength", 0.8}, {"anisotropyRotation", 1.0}}}}}});
+  b.node({{"mesh", b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, mat)}}, true);
+  b.doc["extensionsUsed"] = {"KHR_materials_anisotropy"};
+  b.doc["extensionsRequired"] = {"KHR_materials_anisotropy"};
+  const auto dir = std::filesystem::temp_directory_path() / ("tessera-gltf-aniso-" + std::to_string(::getpid()));
+  const auto path = b.write(dir, "anisotropy");
+  Scene scene;
+  const GltfImport imported = import_gltf(path, "/scene/gltf", scene, {});
+  std::filesystem::remove_all(dir);
+  EXPECT_TRUE(imported.warnings.empty()) << imported.warnings.front();
+  ASSERT_EQ(scene.materials.size(), 1u);
+  EXPECT_FALSE(scene.materials[0]->isotropic);  // the hit's tangent orients the lobe
+}
+
 // One triangle with material "plain" (0), and variants "midnight_blue" (material "blue", 1) and "crimson" (material
 // "red", 2) mapped on its primitive; material "unused" (3) is no variant's.
 std::filesystem::path write_variants(const std::filesystem::path& dir) {
