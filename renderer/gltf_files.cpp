@@ -35,6 +35,7 @@ const std::set<std::string> kSupportedExtensions = {
     "KHR_materials_unlit",
     "EXT_mesh_gpu_instancing",
     "KHR_materials_anisotropy",
+    "KHR_materials_diffuse_transmission",
 };
 
 // ---- confined file access for tinygltf ----

@@ -138,6 +138,18 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
     set("sheen_roughness", number_or(t, "sheenRoughnessFactor", 0.0), t.value("sheenRoughnessTexture", json()), 3,
         false);
   }
+  if (ext.contains("KHR_materials_diffuse_transmission")) {
+    // KHR_materials_diffuse_transmission: the factor (times the texture's A) and the colour (sRGB texture).
+    const json& t = ext["KHR_materials_diffuse_transmission"];
+    set("diffuse_transmission", number_or(t, "diffuseTransmissionFactor", 0.0),
+        t.value("diffuseTransmissionTexture", json()), 3, false);
+    set("diffuse_transmission_color", rgb_or(t, "diffuseTransmissionColorFactor", {1, 1, 1}),
+        t.value("diffuseTransmissionColorTexture", json()), -1, true);
+    if (p.value("thin_walled", true) == false && warnings)
+      warnings->push_back("material \"" + m.value("name", std::string()) +
+                          "\": KHR_materials_diffuse_transmission is not drawn on a refracting volume (thin-walled "
+                          "only)");
+  }
   if (ext.contains("KHR_materials_anisotropy")) {
     // KHR_materials_anisotropy: strength (times the texture's B), rotation (radians, counter-clockwise from the
     // tangent) and the texture's RG direction in tangent space (linear).

@@ -53,6 +53,11 @@
 // works in that direction's frame (every other lobe is isotropic about the normal; the coat's normal is turned with
 // it). The albedo tables keep the isotropic alpha_b: the specular albedo they give is then at least the anisotropic
 // lobe's, so the diffuse lobe's coupling weight errs towards losing energy, not gaining it.
+// KHR_materials_diffuse_transmission: the diffuse lobe is mix(diffuse_brdf(base_color),
+// diffuse_btdf(diffuse_transmission_color), diffuse_transmission) (the extension's "BTDF"), the BTDF a Lambertian lobe
+// into the opposite hemisphere with the same albedo coupling W as the reflection, so a white base that transmits
+// everything keeps albedo 1 (reflection plus transmission) and stays reciprocal. Thin-walled: on a solid (refracting)
+// surface it is not drawn (the loader warns).
 #include "renderer/bsdf/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/bsdf/rough_dielectric.h"
@@ -217,6 +222,8 @@ struct GltfLobes {
   float alpha_sheen = 0.01f;
   float anisotropy = 0;                // KHR_materials_anisotropy's strength, in [0, 1]
   float aniso_cos = 1, aniso_sin = 0;  // its direction in the shading frame's tangent plane
+  float diffuse_transmission = 0;      // KHR_materials_diffuse_transmission: the diffuse share transmitted
+  Rgb diffuse_transmission_color{1, 1, 1};
 };
 
 class GltfPbrBsdf final : public Bsdf {
@@ -244,6 +251,10 @@ class GltfPbrBsdf final : public Bsdf {
     SchlickAlbedoTable::get().average(l.alpha, &a1, &a2);
     specular_average_ = std::min(max_component(l.f0_d * a1 + Rgb(l.f90_d * a2)), 0.999f);
     sheen_max_ = max_component(l.sheen_color);
+    // The diffuse lobe's share that transmits, for sampling: by the luminances of the two colours.
+    const float dr = (1 - l.diffuse_transmission) * luminance(l.base_color),
+                dt = l.diffuse_transmission * luminance(l.diffuse_transmission_color);
+    diffuse_t_share_ = dr + dt > 0 ? dt / (dr + dt) : 0;
   }
 
   Rgb eval(const Vec3& wo, const Vec3& wi) const override { return evaluate(to_aniso(wo), to_aniso(wi), nullptr); }
@@ -276,7 +287,7 @@ class GltfPbrBsdf final : public Bsdf {
 
   uint32_t flags() const override {
     uint32_t f = kBsdfReflection | kBsdfDiffuse | kBsdfGlossy;
-    if (l_.transmission > 0 && l_.metallic < 1) f |= kBsdfTransmission;
+    if ((l_.transmission > 0 || l_.diffuse_transmission > 0) && l_.metallic < 1) f |= kBsdfTransmission;
     return f;
   }
   Rgb albedo_hint() const override { return l_.base_color; }
@@ -302,6 +313,10 @@ class GltfPbrBsdf final : public Bsdf {
     if (uc < p[0] || uc >= p[0] + p[1] + p[2] + p[3]) {  // diffuse or sheen: cosine-weighted
       wi = sample_cosine_hemisphere(u);
       flags = kBsdfReflection | (uc < p[0] ? kBsdfDiffuse : kBsdfGlossy);
+      if (uc < p[0] * diffuse_t_share_) {  // the diffuse lobe's transmitted part
+        wi.z = -wi.z;
+        flags = kBsdfTransmission | kBsdfDiffuse;
+      }
     } else if (uc < p[0] + p[1]) {
       if (!microfacet_reflection_sample(dist_, wo, u, 0.5f, &wi)) return std::nullopt;
       flags = kBsdfReflection | kBsdfGlossy;
@@ -344,7 +359,7 @@ class GltfPbrBsdf final : public Bsdf {
       wi.z = -wi.z;
     }
     const bool transmit = wi.z < 0;
-    if (transmit && l_.transmission <= 0) return Rgb(0);
+    if (transmit && l_.transmission <= 0 && l_.diffuse_transmission <= 0) return Rgb(0);
     const Vec3 wr(wi.x, wi.y, std::abs(wi.z));  // the mirrored pair for transmission
     const float m = l_.metallic;
     Rgb f(0);
@@ -368,7 +383,7 @@ class GltfPbrBsdf final : public Bsdf {
         if (transmit) {
           *pdf_out = p[2] * specular_pdf;
         } else {
-          *pdf_out += (p[0] + p[4]) * cosine_hemisphere_pdf(wr.z) + p[1] * specular_pdf;
+          *pdf_out += (p[0] * (1 - diffuse_t_share_) + p[4]) * cosine_hemisphere_pdf(wr.z) + p[1] * specular_pdf;
           if (p[3] > 0) {
             const Frame& cf = coat_frame(wo_in.z < 0);
             *pdf_out += p[3] * microfacet_reflection_pdf(dist_c_, to_coat(cf, wo), to_coat(cf, wr));
@@ -384,11 +399,20 @@ class GltfPbrBsdf final : public Bsdf {
         const float w = (1 - cache_.albedo_o) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
         // With solid transmission the interface reflects for its share of the surface.
         const float specular_share = solid() ? (1 - m) * (1 - l_.transmission) : 1 - m;
-        f += l_.base_color * ((1 - m) * (1 - l_.transmission) * w * kInvPi) + fd * (specular_share * dv);
+        f += l_.base_color * ((1 - m) * (1 - l_.transmission) * (1 - l_.diffuse_transmission) * w * kInvPi) +
+             fd * (specular_share * dv);
         if (m > 0) f += fresnel_schlick(l_.base_color, Rgb(1), vh) * (m * dv);
       }
     } else if (!solid()) {
       return Rgb(0);
+    }
+    if (transmit && l_.diffuse_transmission > 0) {
+      // The Lambertian BTDF, coupled to the specular lobe by the albedos of wo and the mirrored wi, as the diffuse
+      // reflection is.
+      const float* p = lobes_at(wo, wo_in.z < 0);
+      const float w = (1 - cache_.albedo_o) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
+      f += l_.diffuse_transmission_color * ((1 - m) * (1 - l_.transmission) * l_.diffuse_transmission * w * kInvPi);
+      if (pdf_out) *pdf_out += p[0] * diffuse_t_share_ * cosine_hemisphere_pdf(wr.z);
     }
     if (sheen_max_ > 0) {
       const float eo = sheen_albedo(wo.z), ei = sheen_albedo(wr.z);
@@ -434,7 +458,9 @@ class GltfPbrBsdf final : public Bsdf {
     // The coat's weight from the cosine about its own normal; none where wo is under the coat.
     const float coat_cos = to_coat(coat_frame(back), wo).z;
     const float fc = coat_cos > 0 ? l_.clearcoat * fresnel_schlick(0.04f, coat_cos) : 0;
-    p[0] = (1 - fc) * (1 - m) * (1 - l_.transmission) * (1 - fd_max) * base;
+    const float diffuse =
+        (1 - l_.diffuse_transmission) * base + l_.diffuse_transmission * luminance(l_.diffuse_transmission_color);
+    p[0] = (1 - fc) * (1 - m) * (1 - l_.transmission) * (1 - fd_max) * diffuse;
     const float t = l_.transmission;
     if (solid()) {
       // The interface reflects and transmits: its share of the surface, by what it reflects and what it passes.
@@ -497,14 +523,17 @@ class GltfPbrBsdf final : public Bsdf {
   } cache_;
   float specular_average_ = 0;
   float sheen_max_ = 0;
+  float diffuse_t_share_ = 0;  // of the diffuse lobe's samples, the transmitted ones
 };
 
 class GltfPbrMaterial final : public Material {
  public:
   RgbParam base_color, specular_color, sheen_color;
   FloatParam metallic, roughness, specular, transmission, clearcoat, clearcoat_roughness, sheen_roughness;
-  FloatParam anisotropy;                       // KHR_materials_anisotropy: anisotropyStrength (times the texture's B)
-  RgbParam anisotropy_direction;               // its texture's RG: the direction in tangent space, mapped to [-1, 1]
+  FloatParam anisotropy;  // KHR_materials_anisotropy: anisotropyStrength (times the texture's B)
+  RgbParam anisotropy_direction;
+  FloatParam diffuse_transmission;  // KHR_materials_diffuse_transmission: diffuseTransmissionFactor (times texture A)
+  RgbParam diffuse_transmission_color;         // its texture's RG: the direction in tangent space, mapped to [-1, 1]
   float aniso_rot_cos = 1, aniso_rot_sin = 0;  // anisotropyRotation, counter-clockwise from the tangent
   float f0_ior = 0.04f;
   float transmission_roughness_scale = 1;  // clamp(2 ior - 2, 0, 1)
@@ -545,6 +574,10 @@ class GltfPbrMaterial final : public Material {
     l.sheen_color = vmin(vmax(sheen_color.eval(sp), Rgb(0)), Rgb(1));
     float rs = clamp(sheen_roughness.eval(sp), 0.0f, 1.0f);
     l.alpha_sheen = std::max(rs * rs, SheenAlbedoTable::kMinAlpha);
+    // Thin-walled only: a solid's transmission is its refracting interface.
+    l.diffuse_transmission = solid ? 0.0f : clamp(diffuse_transmission.eval(sp), 0.0f, 1.0f);
+    if (l.diffuse_transmission > 0)
+      l.diffuse_transmission_color = vmin(vmax(diffuse_transmission_color.eval(sp), Rgb(0)), Rgb(1));
     l.anisotropy = clamp(anisotropy.eval(sp), 0.0f, 1.0f);
     if (l.anisotropy > 0) {
       // KHR_materials_anisotropy: direction = rotation(anisotropyRotation) * (texture.rg * 2 - 1), in the tangent
@@ -595,6 +628,8 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     m->clearcoat_roughness = params::float_param(j, "clearcoat_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
     m->sheen_color = params::rgb_param(j, "sheen_color", ptr, Rgb(0), 0.0f, 1.0f, ctx);
     m->sheen_roughness = params::float_param(j, "sheen_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    m->diffuse_transmission = params::float_param(j, "diffuse_transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    m->diffuse_transmission_color = params::rgb_param(j, "diffuse_transmission_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
     m->anisotropy = params::float_param(j, "anisotropy", ptr, 0.0f, 0.0f, 1.0f, ctx);
     m->anisotropy_direction = params::rgb_param(j, "anisotropy_direction", ptr, Rgb(1, 0.5f, 1), 0.0f, 1.0f, ctx);
     const float rotation = params::number(j, "anisotropy_rotation", ptr, 0.0f, -1e3f, 1e3f);

@@ -137,6 +137,59 @@ TEST(GltfMaterials, AnAnisotropicAssetImportsWithoutAWarningAndAsksForTangents) 
   EXPECT_FALSE(scene.materials[0]->isotropic);  // the hit's tangent orients the lobe
 }
 
+// KHR_materials_diffuse_transmission (the extension's specification): the factor (times the texture's A, linear)
+// and the colour (times its sRGB texture).
+TEST(GltfMaterials, DiffuseTransmissionParametersAreRead) {
+  const json doc = {{"images", {json::object(), json::object()}}, {"textures", {{{"source", 0}}, {{"source", 1}}}}};
+  const json m = {{"extensions",
+                   {{"KHR_materials_diffuse_transmission",
+                     {{"diffuseTransmissionFactor", 0.7},
+                      {"diffuseTransmissionTexture", {{"index", 0}}},
+                      {"diffuseTransmissionColorFactor", {0.9, 0.5, 0.1}},
+                      {"diffuseTransmissionColorTexture", {{"index", 1}}}}}}}};
+  std::vector<std::string> warnings;
+  const json p = gltf::material_params(doc, m, &warnings);
+  EXPECT_TRUE(warnings.empty());
+  ASSERT_TRUE(p.contains("diffuse_transmission")) << p.dump();
+  EXPECT_EQ(p["diffuse_transmission"]["texture"], "#image0");
+  EXPECT_EQ(p["diffuse_transmission"]["channel"], 3);
+  EXPECT_EQ(p["diffuse_transmission"]["factor"], 0.7);
+  EXPECT_EQ(p["diffuse_transmission"]["colorspace"], "linear");
+  ASSERT_TRUE(p.contains("diffuse_transmission_color")) << p.dump();
+  EXPECT_EQ(p["diffuse_transmission_color"]["texture"], "#image1");
+  EXPECT_EQ(p["diffuse_transmission_color"]["factor"], json({0.9, 0.5, 0.1}));
+  EXPECT_EQ(p["diffuse_transmission_color"]["colorspace"], "srgb");
+  // Factors alone, on a refracting volume: read, and a warning that it is not drawn there.
+  const json solid = {{"name", "leaf"},
+                      {"extensions",
+                       {{"KHR_materials_diffuse_transmission", {{"diffuseTransmissionFactor", 0.4}}},
+                        {"KHR_materials_volume", {{"thicknessFactor", 1.0}}}}}};
+  const json q = gltf::material_params(doc, solid, &warnings);
+  EXPECT_EQ(q["diffuse_transmission"], 0.4);
+  EXPECT_EQ(q["diffuse_transmission_color"], json({1, 1, 1}));
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("\"leaf\": KHR_materials_diffuse_transmission is not drawn"), std::string::npos)
+      << warnings[0];
+}
+
+TEST(GltfMaterials, ADiffuselyTransmittingAssetImportsWithoutAWarning) {
+  test::GltfBuilder b;
+  const int mat =
+      b.material({{"name", "paper"},
+                  {"pbrMetallicRoughness", {{"metallicFactor", 0.0}}},
+                  {"extensions", {{"KHR_materials_diffuse_transmission", {{"diffuseTransmissionFactor", 1.0}}}}}});
+  b.node({{"mesh", b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, mat)}}, true);
+  b.doc["extensionsUsed"] = {"KHR_materials_diffuse_transmission"};
+  b.doc["extensionsRequired"] = {"KHR_materials_diffuse_transmission"};
+  const auto dir = std::filesystem::temp_directory_path() / ("tessera-gltf-difftrans-" + std::to_string(::getpid()));
+  const auto path = b.write(dir, "difftrans");
+  Scene scene;
+  const GltfImport imported = import_gltf(path, "/scene/gltf", scene, {});
+  std::filesystem::remove_all(dir);
+  EXPECT_TRUE(imported.warnings.empty()) << imported.warnings.front();
+  ASSERT_EQ(scene.materials.size(), 1u);
+}
+
 // One triangle with material "plain" (0), and variants "midnight_blue" (material "blue", 1) and "crimson" (material
 // "red", 2) mapped on its primitive; material "unused" (3) is no variant's.
 std::filesystem::path write_variants(const std::filesystem::path& dir) {

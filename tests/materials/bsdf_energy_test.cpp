@@ -45,6 +45,8 @@ std::vector<std::pair<std::string, json>> energy_cases() {
   out.emplace_back("plastic_white", json{{"type", "plastic"}, {"diffuse", 1.0}, {"roughness", 0.3}});
   out.emplace_back("plastic_white_smooth", json{{"type", "plastic"}, {"diffuse", 1.0}});
   out.emplace_back("gltf_white_dielectric", json{{"type", "gltf_pbr"}, {"metallic", 0}, {"roughness", 0.3}});
+  out.emplace_back("gltf_white_diffuse_transmission",
+                   json{{"type", "gltf_pbr"}, {"metallic", 0}, {"roughness", 0.5}, {"diffuse_transmission", 1}});
   out.emplace_back("cook_torrance_white_kd",
                    json{{"type", "cook_torrance"}, {"kd", 0.5}, {"ks", 0.5}, {"roughness", 0.5}});
   return out;
