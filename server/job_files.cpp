@@ -157,6 +157,30 @@ void DirectoryJobFiles::publish_path(const fs::path& final_path, const char* nam
   fsync_dir(final_path.parent_path());
 }
 
+fs::path DirectoryJobFiles::staged_path(const std::string& id, JobFile f, int64_t epoch) const {
+  const fs::path final_path = path(id, f);
+  return final_path.parent_path() /
+         (final_path.stem().string() + ".e" + std::to_string(epoch) + final_path.extension().string());
+}
+
+void DirectoryJobFiles::stage(const std::string& id, JobFile f, int64_t epoch,
+                              const std::function<void(const std::string&)>& writer) const {
+  publish_path(staged_path(id, f, epoch), job_file_name(f), writer, false);
+}
+
+bool DirectoryJobFiles::publish_staged(const std::string& id, JobFile f, int64_t epoch) const {
+  std::error_code ec;
+  fs::rename(staged_path(id, f, epoch), path(id, f), ec);
+  if (ec) return false;  // none staged (published already, or the job deleted)
+  fsync_dir(dir(id));
+  return true;
+}
+
+void DirectoryJobFiles::discard_staged(const std::string& id, JobFile f, int64_t epoch) const {
+  std::error_code ignored;
+  fs::remove(staged_path(id, f, epoch), ignored);
+}
+
 std::unique_ptr<FileReader> DirectoryJobFiles::open(const std::string& id, JobFile f) const {
   const int fd = ::open(path(id, f).c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return nullptr;

@@ -46,6 +46,14 @@ class JobFiles {
   // extension, for writers that choose the format by it), failing like write().
   virtual void write_with(const std::string& id, JobFile f,
                           const std::function<void(const std::string&)>& writer) const = 0;
+  // Outputs fenced by the end of the run that made them (a result file): `writer` writes it, as write_with() does,
+  // under a name of the run's epoch beside the final one, where no reader looks. publish_staged() renames it over the
+  // final name once the store has taken the run's end; discard_staged() removes it when the store refused that end.
+  // publish_staged() is false (and changes nothing) when no such file exists: already published, or never staged.
+  virtual void stage(const std::string& id, JobFile f, int64_t epoch,
+                     const std::function<void(const std::string&)>& writer) const = 0;
+  virtual bool publish_staged(const std::string& id, JobFile f, int64_t epoch) const = 0;
+  virtual void discard_staged(const std::string& id, JobFile f, int64_t epoch) const = 0;
   // The file's bytes, or nothing when it does not exist.
   virtual std::optional<std::string> read(const std::string& id, JobFile f) const = 0;
   // The file's current version; null when it does not exist.
@@ -79,6 +87,11 @@ class DirectoryJobFiles final : public JobFiles {
   void write(const std::string& id, JobFile f, std::string_view bytes) const override;
   void write_with(const std::string& id, JobFile f,
                   const std::function<void(const std::string&)>& writer) const override;
+  // <data>/jobs/<id>/result.e<epoch>.png (the final name's stem, the epoch, its extension)
+  void stage(const std::string& id, JobFile f, int64_t epoch,
+             const std::function<void(const std::string&)>& writer) const override;
+  bool publish_staged(const std::string& id, JobFile f, int64_t epoch) const override;
+  void discard_staged(const std::string& id, JobFile f, int64_t epoch) const override;
   std::optional<std::string> read(const std::string& id, JobFile f) const override;
   std::unique_ptr<FileReader> open(const std::string& id, JobFile f) const override;
   void remove(const std::string& id) const override;
@@ -94,6 +107,7 @@ class DirectoryJobFiles final : public JobFiles {
   void publish_path(const std::filesystem::path& final_path, const char* name,
                     const std::function<void(const std::string&)>& writer, bool writer_synced) const;
   std::filesystem::path unit_path(const std::string& id, int unit, int64_t epoch) const;
+  std::filesystem::path staged_path(const std::string& id, JobFile f, int64_t epoch) const;
 
   std::filesystem::path root_;
 };

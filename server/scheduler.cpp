@@ -4,6 +4,7 @@
 #include <bit>
 #include <chrono>
 #include <cstdio>
+#include <system_error>
 
 #include <nlohmann/json.hpp>
 
@@ -13,6 +14,7 @@
 #include "renderer/scene_error.h"
 #include "renderer/session.h"
 #include "server/checkpoint.h"
+#include "server/file_io.h"
 #include "server/log.h"
 #include "server/time_format.h"
 
@@ -35,6 +37,9 @@ class Scheduler::RenderSlot {
   bool ending = false;          // its end is being recorded: its lease is no longer renewed nor checked
   int64_t epoch = 0;            // of its lease: every write of the run carries it
   bool lease_lost = false;      // the store refused the lease: the job was taken over or changed elsewhere
+  // A client's cancel or pause of a split job that the store took first (Scheduler::cancel()): the unit stops and
+  // records nothing.
+  bool settled = false;
   std::chrono::steady_clock::time_point renewed_at = std::chrono::steady_clock::now();
   bool done = false;
   std::thread thread;
@@ -81,6 +86,15 @@ JobProgress to_job_progress(const RenderProgress& p) {
   jp.eta_s = p.eta_s;
   jp.samples_per_s = p.samples_per_s;
   return jp;
+}
+
+// A result.png staged for the end of a run of `epoch` (Scheduler::publish_outputs()).
+void stage_png(const JobFiles& files, const std::string& id, int64_t epoch, const std::vector<uint8_t>& png) {
+  files.stage(id, JobFile::kResultPng, epoch, [&](const std::string& temp) {
+    const std::string_view bytes(reinterpret_cast<const char*>(png.data()), png.size());
+    if (int error = write_file_synced(temp, bytes); error != 0)
+      throw std::system_error(error, std::generic_category(), "cannot write result.png");
+  });
 }
 
 }  // namespace
@@ -206,7 +220,7 @@ void Scheduler::renew_leases_locked() {
 
 void Scheduler::renew_lease_locked(RenderSlot& slot, const char* noticed_by) {
   // A run recording its end has its outcome fenced by end_run(): the store's own change of state is no loss of lease.
-  if (slot.done || slot.lease_lost || slot.ending) return;
+  if (slot.done || slot.lease_lost || slot.ending || slot.settled) return;
   try {
     if (store_.renew_lease(slot.id, slot.epoch, now_ms(), options_.lease.count()))
       slot.renewed_at = std::chrono::steady_clock::now();
@@ -261,8 +275,11 @@ void Scheduler::dispatch_loop() {
       slot->id = record->id;
       slot->unit = record->unit;
       slot->epoch = record->epoch;
-      // A slot per job rendered whole, per unit of a split one (units of one job may render here side by side).
-      running_[slot->unit < 0 ? slot->id : slot->id + "/" + std::to_string(slot->unit)] = slot;
+      // A slot per job rendered whole, per unit of a split one (units of one job may render here side by side); a
+      // run claimed again while the last one here winds down (it was paused and resumed) gets a slot of its own.
+      std::string key = slot->unit < 0 ? slot->id : slot->id + "/" + std::to_string(slot->unit);
+      if (running_.contains(key)) key += "@" + std::to_string(slot->epoch);
+      running_[key] = slot;
       slot->thread = std::thread([this, slot, rec = std::move(*record)] { run_job(slot, rec); });
     }
     renew_leases_locked();
@@ -317,18 +334,25 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
   // A render (or a load) that stopped before its end: the job is deleted, cancelled, paused or (the daemon stopping)
   // back in the queue, to resume from its last checkpoint.
   const auto end_interrupted = [&](uint32_t samples_done) {
-    bool cancelled_by_client, paused, deleted, lease_lost;
+    bool cancelled_by_client, paused, deleted, lease_lost, settled;
     {
       std::lock_guard lock(mutex_);
       cancelled_by_client = slot->cancel_requested;
       paused = slot->pause_requested;
       deleted = slot->delete_requested;
       lease_lost = slot->lease_lost;
+      settled = slot->settled;
     }
     // The end of the run goes to the store through record_end(): retried while the store fails; when the daemon
     // stops first, the job stays running in the store, with its checkpoint, for the next start to resume.
     if (deleted) {
       log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
+    } else if (settled) {
+      // The store has the client's change already, made before this unit was asked to stop.
+      log_.add(id, printf_string("unit %d stopped at %u spp: the job was %s by a client", record.unit + 1,
+                                 static_cast<unsigned>(samples_done), cancelled_by_client ? "cancelled" : "paused"));
+      log(LogLevel::kInfo, "unit stopped: its job was cancelled or paused",
+          {{"job", id}, {"unit", record.unit}, {"samples_done", samples_done}});
     } else if (lease_lost) {
       // Whoever holds the job now owns its end. Its files go only if the job is gone.
       log_.add(id, printf_string("stopped at %u spp: the job was changed or taken over elsewhere",
@@ -427,7 +451,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     {
       std::lock_guard lock(mutex_);
       slot->session = &session;
-      if (slot->cancel_requested || slot->delete_requested || slot->lease_lost) session.cancel();
+      if (slot->cancel_requested || slot->delete_requested || slot->lease_lost || slot->settled) session.cancel();
       if (slot->pause_requested || stopping_) session.stop();
     }
     uint32_t samples_before = session.progress().samples_done;
@@ -542,15 +566,16 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
         }
       }
     } else {
-      // The outputs first: a file that cannot be written (a full disk) fails the job, as it should.
+      // The outputs first, staged (publish_outputs()): a file that cannot be written (a full disk) fails the job, as
+      // it should.
       const Film& film = session.film();
       const std::vector<float> rgb = film.resolve();
       if (job.want_png) {
         std::vector<uint8_t> png = encode_png(rgb, film.width(), film.height(), job.settings.display);
-        files_.write(id, JobFile::kResultPng, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+        stage_png(files_, id, slot->epoch, png);
       }
       if (job.want_exr) {
-        files_.write_with(id, JobFile::kResultExr, [&](const std::string& temp) {
+        files_.stage(id, JobFile::kResultExr, slot->epoch, [&](const std::string& temp) {
           write_exr(temp, rgb, film.width(), film.height(), job.settings.exr_half);
         });
       }
@@ -563,8 +588,10 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
                printf_string("succeeded: %s after %.2f s, %u spp in %u passes; wrote%s", stop_explained(reason).c_str(),
                              final_progress.elapsed_s, static_cast<unsigned>(final_progress.samples_done),
                              static_cast<unsigned>(final_progress.passes), written.c_str()));
-      if (record_terminal(*slot, JobState::kSucceeded, render_s, stop_reason_name(reason), "",
-                          [&] { store_.update_progress(id, slot->epoch, final_progress); })) {
+      const bool recorded = record_terminal(*slot, JobState::kSucceeded, render_s, stop_reason_name(reason), "",
+                                            [&] { store_.update_progress(id, slot->epoch, final_progress); });
+      publish_outputs(*slot, recorded);
+      if (recorded) {
         log(LogLevel::kInfo, "job succeeded",
             {{"job", id},
              {"elapsed_s", final_progress.elapsed_s},
@@ -674,7 +701,44 @@ bool Scheduler::record_failure(RenderSlot& slot, const std::string& message, dou
   }
 }
 
-std::string Scheduler::write_outputs(const JobRecord& job, const Film& film) {
+// A run's outputs are fenced by its end. They are staged under names of its epoch (JobFiles::stage), its end is
+// recorded (end_run, refused unless the job is still running under that epoch), and only then are they renamed to
+// the names clients read. So a cancel that commits between the run's last lease check and its end keeps the partial
+// results its canceller wrote: the refused run's full image is removed, never published. An end whose outcome is not
+// known (the store failed after taking it, and refused the retry) is read back: the run's outputs are published when
+// the job succeeded under its epoch. A crash between the end and the renames leaves the staged files, which
+// JobService::result() publishes when a client asks for a succeeded job's missing result (the job's epoch is the
+// run's), so a succeeded job is never left without its outputs.
+void Scheduler::publish_outputs(RenderSlot& slot, bool recorded) {
+  bool publish = recorded;
+  if (!recorded) {
+    try {
+      const auto now = store_.get(slot.id);
+      if (now && now->state == JobState::kSucceeded && now->epoch == slot.epoch)
+        publish = true;
+      else if (now)
+        publish = false;
+      else
+        return;  // deleted: its files go with it
+    } catch (const JobStoreError& e) {
+      // Unknown: the staged files stay, published on demand if the run's end was taken (JobService::result()).
+      count_store_error();
+      log(LogLevel::kWarn, "cannot tell whether the end of a job was taken; its outputs stay staged",
+          {{"job", slot.id}, {"error", e.what()}});
+      return;
+    }
+  }
+  if (!publish)
+    log_.add(slot.id, "its outputs are not published: the job was changed elsewhere before its end was recorded");
+  for (JobFile f : {JobFile::kResultPng, JobFile::kResultExr}) {
+    if (publish)
+      files_.publish_staged(slot.id, f, slot.epoch);
+    else
+      files_.discard_staged(slot.id, f, slot.epoch);
+  }
+}
+
+std::string Scheduler::write_outputs(const JobRecord& job, const Film& film, std::optional<int64_t> staged_epoch) {
   const json settings = json::parse(job.settings);
   DisplaySettings display;
   display.exposure_ev = settings.value("exposure_ev", 0.0f);
@@ -684,13 +748,20 @@ std::string Scheduler::write_outputs(const JobRecord& job, const Film& film) {
   for (const json& format : json::parse(job.outputs)) {
     if (format == "png") {
       std::vector<uint8_t> png = encode_png(rgb, film.width(), film.height(), display);
-      files_.write(job.id, JobFile::kResultPng,
-                   std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+      if (staged_epoch)
+        stage_png(files_, job.id, *staged_epoch, png);
+      else
+        files_.write(job.id, JobFile::kResultPng,
+                     std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
       written += " result.png";
     } else if (format == "exr") {
-      files_.write_with(job.id, JobFile::kResultExr, [&](const std::string& temp) {
+      const auto writer = [&](const std::string& temp) {
         write_exr(temp, rgb, film.width(), film.height(), settings.value("exr_precision", "half") == "half");
-      });
+      };
+      if (staged_epoch)
+        files_.stage(job.id, JobFile::kResultExr, *staged_epoch, writer);
+      else
+        files_.write_with(job.id, JobFile::kResultExr, writer);
       written += " result.exr";
     }
   }
@@ -731,7 +802,7 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
     lose_lease_locked(slot, "its lease checked before the merge");
     return;
   }
-  const std::string written = write_outputs(record, *film);
+  const std::string written = write_outputs(record, *film, slot.epoch);
   {
     DisplaySettings display;
     display.exposure_ev = settings.value("exposure_ev", 0.0f);
@@ -742,7 +813,9 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
   const double merge_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   log_.add(id, printf_string("succeeded: its %d units merged in %.3f s, %u spp; wrote%s", record.units, merge_s,
                              static_cast<unsigned>(film->samples()), written.c_str()));
-  if (record_terminal(slot, JobState::kSucceeded, merge_s, stop_reason_name(StopReason::kSamples))) {
+  const bool recorded = record_terminal(slot, JobState::kSucceeded, merge_s, stop_reason_name(StopReason::kSamples));
+  publish_outputs(slot, recorded);
+  if (recorded) {
     files_.remove_units(id);
     log(LogLevel::kInfo, "job succeeded", {{"job", id}, {"units", record.units}, {"merge_s", merge_s}});
   }
@@ -774,6 +847,15 @@ void Scheduler::write_partial_results(const JobRecord& job) {
   }
 }
 
+void Scheduler::settle_locked(const std::vector<RenderSlot*>& slots, bool cancelled) {
+  for (RenderSlot* slot : slots) {
+    slot->settled = true;
+    (cancelled ? slot->cancel_requested : slot->pause_requested) = true;
+    slot->load_stop.request_stop();
+    if (slot->session) slot->session->cancel();
+  }
+}
+
 std::vector<Scheduler::RenderSlot*> Scheduler::slots_locked(const std::string& id) const {
   std::vector<RenderSlot*> out;
   for (const auto& [key, slot] : running_)
@@ -797,7 +879,9 @@ std::optional<JobProgress> Scheduler::live_progress(const std::string& id) const
 Scheduler::Outcome Scheduler::cancel(const std::string& id) {
   {
     std::lock_guard lock(mutex_);
-    if (auto slots = rendering_locked(id); !slots.empty()) {
+    const std::vector<RenderSlot*> slots = rendering_locked(id);
+    if (!slots.empty() && slots.front()->unit < 0) {
+      // A job rendered whole, here: its render records the end once it has wound down.
       for (RenderSlot* slot : slots) {
         slot->cancel_requested = true;
         slot->load_stop.request_stop();
@@ -805,7 +889,9 @@ Scheduler::Outcome Scheduler::cancel(const std::string& id) {
       }
       return Outcome::kInProgress;
     }
-    // Not rendering here, and claims happen under this lock: a queued job stays queued until we are done.
+    // Not rendering here, and claims happen under this lock: a queued job stays queued until we are done. Or units of
+    // a split job render here: the store first, so that the nodes rendering its other units stop at once (its
+    // notification), and then the units here, which record nothing (settle_locked()).
     auto job = store_.get(id);
     if (!job) return Outcome::kUnknown;
     if (!action_allowed(JobAction::kCancel, job->state)) return Outcome::kConflict;
@@ -814,6 +900,7 @@ Scheduler::Outcome Scheduler::cancel(const std::string& id) {
     write_partial_results(*job);
     if (!store_.transition(id, JobState::kCancelled, now_ms(), "cancelled"))
       return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
+    settle_locked(slots, true);
   }
   files_.remove(id, JobFile::kCheckpoint);
   log(LogLevel::kInfo, "job cancelled", {{"job", id}});
@@ -824,25 +911,24 @@ Scheduler::Outcome Scheduler::cancel(const std::string& id) {
 Scheduler::Outcome Scheduler::pause(const std::string& id) {
   {
     std::lock_guard lock(mutex_);
-    if (auto slots = rendering_locked(id); !slots.empty()) {
+    const std::vector<RenderSlot*> slots = rendering_locked(id);
+    if (!slots.empty() && slots.front()->unit < 0) {
       for (RenderSlot* slot : slots)
         if (slot->cancel_requested || slot->delete_requested) return Outcome::kConflict;
-      // A job rendered whole ends its pass and keeps it. A work unit gives up its pass under way (its last
-      // checkpoint stays): the job reads as paused only once this run ends, and until then the other nodes go on
-      // rendering its other units, which they stop within a tile's time once it does.
+      // A job rendered whole, here, ends its pass and keeps it; its render records the pause.
       for (RenderSlot* slot : slots) {
         slot->pause_requested = true;
         slot->load_stop.request_stop();
-        if (slot->session && slot->unit >= 0)
-          slot->session->cancel();
-        else if (slot->session)
-          slot->session->stop();
+        if (slot->session) slot->session->stop();
       }
       return Outcome::kInProgress;
     }
-    // Not rendering here (claims happen under this lock): queued, or running in a process that is gone.
+    // Not rendering here (claims happen under this lock): queued, or running in a process that is gone. Or units of a
+    // split job render here: the store first (its running units go back to the queue with their last checkpoints),
+    // then the units here give up their passes under way and record nothing.
     if (!store_.transition(id, JobState::kPaused, now_ms()))
       return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
+    settle_locked(slots, false);
   }
   log(LogLevel::kInfo, "job paused", {{"job", id}});
   log_.add(id, "paused by a client");

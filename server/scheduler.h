@@ -93,10 +93,12 @@ class Scheduler {
   bool store_failing() const;
 
   enum class Outcome { kDone, kInProgress, kConflict, kUnknown };
-  // queued, paused or running -> cancelled (a running render winds down within one tile's time: kInProgress). A job
-  // cancelled after a pass keeps the image of its last complete pass as its results (partial).
+  // queued, paused or running -> cancelled (a job rendered whole here winds down within one tile's time:
+  // kInProgress; the units of a split job stop after the store took the change, kDone). A job cancelled after a pass
+  // keeps the image of its last complete pass as its results (partial).
   Outcome cancel(const std::string& id);
-  // queued or running -> paused (a running render ends its pass and keeps its checkpoint: kInProgress).
+  // queued or running -> paused (a job rendered whole here ends its pass and keeps its checkpoint: kInProgress; the
+  // units of a split job give up their passes under way after the store took the change, kDone).
   Outcome pause(const std::string& id);
   // paused -> queued.
   Outcome resume(const std::string& id);
@@ -130,6 +132,9 @@ class Scheduler {
   // The slots of a job here (several for the units of a split job); those still rendering.
   std::vector<RenderSlot*> slots_locked(const std::string& id) const;
   std::vector<RenderSlot*> rendering_locked(const std::string& id) const;
+  // The units of a split job here, once the store took a client's cancel (`cancelled`) or pause: they give up their
+  // passes under way and record nothing.
+  void settle_locked(const std::vector<RenderSlot*>& slots, bool cancelled);
   // A split job's units rendered: merges their films (each a unit's authoritative checkpoint) into the job's outputs
   // and records its end (the merge unit's run, fenced by its epoch).
   void merge_units(RenderSlot& slot, const JobRecord& record);
@@ -137,8 +142,12 @@ class Scheduler {
   // (samples rendered, not a contiguous range: an unbiased, noisier image). Nothing for a job rendered whole or when
   // no unit has a film; throws when a done unit's film is missing or damaged.
   std::optional<Film> merge_unit_films(const JobRecord& job, int width, int height, bool in_progress) const;
-  // The outputs the job asked for (result.png, result.exr), from `film`; the names written, for its log.
-  std::string write_outputs(const JobRecord& job, const Film& film);
+  // The outputs the job asked for (result.png, result.exr), from `film`; the names written, for its log. With
+  // `staged_epoch`, staged (JobFiles::stage) for publish_outputs().
+  std::string write_outputs(const JobRecord& job, const Film& film, std::optional<int64_t> staged_epoch = std::nullopt);
+  // After the end of a run that staged its outputs: published when the store took that end (`recorded`, or read back
+  // when it is unknown), removed when it refused it.
+  void publish_outputs(RenderSlot& slot, bool recorded);
 
   JobStore& store_;
   const JobFiles& files_;

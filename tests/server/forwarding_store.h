@@ -45,6 +45,8 @@ class ForwardingStore : public JobStore {
     return inner_.remove(id, only_finished_before_ms);
   }
   int requeue_running() override { return inner_.requeue_running(); }
+  bool splits_jobs() const override { return inner_.splits_jobs(); }
+  std::vector<UnitRecord> units(const std::string& id) override { return inner_.units(id); }
 
  protected:
   JobStore& inner_;

@@ -7,7 +7,9 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <fstream>
 #include <thread>
+#include <variant>
 
 #include <nlohmann/json.hpp>
 
@@ -142,6 +144,26 @@ TEST_F(JobServiceTest, EveryStateOffersExactlyTheActionsItAccepts) {
       EXPECT_FALSE(sqlite_.get(job.id, false));
     }
   }
+}
+
+// A node that stopped after the store took its run's end, before it renamed the run's outputs, left them staged
+// under the run's epoch: the first request for the result publishes them. Those of another epoch (a run whose end was
+// refused) never are.
+TEST_F(JobServiceTest, ASucceededJobsStagedResultIsPublishedWhenAsked) {
+  const JobRecord job = job_in(JobState::kSucceeded);
+  files_.prepare(job.id);
+  const auto stage = [&](int64_t epoch, const std::string& bytes) {
+    files_.stage(job.id, JobFile::kResultPng, epoch,
+                 [&](const std::string& temp) { std::ofstream(temp, std::ios::binary) << bytes; });
+  };
+  stage(job.epoch + 1, "the image of a run whose end was refused");
+  EXPECT_TRUE(std::holds_alternative<Problem>(jobs_.result(job, JobFile::kResultPng)));
+  EXPECT_FALSE(files_.read(job.id, JobFile::kResultPng));
+  stage(job.epoch, "the image of the run that succeeded");
+  auto answer = jobs_.result(job, JobFile::kResultPng);
+  ASSERT_TRUE(std::holds_alternative<std::unique_ptr<FileReader>>(answer));
+  EXPECT_EQ(files_.read(job.id, JobFile::kResultPng).value_or("(none)"), "the image of the run that succeeded");
+  EXPECT_FALSE(files_.publish_staged(job.id, JobFile::kResultPng, job.epoch));  // published once
 }
 
 TEST_F(JobServiceTest, AJobThatFailedOnItsInputOffersOnlyDelete) {

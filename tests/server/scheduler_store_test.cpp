@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <climits>
+#include <functional>
 #include <memory>
 
 #include "renderer/thread_pool.h"
@@ -38,6 +39,14 @@ class FailingEndStore final : public test::ForwardingStore {
     if (to != JobState::kRunning) fail();
     return inner_.transition(id, to, now_ms, stop_reason, error, only_from);
   }
+  // Runs after each lease renewal the store took (to change the job "elsewhere" right after it).
+  std::function<void(const std::string& id)> after_renewal;
+
+  bool renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) override {
+    const bool taken = inner_.renew_lease(id, epoch, now_ms, lease_ms);
+    if (taken && after_renewal) after_renewal(id);
+    return taken;
+  }
   bool end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms, const std::string& stop_reason,
                const std::string& error) override {
     fail();
@@ -62,8 +71,10 @@ class FailingEndStore final : public test::ForwardingStore {
 class SchedulerStoreFailure : public ::testing::Test {
  protected:
   // One job at a time; the store's retries wait `first_retry`, doubling up to four times that.
-  std::unique_ptr<Scheduler> make_scheduler(std::chrono::milliseconds first_retry) {
+  std::unique_ptr<Scheduler> make_scheduler(std::chrono::milliseconds first_retry,
+                                            std::chrono::milliseconds poll_interval = 1000ms) {
     SchedulerOptions options;
+    options.poll_interval = poll_interval;
     options.store_retry_first = first_retry;
     options.store_retry_max = first_retry * 4;
     auto scheduler = std::make_unique<Scheduler>(store_, files_, pool_, options);
@@ -123,6 +134,32 @@ TEST_F(SchedulerStoreFailure, ASucceededJobIsRecordedOnceTheStoreRecovers) {
   EXPECT_TRUE(fs::is_regular_file(files_.path(id, JobFile::kResultPng)));
   EXPECT_FALSE(fs::exists(files_.path(id, JobFile::kCheckpoint)));  // removed once the end is recorded
   EXPECT_FALSE(scheduler->store_failing());
+  scheduler->shutdown();
+}
+
+// Another node cancels the job between the render's last lease check and its end: it keeps the partial results
+// written by the cancelling node, and the render's full image, whose end the store refuses, is never published.
+TEST_F(SchedulerStoreFailure, ACancelAfterTheLastLeaseCheckKeepsThePartialResults) {
+  const std::string partial = "the partial results the cancelling node wrote";
+  std::atomic<int> cancels{0};
+  store_.after_renewal = [&](const std::string& id) {
+    // The render's check before its outputs: its one pass is done (the dispatcher renews only hourly here).
+    if (sqlite_.get(id, false).value().progress.samples_done != 1 || cancels.fetch_add(1) > 0) return;
+    files_.write(id, JobFile::kResultPng, partial);  // as Scheduler::cancel() does, then the store's change
+    EXPECT_TRUE(sqlite_.transition(id, JobState::kCancelled, 2, "cancelled", "", std::nullopt));
+  };
+  auto scheduler = make_scheduler(1ms, std::chrono::hours(1));
+  const std::string id = queue_tiny_job();
+  scheduler->start();
+
+  ASSERT_TRUE(test::eventually([&] { return cancels.load() > 0 && scheduler->running_count() == 0; }, 120));
+  EXPECT_EQ(state_of(id), JobState::kCancelled);
+  EXPECT_EQ(files_.read(id, JobFile::kResultPng).value_or("(none)"), partial);
+  EXPECT_FALSE(files_.read(id, JobFile::kResultExr));  // the canceller kept no EXR: none of the render's either
+  for (const auto& entry : fs::directory_iterator(files_.dir(id))) {  // nothing staged is left behind
+    const std::string name = entry.path().filename().string();
+    EXPECT_FALSE(name.starts_with("result.e") && name != "result.exr") << name;
+  }
   scheduler->shutdown();
 }
 
