@@ -263,9 +263,12 @@ std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobR
     return Problem{404, "the job did not ask for a " + format + " output", std::nullopt};
   if (auto reader = files_.open(job.id, file)) return reader;
   // A run's outputs are published once the store took its end (Scheduler::publish_outputs()); a node that stopped
-  // in between left them staged under the run's epoch, which the succeeded job's record names.
-  if (job.state == JobState::kSucceeded && files_.publish_staged(job.id, file, job.epoch))
+  // in between left them staged under the run's epoch, which the succeeded job's record names. (Opened again
+  // whoever renamed it: the run itself may have done so meanwhile.)
+  if (job.state == JobState::kSucceeded) {
+    files_.publish_staged(job.id, file, job.epoch);
     if (auto reader = files_.open(job.id, file)) return reader;
+  }
   if (job.state == JobState::kCancelled)
     return Problem{404, "the job was cancelled before it finished a pass: it has no partial results", std::nullopt};
   return Problem{404, std::string("the job's ") + job_file_name(file) + " is missing from the data directory",
