@@ -4,6 +4,7 @@
 #include <bit>
 #include <chrono>
 #include <cstdio>
+#include <random>
 #include <system_error>
 
 #include <nlohmann/json.hpp>
@@ -368,9 +369,11 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       }
     } else if (cancelled_by_client) {
       log_.add(id, printf_string("cancelled by a client at %u spp", static_cast<unsigned>(samples_done)));
-      write_partial_results(record);
-      if (record_terminal(*slot, JobState::kCancelled, render_s, "cancelled"))
-        log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+      // Staged under this run's epoch: its own outputs are never staged on this path.
+      stage_partial_results(record, slot->epoch);
+      const bool recorded = record_terminal(*slot, JobState::kCancelled, render_s, "cancelled");
+      settle_partial_results(id, slot->epoch, recorded);
+      if (recorded) log(LogLevel::kInfo, "job cancelled", {{"job", id}});
     } else if (paused) {
       log_.add(id, printf_string("paused by a client at %u spp; its checkpoint is kept",
                                  static_cast<unsigned>(samples_done)));
@@ -821,7 +824,7 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
   }
 }
 
-void Scheduler::write_partial_results(const JobRecord& job) {
+void Scheduler::stage_partial_results(const JobRecord& job, int64_t key) {
   try {
     const json settings = json::parse(job.settings);
     const int width = settings.at("width"), height = settings.at("height");
@@ -837,13 +840,27 @@ void Scheduler::write_partial_results(const JobRecord& job) {
       film = merge_unit_films(job, width, height, true);
     }
     if (!film || film->samples() == 0) return;
-    const std::string written = write_outputs(job, *film);
+    const std::string written = write_outputs(job, *film, key);
     log_.add(job.id,
-             printf_string("kept what it rendered, %u spp in %u passes, as its partial results:%s",
-                           static_cast<unsigned>(film->samples()), static_cast<unsigned>(passes), written.c_str()));
+             printf_string(
+                 "kept what it rendered, %u spp in %u passes, as its partial results (once the cancel is taken):%s",
+                 static_cast<unsigned>(film->samples()), static_cast<unsigned>(passes), written.c_str()));
   } catch (const std::exception& e) {
     log(LogLevel::kWarn, "cannot write the partial results of a cancelled job", {{"job", job.id}, {"error", e.what()}});
     log_.add(job.id, std::string("warning: its partial results cannot be written: ") + e.what());
+  }
+}
+
+void Scheduler::settle_partial_results(const std::string& id, int64_t key, bool cancel_taken) {
+  for (JobFile f : {JobFile::kResultPng, JobFile::kResultExr}) {
+    try {
+      if (cancel_taken)
+        files_.publish_staged(id, f, key);
+      else
+        files_.discard_staged(id, f, key);
+    } catch (const std::exception& e) {
+      log(LogLevel::kWarn, "cannot settle the partial results of a cancelled job", {{"job", id}, {"error", e.what()}});
+    }
   }
 }
 
@@ -896,10 +913,15 @@ Scheduler::Outcome Scheduler::cancel(const std::string& id) {
     if (!job) return Outcome::kUnknown;
     if (!action_allowed(JobAction::kCancel, job->state)) return Outcome::kConflict;
     log_.add(id, "cancelled by a client");
-    // What a paused (or interrupted) render has done is kept as its partial results, before the state says so.
-    write_partial_results(*job);
-    if (!store_.transition(id, JobState::kCancelled, now_ms(), "cancelled"))
-      return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
+    // What a paused (or interrupted) render has done is kept as its partial results, staged before the state says so
+    // and published once the store took the cancel. The key is negative, unlike any run's epoch (a run elsewhere
+    // stages its own outputs under its epoch), and drawn at random, so that two nodes cancelling at once stage
+    // apart.
+    const int64_t key = -static_cast<int64_t>(std::random_device{}() | 1u);
+    stage_partial_results(*job, key);
+    const bool taken = store_.transition(id, JobState::kCancelled, now_ms(), "cancelled");
+    settle_partial_results(id, key, taken);
+    if (!taken) return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
     settle_locked(slots, true);
   }
   files_.remove(id, JobFile::kCheckpoint);

@@ -120,9 +120,12 @@ class Scheduler {
   bool record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused);
   void count_store_error();
   // The outputs of a job cancelled after a pass, from its checkpoint (the film of its last complete pass), so that
-  // what it rendered stays viewable and downloadable. Best effort: nothing without a usable checkpoint; a file that
-  // cannot be written is logged, and the cancel goes on.
-  void write_partial_results(const JobRecord& job);
+  // what it rendered stays viewable and downloadable. They are staged under `key` (JobFiles::stage) and published by
+  // settle_partial_results() only once the store took the cancel: a cancel that loses the race with the run's own
+  // end (refused: the job succeeded meanwhile) must not put its older image over the finished one. Best effort:
+  // nothing without a usable checkpoint; a file that cannot be written is logged, and the cancel goes on.
+  void stage_partial_results(const JobRecord& job, int64_t key);
+  void settle_partial_results(const std::string& id, int64_t key, bool cancel_taken);
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
   void renew_leases_locked();
   // `noticed_by`: what found the lease gone, for the log (a notification, a renewal, a refused write).

@@ -9,7 +9,9 @@
 #include <functional>
 #include <memory>
 
+#include "renderer/film.h"
 #include "renderer/thread_pool.h"
+#include "server/checkpoint.h"
 #include "server/job_files.h"
 #include "server/scheduler.h"
 #include "server/sqlite_job_store.h"
@@ -58,6 +60,13 @@ class FailingEndStore final : public test::ForwardingStore {
       failures.fetch_add(1);
       throw JobStoreError("job store: step: database or disk is full", true);
     }
+  }
+  // Called after each read of a job, with its id: another node acting between this node's read and its next step.
+  std::function<void(const std::string&)> after_get;
+  std::optional<JobRecord> get(const std::string& id, bool with_document) override {
+    std::optional<JobRecord> job = inner_.get(id, with_document);
+    if (after_get) after_get(id);
+    return job;
   }
   bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) override {
     if (remove_failures_left.load() > 0) {
@@ -240,6 +249,44 @@ TEST_F(SchedulerStoreFailure, ARequeueTheStoreRefusesKeepsTheLastRun) {
   EXPECT_EQ(scheduler->requeue(id), Scheduler::Outcome::kDone);
   EXPECT_EQ(state_of(id), JobState::kQueued);
   EXPECT_FALSE(fs::exists(files_.path(id, JobFile::kPreviewPng)));  // from scratch
+}
+
+}  // namespace
+}  // namespace tessera::server
+
+namespace tessera::server {
+namespace {
+
+// A cancel that loses the race with the run's own end on another node: the job succeeded between the canceller's read
+// of it and its change of state, which the store then refuses. The finished image stays: the canceller's older
+// partial image (from the checkpoint it read) is never published over it, and nothing it staged is left behind.
+TEST_F(SchedulerStoreFailure, ACancelRefusedBecauseTheJobSucceededLeavesItsFinishedImage) {
+  const std::string id = queue_tiny_job();
+  const JobRecord run = sqlite_.claim_next(1, 3'600'000).value();  // the other node's run
+  ASSERT_EQ(run.id, id);
+  files_.prepare(id);
+  Film film(16, 16);
+  film.add_sample(3, 4, Rgb(0.5f, 0.25f, 1.0f));
+  film.set_samples(1);
+  files_.write(id, JobFile::kCheckpoint, encode_checkpoint(film, 1, 0.1, fnv1a64(run.settings)));
+  const std::string finished = "the other node's finished image";
+  std::atomic<bool> armed{true};
+  store_.after_get = [&](const std::string& job_id) {
+    if (job_id != id || !armed.exchange(false)) return;
+    EXPECT_TRUE(sqlite_.end_run(id, run.epoch, JobState::kSucceeded, 2, "samples", ""));
+    files_.write(id, JobFile::kResultPng, finished);  // its checkpoint, removed next, is still there to read
+  };
+  auto scheduler = make_scheduler(1ms);  // not started: it renders nothing of this job
+
+  EXPECT_EQ(scheduler->cancel(id), Scheduler::Outcome::kConflict);
+  EXPECT_FALSE(armed.load());  // the other node did end the run in between
+  EXPECT_EQ(state_of(id), JobState::kSucceeded);
+  EXPECT_EQ(files_.read(id, JobFile::kResultPng).value_or("(none)"), finished);
+  EXPECT_FALSE(files_.read(id, JobFile::kResultExr));
+  for (const auto& entry : fs::directory_iterator(files_.dir(id))) {
+    const std::string name = entry.path().filename().string();
+    EXPECT_FALSE(name.starts_with("result.e") && name != "result.exr") << name;
+  }
 }
 
 }  // namespace
