@@ -36,6 +36,7 @@ const std::set<std::string> kSupportedExtensions = {
     "EXT_mesh_gpu_instancing",
     "KHR_materials_anisotropy",
     "KHR_materials_diffuse_transmission",
+    "KHR_materials_iridescence",
 };
 
 // ---- confined file access for tinygltf ----

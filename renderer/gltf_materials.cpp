@@ -150,6 +150,16 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
                           "\": KHR_materials_diffuse_transmission is not drawn on a refracting volume (thin-walled "
                           "only)");
   }
+  if (ext.contains("KHR_materials_iridescence")) {
+    // KHR_materials_iridescence: the factor (times the texture's R), the film's index, and its thickness in
+    // nanometres, mix(minimum, maximum, the thickness texture's G), or the maximum without a texture.
+    const json& t = ext["KHR_materials_iridescence"];
+    set("iridescence", number_or(t, "iridescenceFactor", 0.0), t.value("iridescenceTexture", json()), 0, false);
+    p["iridescence_ior"] = number_or(t, "iridescenceIor", 1.3);
+    p["iridescence_thickness_minimum"] = number_or(t, "iridescenceThicknessMinimum", 100.0);
+    p["iridescence_thickness_maximum"] = number_or(t, "iridescenceThicknessMaximum", 400.0);
+    set("iridescence_thickness", 1.0, t.value("iridescenceThicknessTexture", json()), 1, false);
+  }
   if (ext.contains("KHR_materials_anisotropy")) {
     // KHR_materials_anisotropy: strength (times the texture's B), rotation (radians, counter-clockwise from the
     // tangent) and the texture's RG direction in tangent space (linear).

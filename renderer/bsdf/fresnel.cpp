@@ -81,4 +81,75 @@ float fresnel_diffuse_reflectance(float eta) {
   return static_cast<float>(2 * sum / (3.0 * n));
 }
 
+namespace {
+
+// The m-th interference term of the Airy sum integrated against the CIE 1931 colour matching functions, for an
+// optical path difference `opd_nm` and a phase shift `shift` per channel (Belcour & Barla 2017, eq. 10 and their
+// supplementary Gaussian fit of x, y, z in Fourier space; normalised by the integral of y), in linear sRGB (the
+// XYZ to linear sRGB (D65) matrix of IEC 61966-2-1).
+Rgb thin_film_sensitivity(double opd_nm, const Rgb& shift) {
+  const double phase = 2 * kPi * opd_nm * 1e-9;
+  // Amplitude, mean and variance of each Gaussian (x has a second lobe).
+  const double amp[3] = {5.4856e-13, 4.4201e-13, 5.2481e-13};
+  const double mean[3] = {1.6810e+06, 1.7953e+06, 2.2084e+06};
+  const double var[3] = {4.3278e+09, 9.3046e+09, 6.6121e+09};
+  double xyz[3];
+  for (int i = 0; i < 3; ++i)
+    xyz[i] =
+        amp[i] * std::sqrt(2 * kPi * var[i]) * std::cos(mean[i] * phase + shift[i]) * std::exp(-phase * phase * var[i]);
+  xyz[0] += 9.7470e-14 * std::sqrt(2 * kPi * 4.5282e+09) * std::cos(2.2399e+06 * phase + shift[0]) *
+            std::exp(-4.5282e+09 * phase * phase);
+  for (double& v : xyz) v /= 1.0685e-7;
+  return Rgb(static_cast<float>(3.2404542 * xyz[0] - 1.5371385 * xyz[1] - 0.4985314 * xyz[2]),
+             static_cast<float>(-0.9692660 * xyz[0] + 1.8760108 * xyz[1] + 0.0415560 * xyz[2]),
+             static_cast<float>(0.0556434 * xyz[0] - 0.2040259 * xyz[1] + 1.0572252 * xyz[2]));
+}
+
+}  // namespace
+
+Rgb fresnel_thin_film(float cos_theta, float outside_ior, float film_ior, float thickness_nm, const Rgb& base_f0) {
+  const float c1 = clamp(std::abs(cos_theta), 0.0f, 1.0f);
+  // The film's index, smoothly to the outside's as the thickness goes to 0 (smoothstep over 0..0.03 nm).
+  const float s = clamp(thickness_nm / 0.03f, 0.0f, 1.0f);
+  const float n2 = outside_ior + (film_ior - outside_ior) * (s * s * (3 - 2 * s));
+  // Snell's law into the film; total internal reflection at the first interface reflects everything.
+  const float sin2_sq = sqr(outside_ior / n2) * (1 - c1 * c1);
+  if (sin2_sq >= 1) return Rgb(1);
+  const float c2 = std::sqrt(1 - sin2_sq);
+  // First interface (outside to film): the exact dielectric Fresnel, as Belcour & Barla's own implementation has it
+  // (the glTF appendix's Schlick form reflects (1 - cos)^5 at grazing angles even where the film's index equals the
+  // outside's); phase shift pi on reflection off a denser medium.
+  const float r12 = fresnel_dielectric(c1, n2 / outside_ior);
+  const float t121 = 1 - r12;
+  const float phi21 = n2 < outside_ior ? 0.0f : kPi;  // pi - phi12
+  // Second interface (film to base): the base's index from its f0 against air, then its f0 against the film.
+  Rgb r23, phase;
+  for (int i = 0; i < 3; ++i) {
+    const float sq = std::sqrt(clamp(base_f0[i], 0.0f, 0.9999f));
+    const float n3 = (1 + sq) / (1 - sq);
+    r23[i] = fresnel_schlick(sqr((n3 - n2) / (n3 + n2)), c2);
+    phase[i] = phi21 + (n3 < n2 ? kPi : 0.0f);
+  }
+  // The Airy sum: R = R12 + T121^2 R23 / (1 - R12 R23) + sum_m C_m S_m (Belcour & Barla 2017, eqs. 6-9), with
+  // C_m = (Rs - T121) r123^m, of which the first two interference terms are kept.
+  Rgb result, cm, r123;
+  for (int i = 0; i < 3; ++i) {
+    const float r123_sq = std::min(r12 * r23[i], 0.9999f);
+    r123[i] = std::sqrt(r123_sq);
+    const float rs = t121 * t121 * r23[i] / (1 - r123_sq);
+    result[i] = r12 + rs;
+    cm[i] = rs - t121;
+  }
+  if (r12 > 0) {  // without a first interface there is no interference
+    const double opd = 2.0 * n2 * thickness_nm * c2;
+    for (int m = 1; m <= 2; ++m) {
+      cm = cm * r123;
+      const Rgb sm = thin_film_sensitivity(m * opd, phase * static_cast<float>(m));
+      result = result + cm * sm * 2.0f;
+    }
+  }
+  for (int i = 0; i < 3; ++i) result[i] = clamp(result[i], 0.0f, 1.0f);
+  return result;
+}
+
 }  // namespace tessera

@@ -33,6 +33,17 @@ inline float fresnel_schlick(float f0, float cos_theta) {
   return f0 + (1 - f0) * (m2 * m2 * m);
 }
 
+// Reflectance of a base (its normal-incidence reflectance `base_f0`, per channel, seen from air) under a thin
+// dielectric film of index `film_ior` and thickness `thickness_nm` nanometres, in an outside medium of index
+// `outside_ior`, at incidence cosine `cos_theta` (Belcour & Barla 2017, "A Practical Extension to Microfacet Theory
+// for the Modeling of Varying Iridescence", sections 3-4, as the glTF KHR_materials_iridescence specification's
+// appendix evaluates it): the Airy sum of the film's inter-reflections, the exact Fresnel at the film's surface and
+// Schlick's approximation at the base, its interference terms integrated against the colour matching functions by
+// their Gaussian fit in Fourier space, then XYZ to linear sRGB. The film's index goes smoothly to the outside one as
+// the thickness goes to 0, so at thickness 0, or with a film of the outside medium's index, the result is
+// Schlick(base_f0, 1, cos_theta). Clamped to [0, 1] (the fit can leave the sRGB gamut).
+Rgb fresnel_thin_film(float cos_theta, float outside_ior, float film_ior, float thickness_nm, const Rgb& base_f0);
+
 // Normal-incidence reflectance of a dielectric: ((eta1 - eta2) / (eta1 + eta2))^2.
 inline float f0_from_ior(float ior) {
   return sqr((ior - 1) / (ior + 1));

@@ -1,6 +1,7 @@
 // The glTF 2.0 metallic-roughness material (glTF 2.0 specification, appendix B "BRDF Implementation"), with the
-// extensions KHR_materials_ior, KHR_materials_specular, KHR_materials_transmission, KHR_materials_sheen and
-// KHR_materials_clearcoat:
+// extensions KHR_materials_ior, KHR_materials_specular, KHR_materials_transmission, KHR_materials_sheen,
+// KHR_materials_clearcoat, KHR_materials_anisotropy, KHR_materials_diffuse_transmission and
+// KHR_materials_iridescence (the last three described at the end):
 //
 //   alpha = roughness^2; D = GGX (Trowbridge-Reitz), V = G2 / (4 |N.L| |N.V|) with height-correlated Smith G2
 //   dielectric F_d = Schlick(f0_d, f90_d, V.H), f0_d = min(((ior-1)/(ior+1))^2 * specular_color, 1) * specular,
@@ -58,6 +59,12 @@
 // into the opposite hemisphere with the same albedo coupling W as the reflection, so a white base that transmits
 // everything keeps albedo 1 (reflection plus transmission) and stays reciprocal. Thin-walled: on a solid (refracting)
 // surface it is not drawn (the loader warns).
+// KHR_materials_iridescence: the specular Fresnel terms, dielectric and metal, become mix(F, F_film, iridescence),
+// F_film the reflectance of the base (f0_d, or base_color for the metal) under a thin dielectric film of index
+// iridescence_ior and thickness mix(minimum, maximum, texture) nanometres at V.H (Belcour & Barla 2017; the
+// extension's appendix), fresnel.h's fresnel_thin_film. The thin-walled BTDF passes 1 - max(F) of the same mix. The
+// lobe weights and the diffuse coupling keep Schlick's albedos (sampling weights only; a film may reflect more than
+// the bare base at some angles, so a white iridescent dielectric may gain a little energy there).
 #include "renderer/bsdf/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/bsdf/rough_dielectric.h"
@@ -224,6 +231,9 @@ struct GltfLobes {
   float aniso_cos = 1, aniso_sin = 0;  // its direction in the shading frame's tangent plane
   float diffuse_transmission = 0;      // KHR_materials_diffuse_transmission: the diffuse share transmitted
   Rgb diffuse_transmission_color{1, 1, 1};
+  float iridescence = 0;            // KHR_materials_iridescence: the film's weight, in [0, 1]
+  float iridescence_ior = 1.3f;     // the film's index
+  float iridescence_thickness = 0;  // the film's thickness, nanometres
 };
 
 class GltfPbrBsdf final : public Bsdf {
@@ -390,7 +400,8 @@ class GltfPbrBsdf final : public Bsdf {
           }
         }
       }
-      const Rgb fd = fresnel_schlick(l_.f0_d, Rgb(l_.f90_d), vh);
+      Rgb fd = fresnel_schlick(l_.f0_d, Rgb(l_.f90_d), vh);
+      if (l_.iridescence > 0) fd = lerp_rgb(fd, film_fresnel(l_.f0_d, vh), l_.iridescence);
       const float fd_max = max_component(fd);
       if (transmit) {
         f = l_.base_color * ((1 - m) * l_.transmission * (1 - fd_max) * dv);
@@ -401,7 +412,11 @@ class GltfPbrBsdf final : public Bsdf {
         const float specular_share = solid() ? (1 - m) * (1 - l_.transmission) : 1 - m;
         f += l_.base_color * ((1 - m) * (1 - l_.transmission) * (1 - l_.diffuse_transmission) * w * kInvPi) +
              fd * (specular_share * dv);
-        if (m > 0) f += fresnel_schlick(l_.base_color, Rgb(1), vh) * (m * dv);
+        if (m > 0) {
+          Rgb fm = fresnel_schlick(l_.base_color, Rgb(1), vh);
+          if (l_.iridescence > 0) fm = lerp_rgb(fm, film_fresnel(l_.base_color, vh), l_.iridescence);
+          f += fm * (m * dv);
+        }
       }
     } else if (!solid()) {
       return Rgb(0);
@@ -524,16 +539,25 @@ class GltfPbrBsdf final : public Bsdf {
   float specular_average_ = 0;
   float sheen_max_ = 0;
   float diffuse_t_share_ = 0;  // of the diffuse lobe's samples, the transmitted ones
+
+  static Rgb lerp_rgb(const Rgb& a, const Rgb& b, float t) { return a * (1 - t) + b * t; }
+  // KHR_materials_iridescence's Fresnel of a base of normal-incidence reflectance f0 under the film, in air.
+  Rgb film_fresnel(const Rgb& f0, float cos_theta) const {
+    return fresnel_thin_film(cos_theta, 1.0f, l_.iridescence_ior, l_.iridescence_thickness, f0);
+  }
 };
 
 class GltfPbrMaterial final : public Material {
  public:
   RgbParam base_color, specular_color, sheen_color;
   FloatParam metallic, roughness, specular, transmission, clearcoat, clearcoat_roughness, sheen_roughness;
-  FloatParam anisotropy;  // KHR_materials_anisotropy: anisotropyStrength (times the texture's B)
-  RgbParam anisotropy_direction;
+  FloatParam anisotropy;            // KHR_materials_anisotropy: anisotropyStrength (times the texture's B)
+  RgbParam anisotropy_direction;    // its texture's RG: the direction in tangent space, mapped to [-1, 1]
   FloatParam diffuse_transmission;  // KHR_materials_diffuse_transmission: diffuseTransmissionFactor (times texture A)
-  RgbParam diffuse_transmission_color;         // its texture's RG: the direction in tangent space, mapped to [-1, 1]
+  RgbParam diffuse_transmission_color;
+  FloatParam iridescence;            // KHR_materials_iridescence: iridescenceFactor (times the texture's R)
+  FloatParam iridescence_thickness;  // its thickness texture's G: where between minimum and maximum
+  float iridescence_ior = 1.3f, iridescence_thickness_min = 100, iridescence_thickness_max = 400;
   float aniso_rot_cos = 1, aniso_rot_sin = 0;  // anisotropyRotation, counter-clockwise from the tangent
   float f0_ior = 0.04f;
   float transmission_roughness_scale = 1;  // clamp(2 ior - 2, 0, 1)
@@ -578,6 +602,12 @@ class GltfPbrMaterial final : public Material {
     l.diffuse_transmission = solid ? 0.0f : clamp(diffuse_transmission.eval(sp), 0.0f, 1.0f);
     if (l.diffuse_transmission > 0)
       l.diffuse_transmission_color = vmin(vmax(diffuse_transmission_color.eval(sp), Rgb(0)), Rgb(1));
+    l.iridescence = clamp(iridescence.eval(sp), 0.0f, 1.0f);
+    if (l.iridescence > 0) {
+      l.iridescence_ior = iridescence_ior;
+      const float t = clamp(iridescence_thickness.eval(sp), 0.0f, 1.0f);
+      l.iridescence_thickness = iridescence_thickness_min + (iridescence_thickness_max - iridescence_thickness_min) * t;
+    }
     l.anisotropy = clamp(anisotropy.eval(sp), 0.0f, 1.0f);
     if (l.anisotropy > 0) {
       // KHR_materials_anisotropy: direction = rotation(anisotropyRotation) * (texture.rg * 2 - 1), in the tangent
@@ -630,6 +660,11 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     m->sheen_roughness = params::float_param(j, "sheen_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
     m->diffuse_transmission = params::float_param(j, "diffuse_transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);
     m->diffuse_transmission_color = params::rgb_param(j, "diffuse_transmission_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
+    m->iridescence = params::float_param(j, "iridescence", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    m->iridescence_ior = params::number(j, "iridescence_ior", ptr, 1.3f, 1.0f, 4.0f);
+    m->iridescence_thickness = params::float_param(j, "iridescence_thickness", ptr, 1.0f, 0.0f, 1.0f, ctx);
+    m->iridescence_thickness_min = params::number(j, "iridescence_thickness_minimum", ptr, 100.0f, 0.0f, 1e4f);
+    m->iridescence_thickness_max = params::number(j, "iridescence_thickness_maximum", ptr, 400.0f, 0.0f, 1e4f);
     m->anisotropy = params::float_param(j, "anisotropy", ptr, 0.0f, 0.0f, 1.0f, ctx);
     m->anisotropy_direction = params::rgb_param(j, "anisotropy_direction", ptr, Rgb(1, 0.5f, 1), 0.0f, 1.0f, ctx);
     const float rotation = params::number(j, "anisotropy_rotation", ptr, 0.0f, -1e3f, 1e3f);

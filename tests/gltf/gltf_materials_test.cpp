@@ -137,6 +137,61 @@ TEST(GltfMaterials, AnAnisotropicAssetImportsWithoutAWarningAndAsksForTangents) 
   EXPECT_FALSE(scene.materials[0]->isotropic);  // the hit's tangent orients the lobe
 }
 
+// KHR_materials_iridescence (the extension's specification): the factor (times the texture's R), the film's index,
+// and its thickness between the minimum and the maximum by the thickness texture's G (the maximum without one).
+TEST(GltfMaterials, IridescenceParametersAreRead) {
+  const json doc = {{"images", {json::object(), json::object()}}, {"textures", {{{"source", 0}}, {{"source", 1}}}}};
+  const json m = {{"extensions",
+                   {{"KHR_materials_iridescence",
+                     {{"iridescenceFactor", 0.9},
+                      {"iridescenceTexture", {{"index", 0}}},
+                      {"iridescenceIor", 1.8},
+                      {"iridescenceThicknessMinimum", 250},
+                      {"iridescenceThicknessMaximum", 650},
+                      {"iridescenceThicknessTexture", {{"index", 1}}}}}}}};
+  std::vector<std::string> warnings;
+  const json p = gltf::material_params(doc, m, &warnings);
+  EXPECT_TRUE(warnings.empty());
+  ASSERT_TRUE(p.contains("iridescence")) << p.dump();
+  EXPECT_EQ(p["iridescence"]["texture"], "#image0");
+  EXPECT_EQ(p["iridescence"]["channel"], 0);
+  EXPECT_EQ(p["iridescence"]["factor"], 0.9);
+  EXPECT_EQ(p["iridescence"]["colorspace"], "linear");
+  EXPECT_EQ(p["iridescence_ior"], 1.8);
+  EXPECT_EQ(p["iridescence_thickness_minimum"], 250);
+  EXPECT_EQ(p["iridescence_thickness_maximum"], 650);
+  ASSERT_TRUE(p.contains("iridescence_thickness")) << p.dump();
+  EXPECT_EQ(p["iridescence_thickness"]["texture"], "#image1");
+  EXPECT_EQ(p["iridescence_thickness"]["channel"], 1);
+  EXPECT_EQ(p["iridescence_thickness"]["colorspace"], "linear");
+  // The spec's defaults: index 1.3, 100..400 nm, the maximum without a texture.
+  const json q = gltf::material_params(doc, {{"extensions", {{"KHR_materials_iridescence", json::object()}}}}, nullptr);
+  EXPECT_EQ(q["iridescence"], 0.0);
+  EXPECT_EQ(q["iridescence_ior"], 1.3);
+  EXPECT_EQ(q["iridescence_thickness_minimum"], 100.0);
+  EXPECT_EQ(q["iridescence_thickness_maximum"], 400.0);
+  EXPECT_EQ(q["iridescence_thickness"], 1.0);
+}
+
+TEST(GltfMaterials, AnIridescentAssetImportsWithoutAWarning) {
+  test::GltfBuilder b;
+  const int mat = b.material(
+      {{"name", "beetle"},
+       {"pbrMetallicRoughness", {{"metallicFactor", 1.0}, {"roughnessFactor", 0.3}}},
+       {"extensions",
+        {{"KHR_materials_iridescence", {{"iridescenceFactor", 1.0}, {"iridescenceThicknessMaximum", 500}}}}}});
+  b.node({{"mesh", b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, mat)}}, true);
+  b.doc["extensionsUsed"] = {"KHR_materials_iridescence"};
+  b.doc["extensionsRequired"] = {"KHR_materials_iridescence"};
+  const auto dir = std::filesystem::temp_directory_path() / ("tessera-gltf-irid-" + std::to_string(::getpid()));
+  const auto path = b.write(dir, "iridescence");
+  Scene scene;
+  const GltfImport imported = import_gltf(path, "/scene/gltf", scene, {});
+  std::filesystem::remove_all(dir);
+  EXPECT_TRUE(imported.warnings.empty()) << imported.warnings.front();
+  ASSERT_EQ(scene.materials.size(), 1u);
+}
+
 // KHR_materials_diffuse_transmission (the extension's specification): the factor (times the texture's A, linear)
 // and the colour (times its sRGB texture).
 TEST(GltfMaterials, DiffuseTransmissionParametersAreRead) {

@@ -1,6 +1,8 @@
 // Fresnel reflectance against closed forms (Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed.,
 // §2.5.3 "Fresnel Equations"; Pharr, Jakob & Humphreys, Physically Based Rendering, 3rd ed., §8.2.1).
+#include <algorithm>
 #include <complex>
+#include <cstdio>
 
 #include <gtest/gtest.h>
 
@@ -110,6 +112,55 @@ TEST(Fresnel, ConductorMatchesTheComplexEquations) {
         ++checked;
       }
   EXPECT_EQ(checked, 7 * 7 * 41);
+}
+
+// The thin-film reflectance of Belcour & Barla 2017 (KHR_materials_iridescence): without a film (thickness 0, or a
+// film of the outside's index) it is the base's own Schlick reflectance.
+TEST(ThinFilmFresnel, WithoutAFilmItIsTheBasesFresnel) {
+  for (const Rgb base : {Rgb(0.04f), Rgb(0.9f, 0.6f, 0.3f), Rgb(0.97f, 0.96f, 0.91f)}) {
+    for (float c : {1.0f, 0.8f, 0.5f, 0.2f, 0.05f}) {
+      const Rgb plain = fresnel_schlick(base, Rgb(1), c);
+      const Rgb none = fresnel_thin_film(c, 1.0f, 1.3f, 0.0f, base);
+      for (int i = 0; i < 3; ++i) EXPECT_NEAR(none[i], plain[i], 1e-4f) << "thickness 0, cos " << c;
+    }
+    // A film of the outside medium's index, at normal incidence, whatever its thickness.
+    for (float d : {50.0f, 300.0f, 800.0f}) {
+      const Rgb same = fresnel_thin_film(1.0f, 1.0f, 1.0f, d, base);
+      for (int i = 0; i < 3; ++i) EXPECT_NEAR(same[i], base[i], 1e-4f) << "thickness " << d;
+    }
+  }
+}
+
+TEST(ThinFilmFresnel, StaysInZeroOneAndItsColourVariesWithThickness) {
+  for (const Rgb base : {Rgb(0.04f), Rgb(0.5f), Rgb(0.95f, 0.64f, 0.54f)})
+    for (float ior : {1.0f, 1.2f, 1.3f, 1.8f, 2.5f})
+      for (float d = 0; d <= 1200; d += 25)
+        for (float c = 0.0f; c <= 1.0f; c += 0.05f) {
+          const Rgb f = fresnel_thin_film(c, 1.0f, ior, d, base);
+          for (int i = 0; i < 3; ++i) {
+            ASSERT_GE(f[i], 0.0f) << ior << " " << d << " " << c;
+            ASSERT_LE(f[i], 1.0f) << ior << " " << d << " " << c;
+          }
+        }
+  // A soap-like film (index 1.3) on glass (f0 0.04) seen head-on: the hue (the spread between channels) changes
+  // with the thickness, and the colour at 250 nm differs from that at 400 nm and from the bare glass.
+  const Rgb base(0.04f);
+  float most_spread = 0, most_change = 0;
+  Rgb previous = fresnel_thin_film(1.0f, 1.0f, 1.3f, 100.0f, base);
+  for (float d = 100; d <= 800; d += 50) {
+    const Rgb f = fresnel_thin_film(1.0f, 1.0f, 1.3f, d, base);
+    most_spread = std::max(most_spread, max_component(f) - std::min({f[0], f[1], f[2]}));
+    for (int i = 0; i < 3; ++i) most_change = std::max(most_change, std::abs(f[i] - previous[i]));
+    previous = f;
+  }
+  std::printf("thin film 1.3 on f0 0.04, 100..800 nm: largest channel spread %.4f, largest change per 50 nm %.4f\n",
+              most_spread, most_change);
+  EXPECT_GT(most_spread, 0.01f);  // the bare glass is grey (spread 0)
+  EXPECT_GT(most_change, 0.01f);
+  // A metal under a film: coloured differently at two thicknesses.
+  const Rgb a = fresnel_thin_film(1.0f, 1.0f, 1.8f, 250.0f, Rgb(0.9f)),
+            b = fresnel_thin_film(1.0f, 1.0f, 1.8f, 400.0f, Rgb(0.9f));
+  EXPECT_GT(std::max({std::abs(a[0] - b[0]), std::abs(a[1] - b[1]), std::abs(a[2] - b[2])}), 0.01f);
 }
 
 }  // namespace
