@@ -1,7 +1,8 @@
 // glTF material extensions in the gltf_pbr model. KHR_materials_anisotropy: the specular lobe is anisotropic GGX with
 // alpha_t = mix(alpha, 1, strength^2) along the anisotropy direction (the tangent turned by the rotation) and alpha_b =
 // alpha across it, so a highlight seen head-on is stretched along that direction. KHR_materials_diffuse_transmission: a
-// Lambertian lobe into the other hemisphere sharing the diffuse lobe with the base colour.
+// Lambertian lobe into the other hemisphere sharing the diffuse lobe with the base colour. KHR_materials_iridescence:
+// the specular Fresnel mixed with the thin-film Fresnel of Belcour and Barla 2017.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -9,6 +10,7 @@
 #include <random>
 
 #include "bsdf_harness.h"
+#include "renderer/bsdf/fresnel.h"
 
 namespace tessera::test {
 namespace {
@@ -100,6 +102,36 @@ TEST(GltfDiffuseTransmission, AWhiteSurfaceThatTransmitsAllItsDiffuseLightKeepsI
   albedo(h.bsdf(), direction(0, 0), 200000, &r, &t, &e);
   // Diffuse share 1 - E_s(1) ~ 0.96 at normal incidence: transmitted 0.5 * 0.2 of it, reflected 0.5 of it + E_s.
   EXPECT_NEAR(t, 0.1 * (1 - r + t) / (1 - 0.4), 0.01 + 4 * e);  // t = 0.1 D, r = E_s + 0.5 D, so D = (1 - r + t) / 0.6
+}
+
+// KHR_materials_iridescence: a metal's Fresnel becomes mix(F, F_film, iridescence). Seen and lit head-on (the half
+// vector is the normal, V.H = 1) the BSDF's value divided by the bare metal's is that mix over the base's Fresnel,
+// per channel, and it changes colour with the film's thickness.
+TEST(GltfIridescence, TheMetalReflectsTheThinFilmsFresnel) {
+  const Rgb base(0.9f, 0.6f, 0.3f);
+  auto eval = [&](float iridescence, float thickness) {
+    BsdfInstance b(json{{"type", "gltf_pbr"},
+                        {"metallic", 1},
+                        {"roughness", 0.4},
+                        {"base_color", {base[0], base[1], base[2]}},
+                        {"iridescence", iridescence},
+                        {"iridescence_ior", 1.8},
+                        {"iridescence_thickness_minimum", thickness},
+                        {"iridescence_thickness_maximum", thickness}});
+    return b.bsdf().eval(direction(0, 0), direction(0, 0));
+  };
+  const Rgb bare = eval(0, 300);
+  for (float thickness : {250.0f, 400.0f})
+    for (float weight : {1.0f, 0.5f}) {
+      const Rgb film = fresnel_thin_film(1.0f, 1.0f, 1.8f, thickness, base);
+      const Rgb f = eval(weight, thickness);
+      for (int i = 0; i < 3; ++i) {
+        const float expected = (1 - weight) + weight * film[i] / base[i];  // Schlick at V.H = 1 is base
+        EXPECT_NEAR(f[i] / bare[i], expected, 1e-3f * expected) << thickness << " nm, weight " << weight << ", " << i;
+      }
+    }
+  const Rgb a = eval(1, 250), b = eval(1, 400);
+  EXPECT_GT(std::abs(a[0] / a[2] - b[0] / b[2]), 0.05f);  // the hue changes with the thickness
 }
 
 }  // namespace
