@@ -97,16 +97,7 @@ class SchedulerStoreFailure : public ::testing::Test {
   std::string queue_tiny_job() { return queue_job(test::cornell_job(16, 1)); }
 
   std::string queue_job(const nlohmann::json& doc) {
-    auto checked = check_job_document(doc, SubmissionLimits{});
-    const AcceptedJob& accepted = std::get<AcceptedJob>(checked);
-    JobRecord job;
-    job.id = new_job_id();
-    job.kind = accepted.kind;
-    job.created_at_ms = 1;
-    job.document = accepted.document.dump();
-    job.settings = accepted.settings.dump();
-    job.outputs = accepted.outputs.dump();
-    job.progress.samples_total = accepted.spp;
+    const JobRecord job = test::accepted_job_record(doc);
     sqlite_.create(job);
     return job.id;
   }

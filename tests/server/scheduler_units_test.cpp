@@ -61,15 +61,7 @@ class SchedulerUnits : public ::testing::Test {
   // A job of two units, each far longer than the test, with one of them rendering here.
   std::string start_split_job() {
     const nlohmann::json doc = test::cornell_job(64, 4096);
-    const AcceptedJob accepted = std::get<AcceptedJob>(check_job_document(doc, SubmissionLimits{}));
-    JobRecord job;
-    job.id = new_job_id();
-    job.kind = accepted.kind;
-    job.created_at_ms = 1;
-    job.document = accepted.document.dump();
-    job.settings = accepted.settings.dump();
-    job.outputs = accepted.outputs.dump();
-    job.progress.samples_total = accepted.spp;
+    JobRecord job = test::accepted_job_record(doc);
     job.units = 2;
     postgres_.create(job);
     scheduler_.start();

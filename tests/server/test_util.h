@@ -13,12 +13,14 @@
 #include <string>
 #include <thread>
 #include <utility>
+#include <variant>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "server/job_id.h"
 #include "server/job_store.h"
+#include "server/submission.h"
 
 namespace tessera::server::test {
 
@@ -58,6 +60,21 @@ inline nlohmann::json cornell_job(int size, int spp) {
 // A job that renders until cancelled (on two threads, 65536 spp of 128x128 take minutes).
 inline nlohmann::json long_cornell_job() {
   return cornell_job(128, 65536);
+}
+
+// The queued record POST /v1/jobs stores for `doc`, checked as the API checks it (the document must be valid), with a
+// fresh id.
+inline JobRecord accepted_job_record(const nlohmann::json& doc) {
+  const AcceptedJob accepted = std::get<AcceptedJob>(check_job_document(doc, SubmissionLimits{}));
+  JobRecord job;
+  job.id = new_job_id();
+  job.kind = accepted.kind;
+  job.created_at_ms = 1;
+  job.document = accepted.document.dump();
+  job.settings = accepted.settings.dump();
+  job.outputs = accepted.outputs.dump();
+  job.progress.samples_total = accepted.spp;
+  return job;
 }
 
 // One triangle as an upload: tri.gltf, padded with `padding` bytes of extras (which loaders ignore), and its tri.bin;
