@@ -37,6 +37,7 @@ const std::set<std::string> kSupportedExtensions = {
     "KHR_materials_anisotropy",
     "KHR_materials_diffuse_transmission",
     "KHR_materials_iridescence",
+    "KHR_materials_dispersion",
 };
 
 // ---- confined file access for tinygltf ----

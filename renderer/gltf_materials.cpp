@@ -120,6 +120,15 @@ json material_params(const json& doc, const json& m, std::vector<std::string>* w
   // thickness 0, or no volume, keeps the surface thin-walled (the extension's "thin-walled" rule).
   if (ext.contains("KHR_materials_volume") && number_or(ext["KHR_materials_volume"], "thicknessFactor", 0.0) > 0)
     p["thin_walled"] = false;
+  if (ext.contains("KHR_materials_dispersion")) {
+    // KHR_materials_dispersion: 20 / V_d, which the extension defines for the volume of KHR_materials_volume; a thin
+    // wall has no refraction to part colours.
+    p["dispersion"] = number_or(ext["KHR_materials_dispersion"], "dispersion", 0.0);
+    if (p["dispersion"].get<double>() > 0 && p.value("thin_walled", true) && warnings)
+      warnings->push_back("material \"" + m.value("name", std::string()) +
+                          "\": KHR_materials_dispersion has no effect without a KHR_materials_volume thickness "
+                          "(the surface is thin-walled)");
+  }
   if (ext.contains("KHR_materials_specular")) {
     const json& t = ext["KHR_materials_specular"];
     set("specular", number_or(t, "specularFactor", 1.0), t.value("specularTexture", json()), 3, false);

@@ -59,6 +59,11 @@ class Material {
   // texture coordinates. Models set it when they know it; false is always correct.
   bool isotropic = false;
 
+  // True when the BSDF depends on the wavelength the path carries (ShadingPoint::wavelength_nm): an index of
+  // refraction that varies with it (dispersion, spectrum.h). The integrators then draw a wavelength for the pixel
+  // sample and weight the paths through this material by it. Models that disperse set it.
+  bool dispersive = false;
+
   // False when none of the material's parameters is a texture (MaterialRegistry::create sets it): hits on it skip
   // working out the texture footprint. True is always correct.
   bool reads_textures = true;

@@ -134,6 +134,16 @@ class PixelSampler {
     float a = get1d();
     return {a, get1d()};
   }
+  // The number of dimension 0, which get1d() and get2d() never reach (they start at 1): for a choice the whole sample
+  // makes once, where only some samples make it (the wavelength of a path through a dispersive material), drawn
+  // without moving any other number. Stratified over the pixel's samples as dimension 1 is.
+  float get1d_dimension0() const {
+    if (kind_ == SamplerKind::kSobol) {
+      const uint64_t h = mix64(pixel_key_);
+      return static_cast<float>(sobol_dim0(shuffled_index(h), h) >> 8) * 0x1p-24f;
+    }
+    return to_unit(mix64(key_));
+  }
   // Steps over the dimensions a get1d() or get2d() would use, without computing them: for numbers a caller draws
   // only to keep the dimension layout fixed and would not use. Every later number is the same as after the call.
   void skip1d() { ++dimension_; }

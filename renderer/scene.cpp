@@ -32,7 +32,11 @@ void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
     bounds_.extend(s.center + Vec3(s.radius));
   }
   std::vector<const Material*> material_ptrs;
-  for (const auto& m : materials) material_ptrs.push_back(m.get());
+  dispersive_ = false;
+  for (const auto& m : materials) {
+    material_ptrs.push_back(m.get());
+    dispersive_ = dispersive_ || m->dispersive;
+  }
   accel_.build(meshes, spheres, groups, instances, material_ptrs);
   lights_.build(*this, punctual);
   // Record each emitter's light index on its geometry, in the order LightSet::build enumerates them.

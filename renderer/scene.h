@@ -97,12 +97,15 @@ class Scene {
   size_t triangle_count() const;         // triangles traced, instances counted each time
   size_t unique_triangle_count() const;  // triangles stored
   double build_seconds() const { return build_seconds_; }
+  // Whether any material disperses (Material::dispersive): only then do paths carry a wavelength.
+  bool dispersive() const { return dispersive_; }
 
  private:
   Accel accel_;
   LightSet lights_;
   Bounds bounds_;
   double build_seconds_ = 0;
+  bool dispersive_ = false;
 };
 
 // Bends the shading frame of `sp` by the material's normal map, seen from direction `wo` (world, towards where the

@@ -29,6 +29,9 @@ struct ShadingPoint {
   // The normal of a coating layer with its own normal map (Material::coat_normal_map), world; zero when the coat
   // follows frame.n.
   Vec3 coat_normal{0, 0, 0};
+  // The wavelength, in nm, the path through this point carries (spectrum.h), which dispersive materials
+  // (Material::dispersive) refract by; 0 where the scene has none.
+  float wavelength_nm = 0;
 };
 
 class Texture {

@@ -17,6 +17,7 @@
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/bsdf/rough_dielectric.h"
 #include "renderer/scene_error.h"
+#include "renderer/spectrum.h"
 
 namespace tessera {
 
@@ -83,6 +84,11 @@ bool RoughDielectric::sample(const Vec3& wo, float uc, Vec2 u, Vec3* wi, bool* t
 }
 
 namespace {
+
+// An index-matched interface (ior 1) keeps the formulas finite by a hair's difference.
+float keep_refracting(float ior) {
+  return ior == 1.0f ? 1.0001f : ior;
+}
 
 class DielectricBsdf final : public Bsdf {
  public:
@@ -184,17 +190,29 @@ class ThinDielectricBsdf final : public Bsdf {
 
 class DielectricMaterial final : public Material {
  public:
-  DielectricMaterial(bool thin, RoughnessParams rough, float ior, RgbParam kr, RgbParam kt)
-      : thin_(thin), rough_(std::move(rough)), ior_(ior), kr_(std::move(kr)), kt_(std::move(kt)) {}
+  DielectricMaterial(bool thin, RoughnessParams rough, float ior, float dispersion, RgbParam kr, RgbParam kt)
+      : thin_(thin),
+        rough_(std::move(rough)),
+        ior_(ior),
+        dispersion_(dispersion),
+        kr_(std::move(kr)),
+        kt_(std::move(kt)) {
+    dispersive = dispersion_ > 0;
+  }
   const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
     if (thin_) return arena.make<ThinDielectricBsdf>(ior_, kr_.eval(sp), kt_.eval(sp));
-    return arena.make<DielectricBsdf>(rough_.at(sp), ior_, kr_.eval(sp), kt_.eval(sp));
+    // Dispersion: the index at the path's wavelength (spectrum.h); without one (no wavelength drawn), at the d line.
+    float eta = ior_;
+    if (dispersive && sp.wavelength_nm > 0)
+      eta = keep_refracting(spectrum::dispersive_ior(ior_, dispersion_, sp.wavelength_nm));
+    return arena.make<DielectricBsdf>(rough_.at(sp), eta, kr_.eval(sp), kt_.eval(sp));
   }
 
  private:
   bool thin_;
   RoughnessParams rough_;
   float ior_;
+  float dispersion_;  // 20 / V_d (V_d the Abbe number), as glTF's KHR_materials_dispersion
   RgbParam kr_, kt_;
 };
 
@@ -202,11 +220,12 @@ MaterialFactory dielectric_factory(bool thin) {
   return [thin](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
     RoughnessParams rough;
     if (!thin) rough = read_roughness(j, ptr, ctx, 0.0f, false);
-    float ior = params::number(j, "ior", ptr, 1.5f, 1.0f, 4.0f);
-    if (ior == 1.0f) ior = 1.0001f;  // an index-matched interface: keep the formulas finite
+    const float ior = keep_refracting(params::number(j, "ior", ptr, 1.5f, 1.0f, 4.0f));
+    // A thin pane refracts out as it refracted in: no colours part, and it has no dispersion to set.
+    const float dispersion = thin ? 0.0f : params::number(j, "dispersion", ptr, 0.0f, 0.0f, 100.0f);
     RgbParam kr = params::rgb_param(j, "reflectance", ptr, Rgb(1), 0.0f, 1.0f, ctx);
     RgbParam kt = params::rgb_param(j, "transmittance", ptr, Rgb(1), 0.0f, 1.0f, ctx);
-    return std::make_unique<DielectricMaterial>(thin, std::move(rough), ior, std::move(kr), std::move(kt));
+    return std::make_unique<DielectricMaterial>(thin, std::move(rough), ior, dispersion, std::move(kr), std::move(kt));
   };
 }
 

@@ -1,5 +1,7 @@
 #include "renderer/bsdf/fresnel.h"
 
+#include "renderer/spectrum.h"
+
 namespace tessera {
 
 void fresnel_dielectric_polarized(float cos_theta_i, float eta, float* r_s, float* r_p) {
@@ -85,8 +87,7 @@ namespace {
 
 // The m-th interference term of the Airy sum integrated against the CIE 1931 colour matching functions, for an
 // optical path difference `opd_nm` and a phase shift `shift` per channel (Belcour & Barla 2017, eq. 10 and their
-// supplementary Gaussian fit of x, y, z in Fourier space; normalised by the integral of y), in linear sRGB (the
-// XYZ to linear sRGB (D65) matrix of IEC 61966-2-1).
+// supplementary Gaussian fit of x, y, z in Fourier space; normalised by the integral of y), in linear sRGB.
 Rgb thin_film_sensitivity(double opd_nm, const Rgb& shift) {
   const double phase = 2 * kPi * opd_nm * 1e-9;
   // Amplitude, mean and variance of each Gaussian (x has a second lobe).
@@ -100,9 +101,8 @@ Rgb thin_film_sensitivity(double opd_nm, const Rgb& shift) {
   xyz[0] += 9.7470e-14 * std::sqrt(2 * kPi * 4.5282e+09) * std::cos(2.2399e+06 * phase + shift[0]) *
             std::exp(-4.5282e+09 * phase * phase);
   for (double& v : xyz) v /= 1.0685e-7;
-  return Rgb(static_cast<float>(3.2404542 * xyz[0] - 1.5371385 * xyz[1] - 0.4985314 * xyz[2]),
-             static_cast<float>(-0.9692660 * xyz[0] + 1.8760108 * xyz[1] + 0.0415560 * xyz[2]),
-             static_cast<float>(0.0556434 * xyz[0] - 0.2040259 * xyz[1] + 1.0572252 * xyz[2]));
+  return spectrum::xyz_to_linear_srgb(
+      Vec3(static_cast<float>(xyz[0]), static_cast<float>(xyz[1]), static_cast<float>(xyz[2])));
 }
 
 }  // namespace

@@ -48,6 +48,8 @@
 // transmission lobe's roughness is scaled by clamp(2 ior - 2, 0, 1), as the Khronos glTF Sample Viewer does
 // (applyIorToRoughness): at IOR 1 nothing refracts, so a rough pane stays clear; at 1.5 the lobe is as rough as the
 // reflection.
+// KHR_materials_dispersion: a solid's index varies with the wavelength (spectrum.h's dispersive_ior, the extension's
+// Cauchy form from the Abbe number); the BSDF refracts and reflects by its index at the wavelength the path carries.
 // KHR_materials_anisotropy: the specular and metal lobes are anisotropic GGX with alpha_t = mix(alpha, 1,
 // strength^2) along the anisotropy direction and alpha_b = alpha across it (the extension's "Implementation"); the
 // direction is the tangent rotated in the tangent plane by the rotation (and by the texture's RG direction). The BSDF
@@ -70,6 +72,7 @@
 #include "renderer/bsdf/rough_dielectric.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"
+#include "renderer/spectrum.h"
 #include "renderer/thread_pool.h"
 
 namespace tessera {
@@ -562,7 +565,8 @@ class GltfPbrMaterial final : public Material {
   float f0_ior = 0.04f;
   float transmission_roughness_scale = 1;  // clamp(2 ior - 2, 0, 1)
   float ior = 1.5f;
-  bool solid = false;  // "thin_walled": false, and an index that refracts
+  bool solid = false;    // "thin_walled": false, and an index that refracts
+  float dispersion = 0;  // KHR_materials_dispersion: 20 / V_d, a solid's only (Material::dispersive)
   // metallic's and roughness's textures as one RGB lookup, when they read channels of the same image.
   std::shared_ptr<const Texture> metallic_roughness;
   int metallic_channel = 0, roughness_channel = 0;
@@ -585,12 +589,18 @@ class GltfPbrMaterial final : public Material {
     l.alpha = r * r;
     const float rt = clamp(r * transmission_roughness_scale, 0.045f, 1.0f);
     l.alpha_t = rt * rt;
+    // A dispersive solid refracts, and reflects, by its index at the path's wavelength (spectrum.h).
+    float eta = ior, f0 = f0_ior;
+    if (dispersive && sp.wavelength_nm > 0) {
+      eta = std::max(spectrum::dispersive_ior(ior, dispersion, sp.wavelength_nm), 1.001f);
+      f0 = f0_from_ior(eta);
+    }
     float spec = clamp(specular.eval(sp), 0.0f, 1.0f);
-    l.f0_d = vmin(Rgb(f0_ior) * specular_color.eval(sp), Rgb(1)) * spec;
+    l.f0_d = vmin(Rgb(f0) * specular_color.eval(sp), Rgb(1)) * spec;
     l.f90_d = spec;
     l.transmission = clamp(transmission.eval(sp), 0.0f, 1.0f);
     l.solid = solid;
-    l.eta = ior;
+    l.eta = eta;
     l.clearcoat = clamp(clearcoat.eval(sp), 0.0f, 1.0f);
     float rc = clamp(clearcoat_roughness.eval(sp), 0.045f, 1.0f);
     l.alpha_c = rc * rc;
@@ -651,6 +661,9 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     // An index within 0.1 % of 1 bends rays by less than a few hundredths of a degree and makes the refraction half
     // vector (Walter 2007, eq. 16) degenerate: such a volume is drawn thin-walled.
     m->solid = !params::boolean(j, "thin_walled", ptr, true) && ior > 1.001f;
+    // Dispersion parts the colours of light refracted through a solid; a thin wall lets light out as it came in.
+    m->dispersion = params::number(j, "dispersion", ptr, 0.0f, 0.0f, 100.0f);
+    m->dispersive = m->solid && m->dispersion > 0;
     m->specular = params::float_param(j, "specular", ptr, 1.0f, 0.0f, 1.0f, ctx);
     m->specular_color = params::rgb_param(j, "specular_color", ptr, Rgb(1), 0.0f, 1e3f, ctx);
     m->transmission = params::float_param(j, "transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);

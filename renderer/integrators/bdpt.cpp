@@ -26,6 +26,7 @@
 
 #include "renderer/integrator.h"
 #include "renderer/scene.h"
+#include "renderer/spectrum.h"
 #include "renderer/thread_pool.h"
 
 namespace tessera {
@@ -46,6 +47,7 @@ struct Vertex {
   const Material* material = nullptr;
   uint32_t light = kNoLight;  // the light this vertex is on (light vertices, emitting surfaces)
   bool delta = false;         // scattered by a delta lobe
+  bool dispersed = false;     // a dispersive material among its subpath's surface vertices up to this one
   bool delta_light = false;   // a point, spot or directional light
   bool infinite = false;      // a light at infinity: `dir` is the direction its light travels
   Vec3 dir;
@@ -176,8 +178,9 @@ bool visible(const Scene& scene, const Vertex& a, const Vertex& b, RayCounters& 
 // The subpath's walk from its endpoint (Veach 1997, 10.2): vertices path[1..] after path[0], the endpoint, up to
 // max_vertices of them; returns how many. `beta` and `pdf_dir` are the throughput and the solid-angle density of
 // the ray leaving the endpoint. Camera subpaths that leave the scene end at the environment, as a light vertex.
+// `wavelength_nm` is the pixel sample's, for dispersive BSDFs (0: none).
 int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vertices, TransportMode mode,
-                PixelSampler& sampler, ScratchArena& arena, Vertex* path, RayCounters& counters) {
+                float wavelength_nm, PixelSampler& sampler, ScratchArena& arena, Vertex* path, RayCounters& counters) {
   if (max_vertices <= 0) return 0;
   const Scene& scene = c.scene;
   const float beta_ref = std::max(max_component(beta), 1e-30f);
@@ -208,6 +211,8 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
     }
     v = Vertex();
     v.kind = VertexKind::kSurface;
+    si.sp.wavelength_nm = wavelength_nm;
+    v.dispersed = prev.dispersed || si.material->dispersive;
     v.p = si.sp.p;
     v.ng = si.sp.ng;
     v.frame = si.sp.frame;
@@ -355,9 +360,10 @@ class BidirectionalIntegrator final : public Integrator {
 
  private:
   void render_tile(const PixelRegion& tile, int w, uint32_t first_sample, uint32_t count, Film& film);
-  // The pixel sample's contribution to its own pixel; splats land on the film directly.
+  // The pixel sample's contribution to its own pixel; splats land on the film directly. `wavelength`, in a scene with
+  // dispersive materials, is the sample's (spectrum.h).
   Rgb sample(const Context& c, Vec2 film_pos, PixelSampler& sampler, ScratchArena& arena, Vertex* camera, Vertex* light,
-             Film& film, RayCounters& counters);
+             Film& film, RayCounters& counters, const spectrum::WavelengthSample* wavelength);
   // The unweighted contribution of strategy (s, t), and through `sampled` and `splat_at` the vertex it sampled
   // afresh and, for t = 1, the film position.
   Rgb connect(const Context& c, const LightEmission& le, Vertex* light, Vertex* camera, int s, int t,
@@ -387,14 +393,17 @@ void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32
   Vertex* camera = vertices.data();
   Vertex* light = vertices.data() + half;
   const PixelSampler::SeedKeys seed_keys(setup_.seed);
+  const bool dispersive = setup_.scene->dispersive();
   for (int y = tile.y; y < tile.y + tile.height; ++y) {
     for (int x = tile.x; x < tile.x + tile.width; ++x) {
       const uint32_t pixel = static_cast<uint32_t>(y) * static_cast<uint32_t>(setup_.width) + static_cast<uint32_t>(x);
       for (uint32_t s = first_sample; s < first_sample + count; ++s) {
         PixelSampler sampler(seed_keys, pixel, s, setup_.sampler);
         const Vec2 jitter = sampler.get2d();
+        spectrum::WavelengthSample wavelength;
+        if (dispersive) wavelength = spectrum::sample_wavelength(sampler.get1d_dimension0());
         Rgb l = sample(c, Vec2(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y), sampler,
-                       worker.arena, camera, light, film, counters);
+                       worker.arena, camera, light, film, counters, dispersive ? &wavelength : nullptr);
         if (light_only_) continue;
         if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
           ++nonfinite;
@@ -409,10 +418,12 @@ void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32
 }
 
 Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSampler& sampler, ScratchArena& arena,
-                                    Vertex* camera, Vertex* light, Film& film, RayCounters& counters) {
+                                    Vertex* camera, Vertex* light, Film& film, RayCounters& counters,
+                                    const spectrum::WavelengthSample* wavelength) {
   arena.reset();
   const Scene& scene = c.scene;
   const int max_depth = c.settings.max_depth;
+  const float wavelength_nm = wavelength ? wavelength->lambda_nm : 0.0f;
   const Vec2 u_lens = sampler.get2d();
   // The camera subpath (none for light tracing).
   int n_camera = 0;
@@ -425,8 +436,8 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
     camera[0].beta = Rgb(1);
     float pdf_pos, pdf_dir;
     c.camera.importance_pdf(ray, &pdf_pos, &pdf_dir);
-    n_camera = 1 + random_walk(c, ray, Rgb(1), pdf_dir, max_depth + 1, TransportMode::kRadiance, sampler, arena, camera,
-                               counters);
+    n_camera = 1 + random_walk(c, ray, Rgb(1), pdf_dir, max_depth + 1, TransportMode::kRadiance, wavelength_nm, sampler,
+                               arena, camera, counters);
   }
   // The light subpath.
   int n_light = 0;
@@ -449,8 +460,8 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
     ray.tmin = 0;
     ray.tmax = kInfinity;
     if (!le.infinite && !is_black(le.n)) ray.origin = offset_ray_origin(le.ray.origin, le.n, le.ray.dir);
-    n_light = 1 + random_walk(c, ray, le.weight(), le.pdf_dir, max_depth, TransportMode::kImportance, sampler, arena,
-                              light, counters);
+    n_light = 1 + random_walk(c, ray, le.weight(), le.pdf_dir, max_depth, TransportMode::kImportance, wavelength_nm,
+                              sampler, arena, light, counters);
     if (le.infinite) {
       // From infinity the first surface is found by area across the beam, and the light's own density is that of
       // its direction.
@@ -475,6 +486,12 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
       Rgb contribution = connect(c, le, light, camera, s, t, sampler, &sampled, &splat_at, counters);
       if (is_black(contribution)) continue;
       if (!light_only_) contribution *= mis_weight(c, light, camera, sampled, s, t);
+      // The wavelength's weight, once, for a path that scatters at a dispersive vertex: decided by the path's
+      // scattering vertices (camera[1..t-1] and light[1..s-1]; with s = 0, camera[t-1] is the emitter), the same
+      // whichever strategy made the path, so that the strategies' weights still sum to 1.
+      if (wavelength && ((s == 0 ? t >= 3 && camera[t - 2].dispersed : t >= 2 && camera[t - 1].dispersed) ||
+                         (s >= 1 && light[s - 1].dispersed)))
+        contribution *= wavelength->weight;
       if (t == 1)
         splat(film, splat_at, contribution);
       else

@@ -4,6 +4,7 @@
 // Russian roulette.
 #include "renderer/integrator.h"
 #include "renderer/scene.h"
+#include "renderer/spectrum.h"
 #include "renderer/thread_pool.h"
 
 namespace tessera {
@@ -43,8 +44,11 @@ struct PrimaryHit {
 // Radiance arriving at the camera along `ray`. With `primary`, the camera ray's hit is taken from it rather than
 // traced again. `cone` is the camera ray's (Camera::pixel_cone); each bounce carries it on, widened by how much the
 // sampled lobe spreads, and textures are filtered over its footprint. A zero cone reads the finest texels.
+// `wavelength`, in a scene with dispersive materials, is the pixel sample's (spectrum.h): every BSDF sees it, and the
+// throughput takes its weight at the path's first dispersive vertex, before anything is added through that vertex.
 Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* primary, PixelSampler& sampler,
-               const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters, RayCone cone) {
+               const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters, RayCone cone,
+               const spectrum::WavelengthSample* wavelength) {
   const LightSet& lights = scene.lights();
   const bool use_light_sampling = settings.estimator != Estimator::kHemisphere;
   const bool use_bsdf_hits = settings.estimator != Estimator::kArea;
@@ -57,8 +61,9 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
   bool prev_delta = true;  // the camera ray counts as a delta event: emitters it sees are added fully
   float prev_pdf = 0;
   Vec3 prev_p;
-  float eta_scale = 1;  // product of eta^2 across refractions, kept out of Russian roulette
-  Rgb sigma_a(0);       // absorption of the medium the path is travelling through (zero: vacuum)
+  float eta_scale = 1;     // product of eta^2 across refractions, kept out of Russian roulette
+  Rgb sigma_a(0);          // absorption of the medium the path is travelling through (zero: vacuum)
+  bool dispersed = false;  // the throughput carries the wavelength's weight
   ++counters.camera;
 
   for (int depth = 0;; ++depth) {
@@ -104,6 +109,13 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       }
     }
     if (depth >= settings.max_depth) break;
+    if (wavelength) {
+      si.sp.wavelength_nm = wavelength->lambda_nm;
+      if (si.material->dispersive && !dispersed) {
+        throughput *= wavelength->weight;
+        dispersed = true;
+      }
+    }
     const Bsdf* bsdf = si.material->bsdf(si.sp, arena);
     if (!bsdf) break;
     const uint32_t flags = bsdf->flags();
@@ -208,6 +220,7 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
   const Camera& camera = setup_.camera;
   const bool uses_lens = camera.uses_lens();
   const RayCone cone = camera.pixel_cone(setup_.samples_per_pixel);
+  const bool dispersive = scene.dispersive();
   // Camera rays of up to kGroup neighbouring pixels in a row, at the same sample index, go to Embree as one packet:
   // they are coherent, and a packet traces them several times faster than one by one. Each pixel still gets its
   // samples in order, and its paths are those it would trace alone (up to Embree's rounding of sphere hits).
@@ -238,7 +251,10 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
         scene.accel().intersect_packet(rays, n, hits, found);
         for (int i = 0; i < n; ++i) {
           const PrimaryHit primary{found[i], hits[i]};
-          Rgb l = trace_path(scene, rays[i], &primary, samplers[i], setup_.settings, arena, counters, cone);
+          spectrum::WavelengthSample wavelength;
+          if (dispersive) wavelength = spectrum::sample_wavelength(samplers[i].get1d_dimension0());
+          Rgb l = trace_path(scene, rays[i], &primary, samplers[i], setup_.settings, arena, counters, cone,
+                             dispersive ? &wavelength : nullptr);
           if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
             ++nonfinite;
             l = Rgb(0);

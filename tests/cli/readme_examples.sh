@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The README's examples run as written from a clone: every `sh` block of the sections a user follows with a built
 # tree and a running daemon (A first render, The HTTP API, the command line's render-farm example, glTF scenes,
-# Materials) runs, in order, in one shell with `set -e`, in a copy of the repository's tracked files whose build/ is
-# this build, against a tesserad on a free port (the README's http://127.0.0.1:8080 is replaced by its address).
+# Materials; their subsections included) runs, in order, in one shell with `set -e`, in a copy of the repository's
+# tracked files whose build/ is this build, against a tesserad on a free port (the README's http://127.0.0.1:8080 is
+# replaced by its address).
 # Synopses (lines that start with a bare `tessera `) are not commands and are skipped; so are the sections that
 # install, deploy or benchmark (the deploy and container tests run those). The sample assets must come out unchanged.
 # usage: readme_examples.sh BUILD_DIR     (run by CTest)
@@ -45,7 +46,7 @@ sections = ("## A first render", "## The HTTP API", "## Web client, command line
             "## Materials")
 heading, block, out = "", None, []
 for line in text.split("\n"):
-    if block is None and line.startswith("#"):
+    if block is None and line.startswith("## "):
         heading = line.strip()
     elif block is None and line.startswith("```sh"):
         block = []
@@ -68,7 +69,7 @@ else
   echo "ok - $blocks README blocks ran"
 fi
 [[ $blocks -ge 6 ]] && echo "ok - every section's examples were found" || { echo "not ok - only $blocks blocks"; failed=1; }
-for f in out/result.png cornell.png quick.png duck.png out.exr out.png; do
+for f in out/result.png cornell.png quick.png duck.png prism.png out.exr out.png; do
   [[ -s $tmp/clone/$f ]] && echo "ok - the examples wrote $f" || { echo "not ok - no $f"; failed=1; }
 done
 assets_after=$(cd "$tmp/clone" && find examples -type f -print0 | sort -z | xargs -0 sha256sum)

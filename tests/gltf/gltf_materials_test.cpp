@@ -192,6 +192,56 @@ TEST(GltfMaterials, AnIridescentAssetImportsWithoutAWarning) {
   ASSERT_EQ(scene.materials.size(), 1u);
 }
 
+// KHR_materials_dispersion (the extension's specification): dispersion, 20 / V_d, read onto the material, which then
+// disperses when KHR_materials_volume makes it a solid; on a thin wall it has no effect, and a warning says so.
+TEST(GltfMaterials, DispersionIsReadAndDispersesASolid) {
+  const json doc = json::object();
+  const json solid = {{"name", "gem"},
+                      {"extensions",
+                       {{"KHR_materials_transmission", {{"transmissionFactor", 1.0}}},
+                        {"KHR_materials_volume", {{"thicknessFactor", 1.0}}},
+                        {"KHR_materials_dispersion", {{"dispersion", 0.36}}}}}};
+  std::vector<std::string> warnings;
+  const json p = gltf::material_params(doc, solid, &warnings);
+  EXPECT_TRUE(warnings.empty());
+  EXPECT_EQ(p["dispersion"], 0.36);
+  MaterialContext ctx;
+  EXPECT_TRUE(MaterialRegistry::builtin().create(p, "/m", ctx)->dispersive);
+  // Without a volume the surface is thin-walled: read, not dispersive, and warned about, naming the material.
+  json thin = solid;
+  thin["extensions"].erase("KHR_materials_volume");
+  warnings.clear();
+  const json q = gltf::material_params(doc, thin, &warnings);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("\"gem\""), std::string::npos) << warnings[0];
+  EXPECT_NE(warnings[0].find("KHR_materials_dispersion"), std::string::npos) << warnings[0];
+  EXPECT_FALSE(MaterialRegistry::builtin().create(q, "/m", ctx)->dispersive);
+  // The default, 0, is no dispersion.
+  const json none =
+      gltf::material_params(doc, {{"extensions", {{"KHR_materials_dispersion", json::object()}}}}, nullptr);
+  EXPECT_EQ(none["dispersion"], 0.0);
+}
+
+TEST(GltfMaterials, ADispersiveAssetImportsWithoutAWarning) {
+  test::GltfBuilder b;
+  const int mat = b.material({{"name", "prism"},
+                              {"extensions",
+                               {{"KHR_materials_transmission", {{"transmissionFactor", 1.0}}},
+                                {"KHR_materials_volume", {{"thicknessFactor", 0.5}}},
+                                {"KHR_materials_dispersion", {{"dispersion", 1.0}}}}}});
+  b.node({{"mesh", b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, mat)}}, true);
+  b.doc["extensionsUsed"] = {"KHR_materials_transmission", "KHR_materials_volume", "KHR_materials_dispersion"};
+  b.doc["extensionsRequired"] = {"KHR_materials_dispersion"};
+  const auto dir = std::filesystem::temp_directory_path() / ("tessera-gltf-disp-" + std::to_string(::getpid()));
+  const auto path = b.write(dir, "dispersion");
+  Scene scene;
+  const GltfImport imported = import_gltf(path, "/scene/gltf", scene, {});
+  std::filesystem::remove_all(dir);
+  EXPECT_TRUE(imported.warnings.empty()) << imported.warnings.front();
+  ASSERT_EQ(scene.materials.size(), 1u);
+  EXPECT_TRUE(scene.materials[0]->dispersive);
+}
+
 // KHR_materials_diffuse_transmission (the extension's specification): the factor (times the texture's A, linear)
 // and the colour (times its sRGB texture).
 TEST(GltfMaterials, DiffuseTransmissionParametersAreRead) {

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <random>
 #include <stop_token>
@@ -18,6 +19,7 @@
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"
 #include "renderer/scene_loader.h"
+#include "renderer/spectrum.h"
 #include "tests/renderer/gltf_fixture.h"
 
 namespace tessera {
@@ -1434,60 +1436,122 @@ int box_mesh(GltfBuilder& b, float hx, float hy, float hz, int material) {
   return b.mesh(pos, idx, material);
 }
 
+// The sideways shift of what is seen through a smooth slab of index n and thickness d turned by theta about the
+// vertical, looking along -z: t.x L, with t the refracted direction and L = d / cos(theta_t) the path inside (the ray
+// leaves parallel to how it came). Snell's law in vector form (Dutre, Bala & Bekaert, Advanced Global Illumination,
+// 2nd ed., 2.5.3): d = -z enters through the face of normal (sin theta, 0, cos theta), t = eta d + (eta cos_i -
+// cos_t) n with eta = 1 / n, and d.x = 0.
+double slab_shift(double theta, double n, double thickness) {
+  const double nx = std::sin(theta), cos_i = std::cos(theta), eta = 1 / n;
+  const double cos_t = std::sqrt(1 - eta * eta * (1 - cos_i * cos_i));
+  return thickness * (eta * cos_i - cos_t) * nx / cos_t;
+}
+
+// A glTF glass slab (extensions `glass` on a white, smooth, fully transmitting material), `half_width` wide on each
+// side, 4 high and `thickness` thick, turned by theta about the vertical, hiding a bright vertical line 0.06 wide at x
+// = 0 behind it, seen by an orthographic camera looking along -z whose view is `view_height` high.
+Rendered render_line_behind_slab(const json& glass, double theta, float half_width, double thickness,
+                                 double view_height, int width, int height, uint32_t spp) {
+  GltfBuilder b;
+  for (const auto& [name, value] : glass.items()) b.doc["extensionsUsed"].push_back(name);
+  int slab = b.material(
+      {{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 1}}, {"metallicFactor", 0}, {"roughnessFactor", 0}}},
+       {"extensions", glass}});
+  int line = b.material({{"emissiveFactor", {1, 1, 1}}, {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}}}});
+  b.node({{"mesh", box_mesh(b, half_width, 2, static_cast<float>(thickness / 2), slab)},
+          {"rotation", {0, std::sin(theta / 2), 0, std::cos(theta / 2)}}},
+         true);
+  b.node({{"mesh", box_mesh(b, 0.03f, 2, 0.01f, line)}, {"translation", {0, 0, -thickness - 2}}}, true);
+  b.write(fixture_dir(), "slab");
+  json job = {{"kind", "scene"},
+              {"scene",
+               {{"gltf", "slab.gltf"},
+                {"camera", {{"type", "orthographic"}, {"from", {0, 0, 6}}, {"to", {0, 0, 0}}, {"height", view_height}}},
+                {"environment", {{"color", 0}}}}},
+              {"render", {{"width", width}, {"height", height}, {"spp", spp}, {"max_depth", 8}}}};
+  return render_job(job);
+}
+
+// The centroid column of channel c over columns [x0, x1] of all rows.
+double centroid_column(const Rendered& img, int c, int x0, int x1) {
+  double sum = 0, moment = 0;
+  for (int y = 0; y < img.height; ++y)
+    for (int x = std::max(0, x0); x <= std::min(img.width - 1, x1); ++x) {
+      sum += img.at(x, y)[c];
+      moment += img.at(x, y)[c] * (x + 0.5);
+    }
+  return sum > 0 ? moment / sum : -1;
+}
+
 // KHR_materials_volume with a thicknessFactor above 0 makes a solid dielectric: a smooth glass slab (ior 1.5, 1 thick)
-// turned 45 degrees shifts what is seen through it sideways by Snell's law, by t.x L with t the refracted direction
-// and L = 1 / cos(theta_t) the path inside (the ray leaves parallel to how it came). A thin wall (thickness 0) shifts
-// nothing. The slab hides a bright vertical line behind it; the column where the line shows is compared.
+// turned 45 degrees shifts what is seen through it sideways by Snell's law (slab_shift). A thin wall (thickness 0)
+// shifts nothing. The column where the line shows is compared.
 TEST(GltfTransmission, SolidGlassRefractsBySnellsLaw) {
   const double theta = M_PI / 4, ior = 1.5;
-  // Snell's law in vector form (Dutre, Bala & Bekaert, Advanced Global Illumination, 2nd ed., 2.5.3): d = -z enters
-  // through the face of normal n = (sin, 0, cos).
-  const double nx = std::sin(theta), nz = std::cos(theta), eta = 1 / ior;
-  const double cos_i = nz, cos_t = std::sqrt(1 - eta * eta * (1 - cos_i * cos_i));
-  const double tx = (eta * cos_i - cos_t) * nx;  // t = eta d + (eta cos_i - cos_t) n, and d.x = 0
-  const double shift = tx / cos_t;               // the exit point's x minus the entry point's
-  const int width = 512, height = 128;           // 2 units of height: 64 pixels per unit, x in [-4, 4]
+  const double shift = slab_shift(theta, ior, 1);
+  const int width = 512, height = 128;  // 2 units of height: 64 pixels per unit, x in [-4, 4]
   auto column_of = [&](double x) { return (x + 4) / 8 * width; };
   double found[2];
   for (int solid = 0; solid < 2; ++solid) {
-    GltfBuilder b;
-    b.doc["extensionsUsed"] = {"KHR_materials_transmission", "KHR_materials_volume", "KHR_materials_ior"};
-    int glass = b.material(
-        {{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 1}}, {"metallicFactor", 0}, {"roughnessFactor", 0}}},
-         {"extensions",
-          {{"KHR_materials_transmission", {{"transmissionFactor", 1}}},
-           {"KHR_materials_ior", {{"ior", ior}}},
-           {"KHR_materials_volume", {{"thicknessFactor", solid ? 1.0 : 0.0}}}}}});
-    int line =
-        b.material({{"emissiveFactor", {1, 1, 1}}, {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}}}});
-    b.node({{"mesh", box_mesh(b, 2, 2, 0.5f, glass)}, {"rotation", {0, std::sin(theta / 2), 0, std::cos(theta / 2)}}},
-           true);
-    b.node({{"mesh", box_mesh(b, 0.03f, 2, 0.01f, line)}, {"translation", {0, 0, -3}}}, true);
-    b.write(fixture_dir(), "slab");
-    json job = {{"kind", "scene"},
-                {"scene",
-                 {{"gltf", "slab.gltf"},
-                  {"camera", {{"type", "orthographic"}, {"from", {0, 0, 5}}, {"to", {0, 0, 0}}, {"height", 2}}},
-                  {"environment", {{"color", 0}}}}},
-                {"render", {{"width", width}, {"height", height}, {"spp", 16}, {"max_depth", 8}}}};
-    Rendered img = render_job(job);
+    const json glass = {{"KHR_materials_transmission", {{"transmissionFactor", 1}}},
+                        {"KHR_materials_ior", {{"ior", ior}}},
+                        {"KHR_materials_volume", {{"thicknessFactor", solid ? 1.0 : 0.0}}}};
+    const Rendered img = render_line_behind_slab(glass, theta, 2, 1, 2, width, height, 16);
     // The brightest column (summed over the rows), refined by the centroid of the columns around it.
     std::vector<double> col(width, 0.0);
     for (int y = 0; y < height; ++y)
       for (int x = 0; x < width; ++x) col[x] += img.at(x, y).y;
     const int peak = static_cast<int>(std::max_element(col.begin(), col.end()) - col.begin());
-    double sum = 0, moment = 0;
-    for (int x = std::max(0, peak - 4); x <= std::min(width - 1, peak + 4); ++x) {
-      sum += col[x];
-      moment += col[x] * (x + 0.5);
-    }
-    ASSERT_GT(sum, 0) << "solid " << solid;
-    found[solid] = moment / sum;
+    found[solid] = centroid_column(img, 1, peak - 4, peak + 4);
+    ASSERT_GT(found[solid], 0) << "solid " << solid;
   }
   // The line is at x = 0; through the slab it shows where the camera ray lands on it: at x0 with x0 + shift = 0.
   EXPECT_NEAR(found[0], column_of(0), 1.0);
   EXPECT_NEAR(found[1], column_of(-shift), 1.0);
   EXPECT_GT(std::abs(column_of(-shift) - column_of(0)), 15);  // the test can tell the two apart
+}
+
+// KHR_materials_dispersion parts the colours by Snell's law at each wavelength: a slab as above, 3 thick, of dispersion
+// 4 (V_d = 5), shows the line behind it as a spectrum. Each channel of the image is the line's shift at every
+// wavelength weighted by that channel's weight (renderer/spectrum.h), so each channel's centroid column is predicted
+// from the weights and Snell's law alone; without the dispersion (or with the wavelength not reaching the BSDF, or
+// its weight not reaching the path) the three channels' lines coincide.
+TEST(GltfTransmission, DispersiveGlassPartsColoursBySnellsLawAtEachWavelength) {
+  const double theta = M_PI / 4, ior = 1.5, dispersion = 4, thickness = 3;
+  const int width = 1024, height = 32;  // half a unit of height: 64 pixels per unit; x in [-8, 8]
+  auto column_of = [&](double x) { return (x + 8) / 16 * width; };
+  // The predicted column of each channel: the weight-averaged column of the line seen at each 1 nm of wavelength.
+  Vec3 predicted(0), total(0);
+  for (float nm = spectrum::kMinNm + 0.5f; nm < spectrum::kMaxNm; nm += 1) {
+    const Rgb w = spectrum::channel_weight(nm);
+    const double column = column_of(-slab_shift(theta, spectrum::dispersive_ior(ior, dispersion, nm), thickness));
+    predicted += w * static_cast<float>(column);
+    total += w;
+  }
+  predicted = Vec3(predicted.x / total.x, predicted.y / total.y, predicted.z / total.z);
+  ASSERT_GT(predicted.z - predicted.x, 5);  // blue bends most, so its line is seen furthest right: the test can tell
+
+  Vec3 found[2];
+  for (int dispersive = 0; dispersive < 2; ++dispersive) {
+    const json glass = {{"KHR_materials_transmission", {{"transmissionFactor", 1}}},
+                        {"KHR_materials_ior", {{"ior", ior}}},
+                        {"KHR_materials_volume", {{"thicknessFactor", thickness}}},
+                        {"KHR_materials_dispersion", {{"dispersion", dispersive ? dispersion : 0.0}}}};
+    const Rendered img = render_line_behind_slab(glass, theta, 4, thickness, 0.5, width, height, 64);
+    // Each channel's centroid column over the pixels around the line (the slab's shift at 1.5, +-32 columns).
+    const int centre = static_cast<int>(column_of(-slab_shift(theta, ior, thickness)));
+    for (int c = 0; c < 3; ++c) {
+      found[dispersive][c] = static_cast<float>(centroid_column(img, c, centre - 32, centre + 32));
+      ASSERT_GT(found[dispersive][c], 0) << "channel " << c;
+    }
+  }
+  std::printf(
+      "line's column, red green blue: predicted %.2f %.2f %.2f, found %.2f %.2f %.2f (without dispersion %.2f %.2f "
+      "%.2f)\n",
+      predicted.x, predicted.y, predicted.z, found[1].x, found[1].y, found[1].z, found[0].x, found[0].y, found[0].z);
+  // Without dispersion the channels coincide; with it each lands where its wavelengths put it.
+  EXPECT_NEAR(found[0].x, found[0].z, 0.25);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(found[1][c], predicted[c], 0.3) << "channel " << c;
 }
 
 }  // namespace
