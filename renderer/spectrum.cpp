@@ -27,7 +27,8 @@ struct Table {
   Table() {
     Vec3 sum(0);
     for (int i = 0; i < kBins; ++i) {
-      const Rgb c = xyz_to_linear_srgb(cie_xyz(kMinNm + static_cast<float>(i) + 0.5f));
+      const Vec3 xyz = cie_xyz(kMinNm + static_cast<float>(i) + 0.5f);
+      const Rgb c = xyz_to_linear_srgb(xyz.x, xyz.y, xyz.z);
       weight[static_cast<size_t>(i)] = Rgb(std::max(c.x, 0.0f), std::max(c.y, 0.0f), std::max(c.z, 0.0f));
       sum += weight[static_cast<size_t>(i)];
     }
@@ -63,10 +64,10 @@ Vec3 cie_xyz(float lambda_nm) {
   return {x, y, z};
 }
 
-Rgb xyz_to_linear_srgb(const Vec3& xyz) {
-  return Rgb(3.2404542f * xyz.x - 1.5371385f * xyz.y - 0.4985314f * xyz.z,
-             -0.9692660f * xyz.x + 1.8760108f * xyz.y + 0.0415560f * xyz.z,
-             0.0556434f * xyz.x - 0.2040259f * xyz.y + 1.0572252f * xyz.z);
+Rgb xyz_to_linear_srgb(double x, double y, double z) {
+  return Rgb(static_cast<float>(3.2404542 * x - 1.5371385 * y - 0.4985314 * z),
+             static_cast<float>(-0.9692660 * x + 1.8760108 * y + 0.0415560 * z),
+             static_cast<float>(0.0556434 * x - 0.2040259 * y + 1.0572252 * z));
 }
 
 WavelengthSample sample_wavelength(float u) {

@@ -27,8 +27,8 @@ constexpr float kMinNm = 380, kMaxNm = 780;
 // Sloan & Shirley, "Simple Analytic Approximations to the CIE XYZ Color Matching Functions", JCGT 2(2), 2013.
 Vec3 cie_xyz(float lambda_nm);
 
-// Linear sRGB (D65) of a CIE XYZ colour (IEC 61966-2-1).
-Rgb xyz_to_linear_srgb(const Vec3& xyz);
+// Linear sRGB (D65) of a CIE XYZ colour (IEC 61966-2-1), computed in double precision.
+Rgb xyz_to_linear_srgb(double x, double y, double z);
 
 // One wavelength for a path: the wavelength and the weight w(lambda) / p(lambda) its throughput takes.
 struct WavelengthSample {

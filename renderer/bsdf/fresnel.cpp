@@ -101,8 +101,7 @@ Rgb thin_film_sensitivity(double opd_nm, const Rgb& shift) {
   xyz[0] += 9.7470e-14 * std::sqrt(2 * kPi * 4.5282e+09) * std::cos(2.2399e+06 * phase + shift[0]) *
             std::exp(-4.5282e+09 * phase * phase);
   for (double& v : xyz) v /= 1.0685e-7;
-  return spectrum::xyz_to_linear_srgb(
-      Vec3(static_cast<float>(xyz[0]), static_cast<float>(xyz[1]), static_cast<float>(xyz[2])));
+  return spectrum::xyz_to_linear_srgb(xyz[0], xyz[1], xyz[2]);
 }
 
 }  // namespace

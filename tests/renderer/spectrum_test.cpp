@@ -28,7 +28,7 @@ TEST(Spectrum, ColourMatchingFunctionsFollowTheCieTable) {
     EXPECT_NEAR(xyz.z, r.z, 0.035f) << r.nm;
   }
   // D65 white (Y = 1) is sRGB's white.
-  const Rgb white = spectrum::xyz_to_linear_srgb(Vec3(0.95047f, 1.0f, 1.08883f));
+  const Rgb white = spectrum::xyz_to_linear_srgb(0.95047, 1.0, 1.08883);
   EXPECT_NEAR(white.x, 1, 1e-3f);
   EXPECT_NEAR(white.y, 1, 1e-3f);
   EXPECT_NEAR(white.z, 1, 1e-3f);
