@@ -65,8 +65,12 @@
 // F_film the reflectance of the base (f0_d, or base_color for the metal) under a thin dielectric film of index
 // iridescence_ior and thickness mix(minimum, maximum, texture) nanometres at V.H (Belcour & Barla 2017; the
 // extension's appendix), fresnel.h's fresnel_thin_film. The thin-walled BTDF passes 1 - max(F) of the same mix. The
-// lobe weights and the diffuse coupling keep Schlick's albedos (sampling weights only; a film may reflect more than
-// the bare base at some angles, so a white iridescent dielectric may gain a little energy there).
+// diffuse lobe's coupling W needs the specular lobe's albedo under the film, which the Schlick tables do not hold: a
+// film reflects up to several times the bare base's f0 (a white dielectric under a 120 nm film of index 1.8 had albedo
+// 1.13 with Schlick's). E_s is linear in f0, and a Schlick curve f0' + (f90 - f0')(1 - c)^5 that lies above F_film at
+// every angle bounds the film lobe's albedo from above, so W takes E_s of mix(f0_d, f0', iridescence), with f0' the
+// least such f0 over seven angles (cos 1 to 0.1) per channel: energy is lost, not gained, where the film reflects
+// less than its bound. The lobe probabilities keep Schlick's Fresnel (they are sampling weights only).
 #include "renderer/bsdf/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/bsdf/rough_dielectric.h"
@@ -215,6 +219,19 @@ class SheenAlbedoTable {
   float e_[kN][kN];
 };
 
+// The least f0' per channel whose Schlick curve f0' + (f90 - f0')(1 - c)^5 lies above the thin-film Fresnel of a base
+// of reflectance f0 (fresnel_thin_film, in air) at seven angles (see the header): (F_film(c) - f90 w) / (1 - w),
+// w = (1 - c)^5, at its largest, and at least f0.
+Rgb film_f0_bound(const Rgb& f0, float f90, float film_ior, float thickness_nm) {
+  Rgb bound = f0;
+  for (float c : {1.0f, 0.85f, 0.7f, 0.55f, 0.4f, 0.25f, 0.1f}) {
+    const Rgb f = fresnel_thin_film(c, 1.0f, film_ior, thickness_nm, f0);
+    const float w = sqr(sqr(1 - c)) * (1 - c);
+    for (int i = 0; i < 3; ++i) bound[i] = std::max(bound[i], (f[i] - f90 * w) / (1 - w));
+  }
+  return vmin(bound, Rgb(1));
+}
+
 struct GltfLobes {
   Rgb base_color{1, 1, 1};
   float metallic = 1;
@@ -237,6 +254,9 @@ struct GltfLobes {
   float iridescence = 0;            // KHR_materials_iridescence: the film's weight, in [0, 1]
   float iridescence_ior = 1.3f;     // the film's index
   float iridescence_thickness = 0;  // the film's thickness, nanometres
+  // film_f0_bound of f0_d, f90_d and the film, when the material knows it for every point (negative: not known, the
+  // BSDF works it out if it needs it).
+  Rgb film_f0_bound{-1, -1, -1};
 };
 
 class GltfPbrBsdf final : public Bsdf {
@@ -260,9 +280,16 @@ class GltfPbrBsdf final : public Bsdf {
       coat_frame_back_ = Frame::from_normal(Vec3(-c.x, -c.y, c.z));
     }
     if (solid()) interface_ = RoughDielectric{dist_t_, l.eta, 1.0f, max_component(l.base_color)};
+    f0_albedo_ = l.f0_d;
+    if (l.iridescence > 0 && l.metallic < 1) {
+      const Rgb bound = l.film_f0_bound.x >= 0
+                            ? l.film_f0_bound
+                            : film_f0_bound(l.f0_d, l.f90_d, l.iridescence_ior, l.iridescence_thickness);
+      f0_albedo_ = lerp_rgb(l.f0_d, bound, l.iridescence);
+    }
     float a1, a2;
     SchlickAlbedoTable::get().average(l.alpha, &a1, &a2);
-    specular_average_ = std::min(max_component(l.f0_d * a1 + Rgb(l.f90_d * a2)), 0.999f);
+    specular_average_ = std::min(max_component(f0_albedo_ * a1 + Rgb(l.f90_d * a2)), 0.999f);
     sheen_max_ = max_component(l.sheen_color);
     // The diffuse lobe's share that transmits, for sampling: by the luminances of the two colours.
     const float dr = (1 - l.diffuse_transmission) * luminance(l.base_color),
@@ -506,11 +533,12 @@ class GltfPbrBsdf final : public Bsdf {
     for (int i = 0; i < 5; ++i) p[i] /= sum;
   }
 
-  // The dielectric specular lobe's albedo E_s(mu) (its largest channel) and the clearcoat's.
+  // The dielectric specular lobe's albedo E_s(mu) (its largest channel; of f0_albedo_, the film's bound mixed in) and
+  // the clearcoat's.
   float specular_albedo(float mu) const {
     float e1, e2;
     SchlickAlbedoTable::get().eval(mu, l_.alpha, &e1, &e2);
-    return std::min(max_component(l_.f0_d * e1 + Rgb(l_.f90_d * e2)), 0.999f);
+    return std::min(max_component(f0_albedo_ * e1 + Rgb(l_.f90_d * e2)), 0.999f);
   }
   float sheen_albedo(float mu) const { return SheenAlbedoTable::get().eval(mu, l_.alpha_sheen); }
   float coat_albedo(float mu) const {
@@ -540,6 +568,7 @@ class GltfPbrBsdf final : public Bsdf {
     bool back = false;
   } cache_;
   float specular_average_ = 0;
+  Rgb f0_albedo_;  // the f0 of the specular lobe's albedo for the diffuse coupling: f0_d, or with a film its bound
   float sheen_max_ = 0;
   float diffuse_t_share_ = 0;  // of the diffuse lobe's samples, the transmitted ones
 
@@ -567,6 +596,8 @@ class GltfPbrMaterial final : public Material {
   float ior = 1.5f;
   bool solid = false;    // "thin_walled": false, and an index that refracts
   float dispersion = 0;  // KHR_materials_dispersion: 20 / V_d, a solid's only (Material::dispersive)
+  // The film's f0 bound (film_f0_bound), worked out once where nothing it depends on varies over the surface.
+  Rgb film_bound{-1, -1, -1};
   // metallic's and roughness's textures as one RGB lookup, when they read channels of the same image.
   std::shared_ptr<const Texture> metallic_roughness;
   int metallic_channel = 0, roughness_channel = 0;
@@ -617,6 +648,7 @@ class GltfPbrMaterial final : public Material {
       l.iridescence_ior = iridescence_ior;
       const float t = clamp(iridescence_thickness.eval(sp), 0.0f, 1.0f);
       l.iridescence_thickness = iridescence_thickness_min + (iridescence_thickness_max - iridescence_thickness_min) * t;
+      l.film_f0_bound = film_bound;
     }
     l.anisotropy = clamp(anisotropy.eval(sp), 0.0f, 1.0f);
     if (l.anisotropy > 0) {
@@ -683,6 +715,15 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     const float rotation = params::number(j, "anisotropy_rotation", ptr, 0.0f, -1e3f, 1e3f);
     m->aniso_rot_cos = std::cos(rotation);
     m->aniso_rot_sin = std::sin(rotation);
+    // A film of one thickness on a base of one f0: its bound once here rather than at every hit (7 film Fresnels).
+    if ((m->iridescence.texture || m->iridescence.value > 0) && !m->iridescence_thickness.texture &&
+        !m->specular.texture && !m->specular_color.texture && !m->dispersive) {
+      const float spec = clamp(m->specular.value, 0.0f, 1.0f);
+      const float t = clamp(m->iridescence_thickness.value, 0.0f, 1.0f);
+      m->film_bound = film_f0_bound(
+          vmin(Rgb(m->f0_ior) * m->specular_color.value, Rgb(1)) * spec, spec, m->iridescence_ior,
+          m->iridescence_thickness_min + (m->iridescence_thickness_max - m->iridescence_thickness_min) * t);
+    }
     // An anisotropic lobe needs the hit's tangent.
     if (m->anisotropy.texture || m->anisotropy.value > 0) m->isotropic = false;
     // The albedo tables are computed once per process (0.1 s, and 0.2 s for sheen's): here, while the scene loads,

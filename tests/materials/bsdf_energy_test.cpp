@@ -45,6 +45,18 @@ std::vector<std::pair<std::string, json>> energy_cases() {
   out.emplace_back("plastic_white", json{{"type", "plastic"}, {"diffuse", 1.0}, {"roughness", 0.3}});
   out.emplace_back("plastic_white_smooth", json{{"type", "plastic"}, {"diffuse", 1.0}});
   out.emplace_back("gltf_white_dielectric", json{{"type", "gltf_pbr"}, {"metallic", 0}, {"roughness", 0.3}});
+  // A white dielectric under a thin film at the thicknesses where the film reflects most and least: the film's
+  // Fresnel replaces Schlick's in the specular lobe, while the diffuse lobe's share is still Schlick's albedo.
+  for (double nm : {120.0, 300.0, 550.0})
+    for (double roughness : {0.2, 0.6})
+      out.emplace_back("gltf_white_iridescent_" + std::to_string(static_cast<int>(nm)) + "nm_r" +
+                           std::to_string(static_cast<int>(roughness * 10)),
+                       json{{"type", "gltf_pbr"},
+                            {"metallic", 0},
+                            {"roughness", roughness},
+                            {"iridescence", 1},
+                            {"iridescence_ior", 1.8},
+                            {"iridescence_thickness_maximum", nm}});
   out.emplace_back("gltf_white_diffuse_transmission",
                    json{{"type", "gltf_pbr"}, {"metallic", 0}, {"roughness", 0.5}, {"diffuse_transmission", 1}});
   out.emplace_back("cook_torrance_white_kd",
