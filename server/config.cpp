@@ -235,6 +235,10 @@ const std::vector<Option>& options() {
       {"--max-queued-per-user", "TESSERA_MAX_QUEUED_PER_USER", "N",
        "queued jobs one owner may have; more is 429 (default 0: no limit)",
        integer(&Config::max_queued_per_user, 0, 1 << 30)},
+      {"--max-running-per-user", "TESSERA_MAX_RUNNING_PER_USER", "N",
+       "jobs (or work units of split jobs) one owner renders at once across every node sharing the store; the rest "
+       "wait while other owners' jobs run (default 0: no limit)",
+       integer(&Config::max_running_per_user, 0, 1 << 30)},
       {"--max-work", "TESSERA_MAX_WORK", "N", "largest width*height*spp*max_depth of a job, 422 above (0: no limit)",
        real(&Config::max_work, 0, 1e30)},
       {"--max-gltf-instances", "TESSERA_MAX_GLTF_INSTANCES", "N",

@@ -39,6 +39,7 @@ struct Config {
   int max_user_priority = 100;  // above it, admin only (403)
   std::vector<std::string> cors_origins;
   int max_queued_per_user = 0;              // 0: no limit; above it 429
+  int max_running_per_user = 0;             // runs one owner holds at once across the store's nodes; 0: no limit
   double max_work = 0;                      // width x height x spp x max_depth; 0: no limit; above it 422
   uint64_t max_gltf_instances = 1'000'000;  // node instances of a glTF (paths through its hierarchy); above: 422
   double grace_s = 20;                      // SIGTERM: running jobs end their pass and checkpoint within this

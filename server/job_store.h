@@ -106,7 +106,12 @@ class JobStore {
   // Takes the next job to render (highest priority, then first come): a queued one, or a running one whose lease
   // expired (its node stopped renewing it: it died, or was paused or cut off). Marks it running under a new lease:
   // the next epoch, expiring at now_ms + lease_ms, this store's node. Nothing when none waits.
-  virtual std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms = kDefaultLeaseMs) = 0;
+  // With `max_running_per_owner` above 0, jobs of an owner whose runs under a live lease already number that many
+  // are passed over (a run: a job rendered whole, or one work unit of a split job), whichever node holds them: a user
+  // cannot take every render slot of the cluster, and never holds more than that many, however many nodes claim at
+  // once.
+  virtual std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms = kDefaultLeaseMs,
+                                              int max_running_per_owner = 0) = 0;
   // Extends the lease of a run to now_ms + lease_ms; false when the run is no longer this epoch's (the job was
   // claimed again, ended, paused, cancelled or deleted elsewhere): its render must stop and write nothing more.
   virtual bool renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) = 0;

@@ -119,6 +119,7 @@ int run(const Config& config) {
 
   SchedulerOptions scheduler_options;
   scheduler_options.max_jobs = config.max_jobs;
+  scheduler_options.max_running_per_user = config.max_running_per_user;
   scheduler_options.lease = std::chrono::milliseconds(static_cast<int64_t>(config.lease_s * 1000));
   scheduler_options.limits.max_width = config.max_width;
   scheduler_options.limits.max_height = config.max_height;

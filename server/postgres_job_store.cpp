@@ -256,61 +256,97 @@ void PostgresJobStore::create(const JobRecord& job) {
   });
 }
 
-std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms, int64_t lease_ms) {
+namespace {
+
+// How many runs of the owner `owner_sql` names hold a live lease at $1: jobs rendered whole, and work units.
+std::string live_runs_of(const std::string& owner_sql) {
+  return "((SELECT count(*) FROM tessera_jobs r WHERE r.owner = " + owner_sql +
+         " AND r.units = 1 AND r.state = 'running' AND r.lease_expires_at >= $1) + (SELECT count(*) FROM "
+         "tessera_units ru JOIN tessera_jobs rj ON rj.id = ru.job_id WHERE rj.owner = " +
+         owner_sql + " AND ru.state = 'running' AND ru.lease_expires_at >= $1))";
+}
+
+// pg_advisory_xact_lock's first key for an owner's claims (the second is the hash of the owner): "tess" in ASCII. The
+// two-key locks are apart from the one-key lock of the migrations.
+constexpr const char* kOwnerClaimLock = "1952805747";
+
+}  // namespace
+
+std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms, int64_t lease_ms, int max_running_per_owner) {
   std::lock_guard lock(mutex_);
-  const std::string now = to_text(now_ms), lease = to_text(lease_ms);
-  return in_transaction([&]() -> std::optional<JobRecord> {
-    // The best job rendered whole and the best unit of a split one, each row locked as it is chosen, rows other
-    // daemons are claiming skipped, not waited for; the better of the two (priority, then first come) is taken and
-    // the other's lock released with the transaction. A unit: queued, or running under a lease that expired; the
-    // merge only once every range is done.
-    Result whole = exec(
-        "SELECT seq, priority FROM tessera_jobs WHERE units = 1 AND (state = 'queued' OR (state = 'running' AND "
-        "lease_expires_at < $1)) ORDER BY priority DESC, seq LIMIT 1 FOR UPDATE SKIP LOCKED",
-        {now});
-    Result unit = exec(
-        "SELECT u.job_id, u.idx, j.seq, j.priority FROM tessera_units u JOIN tessera_jobs j ON j.id = u.job_id "
-        "WHERE j.state IN ('queued', 'running') AND (u.state = 'queued' OR (u.state = 'running' AND "
-        "u.lease_expires_at < $1)) AND (u.idx < j.units OR NOT EXISTS (SELECT 1 FROM tessera_units d WHERE "
-        "d.job_id = u.job_id AND d.idx < j.units AND d.state <> 'done')) ORDER BY j.priority DESC, j.seq, u.idx LIMIT "
-        "1 "
-        "FOR UPDATE OF u SKIP LOCKED",
-        {now});
-    bool take_unit = unit.rows() > 0;
-    if (take_unit && whole.rows() > 0) {
-      const int64_t wp = whole.int64(1), up = unit.int64(3);
-      take_unit = up > wp || (up == wp && unit.int64(2) < whole.int64(0));
-    }
-    if (!take_unit) {
-      if (whole.rows() == 0) return std::nullopt;
-      Result r = exec(std::string("UPDATE tessera_jobs SET state = 'running', started_at = $1, node = $2, passes = 0, "
-                                  "samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0, "
-                                  "epoch = epoch + 1, lease_expires_at = $1::bigint + $3::bigint WHERE seq = $4 "
-                                  "RETURNING ") +
+  const std::string now = to_text(now_ms), lease = to_text(lease_ms),
+                    cap = to_text(static_cast<int64_t>(max_running_per_owner));
+  // An owner at the cap is passed over. Two nodes may both see an owner one below it and claim for them at once: the
+  // claim then takes the owner's advisory lock (held to the transaction's end), so that claims for one owner take
+  // turns, and counts again, seeing the other's committed claim; a claim that finds the owner at the cap after all
+  // takes nothing and is tried again, which now passes the owner over.
+  for (int attempt = 0;; ++attempt) {
+    bool owner_full = false;
+    std::optional<JobRecord> claimed = in_transaction([&]() -> std::optional<JobRecord> {
+      // A job rendered whole, and a unit of a split job: each the first by priority, then age, that no other node
+      // holds; rows other daemons are claiming skipped, not waited for; the better of the two (priority, then first
+      // come) is taken and the other's lock released with the transaction. A unit: queued, or running under a lease
+      // that expired; the merge only once every range is done.
+      Result whole = exec(
+          "SELECT seq, priority, owner FROM tessera_jobs j WHERE units = 1 AND (state = 'queued' OR (state = "
+          "'running' AND lease_expires_at < $1)) AND ($2::int <= 0 OR " +
+              live_runs_of("j.owner") + " < $2::int) ORDER BY priority DESC, seq LIMIT 1 FOR UPDATE SKIP LOCKED",
+          {now, cap});
+      Result unit = exec(
+          "SELECT u.job_id, u.idx, j.seq, j.priority, j.owner FROM tessera_units u JOIN tessera_jobs j ON j.id = "
+          "u.job_id WHERE j.state IN ('queued', 'running') AND (u.state = 'queued' OR (u.state = 'running' AND "
+          "u.lease_expires_at < $1)) AND (u.idx < j.units OR NOT EXISTS (SELECT 1 FROM tessera_units d WHERE "
+          "d.job_id = u.job_id AND d.idx < j.units AND d.state <> 'done')) AND ($2::int <= 0 OR " +
+              live_runs_of("j.owner") +
+              " < $2::int) ORDER BY j.priority DESC, j.seq, u.idx LIMIT 1 FOR UPDATE OF u "
+              "SKIP LOCKED",
+          {now, cap});
+      bool take_unit = unit.rows() > 0;
+      if (take_unit && whole.rows() > 0) {
+        const int64_t wp = whole.int64(1), up = unit.int64(3);
+        take_unit = up > wp || (up == wp && unit.int64(2) < whole.int64(0));
+      }
+      if (!take_unit && whole.rows() == 0) return std::nullopt;
+      if (max_running_per_owner > 0) {
+        const std::string owner = take_unit ? unit.text(4) : whole.text(2);
+        exec(std::string("SELECT pg_advisory_xact_lock(") + kOwnerClaimLock + ", hashtext($1))", {owner});
+        Result runs = exec("SELECT " + live_runs_of("$2"), {now, owner});
+        if (runs.int64(0) >= max_running_per_owner) {
+          owner_full = true;
+          return std::nullopt;
+        }
+      }
+      if (!take_unit) {
+        Result r = exec(std::string("UPDATE tessera_jobs SET state = 'running', started_at = $1, node = $2, passes = "
+                                    "0, samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0, "
+                                    "epoch = epoch + 1, lease_expires_at = $1::bigint + $3::bigint WHERE seq = $4 "
+                                    "RETURNING ") +
+                            kJobColumns + ", document",
+                        {now, node_, lease, whole.text(0)});
+        return r.record(true);
+      }
+      const std::string job_id = unit.text(0), idx = unit.text(1);
+      // The job's epoch counter hands out the unit run's fencing token; the job runs from its first unit's claim.
+      Result j = exec(std::string("UPDATE tessera_jobs SET epoch = epoch + 1, state = 'running', "
+                                  "started_at = COALESCE(started_at, $2) WHERE id = $1 RETURNING ") +
                           kJobColumns + ", document",
-                      {now, node_, lease, whole.text(0)});
-      return r.record(true);
-    }
-    const std::string job_id = unit.text(0), idx = unit.text(1);
-    // The job's epoch counter hands out the unit run's fencing token; the job runs from its first unit's claim.
-    Result j = exec(std::string("UPDATE tessera_jobs SET epoch = epoch + 1, state = 'running', "
-                                "started_at = COALESCE(started_at, $2) WHERE id = $1 RETURNING ") +
-                        kJobColumns + ", document",
-                    {job_id, now});
-    JobRecord record = j.record(true);
-    Result u = exec(
-        "UPDATE tessera_units SET state = 'running', epoch = $3, node = $4, lease_expires_at = $5::bigint + "
-        "$6::bigint WHERE job_id = $1 AND idx = $2 RETURNING first_sample, samples, checkpoint_epoch, "
-        "(SELECT units FROM tessera_jobs WHERE id = $1)",
-        {job_id, idx, to_text(record.epoch), node_, now, lease});
-    record.unit = static_cast<int>(std::strtol(idx.c_str(), nullptr, 10));
-    record.unit_first_sample = static_cast<uint32_t>(u.int64(0));
-    record.unit_samples = static_cast<uint32_t>(u.int64(1));
-    record.unit_checkpoint_epoch = u.int64(2);
-    record.units = static_cast<int>(u.int64(3));
-    record.node = node_;
-    return record;
-  });
+                      {job_id, now});
+      JobRecord record = j.record(true);
+      Result u = exec(
+          "UPDATE tessera_units SET state = 'running', epoch = $3, node = $4, lease_expires_at = $5::bigint + "
+          "$6::bigint WHERE job_id = $1 AND idx = $2 RETURNING first_sample, samples, checkpoint_epoch, "
+          "(SELECT units FROM tessera_jobs WHERE id = $1)",
+          {job_id, idx, to_text(record.epoch), node_, now, lease});
+      record.unit = static_cast<int>(std::strtol(idx.c_str(), nullptr, 10));
+      record.unit_first_sample = static_cast<uint32_t>(u.int64(0));
+      record.unit_samples = static_cast<uint32_t>(u.int64(1));
+      record.unit_checkpoint_epoch = u.int64(2);
+      record.units = static_cast<int>(u.int64(3));
+      record.node = node_;
+      return record;
+    });
+    if (claimed || !owner_full || attempt == 2) return claimed;
+  }
 }
 
 bool PostgresJobStore::renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) {

@@ -29,7 +29,8 @@ class PostgresJobStore final : public JobStore {
   PostgresJobStore& operator=(const PostgresJobStore&) = delete;
 
   void create(const JobRecord& job) override;
-  std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms = kDefaultLeaseMs) override;
+  std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms = kDefaultLeaseMs,
+                                      int max_running_per_owner = 0) override;
   bool renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) override;
   bool update_progress(const std::string& id, int64_t epoch, const JobProgress& progress) override;
   bool end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms, const std::string& stop_reason = "",

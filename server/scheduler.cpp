@@ -266,7 +266,7 @@ void Scheduler::dispatch_loop() {
     while (!stopping_ && static_cast<int>(running_.size()) < options_.max_jobs) {
       std::optional<JobRecord> record;
       try {
-        record = store_.claim_next(now_ms(), options_.lease.count());
+        record = store_.claim_next(now_ms(), options_.lease.count(), options_.max_running_per_user);
       } catch (const std::exception& e) {
         log(LogLevel::kError, "cannot claim a job", {{"error", e.what()}});
         break;

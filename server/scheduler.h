@@ -29,6 +29,9 @@ namespace tessera::server {
 
 struct SchedulerOptions {
   int max_jobs = 1;
+  // Runs (jobs rendered whole, work units) one owner's jobs may hold at once across every node of the store; 0: no
+  // limit (JobStore::claim_next).
+  int max_running_per_user = 0;
   RenderLimits limits;
   // Maps an asset reference of a job ("gltf", "environment.map") to its file (SceneLoadOptions::resolve_asset).
   std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;

@@ -258,17 +258,22 @@ void SqliteJobStore::create(const JobRecord& job) {
   s.step();
 }
 
-std::optional<JobRecord> SqliteJobStore::claim_next(int64_t now_ms, int64_t lease_ms) {
+std::optional<JobRecord> SqliteJobStore::claim_next(int64_t now_ms, int64_t lease_ms, int max_running_per_owner) {
   std::lock_guard lock(mutex_);
-  // One statement, so two daemons sharing the file can never claim the same job.
-  Statement s(*this, std::string("UPDATE jobs SET state = 'running', started_at = ?1, passes = 0, samples_done = 0, "
-                                 "elapsed_s = 0, eta_s = NULL, samples_per_s = 0, epoch = epoch + 1, "
-                                 "lease_expires_at = ?1 + ?2 "
-                                 "WHERE seq = (SELECT seq FROM jobs WHERE state = 'queued' OR (state = 'running' AND "
-                                 "lease_expires_at < ?1) ORDER BY priority DESC, seq LIMIT 1) RETURNING ") +
-                         kJobColumns + ", document");
+  // One statement, so two daemons sharing the file can never claim the same job, nor an owner's runs pass the cap
+  // (the write lock serialises the statements).
+  Statement s(*this,
+              std::string("UPDATE jobs SET state = 'running', started_at = ?1, passes = 0, samples_done = 0, "
+                          "elapsed_s = 0, eta_s = NULL, samples_per_s = 0, epoch = epoch + 1, "
+                          "lease_expires_at = ?1 + ?2 "
+                          "WHERE seq = (SELECT seq FROM jobs c WHERE (c.state = 'queued' OR (c.state = 'running' "
+                          "AND c.lease_expires_at < ?1)) AND (?3 <= 0 OR (SELECT count(*) FROM jobs r WHERE "
+                          "r.owner = c.owner AND r.state = 'running' AND r.lease_expires_at >= ?1) < ?3) "
+                          "ORDER BY c.priority DESC, c.seq LIMIT 1) RETURNING ") +
+                  kJobColumns + ", document");
   s.bind(1, now_ms);
   s.bind(2, lease_ms);
+  s.bind(3, static_cast<int64_t>(max_running_per_owner));
   if (!s.step()) return std::nullopt;
   JobRecord r = s.record(true);
   while (s.step()) {

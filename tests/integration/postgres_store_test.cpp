@@ -170,6 +170,75 @@ TEST(PostgresStore, NodesSharingADataDirectoryServeEachOthersJobsAndResumeATaken
       << "the image rendered across two nodes differs from the one-node render";
 }
 
+// --max-running-per-user across nodes: two nodes of two render slots each, alice's three long jobs and then bob's
+// one. Without the cap alice would hold three of the four slots; with a cap of 1 she holds one, whichever node runs
+// it, bob's job runs beside it, and her other two wait in the queue, for as long as the test watches (3 s, three
+// claim polls of each node).
+TEST(PostgresStore, TwoNodesGiveEachUserNoMoreRunsThanTheCap) {
+  PostgresCluster& pg = PostgresCluster::shared();
+  const std::string uri = pg.create_database();
+  TempDir dir;
+  const std::string alice = "alice-token-0123456789", bob = "bob-token-0123456789";
+  const auto tokens = dir.path() / "tokens.json";
+  std::ofstream(tokens) << json::array(
+      {{{"token", alice}, {"name", "alice"}, {"role", "user"}}, {{"token", bob}, {"name", "bob"}, {"role", "user"}}});
+  auto node = [&](const std::string& name) {
+    return std::vector<std::string>{"--store",
+                                    uri,
+                                    "--node",
+                                    name,
+                                    "--threads",
+                                    "1",
+                                    "--max-jobs",
+                                    "2",
+                                    "--tokens",
+                                    tokens.string(),
+                                    "--max-running-per-user",
+                                    "1"};
+  };
+  Daemon a(dir.path() / "shared", node("node-a"));
+  Daemon b(dir.path() / "shared", node("node-b"));
+  auto ca = a.client(), cb = b.client();
+  ca->set_default_headers({{"Authorization", "Bearer " + alice}});
+  cb->set_default_headers({{"Authorization", "Bearer " + bob}});
+  // Long, and rendered whole (a job with a time limit is one unit).
+  json job = cornell_job(64, 65536);
+  job["render"]["time_limit_s"] = 600;
+  std::vector<std::string> alices;
+  for (int i = 0; i < 3; ++i) alices.push_back(submit(*ca, job));
+  const std::string bobs = submit(*cb, job);
+  // Running jobs per owner, as "owner:count,..." in owner order.
+  auto running = [&] {
+    return pg.psql(PostgresCluster::database_of(uri),
+                   "SELECT string_agg(owner || ':' || n, ',' ORDER BY owner) FROM (SELECT owner, count(*) AS n FROM "
+                   "tessera_jobs WHERE state = 'running' GROUP BY owner) c");
+  };
+  ASSERT_TRUE(eventually([&] { return state_of(*cb, bobs) == "running"; }, 60)) << a.log() << b.log();
+  std::string seen;
+  for (int i = 0; i < 30; ++i) {
+    seen = running();
+    ASSERT_EQ(seen, "alice:1,bob:1");
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  int queued = 0;
+  for (const std::string& id : alices) queued += state_of(*ca, id) == "queued";
+  EXPECT_EQ(queued, 2);
+  // Cancelling alice's running job lets her next one run, on either node (202: node a renders it and stops it; 200:
+  // node b does, and the store took the cancel).
+  for (const std::string& id : alices)
+    if (state_of(*ca, id) == "running") {
+      const int status = ca->Post("/v1/jobs/" + id + "/cancel")->status;
+      ASSERT_TRUE(status == 200 || status == 202) << status;
+    }
+  ASSERT_TRUE(eventually(
+      [&] {
+        int n = 0;
+        for (const std::string& id : alices) n += state_of(*ca, id) == "running";
+        return n == 1 && running() == "alice:1,bob:1";
+      },
+      30));
+}
+
 // Three nodes on one store and one volume, 200 jobs of five priorities submitted to them at once, one node killed
 // (SIGKILL) on the way: every job ends succeeded, none is lost, none is claimed twice except those the killed node
 // held (taken over once its lease ran out), each node took its share, and the claims of all three kept the priority

@@ -11,8 +11,8 @@ class ForwardingStore : public JobStore {
   explicit ForwardingStore(JobStore& inner) : inner_(inner) {}
 
   void create(const JobRecord& job) override { inner_.create(job); }
-  std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms) override {
-    return inner_.claim_next(now_ms, lease_ms);
+  std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms, int max_running_per_owner) override {
+    return inner_.claim_next(now_ms, lease_ms, max_running_per_owner);
   }
   bool renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) override {
     return inner_.renew_lease(id, epoch, now_ms, lease_ms);

@@ -46,9 +46,9 @@ class FlakyStore final : public JobStore {
     check(true);
     inner_.create(job);
   }
-  std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms) override {
+  std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms, int max_running_per_owner) override {
     check(true);
-    return inner_.claim_next(now_ms, lease_ms);
+    return inner_.claim_next(now_ms, lease_ms, max_running_per_owner);
   }
   bool renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) override {
     check(true);

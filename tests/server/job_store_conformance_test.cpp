@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -214,6 +215,74 @@ TYPED_TEST(JobStoreConformance, ConcurrentClaimsTakeEachJobOnce) {
   b.join();
   EXPECT_EQ(claimed.size(), static_cast<size_t>(kJobs));
   EXPECT_EQ(std::set<std::string>(claimed.begin(), claimed.end()), ids);
+}
+
+// With a cap on the runs an owner holds, a claim passes over the owner at the cap for the next one's jobs, and takes
+// the owner's again once a run ends or its lease runs out (a run under an expired lease holds nothing); 0 is no cap.
+TYPED_TEST(JobStoreConformance, AnOwnerAtTheRunningCapIsPassedOverUntilARunEnds) {
+  JobStore& store = this->store;
+  JobRecord a1 = make_job(0, 1), a2 = make_job(0, 2), b1 = make_job(0, 3);
+  a1.owner = a2.owner = "alice";
+  b1.owner = "bob";
+  for (const JobRecord* j : {&a1, &a2, &b1}) store.create(*j);
+  const auto first = store.claim_next(10, 1000, 1);
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->id, a1.id);
+  EXPECT_EQ(store.claim_next(10, 100'000, 1)->id, b1.id);  // alice holds her one: bob's job, submitted after hers
+  EXPECT_FALSE(store.claim_next(10, 1000, 1));             // both at their cap
+  EXPECT_TRUE(store.end_run(a1.id, first->epoch, JobState::kSucceeded, 20));
+  const auto second = store.claim_next(30, 1000, 1);
+  ASSERT_TRUE(second);
+  EXPECT_EQ(second->id, a2.id);
+  // Past its lease (a node that died), a run holds nothing: its own job is claimed again under the cap.
+  const auto again = store.claim_next(1031, 1000, 1);
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->id, a2.id);
+  EXPECT_GT(again->epoch, second->epoch);
+  // No cap: alice's next job is claimed beside her running one.
+  JobRecord a3 = make_job(0, 4);
+  a3.owner = "alice";
+  store.create(a3);
+  EXPECT_FALSE(store.claim_next(1040, 1000, 1));
+  EXPECT_EQ(store.claim_next(1040, 1000, 0)->id, a3.id);
+}
+
+// Nodes claiming at once never give an owner more runs than the cap: two stores (two daemons) claim in two threads
+// until nothing is left, twenty times over, with two owners of twelve jobs each under a cap of 2.
+TYPED_TEST(JobStoreConformance, ConcurrentClaimsNeverPassAnOwnersCap) {
+  std::unique_ptr<JobStore> other = this->backend.open("node-b");
+  for (int round = 0; round < 20; ++round) {
+    const int64_t now = 1000 * (round + 1);
+    for (int i = 0; i < 24; ++i) {
+      JobRecord j = make_job(0, now + i);
+      j.owner = i % 2 ? "alice" : "bob";
+      this->store.create(j);
+    }
+    std::mutex mutex;
+    std::map<std::string, int> runs;  // by owner
+    std::vector<std::string> claimed;
+    auto claimer = [&](JobStore& s) {
+      while (auto j = s.claim_next(now, 100'000'000, 2)) {
+        std::lock_guard lock(mutex);
+        ++runs[j->owner];
+        claimed.push_back(j->id);
+      }
+    };
+    std::thread a([&] { claimer(this->store); });
+    std::thread b([&] { claimer(*other); });
+    a.join();
+    b.join();
+    EXPECT_EQ(runs["alice"], 2) << "round " << round;
+    EXPECT_EQ(runs["bob"], 2) << "round " << round;
+    // The runs end (and every other job is cancelled), so the next round starts with none under way.
+    for (const std::string& id : claimed)
+      EXPECT_TRUE(this->store.transition(id, JobState::kCancelled, now + 500, "cancelled", ""));
+    JobFilter queued;
+    queued.state = JobState::kQueued;
+    queued.limit = 1000;
+    for (const JobRecord& j : this->store.list(queued))
+      EXPECT_TRUE(this->store.transition(j.id, JobState::kCancelled, now + 500, "cancelled", ""));
+  }
 }
 
 TYPED_TEST(JobStoreConformance, QueuePositionFollowsPriorityAndPriorityChangesOnlyWhileNotEnded) {
