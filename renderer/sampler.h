@@ -109,14 +109,7 @@ class PixelSampler {
         kind_(kind) {}
 
   // Next uniform number in [0, 1).
-  float get1d() {
-    if (kind_ == SamplerKind::kSobol) {
-      // One dimension: the shuffled, scrambled van der Corput sequence (Sobol's dimension 0).
-      const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * ++dimension_);
-      return static_cast<float>(sobol_dim0(shuffled_index(h), h) >> 8) * 0x1p-24f;
-    }
-    return to_unit(mix64(key_ + 0x9e3779b97f4a7c15ULL * ++dimension_));
-  }
+  float get1d() { return get1d_at(++dimension_); }
   // Next pair of uniform numbers in [0, 1)^2, stratified jointly with the Sobol sampler.
   Vec2 get2d() {
     if (kind_ == SamplerKind::kSobol) {
@@ -137,13 +130,7 @@ class PixelSampler {
   // The number of dimension 0, which get1d() and get2d() never reach (they start at 1): for a choice the whole sample
   // makes once, where only some samples make it (the wavelength of a path through a dispersive material), drawn
   // without moving any other number. Stratified over the pixel's samples as dimension 1 is.
-  float get1d_dimension0() const {
-    if (kind_ == SamplerKind::kSobol) {
-      const uint64_t h = mix64(pixel_key_);
-      return static_cast<float>(sobol_dim0(shuffled_index(h), h) >> 8) * 0x1p-24f;
-    }
-    return to_unit(mix64(key_));
-  }
+  float get1d_dimension0() const { return get1d_at(0); }
   // Steps over the dimensions a get1d() or get2d() would use, without computing them: for numbers a caller draws
   // only to keep the dimension layout fixed and would not use. Every later number is the same as after the call.
   void skip1d() { ++dimension_; }
@@ -151,6 +138,15 @@ class PixelSampler {
   uint32_t dimension() const { return dimension_; }
 
  private:
+  // The number of dimension `dimension`.
+  float get1d_at(uint32_t dimension) const {
+    if (kind_ == SamplerKind::kSobol) {
+      // One dimension: the shuffled, scrambled van der Corput sequence (Sobol's dimension 0).
+      const uint64_t h = mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * dimension);
+      return static_cast<float>(sobol_dim0(shuffled_index(h), h) >> 8) * 0x1p-24f;
+    }
+    return to_unit(mix64(key_ + 0x9e3779b97f4a7c15ULL * dimension));
+  }
   // The sample index shuffled by the dimension pair's hash h, by the Owen scramble reverse(LK(reverse(i))), with
   // reverse(i) computed once per sample.
   uint32_t shuffled_index(uint64_t h) const { return sobol_detail::reverse_bits(shuffled_reversed_index(h)); }

@@ -602,6 +602,19 @@ class GltfPbrMaterial final : public Material {
   std::shared_ptr<const Texture> metallic_roughness;
   int metallic_channel = 0, roughness_channel = 0;
 
+  // The dielectric's f0 at sp (KHR_materials_specular: specular_color tints, specular scales) for the normal-incidence
+  // reflectance f0 of its index, and its f90.
+  Rgb dielectric_f0(float f0, const ShadingPoint& sp, float* f90) const {
+    const float spec = clamp(specular.eval(sp), 0.0f, 1.0f);
+    *f90 = spec;
+    return vmin(Rgb(f0) * specular_color.eval(sp), Rgb(1)) * spec;
+  }
+  // The iridescent film's thickness at sp, nanometres: between the minimum and the maximum by the texture.
+  float film_thickness(const ShadingPoint& sp) const {
+    const float t = clamp(iridescence_thickness.eval(sp), 0.0f, 1.0f);
+    return iridescence_thickness_min + (iridescence_thickness_max - iridescence_thickness_min) * t;
+  }
+
   const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
     GltfLobes l;
     l.base_color = vmin(base_color.eval(sp) * sp.vertex_color, Rgb(1));
@@ -626,9 +639,7 @@ class GltfPbrMaterial final : public Material {
       eta = std::max(spectrum::dispersive_ior(ior, dispersion, sp.wavelength_nm), 1.001f);
       f0 = f0_from_ior(eta);
     }
-    float spec = clamp(specular.eval(sp), 0.0f, 1.0f);
-    l.f0_d = vmin(Rgb(f0) * specular_color.eval(sp), Rgb(1)) * spec;
-    l.f90_d = spec;
+    l.f0_d = dielectric_f0(f0, sp, &l.f90_d);
     l.transmission = clamp(transmission.eval(sp), 0.0f, 1.0f);
     l.solid = solid;
     l.eta = eta;
@@ -646,8 +657,7 @@ class GltfPbrMaterial final : public Material {
     l.iridescence = clamp(iridescence.eval(sp), 0.0f, 1.0f);
     if (l.iridescence > 0) {
       l.iridescence_ior = iridescence_ior;
-      const float t = clamp(iridescence_thickness.eval(sp), 0.0f, 1.0f);
-      l.iridescence_thickness = iridescence_thickness_min + (iridescence_thickness_max - iridescence_thickness_min) * t;
+      l.iridescence_thickness = film_thickness(sp);
       l.film_f0_bound = film_bound;
     }
     l.anisotropy = clamp(anisotropy.eval(sp), 0.0f, 1.0f);
@@ -718,11 +728,10 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     // A film of one thickness on a base of one f0: its bound once here rather than at every hit (7 film Fresnels).
     if ((m->iridescence.texture || m->iridescence.value > 0) && !m->iridescence_thickness.texture &&
         !m->specular.texture && !m->specular_color.texture && !m->dispersive) {
-      const float spec = clamp(m->specular.value, 0.0f, 1.0f);
-      const float t = clamp(m->iridescence_thickness.value, 0.0f, 1.0f);
-      m->film_bound = film_f0_bound(
-          vmin(Rgb(m->f0_ior) * m->specular_color.value, Rgb(1)) * spec, spec, m->iridescence_ior,
-          m->iridescence_thickness_min + (m->iridescence_thickness_max - m->iridescence_thickness_min) * t);
+      const ShadingPoint anywhere;  // the parameters are untextured: any point gives them
+      float f90;
+      const Rgb f0 = m->dielectric_f0(m->f0_ior, anywhere, &f90);
+      m->film_bound = film_f0_bound(f0, f90, m->iridescence_ior, m->film_thickness(anywhere));
     }
     // An anisotropic lobe needs the hit's tangent.
     if (m->anisotropy.texture || m->anisotropy.value > 0) m->isotropic = false;
