@@ -495,7 +495,7 @@ int main(int argc, char** argv) {
         b.spp = 16;
         b.sampler = kind;
         double e = rmse(render_image(scene, b, pool), reference);
-        sampler_rmse[kind == SamplerKind::kSobol ? "sobol" : "independent"] = e;
+        sampler_rmse[sampler_name(kind)] = e;
       }
       const double ratio = sampler_rmse["sobol"].get<double>() / sampler_rmse["independent"].get<double>();
       std::printf("   16 spp RMSE: Sobol %.5f, independent %.5f (Sobol / independent %.2f)\n",

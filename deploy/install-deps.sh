@@ -26,7 +26,10 @@ packages=(
 if [ "$mode" = "test" ]; then
   # postgresql: the server the job-store tests start their throw-away clusters with (initdb, pg_ctl).
   # clang-format: the test that the tracked sources are formatted as .clang-format says (Debian 12's, version 14).
-  packages+=(libgtest-dev libgmock-dev libbenchmark-dev chromium prometheus postgresql clang-format)
+  # clang-14, libfuzzer-14-dev, libclang-rt-14-dev: the fuzz targets of tests/fuzz (build-fuzz); the last holds the
+  # runtimes of -fsanitize=fuzzer,address,undefined, which clang-14 only recommends (not installed here).
+  packages+=(libgtest-dev libgmock-dev libbenchmark-dev chromium prometheus postgresql clang-format
+             clang-14 libfuzzer-14-dev libclang-rt-14-dev)
   # Node.js: any working node and npm will do (machines often have a newer one than Debian's, which Debian's npm
   # package would conflict with); Debian's only when there is none.
   if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then packages+=(nodejs npm); fi

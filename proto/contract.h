@@ -23,4 +23,10 @@ std::optional<std::string_view> contract_file(const std::string& path);
 // place), and a job rendered by `tessera render` the name of a file beside it (read from there).
 inline constexpr std::string_view kAssetRefPointers[] = {"/scene/gltf", "/scene/environment/map"};
 
+// Said with a document's schema errors when the checks that follow the schema's (the renderer's: material names,
+// indices, assets, limits) could not run on what the errors leave (SchemaSet::valid_remainder): the problem's
+// "pending", and a line of `tessera render`.
+inline constexpr std::string_view kChecksPending =
+    "more checks (material names, indices, assets, limits) follow once these errors are fixed";
+
 }  // namespace tessera::proto

@@ -123,7 +123,7 @@ class Validator {
             "enum");
     }
     if (v.is_number()) {
-      if (auto e = check_number(schema, v.get<double>(), at)) return {*e};
+      if (auto e = check_number(schema, v, at)) return {*e};
     }
     if (v.is_string()) {
       if (auto e = check_string(schema, v.get<std::string>(), at)) return {*e};
@@ -174,20 +174,34 @@ class Validator {
     return SchemaError{at, "must be " + expected, "type"};
   }
 
-  std::optional<SchemaError> check_number(const json& schema, double d, const std::string& at) {
-    auto bound = [&](const char* key) -> std::optional<double> {
+  // Where `v` lies against `bound`: below (< 0), equal (0) or above (> 0); exactly when both are integers (a double
+  // holds every integer only up to 2^53, and 2^53 + 1 read as one equals 2^53), as doubles otherwise.
+  static int compare(const json& v, const json& bound) {
+    if (v.is_number_integer() && bound.is_number_integer()) {
+      auto wide = [](const json& x) -> __int128 {
+        return x.is_number_unsigned() ? static_cast<__int128>(x.get<uint64_t>()) : x.get<int64_t>();
+      };
+      const __int128 a = wide(v), b = wide(bound);
+      return a < b ? -1 : a > b ? 1 : 0;
+    }
+    const double a = v.get<double>(), b = bound.get<double>();
+    return a < b ? -1 : a > b ? 1 : a == b ? 0 : 2;  // 2: unordered (NaN), which passes no bound
+  }
+
+  std::optional<SchemaError> check_number(const json& schema, const json& v, const std::string& at) {
+    auto against = [&](const char* key) -> std::optional<int> {
       auto it = schema.find(key);
       if (it == schema.end() || !it->is_number()) return std::nullopt;
-      return it->get<double>();
+      return compare(v, *it);
     };
     auto text = [&](const char* key) { return number_text(schema.at(key)); };
-    if (auto b = bound("minimum"); b && !(d >= *b))
+    if (auto c = against("minimum"); c && !(*c >= 0 && *c != 2))
       return SchemaError{at, "must be at least " + text("minimum"), "minimum"};
-    if (auto b = bound("maximum"); b && !(d <= *b))
+    if (auto c = against("maximum"); c && !(*c <= 0))
       return SchemaError{at, "must be at most " + text("maximum"), "maximum"};
-    if (auto b = bound("exclusiveMinimum"); b && !(d > *b))
+    if (auto c = against("exclusiveMinimum"); c && !(*c == 1))
       return SchemaError{at, "must be greater than " + text("exclusiveMinimum"), "exclusiveMinimum"};
-    if (auto b = bound("exclusiveMaximum"); b && !(d < *b))
+    if (auto c = against("exclusiveMaximum"); c && !(*c < 0))
       return SchemaError{at, "must be less than " + text("exclusiveMaximum"), "exclusiveMaximum"};
     return std::nullopt;
   }
@@ -418,6 +432,29 @@ size_t json_nesting_depth(std::string_view text) {
     }
   }
   return deepest;
+}
+
+std::optional<json> SchemaSet::valid_remainder(const json& instance, const std::string& name,
+                                               const std::vector<SchemaError>& errors, int max_depth) const {
+  json rest = instance;
+  for (const SchemaError& e : errors) {
+    if (e.pointer.empty()) return std::nullopt;
+    json::json_pointer at;
+    try {
+      at = json::json_pointer(e.pointer);
+    } catch (const json::exception&) {
+      return std::nullopt;
+    }
+    const json::json_pointer parent = at.parent_pointer();
+    if (!rest.contains(parent) || !rest[parent].is_object()) return std::nullopt;
+    json& holder = rest[parent];
+    const auto it = holder.find(at.back());
+    if (it == holder.end()) continue;  // left out already, with an error of its own
+    if (e.keyword != "additionalProperties" && it->is_structured()) return std::nullopt;
+    holder.erase(it);
+  }
+  if (!validate_all(rest, name, max_depth, 1).empty()) return std::nullopt;
+  return rest;
 }
 
 }  // namespace tessera::proto

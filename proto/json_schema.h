@@ -26,6 +26,10 @@ struct SchemaError {
   std::string keyword;  // the keyword that failed ("type", "required", ...)
 };
 
+// The most errors validate_all() reports of one document (a document of a thousand mistakes is answered with the
+// first of them).
+inline constexpr size_t kMaxReportedErrors = 20;
+
 class SchemaSet {
  public:
   // Adds a schema document under its file name ("job.schema.json"); references between documents use that name.
@@ -40,7 +44,15 @@ class SchemaSet {
   // Every error (up to `max_errors`), in document order: each member and item is checked whatever its siblings
   // hold, so a user sees all the mistakes of a document at once. The first is the one validate() returns.
   std::vector<SchemaError> validate_all(const nlohmann::json& instance, const std::string& name, int max_depth = 64,
-                                        size_t max_errors = 20) const;
+                                        size_t max_errors = kMaxReportedErrors) const;
+
+  // `instance` without the values `errors` (validate_all's) refused, when that is valid: what further checks (the
+  // renderer's: material names, indices, assets) can judge while those errors stand, whatever their fixes will be.
+  // A value is left out only where its absence cannot mean something else: an unknown property, or a scalar member
+  // of an object (its default takes its place). Nothing when an error cannot be left out so (a missing property, a
+  // wrong object or array, an item of an array) or the rest is still invalid: the further checks must wait.
+  std::optional<nlohmann::json> valid_remainder(const nlohmann::json& instance, const std::string& name,
+                                                const std::vector<SchemaError>& errors, int max_depth = 64) const;
 
   // Resolves a "$ref" found in document `base`. Returns nullptr when it names nothing; `*target_doc` receives the
   // name of the document the result lives in (for the references inside it).

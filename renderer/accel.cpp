@@ -4,6 +4,7 @@
 #include <pmmintrin.h>
 #include <xmmintrin.h>
 
+#include <cmath>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -226,7 +227,23 @@ bool Accel::resolve(float t, float u, float v, Vec3 ng, uint32_t geom_id, uint32
   return true;
 }
 
+namespace {
+
+// Whether Embree may be given `ray`. Embree 3 asserts that every origin and direction component lies within
+// +-1.844e18 (its FLT_LARGE) and that tnear and tfar are not NaN (RayK::valid), and the assertion aborts the process.
+// A ray that fails (a NaN from a degenerate shading frame, say) is answered as one that hits nothing: the path ends,
+// and the film drops a sample that is not a number.
+bool traceable(const Ray& ray) {
+  constexpr float kLarge = 1.844e18f;
+  return std::abs(ray.origin.x) <= kLarge && std::abs(ray.origin.y) <= kLarge && std::abs(ray.origin.z) <= kLarge &&
+         std::abs(ray.dir.x) <= kLarge && std::abs(ray.dir.y) <= kLarge && std::abs(ray.dir.z) <= kLarge &&
+         !std::isnan(ray.tmin) && !std::isnan(ray.tmax);
+}
+
+}  // namespace
+
 bool Accel::intersect(const Ray& ray, RayHit* hit) const {
+  if (!traceable(ray)) return false;
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRayHit rh;
@@ -258,7 +275,7 @@ void Accel::intersect_packet(const Ray* rays, int count, RayHit* hits, bool* fou
   alignas(32) RTCRayHit8 rh;
   for (int i = 0; i < 8; ++i) {
     const Ray& ray = rays[i < count ? i : 0];
-    valid[i] = i < count ? -1 : 0;
+    valid[i] = i < count && traceable(ray) ? -1 : 0;
     rh.ray.org_x[i] = ray.origin.x;
     rh.ray.org_y[i] = ray.origin.y;
     rh.ray.org_z[i] = ray.origin.z;
@@ -276,11 +293,13 @@ void Accel::intersect_packet(const Ray* rays, int count, RayHit* hits, bool* fou
   }
   rtcIntersect8(valid, impl_->scene, &ctx, &rh);
   for (int i = 0; i < count; ++i)
-    found[i] = resolve(rh.ray.tfar[i], rh.hit.u[i], rh.hit.v[i], Vec3(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]),
+    found[i] = valid[i] &&
+               resolve(rh.ray.tfar[i], rh.hit.u[i], rh.hit.v[i], Vec3(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]),
                        rh.hit.geomID[i], rh.hit.primID[i], rh.hit.instID[0][i], &hits[i]);
 }
 
 bool Accel::occluded(const Ray& ray) const {
+  if (!traceable(ray)) return false;
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRay r;

@@ -13,9 +13,6 @@ namespace tessera::gltf {
 
 namespace {
 
-// Decoded bytes an asset may make in all, as much as the file an asset may be read from.
-constexpr size_t kMaxDecodedBytes = size_t{1} << 31;
-
 // The bytes of buffer view `index`, checked to lie within its buffer.
 std::string_view view_bytes(const Import& import, int index, const std::string& who) {
   const tinygltf::Model& model = import.model;
@@ -45,17 +42,10 @@ int add_view(tinygltf::Model& model, std::vector<unsigned char> bytes, size_t st
   return static_cast<int>(model.bufferViews.size()) - 1;
 }
 
-void count_decoded(Import& import, size_t bytes, size_t* total) {
-  *total += bytes;
-  if (*total > kMaxDecodedBytes)
-    import.fail("the asset's compressed geometry decodes to more than " + std::to_string(kMaxDecodedBytes >> 20) +
-                " MiB, the limit");
-}
-
 // KHR_draco_mesh_compression (the extension's specification): the primitive's extension names a buffer view holding
 // a Draco mesh and, for each glTF attribute, the Draco attribute's unique id; the primitive's accessors keep their
 // type and count, and their data is what Draco decodes (indices as the decoded faces, a triangle list).
-void decode_draco_primitive(Import& import, int mesh_index, size_t prim_index, size_t* total) {
+void decode_draco_primitive(Import& import, int mesh_index, size_t prim_index) {
   tinygltf::Model& model = import.model;
   tinygltf::Primitive& prim = model.meshes[mesh_index].primitives[prim_index];
   const json ext = parse_extensions(prim.extensions_json_string)["KHR_draco_mesh_compression"];
@@ -83,7 +73,7 @@ void decode_draco_primitive(Import& import, int mesh_index, size_t prim_index, s
                 " vertices, beyond the limits");
   // Indices: the decoded faces, as 32-bit unsigned integers.
   {
-    count_decoded(import, faces * 12, total);
+    import.decoded.take(faces * 12, who);
     std::vector<unsigned char> data(faces * 12);
     for (size_t f = 0; f < faces; ++f)
       for (int k = 0; k < 3; ++k) {
@@ -116,7 +106,7 @@ void decode_draco_primitive(Import& import, int mesh_index, size_t prim_index, s
     tinygltf::Accessor acc = model.accessors[accessor_index];
     const int components = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(acc.type));
     if (components <= 0 || components > 16) import.fail(who + ": attribute " + name + " has an unknown type");
-    count_decoded(import, points * components * 4, total);
+    import.decoded.take(points * components * 4, who);
     std::vector<unsigned char> data(points * components * 4);
     std::vector<float> value(components);
     for (size_t p = 0; p < points; ++p) {
@@ -140,7 +130,7 @@ void decode_draco_primitive(Import& import, int mesh_index, size_t prim_index, s
 // (buffer, byteOffset, byteLength) and how they decode (count elements of byteStride bytes, mode ATTRIBUTES,
 // TRIANGLES or INDICES, filter NONE, OCTAHEDRAL, QUATERNION or EXPONENTIAL). Its own buffer is the fallback, which
 // is not read. The decoder's preconditions are checked here (the library asserts them).
-void decode_meshopt_view(Import& import, int view_index, size_t* total) {
+void decode_meshopt_view(Import& import, int view_index) {
   tinygltf::Model& model = import.model;
   tinygltf::BufferView& view = model.bufferViews[view_index];
   const json ext = parse_extensions(view.extensions_json_string)["EXT_meshopt_compression"];
@@ -172,7 +162,7 @@ void decode_meshopt_view(Import& import, int view_index, size_t* total) {
   if (mode == "ATTRIBUTES") {
     if (stride == 0 || stride > 256 || stride % 4 != 0)
       import.fail(who + ": ATTRIBUTES need a byteStride that is a multiple of 4 up to 256");
-    count_decoded(import, count * stride, total);
+    import.decoded.take(count * stride, who);
     out.resize(count * stride);
     status = meshopt_decodeVertexBuffer(out.data(), count, stride, in, length);
     if (status == 0 && filter == "OCTAHEDRAL") {
@@ -190,7 +180,7 @@ void decode_meshopt_view(Import& import, int view_index, size_t* total) {
     if (stride != 2 && stride != 4) import.fail(who + ": " + mode + " need a byteStride of 2 or 4");
     if (filter != "NONE") import.fail(who + ": " + mode + " take no filter");
     if (mode == "TRIANGLES" && count % 3 != 0) import.fail(who + ": TRIANGLES need a count that is a multiple of 3");
-    count_decoded(import, count * stride, total);
+    import.decoded.take(count * stride, who);
     out.resize(count * stride);
     status = mode == "TRIANGLES" ? meshopt_decodeIndexBuffer(out.data(), count, stride, in, length)
                                  : meshopt_decodeIndexSequence(out.data(), count, stride, in, length);
@@ -213,13 +203,12 @@ void decode_meshopt_view(Import& import, int view_index, size_t* total) {
 
 void decode_compressed_geometry(Import& import) {
   tinygltf::Model& model = import.model;
-  size_t total = 0;
   // meshopt first: a Draco stream could itself sit in a meshopt-compressed view.
   const size_t views = model.bufferViews.size();
   for (size_t v = 0; v < views; ++v) {
     import.check_stop();
     if (parse_extensions(model.bufferViews[v].extensions_json_string).contains("EXT_meshopt_compression"))
-      decode_meshopt_view(import, static_cast<int>(v), &total);
+      decode_meshopt_view(import, static_cast<int>(v));
     else if (import.meshopt_fallbacks.count(model.bufferViews[v].buffer))
       import.fail("buffer view " + std::to_string(v) + " reads a fallback buffer of EXT_meshopt_compression " +
                   "without that extension");
@@ -228,7 +217,7 @@ void decode_compressed_geometry(Import& import) {
     for (size_t p = 0; p < model.meshes[m].primitives.size(); ++p) {
       import.check_stop();
       if (parse_extensions(model.meshes[m].primitives[p].extensions_json_string).contains("KHR_draco_mesh_compression"))
-        decode_draco_primitive(import, static_cast<int>(m), p, &total);
+        decode_draco_primitive(import, static_cast<int>(m), p);
     }
 }
 

@@ -4,11 +4,15 @@
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
+#include <array>
 #include <fstream>
+#include <optional>
+#include <string_view>
 
 #include "proto/asset_path.h"
 #include "renderer/gltf_container.h"
 #include "renderer/gltf_internal.h"
+#include "renderer/image_input.h"
 #include "renderer/image_io.h"
 #include "renderer/thread_pool.h"
 
@@ -45,7 +49,29 @@ const std::set<std::string> kSupportedExtensions = {
 struct FsContext {
   std::filesystem::path folder;  // canonical
   size_t max_bytes;
+  // The decoded data: URIs of the document, handed to tinygltf as files named embedded_file_name(index).
+  std::vector<std::vector<unsigned char>> embedded;
 };
+
+// A name no file of an asset can have (asset paths never start with a dot), for the data: URI `index`.
+constexpr std::string_view kEmbeddedPrefix = ".data-uri-";
+std::string embedded_file_name(size_t index) {
+  return std::string(kEmbeddedPrefix) + std::to_string(index);
+}
+
+// The data: URI a path tinygltf asks for names (the asset's folder joined with embedded_file_name), or nothing for
+// any other path: read from the path itself, whatever the number of data: URIs.
+std::optional<size_t> embedded_index(const FsContext& ctx, const std::string& path) {
+  const std::string head = (ctx.folder / kEmbeddedPrefix).string();
+  if (path.size() <= head.size() || path.compare(0, head.size(), head) != 0) return std::nullopt;
+  size_t index = 0;
+  for (size_t i = head.size(); i < path.size(); ++i) {
+    if (path[i] < '0' || path[i] > '9' || index > ctx.embedded.size()) return std::nullopt;
+    index = index * 10 + static_cast<size_t>(path[i] - '0');
+  }
+  if (index >= ctx.embedded.size() || path != (ctx.folder / embedded_file_name(index)).string()) return std::nullopt;
+  return index;
+}
 
 // The file tinygltf asks for (the asset's folder joined with a URI it percent-decoded; URIs reach it as
 // uri_from_asset_path() wrote them) as the confined file it names.
@@ -61,14 +87,19 @@ bool inside(const FsContext& ctx, const std::string& path, std::filesystem::path
 }
 
 bool fs_exists(const std::string& path, void* user) {
+  const FsContext& ctx = *static_cast<FsContext*>(user);
   std::filesystem::path p;
-  return inside(*static_cast<FsContext*>(user), path, &p);
+  return embedded_index(ctx, path) || inside(ctx, path, &p);
 }
 std::string fs_expand(const std::string& path, void*) {
   return path;
 }
 bool fs_read(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
-  const FsContext& ctx = *static_cast<FsContext*>(user);
+  FsContext& ctx = *static_cast<FsContext*>(user);
+  if (auto index = embedded_index(ctx, path)) {
+    out->swap(ctx.embedded[*index]);  // tinygltf keeps it as it is: the decoded bytes are not copied
+    return true;
+  }
   std::filesystem::path p;
   if (!inside(ctx, path, &p)) {
     if (err) *err += "cannot read " + path.substr(std::min(path.size(), ctx.folder.string().size() + 1)) + "\n";
@@ -88,6 +119,82 @@ bool fs_read(std::vector<unsigned char>* out, std::string* err, const std::strin
 bool fs_write(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
   if (err) *err += "writing is not allowed\n";
   return false;
+}
+
+// ---- data: URIs ----
+
+// The data: URI headers tinygltf decodes (tinygltf::DecodeDataURI).
+constexpr std::string_view kDataUriHeaders[] = {
+    "data:application/octet-stream;base64,",
+    "data:image/jpeg;base64,",
+    "data:image/png;base64,",
+    "data:image/bmp;base64,",
+    "data:image/gif;base64,",
+    "data:text/plain;base64,",
+    "data:application/gltf-buffer;base64,",
+};
+
+// The header of `uri` among those tinygltf decodes, or an empty view.
+std::string_view data_uri_header(std::string_view uri) {
+  for (std::string_view header : kDataUriHeaders)
+    if (uri.substr(0, header.size()) == header) return header;
+  return {};
+}
+
+// The bytes of a data: URI as tinygltf::DecodeDataURI decodes them: the base64 after its header up to the first
+// character that is not base64 ('=' included), a last group of two or three characters giving one or two bytes.
+std::vector<unsigned char> decode_data_uri(std::string_view uri) {
+  static constexpr std::string_view kAlphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  // Each character's 6 bits, looked up (the text may be tens of megabytes); 64 for a character not in the alphabet.
+  static const std::array<uint8_t, 256> kValue = [] {
+    std::array<uint8_t, 256> v;
+    v.fill(64);
+    for (size_t i = 0; i < kAlphabet.size(); ++i) v[static_cast<unsigned char>(kAlphabet[i])] = static_cast<uint8_t>(i);
+    return v;
+  }();
+  const std::string_view text = uri.substr(data_uri_header(uri).size());
+  size_t n = 0;
+  while (n < text.size() && kValue[static_cast<unsigned char>(text[n])] < 64) ++n;
+  std::vector<unsigned char> out((n / 4) * 3 + (n % 4 > 1 ? n % 4 - 1 : 0));
+  uint32_t bits = 0;
+  size_t at = 0;
+  for (size_t i = 0; i < n; ++i) {
+    bits = (bits << 6) | kValue[static_cast<unsigned char>(text[i])];
+    if (i % 4 == 3 || i + 1 == n) {
+      const size_t group = i % 4 + 1;  // characters in this group: 4, or the last 2 or 3
+      bits <<= 6 * (4 - group);
+      for (size_t b = 0; b + 1 < group; ++b) out[at++] = static_cast<unsigned char>(bits >> (16 - 8 * b));
+      bits = 0;
+    }
+  }
+  return out;
+}
+
+// A buffer's byteLength as tinygltf reads it from the document's text (an integer of no sign), or nothing.
+std::optional<uint64_t> byte_length(const json& item) {
+  const auto length = item.find("byteLength");
+  if (length == item.end() || !length->is_number_integer()) return std::nullopt;
+  if (!length->is_number_unsigned() && length->get<int64_t>() < 0) return std::nullopt;
+  return length->get<uint64_t>();
+}
+
+// Decodes the data: URI of a buffer or an image of the document into ctx's files and names that file in its place,
+// so that tinygltf reads it from there: tinygltf would decode it from its own copies of the document's text (three of
+// them, and the text of the URI is as large as the asset). A URI tinygltf would refuse (no bytes, or not the buffer's
+// byteLength) is cut to its header, which tinygltf refuses the same way, naming the URI by its header.
+// False for a URI tinygltf does not decode (it reads it as a file name, which it cannot find), left as it is.
+bool embed_data_uri(json& item, bool buffer, FsContext& ctx) {
+  const std::string& uri = item["uri"].get_ref<const std::string&>();
+  const std::string_view header = data_uri_header(uri);
+  if (header.empty()) return false;
+  std::vector<unsigned char> bytes = decode_data_uri(uri);
+  if (bytes.empty() || (buffer && byte_length(item) != bytes.size())) {
+    item["uri"] = std::string(header);
+    return true;
+  }
+  item["uri"] = embedded_file_name(ctx.embedded.size());
+  ctx.embedded.push_back(std::move(bytes));
+  return true;
 }
 
 // tinygltf hands over each image's encoded bytes (from a buffer view, a data: URI or a file) while it parses; they
@@ -118,8 +225,10 @@ std::string decode_image(const std::vector<unsigned char>& bytes, const std::str
     return what +
            " is a KTX2 (Basis Universal) image, which tessera cannot decode (KHR_texture_basisu is not "
            "supported): give the asset PNG or JPEG images";
-  if (bytes.size() >= 2 && bytes[0] == 0xFF && bytes[1] == 0xD8 && !jpeg_complete(bytes.data(), bytes.size()))
-    return what + " is a truncated JPEG (its data ends before the end-of-image marker)";
+  if (const std::string truncated = truncation(bytes.data(), bytes.size()); !truncated.empty())
+    return what + " is " + truncated;
+  if (const std::string problem = exr_header_problem(bytes.data(), bytes.size()); !problem.empty())
+    return what + " cannot be decoded: " + problem;
   if (header_only) {
     // A JPEG's header through libjpeg: OpenImageIO's open would decode every scan of a progressive one.
     if (auto header = jpeg_header(bytes.data(), bytes.size())) {
@@ -138,7 +247,7 @@ std::string decode_image(const std::vector<unsigned char>& bytes, const std::str
   config.attribute("oiio:UnassociatedAlpha", 1);
   void* proxy = &reader;
   config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
-  auto in = OIIO::ImageInput::open(name, &config);
+  auto in = open_image_input(name, &config);
   if (!in) return what + " cannot be decoded: " + OIIO::geterror();
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 ||
@@ -197,22 +306,67 @@ std::vector<std::shared_ptr<const ImagePixels>> decode_all(tinygltf::Model* mode
   return decoded;
 }
 
-// Reads the JSON part of a .gltf or .glb, checking the binary container's framing (parse_glb).
-json container_json(const std::vector<unsigned char>& bytes, bool* binary, const std::string& pointer) {
-  const std::string_view view(reinterpret_cast<const char*>(bytes.data()), bytes.size());
-  *binary = is_glb(view);
-  if (!*binary) {
-    json j = json::parse(bytes.begin(), bytes.end(), nullptr, false);
-    if (j.is_discarded() || !j.is_object()) throw SceneError(pointer, "the file is neither a .glb nor glTF JSON");
-    return j;
-  }
-  auto chunks = parse_glb(view);
+// The whole file, or SceneError.
+std::vector<unsigned char> read_file_bytes(const std::filesystem::path& path, const std::string& pointer) {
+  std::error_code ec;
+  auto size = std::filesystem::file_size(path, ec);
+  if (ec) throw SceneError(pointer, "the glTF asset cannot be read");
+  std::vector<unsigned char> bytes(size);
+  std::ifstream in(path, std::ios::binary);
+  in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(size));
+  if (!in) throw SceneError(pointer, "the glTF asset cannot be read");
+  return bytes;
+}
+
+// Whether the file is a .glb (is_glb: its first bytes), or SceneError when it cannot be read.
+bool file_is_glb(const std::filesystem::path& path, const std::string& pointer) {
+  std::error_code ec;
+  std::ifstream in(path, std::ios::binary);
+  if (!std::filesystem::is_regular_file(path, ec) || !in) throw SceneError(pointer, "the glTF asset cannot be read");
+  char magic[4] = {};
+  in.read(magic, sizeof magic);
+  return is_glb(std::string_view(magic, static_cast<size_t>(in.gcount())));
+}
+
+// The JSON chunk of a .glb, the container's framing checked (parse_glb).
+json glb_json(const std::vector<unsigned char>& bytes, const std::string& pointer) {
+  auto chunks = parse_glb(std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
   if (auto* problem = std::get_if<std::string>(&chunks))
     throw SceneError(pointer, "the .glb is malformed: " + *problem);
   const std::string_view text = std::get<GlbChunks>(chunks).json;
   json j = json::parse(text.begin(), text.end(), nullptr, false);
   if (j.is_discarded() || !j.is_object()) throw SceneError(pointer, "the .glb's JSON chunk is not valid JSON");
   return j;
+}
+
+// The JSON of a .gltf, parsed as it is read from the file: its text (as large as the asset with data: URIs) is not
+// held beside the document, whose parse takes about three times the size of its largest string at the peak.
+json gltf_json(const std::filesystem::path& path, const std::string& pointer) {
+  std::ifstream in(path, std::ios::binary);
+  json j = json::parse(in, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) throw SceneError(pointer, "the file is neither a .glb nor glTF JSON");
+  return j;
+}
+
+// One warning names the used extensions tessera ignores: the first few, then how many more (an asset may list any
+// number of names).
+void warn_unsupported_extensions(Import& import) {
+  constexpr size_t kNamed = 8;
+  std::set<std::string> unsupported;
+  for (const json& e : import.doc["extensionsUsed"]) {
+    import.check_stop();
+    if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>())) unsupported.insert(e.get<std::string>());
+  }
+  if (unsupported.empty()) return;
+  std::string names;
+  size_t named = 0;
+  for (const std::string& name : unsupported) {
+    if (named == kNamed) break;
+    names += (named++ ? ", " : "") + name.substr(0, 64);
+  }
+  if (unsupported.size() > kNamed) names += " and " + std::to_string(unsupported.size() - kNamed) + " more";
+  import.warn((unsupported.size() == 1 ? "extension " + names + " is not supported and was ignored"
+                                       : "extensions " + names + " are not supported and were ignored"));
 }
 
 }  // namespace
@@ -226,24 +380,23 @@ json parse_extensions(const std::string& text) {
 void read_asset(Import& import) {
   const std::filesystem::path& path = import.path;
   const std::string& pointer = import.pointer;
-  std::error_code ec;
-  auto size = std::filesystem::file_size(path, ec);
-  if (ec) throw SceneError(pointer, "the glTF asset cannot be read");
-  std::vector<unsigned char> bytes(size);
-  {
-    std::ifstream in(path, std::ios::binary);
-    in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(size));
-    if (!in) throw SceneError(pointer, "the glTF asset cannot be read");
+  const bool binary = file_is_glb(path, pointer);
+  std::vector<unsigned char> bytes;  // what tinygltf is given: the .glb, or the .gltf's text
+  if (binary) {
+    bytes = read_file_bytes(path, pointer);
+    import.doc = glb_json(bytes, pointer);
+  } else {
+    import.doc = gltf_json(path, pointer);
   }
-  bool binary = false;
-  import.doc = container_json(bytes, &binary, pointer);
   json& doc = import.doc;
+  FsContext fs_ctx{std::filesystem::weakly_canonical(path.parent_path()), size_t{1} << 31, {}};
 
   // EXT_meshopt_compression's fallback buffers (the extension's specification, "Fallback buffers") hold data only
   // for loaders without the extension, and may have no URI: they are not read (a one-byte stand-in for tinygltf), and
   // nothing may read them but the compressed views that replace them (decode_compressed_geometry).
   if (doc.contains("buffers") && doc["buffers"].is_array())
     for (size_t i = 0; i < doc["buffers"].size(); ++i) {
+      import.check_stop();
       json& item = doc["buffers"][i];
       if (!item.is_object() || !item.contains("extensions") || !item["extensions"].is_object()) continue;
       const json& ext = item["extensions"].value("EXT_meshopt_compression", json::object());
@@ -257,7 +410,8 @@ void read_asset(Import& import) {
   // indices accessor has no data, which tinygltf refuses for indices: the reference is dropped before tinygltf reads
   // the document.
   if (doc.contains("meshes") && doc["meshes"].is_array())
-    for (json& mesh : doc["meshes"])
+    for (json& mesh : doc["meshes"]) {
+      import.check_stop();
       if (mesh.is_object() && mesh.contains("primitives") && mesh["primitives"].is_array())
         for (json& prim : mesh["primitives"])
           if (prim.is_object() && prim.contains("indices") && prim.contains("extensions") &&
@@ -265,18 +419,23 @@ void read_asset(Import& import) {
             prim.erase("indices");
             rewritten = true;
           }
+    }
 
   // Every file the asset names must be inside its own folder (proto/asset_path.h), before tinygltf resolves any: the
   // URIs are decoded and normalised here, and handed to tinygltf encoded as it decodes them.
   for (const char* section : {"buffers", "images"}) {
     if (!doc.contains(section) || !doc[section].is_array()) continue;
     for (size_t i = 0; i < doc[section].size(); ++i) {
+      import.check_stop();
       json& item = doc[section][i];
       if (!item.is_object() || !item.contains("uri")) continue;
       const std::string where = std::string(section) + "[" + std::to_string(i) + "]";
       if (!item["uri"].is_string()) throw SceneError(pointer, where + ".uri must be a string");
-      const std::string uri = item["uri"].get<std::string>();
-      if (proto::is_data_uri(uri)) continue;
+      const std::string& uri = item["uri"].get_ref<const std::string&>();
+      if (proto::is_data_uri(uri)) {
+        rewritten = embed_data_uri(item, section == std::string_view("buffers"), fs_ctx) || rewritten;
+        continue;
+      }
       const std::string shown = "refused URI \"" + uri.substr(0, 200) + "\" in " + where + ": ";
       const proto::AssetPath file = proto::asset_path_from_uri(uri);
       if (!file.problem.empty()) throw SceneError(pointer, shown + file.problem);
@@ -301,19 +460,19 @@ void read_asset(Import& import) {
     } else {
       bytes.assign(text.begin(), text.end());
     }
+  } else if (!binary) {
+    bytes = read_file_bytes(path, pointer);
   }
   // Required extensions we cannot honour fail the job; optional ones are warnings.
   if (doc.contains("extensionsRequired") && doc["extensionsRequired"].is_array())
-    for (const json& e : doc["extensionsRequired"])
+    for (const json& e : doc["extensionsRequired"]) {
+      import.check_stop();
       if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>()))
         throw SceneError(pointer, "the asset requires the unsupported extension " + e.get<std::string>());
-  if (doc.contains("extensionsUsed") && doc["extensionsUsed"].is_array())
-    for (const json& e : doc["extensionsUsed"])
-      if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>()))
-        import.warn("extension " + e.get<std::string>() + " is not supported and was ignored");
+    }
+  if (doc.contains("extensionsUsed") && doc["extensionsUsed"].is_array()) warn_unsupported_extensions(import);
 
   tinygltf::TinyGLTF loader;
-  FsContext fs_ctx{std::filesystem::weakly_canonical(path.parent_path()), size_t{1} << 31};
   loader.SetFsCallbacks(tinygltf::FsCallbacks{&fs_exists, &fs_expand, &fs_read, &fs_write, &fs_ctx});
   loader.SetImageLoader(&keep_encoded_image, nullptr);
   loader.SetStoreOriginalJSONForExtrasAndExtensions(true);
@@ -328,8 +487,26 @@ void read_asset(Import& import) {
     while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
     throw SceneError(pointer, "the glTF asset is invalid: " + (err.empty() ? std::string("tinygltf failed") : err));
   }
+  // An image of a data: URI has no file name (as when tinygltf decodes the URI itself): messages name it by index.
+  for (tinygltf::Image& image : model.images)
+    if (image.uri.rfind(kEmbeddedPrefix, 0) == 0) image.uri.clear();
 
   import.tinygltf_warnings = std::move(warn);
+  // What the import may make beyond what its buffers hold (GltfImportOptions::max_decoded_bytes).
+  size_t stored = 0;
+  for (const tinygltf::Buffer& buffer : model.buffers) stored += buffer.data.size();
+  constexpr size_t kFloor = size_t{256} << 20, kExpansion = 64;
+  import.decoded = DecodeBudget(kFloor + kExpansion * stored, import.options.max_decoded_bytes, pointer);
+}
+
+void DecodeBudget::take(size_t bytes, const std::string& what) {
+  used_ += bytes;
+  if (used_ > allowance_)
+    throw SceneError(pointer_, what + " would make the asset's decoded geometry larger than " +
+                                   std::to_string(allowance_ >> 20) +
+                                   " MiB, the limit for an asset of this size (256 MiB plus 64 times its buffers, at "
+                                   "most " +
+                                   std::to_string(cap_ >> 20) + " MiB)");
 }
 
 std::map<std::string, std::shared_ptr<const ImagePixels>> decode_images(Import& import) {

@@ -6,12 +6,14 @@
 
 #include <tiny_gltf.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <filesystem>
 #include <map>
 #include <memory>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -26,6 +28,22 @@ namespace tessera::gltf {
 
 using nlohmann::json;
 
+// What an import makes that its files do not hold (GltfImportOptions::max_decoded_bytes), counted before it is made.
+class DecodeBudget {
+ public:
+  // What an asset may make: `allowance`, at most `cap` (GltfImportOptions::max_decoded_bytes).
+  DecodeBudget(size_t allowance, size_t cap, std::string pointer)
+      : allowance_(std::min(allowance, cap)), cap_(cap), pointer_(std::move(pointer)) {}
+  // Counts `bytes` that `what` makes; SceneError naming it and the allowance once the import's total passes it.
+  void take(size_t bytes, const std::string& what);
+
+ private:
+  size_t allowance_;
+  size_t cap_;
+  size_t used_ = 0;
+  std::string pointer_;
+};
+
 // One import's shared state: where it reads from, what it adds to, and what it counts against the limits.
 struct Import {
   Import(const std::filesystem::path& path_, const std::string& pointer_, Scene& scene_,
@@ -39,6 +57,8 @@ struct Import {
   json doc;  // the asset's JSON, with its URIs as tinygltf was given them
   tinygltf::Model model;
   size_t triangles = 0;             // in the scene so far, instances counted
+  size_t vertices = 0;              // of the primitives built so far
+  DecodeBudget decoded{0, 0, ""};   // set by read_asset, once the buffers' sizes are known
   std::string tinygltf_warnings;    // what tinygltf said while parsing, reported last
   std::set<int> meshopt_fallbacks;  // buffers EXT_meshopt_compression marks as fallbacks (not read)
 
@@ -47,6 +67,12 @@ struct Import {
   }
   [[noreturn]] void fail(const std::string& what) const { throw SceneError(pointer, what); }
   void warn(std::string what) { result.warnings.push_back(std::move(what)); }
+  // Counts the vertices of a primitive about to be built; throws past options.max_vertices.
+  void count_vertices(size_t count) {
+    vertices += count;
+    if (vertices > options.max_vertices)
+      fail("the asset exceeds the limit of " + std::to_string(options.max_vertices) + " vertices");
+  }
   // Throws once the scene holds more triangles than the limit.
   void check_triangles() const {
     if (triangles > options.max_triangles)
@@ -103,7 +129,9 @@ Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<c
 // Reads accessors with every offset checked against the bytes that exist; SceneError at `pointer` otherwise.
 class AccessorReader {
  public:
-  AccessorReader(const tinygltf::Model& model, const std::string& pointer) : model_(model), pointer_(pointer) {}
+  // Accessors without a buffer view are counted against `budget` before they are made.
+  AccessorReader(const tinygltf::Model& model, const std::string& pointer, DecodeBudget& budget)
+      : model_(model), pointer_(pointer), budget_(budget) {}
   // Accessor `index` as floats, `components` per element (normalised integers mapped to [0,1] / [-1,1]).
   std::vector<float> floats(int index, int components) const;
   // Accessor `index` as triangle indices, each below `vertex_count`.
@@ -113,12 +141,15 @@ class AccessorReader {
  private:
   [[noreturn]] void fail(int index, const std::string& what) const;
   const tinygltf::Accessor& accessor(int index) const;
+  struct Layout;
+  Layout layout(const tinygltf::Accessor& acc, int index) const;
   template <typename Fn>
-  void read(const tinygltf::Accessor& acc, int index, Fn&& fn) const;
+  void read(const tinygltf::Accessor& acc, int index, const Layout& at, Fn&& fn) const;
   void view(int view_index, int accessor_index, const unsigned char** base, size_t* length, size_t* stride) const;
 
   const tinygltf::Model& model_;
   std::string pointer_;
+  DecodeBudget& budget_;
 };
 
 // The triangles of glTF mesh `mesh_index` under transform `world` (identity for instanced prototypes), one Mesh per

@@ -2,8 +2,6 @@
 // (gltf_nodes.cpp) and its meshes built on the way (gltf_meshes.cpp); the parts share renderer/gltf_internal.h.
 #include "renderer/gltf_loader.h"
 
-#include <set>
-
 #include "renderer/gltf_internal.h"
 
 namespace tessera {
@@ -23,12 +21,8 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   import.triangles = scene.triangle_count();
   gltf::place_nodes(import, materials, roots);
   if (!import.tinygltf_warnings.empty()) result.warnings.push_back(import.tinygltf_warnings);
-  // Each warning once, in the order first given (a mesh drawn by many nodes says it once).
-  std::set<std::string> seen;
-  std::vector<std::string> once;
-  for (std::string& w : result.warnings)
-    if (seen.insert(w).second) once.push_back(std::move(w));
-  result.warnings = std::move(once);
+  // Each warning once (a mesh drawn by many nodes says it once), and not too many.
+  tidy_warnings(&result.warnings);
   return result;
 }
 

@@ -31,6 +31,13 @@ struct GltfImportOptions {
   // Materials of the job that replace glTF materials of the same name (already created).
   std::map<std::string, uint32_t> material_overrides;
   size_t max_triangles = 50'000'000;
+  // Vertices of every primitive built, counted from each POSITION accessor's count before any is read.
+  size_t max_vertices = 50'000'000;
+  // Bytes the import may make that its files do not hold: accessors without a buffer view (which glTF fills with
+  // zeros), and Draco and meshopt streams as decoded. Each is counted before it is allocated, against the least of
+  // this and 256 MiB + 64 times the bytes of the asset's buffers, so that a file of a few hundred bytes cannot
+  // declare gigabytes.
+  size_t max_decoded_bytes = size_t{1} << 31;
   size_t max_texture_pixels = 64u << 20;
   // Node instances: every path from a scene's roots to a node counts, since nodes may share children (a chain where
   // each node lists the next four times is 4^n instances of a few nodes). Above it, SceneError naming the limit.

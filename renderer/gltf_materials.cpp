@@ -227,7 +227,53 @@ double srgb_to_linear(double v) {
   return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
 }
 
+double linear_to_srgb(double v) {
+  v = std::clamp(v, 0.0, 1.0);
+  return v <= 0.0031308 ? v * 12.92 : 1.055 * std::pow(v, 1 / 2.4) - 0.055;
+}
+
 }  // namespace specgloss
+
+// The decoded pixels of the texture a textureInfo names, or null (no such texture, or its image not decoded).
+std::shared_ptr<const ImagePixels> texture_pixels(
+    const json& doc, const json& info, const std::map<std::string, std::shared_ptr<const ImagePixels>>& images) {
+  if (!info.is_object() || !info.contains("index") || !info["index"].is_number_integer() || !doc.contains("textures") ||
+      !doc["textures"].is_array())
+    return nullptr;
+  const int index = info["index"].get<int>();
+  if (index < 0 || index >= static_cast<int>(doc["textures"].size())) return nullptr;
+  const int source = doc["textures"][index].value("source", -1);
+  auto it = images.find("image" + std::to_string(source));
+  if (source < 0 || it == images.end() || !it->second || it->second->width <= 0 || it->second->height <= 0 ||
+      it->second->channels <= 0)
+    return nullptr;
+  return it->second;
+}
+
+// The texel of `image` nearest to the centre of texel (x, y) of a width x height image over the same [0, 1]^2.
+const uint8_t* nearest_texel(const ImagePixels& image, int x, int y, int width, int height) {
+  const int ix = std::min(image.width - 1, static_cast<int>((x + 0.5) * image.width / width));
+  const int iy = std::min(image.height - 1, static_cast<int>((y + 0.5) * image.height / height));
+  return &image.data[(static_cast<size_t>(iy) * static_cast<size_t>(image.width) + static_cast<size_t>(ix)) *
+                     static_cast<size_t>(image.channels)];
+}
+
+// Adds `pixels` to the document as a new image and texture (sampled as the texture `like` names is), and returns a
+// textureInfo for it with `like`'s texCoord and transform.
+json add_baked_texture(json& doc, std::map<std::string, std::shared_ptr<const ImagePixels>>& images,
+                       std::shared_ptr<ImagePixels> pixels, const json& like) {
+  if (!doc.contains("images") || !doc["images"].is_array()) doc["images"] = json::array();
+  const size_t image = doc["images"].size();
+  doc["images"].push_back(json::object());
+  images["image" + std::to_string(image)] = std::move(pixels);
+  json texture = {{"source", image}};
+  const json& original = doc["textures"][like["index"].get<int>()];
+  if (original.contains("sampler")) texture["sampler"] = original["sampler"];
+  doc["textures"].push_back(texture);
+  json info = like;
+  info["index"] = doc["textures"].size() - 1;
+  return info;
+}
 
 }  // namespace
 
@@ -252,62 +298,77 @@ json spec_gloss_to_metal_rough(json& doc, const json& material,
   json pbr = {{"baseColorFactor", {base[0], base[1], base[2], diffuse[3]}},
               {"metallicFactor", metallic},
               {"roughnessFactor", roughness}};
-  // The diffuse texture is the base colour's, scaled by the factors' conversion (exact where metallic is 0).
-  if (ext.contains("diffuseTexture")) {
-    pbr["baseColorTexture"] = ext["diffuseTexture"];
+  // The diffuse texture alone: the base colour's, scaled by the factors' conversion (exact where metallic is 0).
+  const json& diffuse_info = ext.value("diffuseTexture", json());
+  if (diffuse_info.is_object()) {
+    pbr["baseColorTexture"] = diffuse_info;
     for (int c = 0; c < 3; ++c)
       pbr["baseColorFactor"][c] = diffuse[c] > 0 ? std::clamp(base[c] / diffuse[c], 0.0, 1.0) : 0.0;
   }
-  // The specular-glossiness texture: metallic and roughness solved per texel into a metallic-roughness image of the
-  // same size (G roughness, B metallic, as glTF's), the diffuse taken as its factor there.
-  const json& info = ext.value("specularGlossinessTexture", json());
-  if (info.is_object() && info.contains("index") && info["index"].is_number_integer() && doc.contains("textures") &&
-      doc["textures"].is_array() && info["index"].get<int>() >= 0 &&
-      info["index"].get<int>() < static_cast<int>(doc["textures"].size())) {
-    const json tex = doc["textures"][info["index"].get<int>()];
-    const int source = tex.value("source", -1);
-    auto it = images.find("image" + std::to_string(source));
-    if (source >= 0 && it != images.end() && it->second) {
-      const ImagePixels& in = *it->second;
-      auto baked = std::make_shared<ImagePixels>();
-      baked->width = in.width;
-      baked->height = in.height;
-      baked->channels = 4;
-      const size_t texels = static_cast<size_t>(in.width) * static_cast<size_t>(in.height);
-      baked->data.resize(texels * 4);
-      for (size_t i = 0; i < texels; ++i) {
-        const uint8_t* p = &in.data[i * static_cast<size_t>(in.channels)];
-        double spec[3];
+  // A specular-glossiness texture: the conversion per texel, from that texel's specular and glossiness and the
+  // diffuse colour at the same place (the diffuse texture's where it has one, read nearest at the texel's centre),
+  // into two images of the larger texture's size: a metallic-roughness image (G roughness, B metallic, as glTF's) and,
+  // as a metal's colour is its specular colour, a base colour image (sRGB, the diffuse alpha kept). The diffuse
+  // texture is read so only where it maps as the specular one does (the same texCoord and transform); otherwise it
+  // is the base colour as above and the diffuse factor enters the metalness.
+  const std::shared_ptr<const ImagePixels> spec_image =
+      texture_pixels(doc, ext.value("specularGlossinessTexture", json()), images);
+  if (spec_image) {
+    const json& info = ext["specularGlossinessTexture"];
+    std::shared_ptr<const ImagePixels> diffuse_image = texture_pixels(doc, diffuse_info, images);
+    if (diffuse_image && (diffuse_info.value("texCoord", 0) != info.value("texCoord", 0) ||
+                          diffuse_info.value("extensions", json()) != info.value("extensions", json())))
+      diffuse_image = nullptr;
+    const ImagePixels& sg = *spec_image;
+    const int width = diffuse_image ? std::max(sg.width, diffuse_image->width) : sg.width;
+    const int height = diffuse_image ? std::max(sg.height, diffuse_image->height) : sg.height;
+    auto metal_rough = std::make_shared<ImagePixels>();
+    auto base_colour = std::make_shared<ImagePixels>();
+    for (ImagePixels* out_image : {metal_rough.get(), base_colour.get()}) {
+      out_image->width = width;
+      out_image->height = height;
+      out_image->channels = 4;
+      out_image->data.resize(static_cast<size_t>(width) * static_cast<size_t>(height) * 4);
+    }
+    for (int y = 0; y < height; ++y) {
+      for (int x = 0; x < width; ++x) {
+        const uint8_t* p = nearest_texel(sg, x, y, width, height);
+        double spec[3], diff[4] = {diffuse[0], diffuse[1], diffuse[2], diffuse[3]};
         for (int c = 0; c < 3; ++c)
-          spec[c] = specgloss::srgb_to_linear(p[std::min(c, in.channels - 1)] / 255.0) * specular[c];
-        const double g = (in.channels == 4 ? p[3] / 255.0 : 1.0) * gloss[0];
+          spec[c] = specgloss::srgb_to_linear(p[sg.channels >= 3 ? c : 0] / 255.0) * specular[c];
+        const double g = (sg.channels == 4 || sg.channels == 2 ? p[sg.channels - 1] / 255.0 : 1.0) * gloss[0];
+        if (diffuse_image) {
+          const ImagePixels& d = *diffuse_image;
+          const uint8_t* q = nearest_texel(d, x, y, width, height);
+          for (int c = 0; c < 3; ++c) diff[c] *= specgloss::srgb_to_linear(q[d.channels >= 3 ? c : 0] / 255.0);
+          if (d.channels == 4 || d.channels == 2) diff[3] *= q[d.channels - 1] / 255.0;
+        }
         double m, r, b[3];
-        specgloss::convert(diffuse.data(), spec, g, &m, &r, b);
-        uint8_t* o = &baked->data[i * 4];
+        specgloss::convert(diff, spec, g, &m, &r, b);
+        const size_t at = (static_cast<size_t>(y) * static_cast<size_t>(width) + static_cast<size_t>(x)) * 4;
+        uint8_t* o = &metal_rough->data[at];
         o[0] = 0;
         o[1] = static_cast<uint8_t>(std::lround(r * 255));
         o[2] = static_cast<uint8_t>(std::lround(m * 255));
         o[3] = 255;
+        uint8_t* bc = &base_colour->data[at];
+        for (int c = 0; c < 3; ++c) bc[c] = static_cast<uint8_t>(std::lround(specgloss::linear_to_srgb(b[c]) * 255));
+        bc[3] = static_cast<uint8_t>(std::lround(std::clamp(diff[3], 0.0, 1.0) * 255));
       }
-      if (!doc.contains("images") || !doc["images"].is_array()) doc["images"] = json::array();
-      const size_t image = doc["images"].size();
-      doc["images"].push_back(json::object());
-      images["image" + std::to_string(image)] = std::move(baked);
-      json baked_tex = {{"source", image}};
-      if (tex.contains("sampler")) baked_tex["sampler"] = tex["sampler"];
-      doc["textures"].push_back(baked_tex);
-      json mr_info = info;
-      mr_info["index"] = doc["textures"].size() - 1;
-      pbr["metallicRoughnessTexture"] = mr_info;
-      pbr["metallicFactor"] = 1.0;
-      pbr["roughnessFactor"] = 1.0;
+    }
+    pbr["metallicRoughnessTexture"] = add_baked_texture(doc, images, std::move(metal_rough), info);
+    pbr["metallicFactor"] = 1.0;
+    pbr["roughnessFactor"] = 1.0;
+    if (diffuse_image || !diffuse_info.is_object()) {
+      pbr["baseColorTexture"] = add_baked_texture(doc, images, std::move(base_colour), info);
+      pbr["baseColorFactor"] = {1.0, 1.0, 1.0, 1.0};
     }
   }
   out["pbrMetallicRoughness"] = pbr;
   if (warnings)
     warnings->push_back("material \"" + material.value("name", std::string()) +
                         "\": KHR_materials_pbrSpecularGlossiness is approximated by metallic-roughness (Khronos' "
-                        "conversion; a textured diffuse does not enter the per-texel metalness)");
+                        "conversion, per texel where it is textured)");
   return out;
 }
 

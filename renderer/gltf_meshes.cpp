@@ -46,21 +46,70 @@ float to_float(const tinygltf::Accessor& acc, const unsigned char* p) {
 
 }  // namespace
 
+// Where an accessor's bytes are, every range checked against the bytes that exist (before anything is allocated).
+struct AccessorReader::Layout {
+  int comps = 0, csize = 0;
+  size_t elem = 0;
+  const unsigned char* base = nullptr;  // the first element; null: zeros (no buffer view)
+  size_t stride = 0;
+  const unsigned char* sparse_indices = nullptr;  // sparse.count indices of sparse_index_size bytes
+  const unsigned char* sparse_values = nullptr;   // sparse.count elements
+  int sparse_index_size = 0;
+};
+
+AccessorReader::Layout AccessorReader::layout(const tinygltf::Accessor& acc, int index) const {
+  Layout at;
+  at.comps = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(acc.type));
+  at.csize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(acc.componentType));
+  if (at.comps <= 0 || at.csize <= 0) fail(index, "has an unknown type or component type");
+  at.elem = static_cast<size_t>(at.comps) * static_cast<size_t>(at.csize);
+  if (acc.bufferView >= 0) {
+    size_t available;
+    view(acc.bufferView, index, &at.base, &available, &at.stride);
+    if (at.stride == 0) at.stride = at.elem;
+    if (at.stride < at.elem) fail(index, "has a byte stride smaller than its element");
+    if (acc.count > 0 &&
+        (acc.byteOffset > available || (acc.count - 1) * at.stride + at.elem > available - acc.byteOffset))
+      fail(index, "reads beyond the end of its buffer view");
+    at.base += acc.byteOffset;
+  } else {
+    // glTF 2.0, 5.1 (accessor.bufferView): without a buffer view the accessor is zeros, which the import makes.
+    budget_.take(acc.count * at.elem, "accessor " + std::to_string(index));
+  }
+  if (acc.sparse.isSparse) {
+    const auto& sp = acc.sparse;
+    if (sp.count < 0 || static_cast<size_t>(sp.count) > acc.count) fail(index, "has a bad sparse count");
+    size_t iavail, vavail, istride, vstride;
+    view(sp.indices.bufferView, index, &at.sparse_indices, &iavail, &istride);
+    view(sp.values.bufferView, index, &at.sparse_values, &vavail, &vstride);
+    at.sparse_index_size = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(sp.indices.componentType));
+    if (at.sparse_index_size <= 0 ||
+        static_cast<size_t>(sp.indices.byteOffset) + static_cast<size_t>(sp.count) * at.sparse_index_size > iavail ||
+        static_cast<size_t>(sp.values.byteOffset) + static_cast<size_t>(sp.count) * at.elem > vavail)
+      fail(index, "has sparse data beyond its buffer views");
+    at.sparse_indices += sp.indices.byteOffset;
+    at.sparse_values += sp.values.byteOffset;
+  }
+  return at;
+}
+
 std::vector<float> AccessorReader::floats(int index, int components) const {
   const tinygltf::Accessor& acc = accessor(index);
   int have = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(acc.type));
   if (have != components)
     fail(index, "has " + std::to_string(have) + " components where " + std::to_string(components) + " are needed");
+  const Layout at = layout(acc, index);
   std::vector<float> out(acc.count * components, 0.0f);
-  read(acc, index, [&](size_t i, int c, const unsigned char* p) { out[i * components + c] = to_float(acc, p); });
+  read(acc, index, at, [&](size_t i, int c, const unsigned char* p) { out[i * components + c] = to_float(acc, p); });
   return out;
 }
 
 std::vector<uint32_t> AccessorReader::indices(int index, size_t vertex_count) const {
   const tinygltf::Accessor& acc = accessor(index);
   if (acc.type != TINYGLTF_TYPE_SCALAR) fail(index, "indices must be scalars");
+  const Layout at = layout(acc, index);
   std::vector<uint32_t> out(acc.count);
-  read(acc, index, [&](size_t i, int, const unsigned char* p) {
+  read(acc, index, at, [&](size_t i, int, const unsigned char* p) {
     uint32_t v;
     switch (acc.componentType) {
       case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
@@ -100,54 +149,31 @@ const tinygltf::Accessor& AccessorReader::accessor(int index) const {
   return acc;
 }
 
-// Calls fn(element, component, bytes) for every component, dense data first, then sparse substitutions.
+// Calls fn(element, component, bytes) for every component of an accessor laid out `at`: dense data (or zeros)
+// first, then sparse substitutions.
 template <typename Fn>
-void AccessorReader::read(const tinygltf::Accessor& acc, int index, Fn&& fn) const {
-  const int comps = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(acc.type));
-  const int csize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(acc.componentType));
-  if (comps <= 0 || csize <= 0) fail(index, "has an unknown type or component type");
-  const size_t elem = static_cast<size_t>(comps) * csize;
-  if (acc.bufferView >= 0) {
-    const unsigned char* base;
-    size_t stride, available;
-    view(acc.bufferView, index, &base, &available, &stride);
-    if (stride == 0) stride = elem;
-    if (stride < elem) fail(index, "has a byte stride smaller than its element");
-    if (acc.count > 0 && (acc.byteOffset > available || (acc.count - 1) * stride + elem > available - acc.byteOffset))
-      fail(index, "reads beyond the end of its buffer view");
-    for (size_t i = 0; i < acc.count; ++i)
-      for (int c = 0; c < comps; ++c) fn(i, c, base + acc.byteOffset + i * stride + static_cast<size_t>(c) * csize);
-  } else {
-    std::vector<unsigned char> zero(elem, 0);
-    for (size_t i = 0; i < acc.count; ++i)
-      for (int c = 0; c < comps; ++c) fn(i, c, zero.data() + static_cast<size_t>(c) * csize);
+void AccessorReader::read(const tinygltf::Accessor& acc, int index, const Layout& at, Fn&& fn) const {
+  const std::vector<unsigned char> zero(at.base ? 0 : at.elem, 0);
+  for (size_t i = 0; i < acc.count; ++i) {
+    const unsigned char* element = at.base ? at.base + i * at.stride : zero.data();
+    for (int c = 0; c < at.comps; ++c) fn(i, c, element + static_cast<size_t>(c) * at.csize);
   }
-  if (acc.sparse.isSparse) {
-    const auto& sp = acc.sparse;
-    if (sp.count < 0 || static_cast<size_t>(sp.count) > acc.count) fail(index, "has a bad sparse count");
-    const unsigned char *ibase, *vbase;
-    size_t iavail, vavail, istride, vstride;
-    view(sp.indices.bufferView, index, &ibase, &iavail, &istride);
-    view(sp.values.bufferView, index, &vbase, &vavail, &vstride);
-    const int isize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(sp.indices.componentType));
-    if (isize <= 0 || static_cast<size_t>(sp.indices.byteOffset) + static_cast<size_t>(sp.count) * isize > iavail ||
-        static_cast<size_t>(sp.values.byteOffset) + static_cast<size_t>(sp.count) * elem > vavail)
-      fail(index, "has sparse data beyond its buffer views");
-    for (int k = 0; k < sp.count; ++k) {
-      const unsigned char* ip = ibase + sp.indices.byteOffset + static_cast<size_t>(k) * isize;
-      uint32_t target = 0;
-      if (isize == 1)
-        target = *ip;
-      else if (isize == 2) {
-        uint16_t s;
-        std::memcpy(&s, ip, 2);
-        target = s;
-      } else
-        std::memcpy(&target, ip, 4);
-      if (target >= acc.count) fail(index, "has a sparse index beyond its count");
-      for (int c = 0; c < comps; ++c)
-        fn(target, c, vbase + sp.values.byteOffset + static_cast<size_t>(k) * elem + static_cast<size_t>(c) * csize);
+  if (!acc.sparse.isSparse) return;
+  for (int k = 0; k < acc.sparse.count; ++k) {
+    const unsigned char* ip = at.sparse_indices + static_cast<size_t>(k) * at.sparse_index_size;
+    uint32_t target = 0;
+    if (at.sparse_index_size == 1) {
+      target = *ip;
+    } else if (at.sparse_index_size == 2) {
+      uint16_t s;
+      std::memcpy(&s, ip, 2);
+      target = s;
+    } else {
+      std::memcpy(&target, ip, 4);
     }
+    if (target >= acc.count) fail(index, "has a sparse index beyond its count");
+    for (int c = 0; c < at.comps; ++c)
+      fn(target, c, at.sparse_values + static_cast<size_t>(k) * at.elem + static_cast<size_t>(c) * at.csize);
   }
 }
 
@@ -185,6 +211,7 @@ std::vector<Mesh> build_meshes(Import& import, const AccessorReader& reader, Mat
     auto pos_it = prim.attributes.find("POSITION");
     if (pos_it == prim.attributes.end()) continue;
     Mesh mesh;
+    import.count_vertices(reader.count(pos_it->second));
     std::vector<float> pos = reader.floats(pos_it->second, 3);
     const size_t nv = pos.size() / 3;
     // Morph targets at the mesh's default weights (glTF 2.0, 3.7.2.2): attribute + sum of weight_k * target_k's
@@ -253,7 +280,7 @@ std::vector<Mesh> build_meshes(Import& import, const AccessorReader& reader, Mat
         Vec3 wn =
             (skin_at.empty() ? nmat : skin_at[v].normal_transform()).vector(Vec3(n[3 * v], n[3 * v + 1], n[3 * v + 2]));
         float len = length(wn);
-        mesh.normals[v] = len > 0 ? wn / len : Vec3(0, 0, 1);
+        mesh.normals[v] = len > 0 && std::isfinite(len) ? wn / len : Vec3(0, 0, 1);
       }
     }
     if (int a = attr("TANGENT"); a >= 0 && !mesh.normals.empty()) {
@@ -265,7 +292,7 @@ std::vector<Mesh> build_meshes(Import& import, const AccessorReader& reader, Mat
       for (size_t v = 0; v < nv; ++v) {
         Vec3 wt = vertex_world(v).vector(Vec3(t[4 * v], t[4 * v + 1], t[4 * v + 2]));
         float len = length(wt);
-        mesh.tangents[v] = len > 0 ? wt / len : Vec3(1, 0, 0);
+        mesh.tangents[v] = len > 0 && std::isfinite(len) ? wt / len : Vec3(1, 0, 0);
         mesh.tangent_signs[v] = (t[4 * v + 3] < 0 ? -1.0f : 1.0f) * (flip ? -1.0f : 1.0f);
       }
     }

@@ -59,6 +59,10 @@ std::vector<int> scene_roots(const Import& import) {
   const GltfImportOptions& options = import.options;
   const std::string& pointer = import.pointer;
   std::vector<int> roots;
+  // glTF 2.0, 5.17 (glTF.scene): the index of the default scene, which must exist.
+  if (model.defaultScene < -1 || model.defaultScene >= static_cast<int>(model.scenes.size()))
+    throw SceneError(pointer, "the asset's scene " + std::to_string(model.defaultScene) + " does not exist (it has " +
+                                  std::to_string(model.scenes.size()) + " scenes)");
   int scene_index = model.defaultScene >= 0 ? model.defaultScene : (model.scenes.empty() ? -1 : 0);
   if (scene_index >= 0 && scene_index < static_cast<int>(model.scenes.size())) {
     roots = model.scenes[scene_index].nodes;
@@ -85,7 +89,7 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
   Scene& scene = import.scene;
   GltfImport& result = import.result;
   const auto check_stop = [&import] { import.check_stop(); };
-  const AccessorReader reader(model, pointer);
+  const AccessorReader reader(model, pointer, import.decoded);
   std::set<int> instanced;
   std::map<int, uint32_t> group_of_mesh;
   std::map<int, size_t> camera_instances;

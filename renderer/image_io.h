@@ -16,10 +16,8 @@ enum class ToneMap { kClamp, kAces };
 struct DisplaySettings {
   float exposure_ev = 0;  // scale by 2^exposure_ev before the tone curve
   ToneMap tonemap = ToneMap::kClamp;
+  bool operator==(const DisplaySettings&) const = default;
 };
-
-bool parse_tonemap(const std::string& name, ToneMap* out);
-const char* tonemap_name(ToneMap t);
 
 // Linear radiance (RGB float, row-major) to 8-bit sRGB, applying exposure and the tone curve.
 std::vector<uint8_t> to_display(const std::vector<float>& rgb, int width, int height, const DisplaySettings& display);
@@ -56,5 +54,17 @@ std::optional<ImageHeader> jpeg_header(const unsigned char* bytes, size_t size);
 // Whether JPEG data reaches its end-of-image marker. libjpeg (and so OpenImageIO) decodes a file cut short with a
 // warning only, the missing rows grey: read_image refuses such a file, and a glTF loader should too.
 bool jpeg_complete(const unsigned char* bytes, size_t size);
+// Whether PNG data holds each of its chunks whole, up to its IEND chunk (PNG specification, 2nd edition, 5.3 "Chunk
+// layout" and 11.2.5 "IEND"). libpng reports data cut short through OpenImageIO 2.4.7's read callback, which loses
+// the memory of its message on the way (it longjmps out past a std::string; found by fuzz_gltf and fuzz_image): a
+// truncated PNG is refused before it is decoded.
+bool png_complete(const unsigned char* bytes, size_t size);
+// What is wrong with the header of EXR data whose attributes declare more bytes than the data holds (OpenEXR 3.1
+// allocates what they declare before reading it); empty for a sound header, or data of another format. Files are
+// checked by open_image_input (renderer/image_input.h) before OpenImageIO opens them.
+std::string exr_header_problem(const unsigned char* bytes, size_t size);
+// What data of a JPEG or a PNG that ends before its end is ("a truncated JPEG (its data ends before ...)"), for
+// messages; empty when the data is whole, or of another format.
+std::string truncation(const unsigned char* bytes, size_t size);
 
 }  // namespace tessera

@@ -24,30 +24,6 @@ Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls) {
   return shadow;
 }
 
-const char* estimator_name(Estimator e) {
-  switch (e) {
-    case Estimator::kHemisphere:
-      return "hemisphere";
-    case Estimator::kArea:
-      return "area";
-    case Estimator::kMis:
-      return "mis";
-  }
-  return "mis";
-}
-
-bool parse_estimator(const std::string& name, Estimator* out) {
-  if (name == "hemisphere")
-    *out = Estimator::kHemisphere;
-  else if (name == "area")
-    *out = Estimator::kArea;
-  else if (name == "mis")
-    *out = Estimator::kMis;
-  else
-    return false;
-  return true;
-}
-
 TileGrid::TileGrid(const PixelRegion& r, int size) : region(r), tile_size(size) {
   tiles_x = (region.width + tile_size - 1) / tile_size;
   tiles_y = (region.height + tile_size - 1) / tile_size;

@@ -34,15 +34,14 @@ enum class Estimator {
   kArea,        // light sampling only: the area form (Dutré et al., §4.1.2), next-event estimation towards lights
   kMis,         // both, weighted by the power heuristic (Veach 1997)
 };
-
-const char* estimator_name(Estimator e);
-bool parse_estimator(const std::string& name, Estimator* out);
+// Documents name them: estimator_name (render_settings.h).
 
 struct IntegratorSettings {
   std::string name = "path";              // the integrator, by its registry name
   Estimator estimator = Estimator::kMis;  // the path tracer's
   int max_depth = 8;                      // maximum number of scattering events along a path
   int rr_start_depth = 3;                 // Russian roulette from this many bounces on
+  bool operator==(const IntegratorSettings&) const = default;
 };
 
 // Counts of rays traced, by kind, per thread; summed by the session.
@@ -62,6 +61,7 @@ struct RayCounters {
 // A rectangle of pixels: (x, y) its top-left pixel.
 struct PixelRegion {
   int x = 0, y = 0, width = 0, height = 0;
+  bool operator==(const PixelRegion&) const = default;
 };
 
 // The region cut into square tiles (the last row and column may be smaller): the thread pool's work items.

@@ -10,22 +10,6 @@ using nlohmann::json;
 
 namespace {
 
-void read_outputs(const json& job, RenderJob* out) {
-  auto it = job.find("outputs");
-  if (it == job.end()) return;
-  if (!it->is_array() || it->empty()) throw SceneError("/outputs", "must be a non-empty array of \"png\" and \"exr\"");
-  out->want_png = out->want_exr = false;
-  for (size_t i = 0; i < it->size(); ++i) {
-    const json& o = (*it)[i];
-    if (o == "png")
-      out->want_png = true;
-    else if (o == "exr")
-      out->want_exr = true;
-    else
-      throw SceneError("/outputs/" + std::to_string(i), "must be \"png\" or \"exr\"");
-  }
-}
-
 std::string kind_of(const json& job) {
   if (!job.is_object()) throw SceneError("", "the job must be a JSON object");
   auto it = job.find("kind");
@@ -37,23 +21,25 @@ std::string kind_of(const json& job) {
 
 }  // namespace
 
-RenderSettings load_job_settings(const json& job, const JobLoadOptions& options) {
+RenderJob load_job(const json& job, const JobLoadOptions& options) {
   kind_of(job);
-  auto it = job.find("render");
-  RenderJob tmp;
-  read_outputs(job, &tmp);
-  return parse_render_settings(it == job.end() ? json() : *it, "/render", options.limits);
+  RenderJob out;
+  if (auto outputs = job.find("outputs"); outputs != job.end())
+    out.outputs = output_spec_from_json(*outputs, "/outputs");
+  auto render = job.find("render");
+  out.settings = render_settings_from_json(render == job.end() ? json() : *render, "/render", options.limits);
+  out.scene = load_job_scene(job, out.settings, options.scene);
+  return out;
 }
 
-RenderJob load_job(const json& job, const JobLoadOptions& options) {
-  RenderJob out;
-  out.settings = load_job_settings(job, options);
-  read_outputs(job, &out);
+std::shared_ptr<Scene> load_job_scene(const json& job, const RenderSettings& settings,
+                                      const SceneLoadOptions& options) {
+  std::shared_ptr<Scene> scene;
   if (kind_of(job) == "material") {
     // The stage scene names the subjects "subject" (one material) or "subject0".."subject15" (a row); errors found
     // in it are reported at the job's own fields: /material/... or /materials/<i>/...
     try {
-      out.scene = load_scene(material_stage_scene(job), "", options.scene);
+      scene = load_scene(material_stage_scene(job, settings.width, settings.height), "", options);
     } catch (const SceneError& e) {
       const std::string& p = e.pointer();
       const std::string row = "/materials/subject";
@@ -69,15 +55,15 @@ RenderJob load_job(const json& job, const JobLoadOptions& options) {
   } else {
     auto it = job.find("scene");
     if (it == job.end()) throw SceneError("/scene", "a scene job needs a \"scene\"");
-    out.scene = load_scene(*it, "/scene", options.scene);
+    scene = load_scene(*it, "/scene", options);
   }
-  const Camera camera(out.scene->camera, out.settings.width, out.settings.height);
-  const std::string problem = integrator_camera_problem(out.settings.integrator.name, camera);
+  const Camera camera(scene->camera, settings.width, settings.height);
+  const std::string problem = integrator_camera_problem(settings.integrator.name, camera);
   if (!problem.empty()) throw SceneError("/render/integrator", problem);
-  return out;
+  return scene;
 }
 
-json material_stage_scene(const json& job) {
+json material_stage_scene(const json& job, int width_px, int height_px) {
   // The built-in preview stage: each material on a sphere (curvature shows every angle of incidence at once; the
   // sphere's tangent runs along its parallels, so anisotropic highlights stretch visibly) standing on a checker
   // floor that shows through transmissive materials and in reflective ones, under a soft sky-coloured environment
@@ -132,12 +118,7 @@ json material_stage_scene(const json& job) {
 
   // Camera: slightly above the spheres' centres, looking a little down; far enough back that the row (with a
   // margin) fits the horizontal and vertical field of view at the job's aspect ratio.
-  double width = 512, height = 512;
-  if (auto r = job.find("render"); r != job.end() && r->is_object()) {
-    if (r->contains("width") && (*r)["width"].is_number()) width = std::max(1.0, (*r)["width"].get<double>());
-    if (r->contains("height") && (*r)["height"].is_number()) height = std::max(1.0, (*r)["height"].get<double>());
-  }
-  const double aspect = width / height;
+  const double aspect = static_cast<double>(width_px) / height_px;
   const double fov_deg = 30;
   const double tan_half_v = std::tan(fov_deg * kPi / 360.0);
   const double tan_half_h = tan_half_v * aspect;

@@ -11,14 +11,14 @@
 #include <nlohmann/json.hpp>
 
 #include "renderer/scene_loader.h"
+#include "renderer/session.h"
 
 namespace tessera {
 
 struct RenderJob {
   std::shared_ptr<Scene> scene;
   RenderSettings settings;
-  bool want_png = true;
-  bool want_exr = true;
+  OutputSpec outputs;
 };
 
 struct JobLoadOptions {
@@ -26,12 +26,15 @@ struct JobLoadOptions {
   RenderLimits limits;
 };
 
-// Reads only "render" and "outputs": cheap, for validating a job at submission without building its scene.
-RenderSettings load_job_settings(const nlohmann::json& job, const JobLoadOptions& options);
-// Reads the whole job and builds its scene (BVH included).
+// Reads the whole job ("render" and "outputs" through render_settings.h) and builds its scene (BVH included).
 RenderJob load_job(const nlohmann::json& job, const JobLoadOptions& options);
+// Builds the scene of a job whose settings were read before (a job record's): its "scene", or its material(s) on the
+// preview stage, framed for the settings' image size; checks that the settings' integrator can render it.
+std::shared_ptr<Scene> load_job_scene(const nlohmann::json& job, const RenderSettings& settings,
+                                      const SceneLoadOptions& options);
 
-// Builds the scene document of a material job: the material(s) on the built-in preview stage.
-nlohmann::json material_stage_scene(const nlohmann::json& job);
+// Builds the scene document of a material job: the material(s) on the built-in preview stage, framed for an image of
+// `width` x `height` pixels.
+nlohmann::json material_stage_scene(const nlohmann::json& job, int width, int height);
 
 }  // namespace tessera

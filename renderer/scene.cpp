@@ -1,8 +1,26 @@
 #include "renderer/scene.h"
 
 #include <chrono>
+#include <cmath>
+#include <set>
 
 namespace tessera {
+
+namespace {
+
+// The last line tidy_warnings writes, "and <n> more warnings": true, with n, for such a line.
+bool more_warnings_line(const std::string& w, size_t* n) {
+  static const std::string kHead = "and ", kTail = " more warnings";
+  if (w.size() <= kHead.size() + kTail.size() || w.compare(0, kHead.size(), kHead) != 0 ||
+      w.compare(w.size() - kTail.size(), kTail.size(), kTail) != 0)
+    return false;
+  const std::string digits = w.substr(kHead.size(), w.size() - kHead.size() - kTail.size());
+  if (digits.size() > 18 || digits.find_first_not_of("0123456789") != std::string::npos) return false;
+  *n = std::stoull(digits);
+  return true;
+}
+
+}  // namespace
 
 void Scene::finalize() {
   finalize_with_lights({});
@@ -10,27 +28,9 @@ void Scene::finalize() {
 
 void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
   auto start = std::chrono::steady_clock::now();
-  bounds_ = Bounds();
-  for (Mesh& mesh : meshes) {
-    if (!mesh.prototype)
-      for (const Vec3& p : mesh.positions) bounds_.extend(p);
-    // Embree reads vertex buffers with 16-byte loads: keep 4 bytes readable past the last vertex.
-    mesh.positions.reserve(mesh.positions.size() + 1);
-  }
-  for (const Instance& inst : instances) {
-    for (uint32_t m : groups.at(inst.group).meshes) {
-      Bounds local;
-      for (const Vec3& p : meshes[m].positions) local.extend(p);
-      if (local.empty()) continue;
-      for (int c = 0; c < 8; ++c)
-        bounds_.extend(inst.to_world.point(
-            Vec3(c & 1 ? local.hi.x : local.lo.x, c & 2 ? local.hi.y : local.lo.y, c & 4 ? local.hi.z : local.lo.z)));
-    }
-  }
-  for (const Sphere& s : spheres) {
-    bounds_.extend(s.center - Vec3(s.radius));
-    bounds_.extend(s.center + Vec3(s.radius));
-  }
+  bounds_ = geometry_bounds();
+  // Embree reads vertex buffers with 16-byte loads: keep 4 bytes readable past the last vertex.
+  for (Mesh& mesh : meshes) mesh.positions.reserve(mesh.positions.size() + 1);
   std::vector<const Material*> material_ptrs;
   dispersive_ = false;
   for (const auto& m : materials) {
@@ -51,6 +51,58 @@ void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
     s.light = next++;
   }
   build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+Bounds Scene::geometry_bounds(bool* finite) const {
+  Bounds b;
+  bool ok = true;
+  auto extend = [&](const Vec3& p) {
+    ok = ok && std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+    b.extend(p);
+  };
+  for (const Mesh& mesh : meshes)
+    if (!mesh.prototype)
+      for (const Vec3& p : mesh.positions) extend(p);
+  for (const Instance& inst : instances) {
+    for (uint32_t m : groups.at(inst.group).meshes) {
+      Bounds local;
+      for (const Vec3& p : meshes[m].positions) {
+        ok = ok && std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+        local.extend(p);
+      }
+      if (local.empty()) continue;
+      for (int c = 0; c < 8; ++c)
+        extend(inst.to_world.point(
+            Vec3(c & 1 ? local.hi.x : local.lo.x, c & 2 ? local.hi.y : local.lo.y, c & 4 ? local.hi.z : local.lo.z)));
+    }
+  }
+  for (const Sphere& s : spheres) {
+    ok = ok && std::isfinite(s.radius);
+    extend(s.center - Vec3(s.radius));
+    extend(s.center + Vec3(s.radius));
+  }
+  if (finite) *finite = ok;
+  return b;
+}
+
+void tidy_warnings(std::vector<std::string>* warnings) {
+  std::set<std::string> seen;
+  std::vector<std::string> kept;
+  size_t more = 0;
+  for (std::string& w : *warnings) {
+    size_t counted = 0;
+    if (more_warnings_line(w, &counted)) {  // what an earlier tidy left out
+      more += counted;
+      continue;
+    }
+    if (!seen.insert(w).second) continue;
+    if (kept.size() < kMaxWarnings)
+      kept.push_back(std::move(w));
+    else
+      ++more;
+  }
+  if (more > 0) kept.push_back("and " + std::to_string(more) + " more warnings");
+  *warnings = std::move(kept);
 }
 
 size_t Scene::triangle_count() const {

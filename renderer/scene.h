@@ -48,6 +48,12 @@ struct Sphere {
   uint32_t light = 0;  // its light index when the material emits
 };
 
+// How far from the origin, in scene units, geometry may lie. Embree 3 aborts the process on a ray whose origin or
+// direction has a component beyond 1.844e18 (FLT_LARGE in its RayK::valid assertion); 1e12 (a million kilometres in
+// metres) leaves room for every distance a path computes from such coordinates, and a scene beyond it is a corrupt
+// or mis-scaled asset, refused when it is loaded.
+constexpr float kMaxSceneCoordinate = 1e12f;
+
 struct Bounds {
   Vec3 lo{kInfinity, kInfinity, kInfinity};
   Vec3 hi{-kInfinity, -kInfinity, -kInfinity};
@@ -94,6 +100,10 @@ class Scene {
   const Accel& accel() const { return accel_; }
   const LightSet& lights() const { return lights_; }
   const Bounds& bounds() const { return bounds_; }
+  // The world-space bounds of every shape (instanced meshes through their transforms), worked out afresh from the
+  // fields above; *finite (when given) is false when a vertex, a sphere or an instance's placement is not a finite
+  // number.
+  Bounds geometry_bounds(bool* finite = nullptr) const;
   size_t triangle_count() const;         // triangles traced, instances counted each time
   size_t unique_triangle_count() const;  // triangles stored
   double build_seconds() const { return build_seconds_; }
@@ -107,6 +117,12 @@ class Scene {
   double build_seconds_ = 0;
   bool dispersive_ = false;
 };
+
+// Keeps the first of each warning given more than once, in order, and at most kMaxWarnings of them: the rest are
+// counted in a last line ("and 9,990 more warnings"). An asset may make any number (one per unknown extension or
+// per material), and every warning is stored with the job and written to its log.
+constexpr size_t kMaxWarnings = 32;
+void tidy_warnings(std::vector<std::string>* warnings);
 
 // Bends the shading frame of `sp` by the material's normal map, seen from direction `wo` (world, towards where the
 // ray came from; any length), and keeps the mirror reflection of wo above the surface

@@ -1,10 +1,13 @@
 #include "renderer/scene_loader.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "proto/asset_path.h"
 #include "proto/did_you_mean.h"
 #include "renderer/gltf_loader.h"
+#include "renderer/json_fields.h"
 #include "renderer/scene_error.h"
 #include "renderer/thread_pool.h"
 
@@ -14,24 +17,14 @@ using nlohmann::json;
 
 namespace {
 
-std::string at(const std::string& pointer, const std::string& key) {
-  return pointer + "/" + json_pointer_token(key);
-}
-std::string at(const std::string& pointer, size_t index) {
-  return pointer + "/" + std::to_string(index);
-}
+using fields::at;
+using fields::finite_number;
+using fields::number_key;
 
 const json& require(const json& obj, const std::string& key, const std::string& pointer) {
   auto it = obj.find(key);
   if (it == obj.end()) throw SceneError(at(pointer, key), "\"" + key + "\" is required");
   return *it;
-}
-
-double finite_number(const json& v, const std::string& pointer) {
-  if (!v.is_number()) throw SceneError(pointer, "must be a number");
-  double d = v.get<double>();
-  if (!std::isfinite(d) || std::abs(d) > 1e30) throw SceneError(pointer, "must be a finite number");
-  return d;
 }
 
 Vec3 vec3(const json& v, const std::string& pointer) {
@@ -43,18 +36,6 @@ Vec3 vec3(const json& v, const std::string& pointer) {
 
 Vec3 vec3_key(const json& obj, const std::string& key, const std::string& pointer) {
   return vec3(require(obj, key, pointer), at(pointer, key));
-}
-
-float number_key(const json& obj, const std::string& key, const std::string& pointer, float fallback, double lo,
-                 double hi, bool lo_exclusive = false) {
-  auto it = obj.find(key);
-  if (it == obj.end()) return fallback;
-  double d = finite_number(*it, at(pointer, key));
-  if (d < lo || d > hi || (lo_exclusive && d == lo)) {
-    throw SceneError(at(pointer, key), std::string("must be ") + (lo_exclusive ? "greater than " : "at least ") +
-                                           json(lo).dump() + " and at most " + json(hi).dump());
-  }
-  return static_cast<float>(d);
 }
 
 template <typename T, int N>
@@ -185,6 +166,23 @@ CameraDesc framing_camera(const Bounds& b) {
   return desc;
 }
 
+// Refuses geometry that is not a finite number or lies beyond kMaxSceneCoordinate (scene.h), whichever shapes and
+// assets it came from: such a scene would make rays Embree cannot trace.
+void check_extent(const Scene& scene, const std::string& pointer) {
+  bool finite = true;
+  const Bounds b = scene.geometry_bounds(&finite);
+  if (!finite) throw SceneError(pointer, "the scene's geometry holds a coordinate that is not a finite number");
+  if (b.empty()) return;
+  const float reach = std::max(
+      {std::abs(b.lo.x), std::abs(b.lo.y), std::abs(b.lo.z), std::abs(b.hi.x), std::abs(b.hi.y), std::abs(b.hi.z)});
+  if (!(reach <= kMaxSceneCoordinate)) {
+    char text[96];
+    std::snprintf(text, sizeof text, "the scene's geometry reaches %.3g units from the origin, beyond the %.3g",
+                  static_cast<double>(reach), static_cast<double>(kMaxSceneCoordinate));
+    throw SceneError(pointer, std::string(text) + " a scene may span (is the asset corrupt or in the wrong units?)");
+  }
+}
+
 }  // namespace
 
 std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, const SceneLoadOptions& options) {
@@ -227,6 +225,7 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     GltfImportOptions gopts;
     gopts.material_overrides = names;
     gopts.max_triangles = options.max_triangles;
+    gopts.max_vertices = options.max_gltf_vertices;
     gopts.headers_only = !options.build;
     gopts.max_instances = options.max_gltf_instances;
     gopts.stop = options.stop;
@@ -382,66 +381,10 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
         "radiance 1 was added");
   }
   if (options.stop.stop_requested()) throw LoadStopped();
+  check_extent(*scene, pointer);
+  tidy_warnings(&scene->warnings);
   if (options.build) scene->finalize_with_lights(punctual);
   return scene;
-}
-
-RenderSettings parse_render_settings(const json& render, const std::string& pointer, const RenderLimits& limits) {
-  RenderSettings s;
-  if (render.is_null()) return s;
-  if (!render.is_object()) throw SceneError(pointer, "must be an object");
-  auto integer = [&](const std::string& key, int64_t fallback, int64_t lo, int64_t hi) -> int64_t {
-    auto it = render.find(key);
-    if (it == render.end()) return fallback;
-    if (!it->is_number_integer() && !(it->is_number_float() && std::isfinite(it->get<double>()) &&
-                                      it->get<double>() == std::floor(it->get<double>())))
-      throw SceneError(at(pointer, key), "must be an integer");
-    double v = it->get<double>();
-    if (v < static_cast<double>(lo) || v > static_cast<double>(hi))
-      throw SceneError(at(pointer, key), "must be between " + std::to_string(lo) + " and " + std::to_string(hi));
-    return static_cast<int64_t>(v);
-  };
-  s.width = static_cast<int>(integer("width", 512, 1, limits.max_width));
-  s.height = static_cast<int>(integer("height", 512, 1, limits.max_height));
-  s.spp = static_cast<uint32_t>(integer("spp", kDefaultSpp, 1, limits.max_spp));
-  s.integrator.max_depth = static_cast<int>(integer("max_depth", 8, 0, limits.max_depth));
-  s.seed = static_cast<uint64_t>(integer("seed", 0, 0, (int64_t{1} << 53)));
-  if (auto it = render.find("integrator"); it != render.end()) {
-    const IntegratorRegistry& integrators = IntegratorRegistry::builtin();
-    if (!it->is_string() || !integrators.has(it->get<std::string>())) {
-      std::string names;
-      const std::vector<std::string> all = integrators.names();
-      for (size_t i = 0; i < all.size(); ++i)
-        names += (i == 0 ? "" : i + 1 == all.size() ? " or " : ", ") + ("\"" + all[i] + "\"");
-      throw SceneError(at(pointer, "integrator"), "must be " + names);
-    }
-    s.integrator.name = it->get<std::string>();
-  }
-  if (auto it = render.find("estimator"); it != render.end()) {
-    if (!it->is_string() || !parse_estimator(it->get<std::string>(), &s.integrator.estimator))
-      throw SceneError(at(pointer, "estimator"), "must be \"mis\", \"area\" or \"hemisphere\"");
-  }
-  if (auto it = render.find("sampler"); it != render.end()) {
-    if (*it == "sobol")
-      s.sampler = SamplerKind::kSobol;
-    else if (*it == "independent")
-      s.sampler = SamplerKind::kIndependent;
-    else
-      throw SceneError(at(pointer, "sampler"), "must be \"sobol\" or \"independent\"");
-  }
-  s.time_limit_s = number_key(render, "time_limit_s", pointer, 0, 0, 7 * 24 * 3600.0);
-  s.noise_target = number_key(render, "noise_target", pointer, 0, 0, 1);
-  s.display.exposure_ev = number_key(render, "exposure_ev", pointer, 0, -20, 20);
-  if (auto it = render.find("tonemap"); it != render.end()) {
-    if (!it->is_string() || !parse_tonemap(it->get<std::string>(), &s.display.tonemap))
-      throw SceneError(at(pointer, "tonemap"), "must be \"clamp\" or \"aces\"");
-  }
-  if (auto it = render.find("exr_precision"); it != render.end()) {
-    if (!it->is_string() || (*it != "half" && *it != "float"))
-      throw SceneError(at(pointer, "exr_precision"), "must be \"half\" or \"float\"");
-    s.exr_half = *it == "half";
-  }
-  return s;
 }
 
 }  // namespace tessera

@@ -1,5 +1,5 @@
-// Reading documents into renderer objects: a JSON scene (format v1, proto/schemas/scene.schema.json) and render
-// settings. Every error is a SceneError carrying the JSON pointer of the offending field.
+// Reading a JSON scene (format v1, proto/schemas/scene.schema.json) into renderer objects; the render settings' own
+// mapping is render_settings.h. Every error is a SceneError carrying the JSON pointer of the offending field.
 #pragma once
 
 #include <filesystem>
@@ -9,8 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "renderer/render_settings.h"
 #include "renderer/scene.h"
-#include "renderer/session.h"
 
 namespace tessera {
 
@@ -18,6 +18,7 @@ struct SceneLoadOptions {
   // Folder that file references inside the scene (textures, glTF) resolve against; empty: none allowed.
   std::filesystem::path asset_root;
   size_t max_triangles = 50'000'000;
+  size_t max_gltf_vertices = 50'000'000;    // GltfImportOptions::max_vertices
   uint64_t max_gltf_instances = 1'000'000;  // GltfImportOptions::max_instances
   // Asked to stop (a daemon shutting down, a job cancelled or paused), load_scene ends soon with LoadStopped.
   std::stop_token stop;
@@ -34,19 +35,5 @@ struct SceneLoadOptions {
 // The result is finalized (lights and acceleration structure built).
 std::shared_ptr<Scene> load_scene(const nlohmann::json& scene, const std::string& pointer,
                                   const SceneLoadOptions& options);
-
-// render.spp when the job does not say (the contract's default).
-constexpr uint32_t kDefaultSpp = 64;
-
-struct RenderLimits {
-  int max_width = 8192;
-  int max_height = 8192;
-  uint32_t max_spp = 1u << 16;
-  int max_depth = 1024;
-};
-
-// Reads the "render" object of a job (defaults for absent keys). `pointer` is its JSON pointer.
-RenderSettings parse_render_settings(const nlohmann::json& render, const std::string& pointer,
-                                     const RenderLimits& limits);
 
 }  // namespace tessera

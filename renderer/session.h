@@ -13,31 +13,13 @@
 #include "renderer/film.h"
 #include "renderer/image_io.h"
 #include "renderer/integrator.h"
+#include "renderer/render_settings.h"
 #include "renderer/sampler.h"
 #include "renderer/thread_pool.h"
 
 namespace tessera {
 
 class Scene;
-
-struct RenderSettings {
-  int width = 512;
-  int height = 512;
-  uint32_t spp = 64;          // samples per pixel budget
-  uint32_t first_sample = 0;  // render sample indices [first_sample, first_sample + spp): a range of a larger job
-  uint32_t job_spp = 0;       // that larger job's samples per pixel (rays' texture footprints depend on it); 0: spp
-  // Crop window in pixels (render only these; the film keeps the full size). Empty (w or h 0): the whole image.
-  using Region = PixelRegion;
-  Region region;
-  uint64_t seed = 0;
-  SamplerKind sampler = SamplerKind::kSobol;
-  IntegratorSettings integrator;  // which integrator renders, and its settings
-  double time_limit_s = 0;        // stop after the pass that crosses this; 0: none
-  double noise_target = 0;        // stop when Film::relative_error() falls below; 0: none
-  int tile_size = 32;
-  DisplaySettings display;  // for PNG outputs and previews
-  bool exr_half = true;     // EXR channel precision
-};
 
 enum class StopReason { kSamples, kTimeLimit, kNoiseTarget, kStopped, kCancelled };
 const char* stop_reason_name(StopReason r);

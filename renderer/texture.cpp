@@ -7,6 +7,7 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include "renderer/image_input.h"
 #include "renderer/image_io.h"
 #include "renderer/once_cache.h"
 #include "renderer/thread_pool.h"
@@ -198,7 +199,7 @@ std::unique_ptr<OIIO::ImageInput> open_image_file(const std::filesystem::path& f
   // Unassociated alpha: colour channels as stored (OpenImageIO would premultiply PNG alpha on read).
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
-  auto in = OIIO::ImageInput::open(file.string(), &config);
+  auto in = open_image_input(file.string(), &config);
   if (!in) throw std::runtime_error("cannot read image \"" + file.filename().string() + "\"");
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 ||

@@ -7,7 +7,6 @@
 #include <atomic>
 #include <fstream>
 #include <set>
-#include <sstream>
 #include <system_error>
 
 #include "proto/asset_path.h"
@@ -38,10 +37,62 @@ Problem invalid(const std::string& detail) {
 }
 
 std::string read_file(const fs::path& p) {
+  std::error_code ec;
+  const auto size = fs::file_size(p, ec);
   std::ifstream in(p, std::ios::binary);
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
+  if (ec || !in) return {};
+  std::string bytes(size, '\0');
+  in.read(bytes.data(), static_cast<std::streamsize>(size));
+  bytes.resize(static_cast<size_t>(in.gcount()));
+  return bytes;
+}
+
+// The JSON of an uploaded glTF's main file `name`, read back from `file`: a .glb's JSON chunk, its container
+// checked, or a .gltf parsed as it is read (its text, as large as the asset with data: URIs, is not held beside the
+// document). Or why it is refused.
+std::variant<json, Problem> read_gltf_json(const fs::path& file, const std::string& name) {
+  json doc;
+  if (lower_ext(name) == ".glb") {
+    const std::string bytes = read_file(file);
+    auto chunks = parse_glb(bytes);
+    if (auto* problem = std::get_if<std::string>(&chunks)) return invalid(name + ": " + *problem);
+    doc = json::parse(std::get<GlbChunks>(chunks).json, nullptr, false);
+  } else {
+    std::ifstream in(file, std::ios::binary);
+    doc = json::parse(in, nullptr, false);
+  }
+  if (doc.is_discarded() || !doc.is_object()) return invalid(name + ": the glTF JSON does not parse");
+  return doc;
+}
+
+// Nothing, or why the glTF `doc` of main file `name` is refused: every URI of its buffers and images is a data: URI
+// or names another file of the upload (`names`).
+std::optional<Problem> check_gltf_uris(const json& doc, const std::string& name, const std::set<std::string>& names) {
+  for (const char* list : {"buffers", "images"}) {
+    auto it = doc.find(list);
+    if (it == doc.end() || !it->is_array()) continue;
+    for (size_t i = 0; i < it->size(); ++i) {
+      const json& item = (*it)[i];
+      if (!item.is_object() || !item.contains("uri")) continue;
+      const std::string where = name + ": " + list + "[" + std::to_string(i) + "].uri ";
+      if (!item["uri"].is_string()) return invalid(where + "is not a string");
+      const std::string& uri = item["uri"].get_ref<const std::string&>();
+      if (proto::is_data_uri(uri)) continue;
+      const std::string shown = "\"" + uri.substr(0, 200) + "\"";
+      const proto::AssetPath file = proto::asset_path_from_uri(uri);
+      if (!file.problem.empty()) return invalid(where + shown + " refused: " + file.problem);
+      if (!names.count(file.path) || file.path == name) return invalid(where + shown + " names no file of this upload");
+    }
+  }
+  return std::nullopt;
+}
+
+// The glTF's own JSON, syntax and every URI, read back from the upload's temp dir once its bytes were let go.
+std::optional<Problem> check_gltf_json(const fs::path& file, const std::string& name,
+                                       const std::set<std::string>& names) {
+  auto doc = read_gltf_json(file, name);
+  if (auto* problem = std::get_if<Problem>(&doc)) return *problem;
+  return check_gltf_uris(std::get<json>(doc), name, names);
 }
 
 // Whole and on the disk before the directory is renamed into place: an asset's id promises its content. Throws
@@ -49,6 +100,12 @@ std::string read_file(const fs::path& p) {
 void write_file(const fs::path& p, std::string_view bytes) {
   if (int error = write_file_synced(p, bytes); error != 0)
     throw std::system_error(error, std::generic_category(), "cannot write " + p.filename().string());
+}
+
+// Frees the upload's bytes once they are on disk: the check loads the asset from its files, and the upload is not
+// held in memory beside what the loader makes of it.
+void release_bytes(std::vector<UploadFile>& files) {
+  for (UploadFile& f : files) std::string().swap(f.bytes);
 }
 
 // The answer to an upload that ran out of room while it was written (the disk filled after the --min-free-disk
@@ -142,45 +199,12 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
     info.bytes += f.bytes.size();
   }
 
-  // The glTF's own JSON: syntax and every URI.
-  if (info.kind == "gltf") {
-    const UploadFile& main = *scenes[0];
-    std::string text;
-    if (lower_ext(main.name) == ".glb") {
-      auto chunks = parse_glb(main.bytes);
-      if (auto* problem = std::get_if<std::string>(&chunks)) return invalid(main.name + ": " + *problem);
-      text = std::get<GlbChunks>(chunks).json;
-    } else {
-      text = main.bytes;
-    }
-    json doc = json::parse(text, nullptr, false);
-    if (doc.is_discarded() || !doc.is_object()) return invalid(main.name + ": the glTF JSON does not parse");
-    for (const char* list : {"buffers", "images"}) {
-      auto it = doc.find(list);
-      if (it == doc.end() || !it->is_array()) continue;
-      for (size_t i = 0; i < it->size(); ++i) {
-        const json& item = (*it)[i];
-        if (!item.is_object() || !item.contains("uri")) continue;
-        const std::string where = main.name + ": " + list + "[" + std::to_string(i) + "].uri ";
-        if (!item["uri"].is_string()) return invalid(where + "is not a string");
-        const std::string uri = item["uri"].get<std::string>();
-        const std::string shown = "\"" + uri.substr(0, 200) + "\"";
-        if (proto::is_data_uri(uri)) continue;
-        const proto::AssetPath file = proto::asset_path_from_uri(uri);
-        if (!file.problem.empty()) return invalid(where + shown + " refused: " + file.problem);
-        if (!names.count(file.path) || file.path == main.name)
-          return invalid(where + shown + " names no file of this upload");
-      }
-    }
-  }
-
-  if (files.size() == 1) {
-    info.id = sha256_hex(files[0].bytes);
-  } else {
-    std::string manifest;
-    for (const UploadFile& f : files) manifest += f.name + "\t" + sha256_hex(f.bytes) + "\n";
-    info.id = sha256_hex(manifest);
-  }
+  // The id is the hash of the upload's names and contents: uploads of the same bytes under the same names share one
+  // asset (and its owners list), while the same bytes under another name are another asset, so that an upload never
+  // answers with the names another user gave.
+  std::string manifest;
+  for (const UploadFile& f : files) manifest += f.name + "\t" + sha256_hex(f.bytes) + "\n";
+  info.id = sha256_hex(manifest);
   const auto known = [&]() -> std::optional<StoredAsset> {
     std::lock_guard<std::mutex> lock(owners_mutex_);
     auto existing = get(info.id);
@@ -199,6 +223,13 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
     for (const UploadFile& f : files) {
       fs::create_directories((temp / f.name).parent_path());  // a subfolder of the asset
       write_file(temp / f.name, f.bytes);
+    }
+    release_bytes(files);
+    if (info.kind == "gltf") {
+      if (auto problem = check_gltf_json(temp / info.main, info.main, names)) {
+        fs::remove_all(temp, ec);
+        return *problem;
+      }
     }
     // The asset as the renderer will load it: a malformed buffer or accessor is refused now, not at render time.
     SceneLoadOptions options;

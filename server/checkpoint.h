@@ -14,6 +14,7 @@
 #include <string>
 #include <string_view>
 
+#include "renderer/byte_fields.h"
 #include "renderer/film.h"
 
 namespace tessera::server {
@@ -28,6 +29,6 @@ std::string encode_checkpoint(const Film& film, uint32_t passes, double elapsed_
 // Nothing when the bytes are not a complete, intact checkpoint of a `width`×`height` render with these settings.
 std::optional<Checkpoint> decode_checkpoint(std::string_view bytes, int width, int height, uint64_t settings_hash);
 
-uint64_t fnv1a64(std::string_view bytes, uint64_t h = 0xcbf29ce484222325ull);
+using tessera::fnv1a64;  // renderer/byte_fields.h: settings are fingerprinted with the hash checkpoints use
 
 }  // namespace tessera::server

@@ -190,7 +190,8 @@ const std::vector<Option>& options() {
          return "";
        }},
       {"--lease-s", "TESSERA_LEASE_S", "S",
-       "seconds a job's claim lasts unless renewed (every second); past it another daemon takes the job over (30)",
+       "seconds a job's claim lasts unless renewed (every quarter of it, at least once a second); past it another "
+       "daemon takes the job over (30)",
        real(&Config::lease_s, 1, 3600)},
       {"--unit-pixel-samples", "TESSERA_UNIT_PIXEL_SAMPLES", "N",
        "on a PostgreSQL store, split a job's samples into units of about N pixel samples (width x height x samples) "
@@ -239,6 +240,10 @@ const std::vector<Option>& options() {
        "jobs (or work units of split jobs) one owner renders at once across every node sharing the store; the rest "
        "wait while other owners' jobs run (default 0: no limit)",
        integer(&Config::max_running_per_user, 0, 1 << 30)},
+      {"--crash-retries", "TESSERA_CRASH_RETRIES", "N",
+       "times a job is rendered again after its renderer died while rendering it (a crash, a kill, a node lost); "
+       "past that it fails naming the crashes, never resumed at a start again (default 2)",
+       integer(&Config::crash_retries, 0, 1000)},
       {"--max-work", "TESSERA_MAX_WORK", "N", "largest width*height*spp*max_depth of a job, 422 above (0: no limit)",
        real(&Config::max_work, 0, 1e30)},
       {"--max-gltf-instances", "TESSERA_MAX_GLTF_INSTANCES", "N",
@@ -249,6 +254,10 @@ const std::vector<Option>& options() {
       {"--http-threads", "TESSERA_HTTP_THREADS", "N",
        "threads handling ordinary requests (default 64; event streams and idle connections hold none)",
        integer(&Config::http_threads, 2, 4096)},
+      {"--body-threads", "TESSERA_BODY_THREADS", "N",
+       "threads reading request bodies that had not all arrived with the headers (uploads); more wait for one, and "
+       "the --http-threads stay free for status requests (default 16)",
+       integer(&Config::body_threads, 1, 4096)},
       {"--max-event-streams", "TESSERA_MAX_EVENT_STREAMS", "N",
        "event streams sent at once, each on a thread of its own; more are 503 (default 256)",
        integer(&Config::max_event_streams, 1, 65536)},

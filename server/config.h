@@ -40,10 +40,12 @@ struct Config {
   std::vector<std::string> cors_origins;
   int max_queued_per_user = 0;              // 0: no limit; above it 429
   int max_running_per_user = 0;             // runs one owner holds at once across the store's nodes; 0: no limit
+  int crash_retries = 2;                    // lost runs of a job (its renderer died while rendering it) before it fails
   double max_work = 0;                      // width x height x spp x max_depth; 0: no limit; above it 422
   uint64_t max_gltf_instances = 1'000'000;  // node instances of a glTF (paths through its hierarchy); above: 422
   double grace_s = 20;                      // SIGTERM: running jobs end their pass and checkpoint within this
   int http_threads = 64;                    // workers for ordinary requests (not event streams, not idle connections)
+  int body_threads = 16;                    // workers for requests whose body is still arriving (queued beyond)
   int max_event_streams = 256;              // event streams sent at once (each holds a thread of its own); more: 503
   int max_connections = 1024;               // open connections; more: 503
   int max_connections_per_client = 32;      // open connections of one remote address; more: 429; 0: no cap

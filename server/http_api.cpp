@@ -43,21 +43,6 @@ constexpr const char* kJobId = "([^/]+)";  // checked by is_valid_job_id() befor
 constexpr const char* kWebFile =
     "/([A-Za-z0-9_-][A-Za-z0-9._-]{0,127}\\.(?:js|mjs|css|html|svg|png|ico|json|map|webmanifest))";
 
-std::string web_media_type(const std::string& name) {
-  static const std::map<std::string, std::string> types = {{"js", "text/javascript; charset=utf-8"},
-                                                           {"mjs", "text/javascript; charset=utf-8"},
-                                                           {"css", "text/css; charset=utf-8"},
-                                                           {"html", "text/html; charset=utf-8"},
-                                                           {"svg", "image/svg+xml"},
-                                                           {"png", "image/png"},
-                                                           {"ico", "image/x-icon"},
-                                                           {"json", "application/json"},
-                                                           {"map", "application/json"},
-                                                           {"webmanifest", "application/manifest+json"}};
-  auto it = types.find(name.substr(name.rfind('.') + 1));
-  return it == types.end() ? "application/octet-stream" : it->second;
-}
-
 void send_json(Response& res, int status, const json& body) {
   res.status = status;
   res.set_content(body.dump(-1, ' ', false, json::error_handler_t::replace), "application/json");
@@ -211,6 +196,13 @@ bool valid_idempotency_key(const std::string& k) {
          std::all_of(k.begin(), k.end(), [](unsigned char c) { return c > 32 && c < 127; });
 }
 
+// The bytes of a request's body or of one of its parts, moved out of the request: an upload is held once, not copied
+// again for the asset store. The request object is not const inside cpp-httplib (read_body filled it), and nothing
+// reads the bytes after the handler that takes them.
+std::string take_bytes(const std::string& bytes) {
+  return std::move(const_cast<std::string&>(bytes));
+}
+
 // A multipart submission: the part "job" plus files, which the job service stores as assets (the job's names for
 // them become their ids).
 std::variant<Submission, Problem> multipart_submission(ApiContext& ctx, const Request& req, const Caller& caller) {
@@ -224,7 +216,7 @@ std::variant<Submission, Problem> multipart_submission(ApiContext& ctx, const Re
   for (const auto& [name, part] : req.files) {
     if (name == "job") continue;
     if (part.filename.empty()) return Problem{422, "the part \"" + name + "\" is not a file", std::nullopt};
-    files.push_back({part.filename, part.content});
+    files.push_back({part.filename, take_bytes(part.content)});
   }
   std::string manifest = job_text + "\n";
   {
@@ -509,7 +501,7 @@ void post_asset(ApiContext& ctx, const Request& req, Response& res) {
   if (type == "multipart/form-data") {
     for (const auto& [name, part] : req.files) {
       if (part.filename.empty()) return send_problem(res, 422, "the part \"" + name + "\" is not a file");
-      files.push_back({part.filename, part.content});
+      files.push_back({part.filename, take_bytes(part.content)});
     }
   } else {
     static const std::map<std::string, std::pair<std::string, std::vector<std::string>>> kTypes = {
@@ -533,7 +525,7 @@ void post_asset(ApiContext& ctx, const Request& req, Response& res) {
     const auto& allowed = it->second.second;
     if (std::find(allowed.begin(), allowed.end(), ext) == allowed.end())
       return send_problem(res, 422, "the name \"" + name.substr(0, 128) + "\" does not fit the content type " + type);
-    files.push_back({name, req.body});
+    files.push_back({name, take_bytes(req.body)});
   }
   auto stored = ctx.assets.store(std::move(files), caller.name);
   if (auto* p = std::get_if<Problem>(&stored)) {

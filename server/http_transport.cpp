@@ -22,6 +22,7 @@
 
 #include "server/log.h"
 #include "server/problem.h"
+#include "server/request_head.h"
 
 namespace tessera::server {
 
@@ -74,12 +75,16 @@ void address_of(int fd, bool peer, std::string& ip, int& port) {
 
 const char* reason_phrase(int status) {
   switch (status) {
+    case 400:
+      return "Bad Request";
     case 408:
       return "Request Timeout";
     case 429:
       return "Too Many Requests";
     case 431:
       return "Request Header Fields Too Large";
+    case 501:
+      return "Not Implemented";
     case 503:
       return "Service Unavailable";
     default:
@@ -183,7 +188,8 @@ struct Connection {
 
   std::string buffer;  // bytes read and not yet consumed (buffer[consumed..])
   size_t consumed = 0;
-  size_t head_end = 0;  // buffer index just past the blank line of the head of the request being handled
+  size_t head_end = 0;      // buffer index just past the blank line of the head of the request being handled
+  size_t head_checked = 0;  // bytes of the next request's head, from `consumed`, that scan_head found well-formed
   Clock::time_point deadline;
   bool started = false;    // a byte of the next request has arrived
   bool lingering = false;  // answered and closing: draining what the client still sends (linger())
@@ -217,6 +223,7 @@ struct HttpTransport::Impl {
   HttpTransport& server;
   TransportLimits limits;
   Workers requests;
+  Workers bodies;
   Workers streams;
   int epoll_fd = -1;
   int wake_fd = -1;
@@ -242,7 +249,11 @@ struct HttpTransport::Impl {
   std::unordered_map<int, std::unique_ptr<Connection>> waiting;
 
   Impl(HttpTransport& s, TransportLimits l)
-      : server(s), limits(std::move(l)), requests(limits.request_threads, true), streams(limits.stream_threads, false) {
+      : server(s),
+        limits(std::move(l)),
+        requests(limits.request_threads, true),
+        bodies(limits.body_threads, true),
+        streams(limits.stream_threads, false) {
     epoll_fd = ::epoll_create1(EPOLL_CLOEXEC);
     wake_fd = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
     if (epoll_fd < 0 || wake_fd < 0) throw std::system_error(errno, std::generic_category(), "epoll/eventfd");
@@ -272,6 +283,7 @@ struct HttpTransport::Impl {
     wake();
     if (reactor.joinable()) reactor.join();
     requests.stop();
+    bodies.stop();
     streams.stop();
   }
 
@@ -513,19 +525,26 @@ struct HttpTransport::Impl {
   bool head_complete_or_refused(std::unique_ptr<Connection>& c) {
     // A server should ignore empty lines before a request line (RFC 9112, section 2.2).
     while (c->pending() >= 2 && c->buffer.compare(c->consumed, 2, "\r\n") == 0) c->consumed += 2;
-    const size_t end = c->buffer.find("\r\n\r\n", c->consumed);
-    if (end == std::string::npos || end + 4 - c->consumed > limits.max_header_bytes) {
+    const std::string_view pending(c->buffer.data() + c->consumed, c->pending());
+    HeadScan scan = scan_head(pending.substr(0, limits.max_header_bytes), c->head_checked);
+    c->head_checked = scan.checked;
+    if (!scan.problem && scan.length > 0 && limits.check_method) scan.problem = limits.check_method(scan.head.method);
+    if (scan.problem) {
+      unwatch(c->fd);
+      refuse(std::move(c), scan.problem->status, scan.problem->detail, 0, true, "request head refused");
+      return true;
+    }
+    if (scan.length == 0) {
       if (c->pending() <= limits.max_header_bytes) return false;
-      const int fd = c->fd;
-      unwatch(fd);
+      unwatch(c->fd);
       refuse(std::move(c), 431,
              "the request line and headers exceed " + std::to_string(limits.max_header_bytes) + " bytes", 0, true,
              "request head too large");
       return true;
     }
-    c->head_end = end + 4;
+    c->head_end = c->consumed + scan.length;
     unwatch(c->fd);
-    dispatch(std::move(c));
+    dispatch(std::move(c), scan.head);
     return true;
   }
 
@@ -553,18 +572,20 @@ struct HttpTransport::Impl {
 
   // ---- workers -------------------------------------------------------------------------------------------------
 
-  void dispatch(std::unique_ptr<Connection> c) {
-    // The request target: between the first two spaces of the request line.
-    const size_t line_end = c->buffer.find("\r\n", c->consumed);
-    const std::string_view line(c->buffer.data() + c->consumed, line_end - c->consumed);
-    const size_t sp1 = line.find(' ');
-    const size_t sp2 = sp1 == std::string_view::npos ? sp1 : line.find(' ', sp1 + 1);
-    const bool long_lived = sp2 != std::string_view::npos && line.substr(0, sp1) == "GET" && limits.is_long_lived &&
-                            limits.is_long_lived(line.substr(sp1 + 1, sp2 - sp1 - 1));
-    c->long_lived = long_lived;
+  // The pool a request goes to: an event stream's own; the body readers' when its body has not all arrived with its
+  // head (the worker would wait for the client, at a pace the client chooses); else the ordinary one, whose workers
+  // therefore never wait for a body, however slowly clients send theirs.
+  Workers& pool_for(const Connection& c, const RequestHead& head) {
+    if (c.long_lived) return streams;
+    return body_arrived(head, c.buffer.size() - c.head_end) ? requests : bodies;
+  }
+
+  // `head` views the connection's buffer, which is the worker's from the moment it has the connection.
+  void dispatch(std::unique_ptr<Connection> c, const RequestHead& head) {
+    c->long_lived = head.method == "GET" && limits.is_long_lived && limits.is_long_lived(head.target);
+    Workers& pool = pool_for(*c, head);
     Connection* raw = c.release();
-    auto task = [this, raw] { serve(std::unique_ptr<Connection>(raw)); };
-    if ((long_lived ? streams : requests).submit(task)) return;
+    if (pool.submit([this, raw] { serve(std::unique_ptr<Connection>(raw)); })) return;
     c.reset(raw);
     if (stopping) return close_connection(std::move(c));
     ++refused_total;
@@ -604,6 +625,7 @@ struct HttpTransport::Impl {
     c->compact();
     if (c->buffer.capacity() > (64u << 10) && c->pending() < (16u << 10)) c->buffer.shrink_to_fit();
     c->started = false;
+    c->head_checked = 0;
     c->deadline = Clock::now() + std::chrono::seconds(server.keep_alive_timeout_sec_);
     hand_to_reactor(std::move(c));
   }

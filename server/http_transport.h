@@ -6,15 +6,19 @@
 //  - one thread waits (epoll) on every connection until a whole request head (request line and headers) has arrived,
 //    within a deadline from its first byte, and within a size; an idle kept-alive connection waits there too, so
 //    neither holds a worker thread;
-//  - a complete request goes to a worker: a fixed pool for ordinary requests, and a separate, bounded pool for
-//    long-lived responses (event streams), which therefore cannot take the threads that status requests need;
+//  - a head is judged as it arrives (request_head.h): a malformed one is refused before cpp-httplib parses it;
+//  - a complete request goes to a worker of one of three pools, so that no kind of request can take the threads
+//    another needs: ordinary requests, whose body (if any) arrived with the head; requests whose body is still to
+//    come, read by a smaller pool that makes them wait their turn rather than hold every thread while a slow client
+//    sends; and long-lived responses (event streams), bounded, beyond which they are refused;
 //  - connections are capped in all and per client address; a request body and a response must move at a minimum
 //    average rate (after a grace period, as Apache's mod_reqtimeout MinRate), and every read and write at least once
 //    per read/write timeout;
 //  - the listen backlog is the system's (SOMAXCONN), and bytes read past a request stay for the next one
 //    (pipelining, RFC 9112 section 9.3.2).
-// What it refuses itself, before any handler runs, it answers with problem+json and closes: 408 (head too slow), 431
-// (head too large), 429 (too many connections from one address), 503 (too many connections or event streams).
+// What it refuses itself, before any handler runs, it answers with problem+json and closes: 400 (malformed head), 408
+// (head too slow), 431 (head too large), 429 (too many connections from one address), 501 (a method refused by
+// TransportLimits::check_method), 503 (too many connections or event streams).
 #pragma once
 
 #include <httplib.h>
@@ -28,10 +32,13 @@
 #include <string>
 #include <string_view>
 
+#include "server/problem.h"
+
 namespace tessera::server {
 
 struct TransportLimits {
   int request_threads = 64;                // workers for ordinary requests (queued beyond)
+  int body_threads = 16;                   // workers for requests whose body had not all come with the head (queued)
   int stream_threads = 256;                // workers for long-lived responses; beyond them 503
   int max_connections = 1024;              // open connections in all; beyond them 503
   int max_connections_per_client = 32;     // open connections of one remote address; beyond them 429; 0: no cap
@@ -43,6 +50,8 @@ struct TransportLimits {
   int listen_backlog = 0;            // 0: SOMAXCONN
   // Whether a request target ("/v1/events?x=1") is answered by a long-lived response.
   std::function<bool(std::string_view target)> is_long_lived;
+  // Nothing, or why a request of this method is refused before it is handled (a method the server does not implement).
+  std::function<std::optional<Problem>(std::string_view method)> check_method;
 };
 
 // Why the body of the request being handled on this thread could not be read (see HttpTransport::read_failure).

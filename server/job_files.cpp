@@ -4,14 +4,17 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstdio>
 #include <fstream>
+#include <mutex>
 #include <sstream>
 #include <stdexcept>
 #include <system_error>
 
+#include "renderer/byte_fields.h"
 #include "server/file_io.h"
 #include "server/job_id.h"
 
@@ -75,6 +78,35 @@ class OpenFile final : public FileReader {
 };
 
 }  // namespace
+
+namespace {
+
+class BytesReader final : public FileReader {
+ public:
+  explicit BytesReader(std::string bytes) : bytes_(std::move(bytes)) {
+    char etag[48];
+    std::snprintf(etag, sizeof etag, "\"b%016llx-%zx\"", static_cast<unsigned long long>(tessera::fnv1a64(bytes_)),
+                  bytes_.size());
+    etag_ = etag;
+  }
+  uint64_t size() const override { return bytes_.size(); }
+  const std::string& etag() const override { return etag_; }
+  size_t read(uint64_t offset, char* out, size_t length) override {
+    if (offset >= bytes_.size()) return 0;
+    const size_t n = std::min<uint64_t>(length, bytes_.size() - offset);
+    std::copy_n(bytes_.data() + offset, n, out);
+    return n;
+  }
+
+ private:
+  std::string bytes_, etag_;
+};
+
+}  // namespace
+
+std::unique_ptr<FileReader> bytes_reader(std::string bytes) {
+  return std::make_unique<BytesReader>(std::move(bytes));
+}
 
 const char* job_file_name(JobFile f) {
   switch (f) {
@@ -203,6 +235,63 @@ std::optional<std::string> DirectoryJobFiles::read(const std::string& id, JobFil
   std::ostringstream ss;
   ss << in.rdbuf();
   return std::move(ss).str();
+}
+
+namespace {
+
+// The file name of part `part` of job file `f`: "log.txt" and "n1" give "log.n1.txt".
+std::string part_file_name(JobFile f, const std::string& part) {
+  const std::string name = job_file_name(f);
+  const size_t dot = name.rfind('.');
+  const bool plain = !part.empty() && part.size() <= 64 && std::all_of(part.begin(), part.end(), [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '-' || c == '_';
+  });
+  char hashed[24];
+  std::snprintf(hashed, sizeof hashed, "h%016llx", static_cast<unsigned long long>(tessera::fnv1a64(part)));
+  return name.substr(0, dot) + "." + (plain ? part : std::string(hashed)) + name.substr(dot);
+}
+
+}  // namespace
+
+void DirectoryJobFiles::update(const std::string& id, JobFile f, const std::function<std::string(std::string)>& change,
+                               const std::string& part) const {
+  static std::mutex updating;
+  std::lock_guard lock(updating);
+  if (part.empty()) return write(id, f, change(read(id, f).value_or("")));
+  const fs::path file = dir(id) / part_file_name(f, part);
+  std::optional<std::string> now;
+  if (std::ifstream in(file, std::ios::binary); in) {
+    std::ostringstream ss;
+    ss << in.rdbuf();
+    now = std::move(ss).str();
+  }
+  const std::string bytes = change(now.value_or(""));
+  const std::string name = file.filename().string();
+  publish_path(
+      file, name.c_str(),
+      [&](const std::string& temp) {
+        if (int error = write_file_synced(temp, bytes); error != 0) write_failed(name.c_str(), error);
+      },
+      true);
+}
+
+std::vector<std::string> DirectoryJobFiles::read_parts(const std::string& id, JobFile f) const {
+  std::vector<std::string> out;
+  const std::string name = job_file_name(f);
+  const std::string stem = name.substr(0, name.rfind('.') + 1), extension = name.substr(name.rfind('.'));
+  std::error_code ec;
+  for (fs::directory_iterator it(dir(id), ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string entry = it->path().filename().string();
+    const bool part = entry.size() > stem.size() + extension.size() && entry.starts_with(stem) &&
+                      entry.ends_with(extension) && entry.find(".tmp-") == std::string::npos;
+    if (entry != name && !part) continue;
+    std::ifstream in(it->path(), std::ios::binary);
+    if (!in) continue;  // removed meanwhile
+    std::ostringstream ss;
+    ss << in.rdbuf();
+    out.push_back(std::move(ss).str());
+  }
+  return out;
 }
 
 void DirectoryJobFiles::remove(const std::string& id) const {

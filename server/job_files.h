@@ -32,6 +32,9 @@ class FileReader {
   virtual size_t read(uint64_t offset, char* out, size_t length) = 0;
 };
 
+// Bytes in memory read as a file (a job's log, merged from its parts); its entity tag is a hash of the bytes.
+std::unique_ptr<FileReader> bytes_reader(std::string bytes);
+
 class JobFiles {
  public:
   virtual ~JobFiles() = default;
@@ -56,6 +59,15 @@ class JobFiles {
   virtual void discard_staged(const std::string& id, JobFile f, int64_t epoch) const = 0;
   // The file's bytes, or nothing when it does not exist.
   virtual std::optional<std::string> read(const std::string& id, JobFile f) const = 0;
+  // Replaces the file with change(its bytes, empty when it does not exist), written as write() writes, with no other
+  // update of it in between: this process's updates take turns. With a `part`, it is this process's part of the file
+  // (`log.<part>.txt` beside `log.txt`) that changes. Each file or part has one writing process: the nodes that share
+  // a data directory each update their own part (every node rendering a unit of a job adds to its log), so no node
+  // ever waits on another; a lock across nodes would stall them all behind one that froze while it held the lock.
+  virtual void update(const std::string& id, JobFile f, const std::function<std::string(std::string)>& change,
+                      const std::string& part = "") const = 0;
+  // The file's bytes, then each of its parts' (update()), in no particular order; empty when none exists.
+  virtual std::vector<std::string> read_parts(const std::string& id, JobFile f) const = 0;
   // The file's current version; null when it does not exist.
   virtual std::unique_ptr<FileReader> open(const std::string& id, JobFile f) const = 0;
   // Every file of the job, and its place.
@@ -93,6 +105,11 @@ class DirectoryJobFiles final : public JobFiles {
   bool publish_staged(const std::string& id, JobFile f, int64_t epoch) const override;
   void discard_staged(const std::string& id, JobFile f, int64_t epoch) const override;
   std::optional<std::string> read(const std::string& id, JobFile f) const override;
+  // Throws, as write() does, when the job has no folder. A part's name is `log.<part>.txt` where `part` is made of
+  // letters, digits, '-' and '_' (up to 64 of them), else `log.h<hash of part>.txt`.
+  void update(const std::string& id, JobFile f, const std::function<std::string(std::string)>& change,
+              const std::string& part = "") const override;
+  std::vector<std::string> read_parts(const std::string& id, JobFile f) const override;
   std::unique_ptr<FileReader> open(const std::string& id, JobFile f) const override;
   void remove(const std::string& id) const override;
   void remove(const std::string& id, JobFile f) const override;

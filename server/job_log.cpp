@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <exception>
+#include <string_view>
+#include <tuple>
+#include <vector>
 
 #include "server/log.h"
 #include "server/time_format.h"
@@ -43,12 +46,49 @@ std::string append_bounded(std::string log, const std::string& line, size_t max_
 
 void JobLog::add(const std::string& id, const std::string& line) const {
   try {
-    std::lock_guard lock(mutex_);
-    std::string text = files_.read(id, JobFile::kLog).value_or("");
-    files_.write(id, JobFile::kLog, append_bounded(std::move(text), rfc3339_ms(now_ms()) + "  " + line));
+    const std::string stamped = rfc3339_ms(now_ms()) + "  " + (node_.empty() ? "" : node_ + "  ") + line;
+    files_.update(
+        id, JobFile::kLog, [&](std::string text) { return append_bounded(std::move(text), stamped); }, node_);
   } catch (const std::exception& e) {
     log(LogLevel::kDebug, "cannot write the job's log", {{"job", id}, {"error", e.what()}});
   }
+}
+
+std::optional<std::string> JobLog::read(const JobFiles& files, const std::string& id) {
+  std::vector<std::string> parts = files.read_parts(id, JobFile::kLog);
+  if (parts.empty()) return std::nullopt;
+  if (parts.size() == 1) return std::move(parts[0]);
+  // (time, part, line number) orders the lines; a line that does not start with a time (the marker of lines left
+  // out) takes the time of the line before it in its part, so it stays where it was.
+  struct Line {
+    std::string_view time, text;
+    size_t part, index;
+  };
+  std::vector<Line> lines;
+  for (size_t p = 0; p < parts.size(); ++p) {
+    std::string_view rest = parts[p], time;
+    for (size_t i = 0; !rest.empty(); ++i) {
+      const size_t end = rest.find('\n');
+      const std::string_view text = rest.substr(0, end == std::string_view::npos ? rest.size() : end + 1);
+      rest.remove_prefix(text.size());
+      if (!text.empty() && text[0] >= '0' && text[0] <= '9') time = text.substr(0, text.find(' '));
+      lines.push_back({time, text, p, i});
+    }
+  }
+  std::sort(lines.begin(), lines.end(), [](const Line& a, const Line& b) {
+    return std::tie(a.time, a.part, a.index) < std::tie(b.time, b.part, b.index);
+  });
+  std::string merged;
+  for (const Line& l : lines) {
+    merged += l.text;
+    if (merged.back() != '\n') merged += '\n';
+  }
+  if (merged.size() <= kMaxLogBytes) return merged;
+  // Bounded as one part is: the last line appended to the rest.
+  merged.pop_back();
+  const size_t last = merged.rfind('\n');
+  return last == std::string::npos ? append_bounded("", merged)
+                                   : append_bounded(merged.substr(0, last + 1), merged.substr(last + 1));
 }
 
 }  // namespace tessera::server

@@ -6,8 +6,9 @@
 #pragma once
 
 #include <cstddef>
-#include <mutex>
+#include <optional>
 #include <string>
+#include <utility>
 
 #include "server/job_files.h"
 
@@ -24,14 +25,20 @@ std::string append_bounded(std::string log, const std::string& line, size_t max_
 
 class JobLog {
  public:
-  explicit JobLog(const JobFiles& files) : files_(files) {}
-  // Adds "<RFC 3339 time>  <line>" to the job's log; nothing when the job has no place for files (it never started
-  // rendering, or was deleted) or the file cannot be written.
+  // `node`: the name of this daemon among the nodes that share a store, written on each line (several nodes write
+  // one job's log when they render its units); empty for a daemon alone.
+  explicit JobLog(const JobFiles& files, std::string node = "") : files_(files), node_(std::move(node)) {}
+  // Adds "<RFC 3339 time>  <line>" (with a node: "<time>  <node>  <line>") to the job's log; nothing when the job has
+  // no place for files (it never started rendering, or was deleted) or the file cannot be written. A node writes its
+  // own part of the log (JobFiles::update), each part bounded as the whole is.
   void add(const std::string& id, const std::string& line) const;
+  // The job's log: the lines of every node's part in the order of their times (a line's time is its first field;
+  // lines of one time keep their part's order), bounded as one part is. Nothing when no part exists.
+  static std::optional<std::string> read(const JobFiles& files, const std::string& id);
 
  private:
   const JobFiles& files_;
-  mutable std::mutex mutex_;  // one read-modify-write at a time
+  const std::string node_;
 };
 
 }  // namespace tessera::server

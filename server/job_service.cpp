@@ -3,8 +3,11 @@
 #include <algorithm>
 #include <filesystem>
 
+#include "proto/contract.h"
+#include "server/assets.h"
 #include "server/job_id.h"
 #include "server/job_json.h"
+#include "server/job_log.h"
 #include "server/log.h"
 #include "server/time_format.h"
 #include "server/work_units.h"
@@ -96,6 +99,22 @@ JobService::~JobService() {
 // ---- submitting -------------------------------------------------------------------------------------------------
 
 std::optional<Problem> JobService::store_uploads(const Caller& caller, json& doc, std::vector<UploadFile> files) {
+  // An asset reference that is no asset id names a file this request should have sent: said so, naming the file,
+  // where the schema would only say that the reference is not an asset id.
+  for (std::string_view at : proto::kAssetRefPointers) {
+    const json::json_pointer pointer{std::string(at)};
+    if (!doc.is_object() || !doc.contains(pointer) || !doc[pointer].is_string()) continue;
+    const std::string name = doc[pointer].get<std::string>();
+    if (is_asset_id(name) ||
+        std::any_of(files.begin(), files.end(), [&](const UploadFile& f) { return f.name == name; }))
+      continue;
+    std::string field(at.substr(1));
+    std::replace(field.begin(), field.end(), '/', '.');
+    return Problem{422,
+                   field + " names " + name +
+                       ", which this request did not send: add it as a file part, or give an uploaded asset's id",
+                   std::string(at)};
+  }
   if (files.empty()) return std::nullopt;
   if (!doc.is_object() || !doc.contains("scene") || !doc["scene"].is_object())
     return Problem{422, "uploaded files need a scene job that names them", "/scene"};
@@ -106,7 +125,8 @@ std::optional<Problem> JobService::store_uploads(const Caller& caller, json& doc
     const std::string map = scene["environment"]["map"];
     auto it = std::find_if(files.begin(), files.end(), [&](const UploadFile& f) { return f.name == map; });
     if (it != files.end()) {
-      std::vector<UploadFile> one{*it};
+      std::vector<UploadFile> one;
+      one.push_back(std::move(*it));
       files.erase(it);
       auto stored = assets_.store(std::move(one), caller.name);
       if (auto* p = std::get_if<Problem>(&stored)) return *p;
@@ -125,77 +145,79 @@ std::optional<Problem> JobService::store_uploads(const Caller& caller, json& doc
 }
 
 std::variant<Submitted, Problem> JobService::submit(const Caller& caller, SubmitRequest request) {
-  if (!scheduler_.accepting()) return Problem{503, "the daemon is shutting down", std::nullopt};
-  const std::string& key = request.idempotency_key;
-  auto existing = [&](const JobRecord& job) -> std::variant<Submitted, Problem> {
-    if (job.request_hash != request.request_hash)
-      return Problem{422, "this Idempotency-Key was used with another request body", std::nullopt};
-    return Submitted{job, status(job), false};
-  };
-  if (!key.empty())
-    if (auto job = store_.find_by_idempotency_key(caller.name, key)) return existing(*job);
-
-  const AcceptedJob& accepted = request.job;
-  if (accepted.priority > options_.max_user_priority && !caller.admin)
-    return priority_needs_admin(accepted.priority, options_.max_user_priority);
-  if (auto full = queue_full(caller.name)) return *full;
-  JobRecord job;
-  job.id = new_job_id();
-  const json& name = accepted.document.contains("name") ? accepted.document["name"] : json();
-  job.name = name.is_string() ? name.get<std::string>() : default_job_name(accepted.document, assets_);
-  job.kind = accepted.kind;
-  job.priority = accepted.priority;
-  job.created_at_ms = now_ms();
-  job.document = accepted.document.dump();
-  job.settings = accepted.settings.dump();
-  job.outputs = accepted.outputs.dump();
-  job.progress.samples_total = accepted.spp;
-  // On a store several nodes share, a large job is split into units they render at once (work_units.h).
-  job.units = store_.splits_jobs() ? unit_count(job.settings, options_.unit_pixel_samples) : 1;
-  job.owner = caller.name;
-  job.warnings = json(accepted.warnings).dump();
-  job.idempotency_key = key;
-  job.request_hash = request.request_hash;
-  try {
-    store_.create(job);
-  } catch (const std::exception& e) {
-    // The same key raced in from another connection: that request's job is this one's.
+  return writing([&]() -> std::variant<Submitted, Problem> {
+    if (!scheduler_.accepting()) return Problem{503, "the daemon is shutting down", std::nullopt};
+    const std::string& key = request.idempotency_key;
+    auto existing = [&](const JobRecord& job) -> std::variant<Submitted, Problem> {
+      if (job.request_hash != request.request_hash)
+        return Problem{422, "this Idempotency-Key was used with another request body", std::nullopt};
+      return Submitted{job, status(job), false};
+    };
     if (!key.empty())
-      if (auto raced = store_.find_by_idempotency_key(caller.name, key)) return existing(*raced);
-    // The disk filled after the --min-free-disk check: the insert was rolled back whole, so, as the check's refusal,
-    // nothing of the job exists (assets a multipart submission stored stay: whole, and found again by a retry).
-    if (const auto* se = dynamic_cast<const JobStoreError*>(&e); se && se->out_of_space()) {
-      metrics_.count_job_store_error();
-      log(LogLevel::kWarn, "job refused: the job store ran out of space", {{"error", e.what()}});
-      return insufficient_storage("the data directory's disk ran out of space while the job was stored",
-                                  request.files_stored ? "the job was not stored; the files uploaded with it were, "
-                                                         "whole, and a retry reuses them"
-                                                       : "nothing was stored");
+      if (auto job = store_.find_by_idempotency_key(caller.name, key)) return existing(*job);
+
+    const AcceptedJob& accepted = request.job;
+    if (accepted.priority > options_.max_user_priority && !caller.admin)
+      return priority_needs_admin(accepted.priority, options_.max_user_priority);
+    if (auto full = queue_full(caller.name)) return *full;
+    JobRecord job;
+    job.id = new_job_id();
+    const json& name = accepted.document.contains("name") ? accepted.document["name"] : json();
+    job.name = name.is_string() ? name.get<std::string>() : default_job_name(accepted.document, assets_);
+    job.kind = accepted.kind;
+    job.priority = accepted.priority;
+    job.created_at_ms = now_ms();
+    job.document = accepted.document.dump();
+    job.settings = render_settings_text(accepted.settings);
+    job.outputs = output_spec_text(accepted.outputs);
+    job.progress.samples_total = accepted.settings.spp;
+    // On a store several nodes share, a large job is split into units they render at once (work_units.h).
+    job.units = store_.splits_jobs() ? unit_count(accepted.settings, options_.unit_pixel_samples) : 1;
+    job.owner = caller.name;
+    job.warnings = json(accepted.warnings).dump();
+    job.idempotency_key = key;
+    job.request_hash = request.request_hash;
+    try {
+      store_.create(job);
+    } catch (const std::exception& e) {
+      // The same key raced in from another connection: that request's job is this one's.
+      if (!key.empty())
+        if (auto raced = store_.find_by_idempotency_key(caller.name, key)) return existing(*raced);
+      // The disk filled after the --min-free-disk check: the insert was rolled back whole, so, as the check's refusal,
+      // nothing of the job exists (assets a multipart submission stored stay: whole, and found again by a retry).
+      if (const auto* se = dynamic_cast<const JobStoreError*>(&e); se && se->out_of_space()) {
+        metrics_.count_job_store_error();
+        log(LogLevel::kWarn, "job refused: the job store ran out of space", {{"error", e.what()}});
+        return insufficient_storage("the data directory's disk ran out of space while the job was stored",
+                                    request.files_stored ? "the job was not stored; the files uploaded with it were, "
+                                                           "whole, and a retry reuses them"
+                                                         : "nothing was stored");
+      }
+      throw;
     }
-    throw;
-  }
-  scheduler_.wake();
-  log(LogLevel::kInfo, "job queued",
-      {{"job", job.id},
-       {"name", job.name},
-       {"kind", job.kind},
-       {"priority", job.priority},
-       {"owner", job.owner},
-       {"render", accepted.settings}});
-  // The job exists from here on: a store that fails as it is read back costs the answer its queue position (and the
-  // event its watchers), not a failure whose retry, without an Idempotency-Key, would queue the job twice.
-  Submitted out{job, json(), true};
-  try {
-    publish_state(job.id);
-    if (auto stored = store_.get(job.id)) out.job = *stored;
-    out.status = status(out.job);
-  } catch (const JobStoreError& e) {
-    metrics_.count_job_store_error();
-    log(LogLevel::kWarn, "job queued, but the job store failed as it was read back",
-        {{"job", job.id}, {"error", e.what()}});
-    out.status = job_status_json(job);
-  }
-  return out;
+    scheduler_.wake();
+    log(LogLevel::kInfo, "job queued",
+        {{"job", job.id},
+         {"name", job.name},
+         {"kind", job.kind},
+         {"priority", job.priority},
+         {"owner", job.owner},
+         {"render", render_settings_to_json(accepted.settings)}});
+    // The job exists from here on: a store that fails as it is read back costs the answer its queue position (and the
+    // event its watchers), not a failure whose retry, without an Idempotency-Key, would queue the job twice.
+    Submitted out{job, json(), true};
+    try {
+      publish_state(job.id);
+      if (auto stored = store_.get(job.id)) out.job = *stored;
+      out.status = status(out.job);
+    } catch (const JobStoreError& e) {
+      metrics_.count_job_store_error();
+      log(LogLevel::kWarn, "job queued, but the job store failed as it was read back",
+          {{"job", job.id}, {"error", e.what()}});
+      out.status = job_status_json(job);
+    }
+    return out;
+  });
 }
 
 // ---- reading ----------------------------------------------------------------------------------------------------
@@ -210,7 +232,10 @@ std::optional<JobRecord> JobService::find(const Caller& caller, const std::strin
 json JobService::status(const JobRecord& job) {
   std::optional<int> position;
   if (job.state == JobState::kQueued) position = store_.queue_position(job.id);
-  return job_status_json(job, scheduler_.live_progress(job.id), position);
+  // A split job's units (a store that splits jobs; empty for a job rendered whole).
+  std::vector<UnitRecord> units;
+  if (store_.splits_jobs()) units = store_.units(job.id);
+  return job_status_json(job, scheduler_.live_progress(job.id), position, units, now_ms());
 }
 
 JobPage JobService::list(const Caller& caller, JobFilter filter) {
@@ -247,7 +272,8 @@ std::optional<std::string> JobService::document(const JobRecord& job) {
 }
 
 std::unique_ptr<FileReader> JobService::job_log(const JobRecord& job) {
-  return files_.open(job.id, JobFile::kLog);
+  auto text = JobLog::read(files_, job.id);
+  return text ? bytes_reader(std::move(*text)) : nullptr;
 }
 
 std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobRecord& job, JobFile file) {
@@ -258,9 +284,14 @@ std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobR
                        "; results exist once it has succeeded (or, partial, once it was cancelled after a pass)",
                    std::nullopt};
   const std::string format = file == JobFile::kResultExr ? "exr" : "png";
-  const json outputs = json::parse(job.outputs, nullptr, false);
-  if (!outputs.is_array() || std::find(outputs.begin(), outputs.end(), format) == outputs.end())
-    return Problem{404, "the job did not ask for a " + format + " output", std::nullopt};
+  bool asked = false;
+  try {
+    const OutputSpec outputs = output_spec_from_text(job.outputs);
+    asked = file == JobFile::kResultExr ? outputs.exr : outputs.png;
+  } catch (const std::runtime_error&) {
+    // A record whose outputs cannot be read asked for nothing that can be served.
+  }
+  if (!asked) return Problem{404, "the job did not ask for a " + format + " output", std::nullopt};
   if (auto reader = files_.open(job.id, file)) return reader;
   // A run's outputs are published once the store took its end (Scheduler::publish_outputs()); a node that stopped
   // in between left them staged under the run's epoch, which the succeeded job's record names. (Opened again
@@ -297,60 +328,66 @@ std::optional<Problem> JobService::queue_full(const std::string& owner) {
 }
 
 std::variant<ActionTaken, Problem> JobService::act(const JobRecord& job, JobAction action) {
-  // Resuming a paused job or requeueing an ended one queues it: the owner's cap holds as for a new job (else pausing
-  // at the cap, submitting and resuming would queue one more).
-  if (action_target(action) == JobState::kQueued && action_allowed(action, job.state))
-    if (auto full = queue_full(job.owner)) return *full;
-  Scheduler::Outcome outcome = Scheduler::Outcome::kConflict;
-  switch (action) {
-    case JobAction::kCancel:
-      outcome = scheduler_.cancel(job.id);
-      break;
-    case JobAction::kPause:
-      outcome = scheduler_.pause(job.id);
-      break;
-    case JobAction::kResume:
-      outcome = scheduler_.resume(job.id);
-      break;
-    case JobAction::kRequeue:
-      outcome = scheduler_.requeue(job.id);
-      break;
-    case JobAction::kPriority:
-    case JobAction::kDelete:
-      return Problem{500, std::string(job_action_name(action)) + " is not a state change", std::nullopt};
-  }
-  switch (outcome) {
-    case Scheduler::Outcome::kDone:
-    case Scheduler::Outcome::kInProgress:
-      return taken(job.id);
-    case Scheduler::Outcome::kConflict: {
-      auto now = store_.get(job.id);
-      const JobRecord& latest = now ? *now : job;
-      return Problem{409, action_refusal(action, latest.state, latest.input_refused()), std::nullopt};
+  return writing([&]() -> std::variant<ActionTaken, Problem> {
+    // Resuming a paused job or requeueing an ended one queues it: the owner's cap holds as for a new job (else pausing
+    // at the cap, submitting and resuming would queue one more).
+    if (action_target(action) == JobState::kQueued && action_allowed(action, job.state))
+      if (auto full = queue_full(job.owner)) return *full;
+    Scheduler::Outcome outcome = Scheduler::Outcome::kConflict;
+    switch (action) {
+      case JobAction::kCancel:
+        outcome = scheduler_.cancel(job.id);
+        break;
+      case JobAction::kPause:
+        outcome = scheduler_.pause(job.id);
+        break;
+      case JobAction::kResume:
+        outcome = scheduler_.resume(job.id);
+        break;
+      case JobAction::kRequeue:
+        outcome = scheduler_.requeue(job.id);
+        break;
+      case JobAction::kPriority:
+      case JobAction::kDelete:
+        return Problem{500, std::string(job_action_name(action)) + " is not a state change", std::nullopt};
     }
-    case Scheduler::Outcome::kUnknown:
-      break;
-  }
-  return Problem{404, "no such job", std::nullopt};
+    switch (outcome) {
+      case Scheduler::Outcome::kDone:
+      case Scheduler::Outcome::kInProgress:
+        return taken(job.id);
+      case Scheduler::Outcome::kConflict: {
+        auto now = store_.get(job.id);
+        const JobRecord& latest = now ? *now : job;
+        return Problem{409, action_refusal(action, latest.state, latest.input_refused()), std::nullopt};
+      }
+      case Scheduler::Outcome::kUnknown:
+        break;
+    }
+    return Problem{404, "no such job", std::nullopt};
+  });
 }
 
 std::variant<ActionTaken, Problem> JobService::set_priority(const Caller& caller, const JobRecord& job, int priority) {
-  if (priority > options_.max_user_priority && !caller.admin)
-    return priority_needs_admin(priority, options_.max_user_priority);
-  if (!store_.set_priority(job.id, priority)) {
-    auto now = store_.get(job.id);
-    if (!now) return Problem{404, "no such job", std::nullopt};
-    return Problem{409, action_refusal(JobAction::kPriority, now->state), std::nullopt};
-  }
-  log(LogLevel::kInfo, "job priority changed", {{"job", job.id}, {"priority", priority}});
-  publish_state(job.id);
-  return taken(job.id);
+  return writing([&]() -> std::variant<ActionTaken, Problem> {
+    if (priority > options_.max_user_priority && !caller.admin)
+      return priority_needs_admin(priority, options_.max_user_priority);
+    if (!store_.set_priority(job.id, priority)) {
+      auto now = store_.get(job.id);
+      if (!now) return Problem{404, "no such job", std::nullopt};
+      return Problem{409, action_refusal(JobAction::kPriority, now->state), std::nullopt};
+    }
+    log(LogLevel::kInfo, "job priority changed", {{"job", job.id}, {"priority", priority}});
+    publish_state(job.id);
+    return taken(job.id);
+  });
 }
 
 bool JobService::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
-  if (!scheduler_.remove(id, only_finished_before_ms)) return false;
-  events_.forget(id);
-  return true;
+  return writing([&]() -> bool {
+    if (!scheduler_.remove(id, only_finished_before_ms)) return false;
+    events_.forget(id);
+    return true;
+  });
 }
 
 bool JobService::accepting() const {
@@ -358,7 +395,7 @@ bool JobService::accepting() const {
 }
 
 bool JobService::store_failing() const {
-  return scheduler_.store_failing();
+  return scheduler_.store_failing() || writes_failing_.load();
 }
 
 void JobService::publish_state(const std::string& id) {

@@ -5,6 +5,7 @@
 // HTTP: a refusal is a Problem for the caller to answer.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -70,7 +71,8 @@ class JobService {
   JobService& operator=(const JobService&) = delete;
 
   // Stores the files uploaded with a job as assets (the environment map it names as one, the rest as its glTF asset)
-  // and puts their ids in the document in place of the file names.
+  // and puts their ids in the document in place of the file names. A reference to a file the request did not send
+  // (no asset id, no file of that name) is a 422 naming that file.
   std::optional<Problem> store_uploads(const Caller& caller, nlohmann::json& document, std::vector<UploadFile> files);
   // Queues a checked job, or answers with the job an earlier request with the same Idempotency-Key made.
   std::variant<Submitted, Problem> submit(const Caller& caller, SubmitRequest request);
@@ -104,10 +106,24 @@ class JobService {
 
   // New jobs are taken (false while starting or shutting down).
   bool accepting() const;
-  // The end of a render is waiting for the store to take it.
+  // The end of a render is waiting for the store to take it, or the store refused the last client's change.
   bool store_failing() const;
 
  private:
+  // Runs a client's change (submit, act, set_priority, remove) and notes whether the store took it: a store that
+  // answers reads but refuses writes is failing all the same (/readyz, tessera_job_store_up), until a change goes
+  // through again. A JobStoreError goes on to the caller.
+  template <typename Fn>
+  auto writing(Fn&& change) -> decltype(change()) {
+    try {
+      auto result = change();
+      writes_failing_.store(false);
+      return result;
+    } catch (const JobStoreError&) {
+      writes_failing_.store(true);
+      throw;
+    }
+  }
   void publish_state(const std::string& id);
   // 429 when `owner` has --max-queued-per-user jobs queued already.
   std::optional<Problem> queue_full(const std::string& owner);
@@ -120,6 +136,7 @@ class JobService {
   EventBus& events_;
   Metrics& metrics_;
   const JobServiceOptions options_;
+  std::atomic<bool> writes_failing_{false};
 };
 
 }  // namespace tessera::server

@@ -4,6 +4,7 @@
 // JobStoreError, so that callers can tell a store that could not record something from a job that went wrong.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <map>
 #include <optional>
@@ -50,6 +51,13 @@ struct JobRecord {
   int64_t epoch = 0;
   std::string node;
   std::optional<int64_t> lease_expires_at_ms;
+  // Runs of the job that were lost: the process rendering it (or one of its units) died without ending its run, found
+  // when its node restarts (requeue_running) or another node takes the run over after its lease expired
+  // (claim_next). The scheduler fails a job lost more often than it allows, rather than let a scene that crashes the
+  // renderer take down every node that claims it, at every start. A requeue of an ended job starts the count over.
+  int lost_runs = 0;
+  // Set by a claim that took the run over from a node whose lease expired: that node's name.
+  std::string taken_over_from;
   // Work units (work_units.h): how many the job's samples are split into (1: the job renders whole), set at
   // submission. A claim of one unit fills the rest: its index (units itself: the merge of the others' films), its
   // sample range, and the epoch of the run whose checkpoint is the unit's authoritative one (0: none yet). Its
@@ -87,6 +95,15 @@ class JobStoreError : public std::runtime_error {
 
 // How long a claim holds a job without being renewed; a render renews its lease about every second.
 inline constexpr int64_t kDefaultLeaseMs = 30000;
+// How often a node renews each lease it holds: a quarter of the lease, at least once a second. A node that misses a
+// renewal or two still holds most of its lease, and another can tell from the time of the last renewal
+// (UnitRecord::renewed_at_ms) that the node stopped: three periods without one.
+constexpr int64_t lease_renewal_period_ms(int64_t lease_ms) {
+  return std::clamp<int64_t>(lease_ms / 4, 1, 1000);
+}
+constexpr int64_t lease_stall_ms(int64_t lease_ms) {
+  return 3 * lease_renewal_period_ms(lease_ms);
+}
 
 // One unit of a split job, as the merge and the preview read them.
 struct UnitRecord {
@@ -95,6 +112,18 @@ struct UnitRecord {
   uint32_t samples = 0;
   bool done = false;
   int64_t checkpoint_epoch = 0;  // the run whose checkpoint (a done unit's: its film) is authoritative; 0: none
+  // What the job's status shows of it: running (or else queued, when not done), on which node, and its progress as
+  // of its last checkpoint (samples per pixel of its range, render seconds, pixel samples per second).
+  bool running = false;
+  std::string node;
+  uint32_t samples_done = 0;
+  double elapsed_s = 0;
+  double samples_per_s = 0;
+  // A running unit's lease: when its node last renewed it and when it runs out (milliseconds since the epoch, the
+  // renewing node's clock; 0 when not known). A node that stopped renewing (it died, or is cut off) holds the unit
+  // until the lease runs out; then another node takes it over from its checkpoint.
+  int64_t renewed_at_ms = 0;
+  int64_t lease_expires_at_ms = 0;
 };
 
 class JobStore {
@@ -104,11 +133,11 @@ class JobStore {
   // Adds a queued job. Throws if the id exists.
   virtual void create(const JobRecord& job) = 0;
   // Takes the next job to render (highest priority, then first come): a queued one, or a running one whose lease
-  // expired (its node stopped renewing it: it died, or was paused or cut off). Marks it running under a new lease:
-  // the next epoch, expiring at now_ms + lease_ms, this store's node. Nothing when none waits.
-  // With `max_running_per_owner` above 0, jobs of an owner whose runs under a live lease already number that many
-  // are passed over (a run: a job rendered whole, or one work unit of a split job), whichever node holds them: a user
-  // cannot take every render slot of the cluster, and never holds more than that many, however many nodes claim at
+  // expired (its node stopped renewing it: it died, or was paused or cut off), which counts a lost run. Marks it
+  // running under a new lease: the next epoch, expiring at now_ms + lease_ms, this store's node. Nothing when none
+  // waits. With `max_running_per_owner` above 0, jobs of an owner whose runs under a live lease already number that
+  // many are passed over (a run: a job rendered whole, or one work unit of a split job), whichever node holds them: a
+  // user cannot take every render slot of the cluster, and never holds more than that many, however many nodes claim at
   // once.
   virtual std::optional<JobRecord> claim_next(int64_t now_ms, int64_t lease_ms = kDefaultLeaseMs,
                                               int max_running_per_owner = 0) = 0;
@@ -141,7 +170,7 @@ class JobStore {
   // Deletes a job; with `only_finished_before_ms`, only if it has ended (succeeded, failed, cancelled) before that
   // time, checked in the same step (a job requeued meanwhile is kept). False when nothing was deleted.
   virtual bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt) = 0;
-  // Puts jobs left running by a previous process back in the queue; returns how many.
+  // Puts jobs left running by a previous process back in the queue, each counting a lost run; returns how many.
   virtual int requeue_running() = 0;
 
   // Work units (JobRecord::units). A store that splits jobs creates a job's units with it (job.units of them, their

@@ -16,8 +16,8 @@ namespace tessera::server {
 inline constexpr const char* kJobColumns =
     "id, kind, state, priority, created_at, started_at, finished_at, settings, outputs, passes, samples_done, "
     "samples_total, elapsed_s, eta_s, samples_per_s, stop_reason, error, seq, owner, warnings, idempotency_key, "
-    "request_hash, name, epoch, lease_expires_at, node";
-inline constexpr int kJobDocumentColumn = 26;
+    "request_hash, name, epoch, lease_expires_at, node, lost_runs";
+inline constexpr int kJobDocumentColumn = 27;
 
 // States as an SQL list, 'queued','paused' (names from the enum, never client text).
 inline std::string sql_state_list(const std::vector<JobState>& states) {
@@ -73,6 +73,7 @@ JobRecord read_job_record(const Row& row, bool with_document) {
   r.epoch = row.int64(23);
   if (!row.is_null(24)) r.lease_expires_at_ms = row.int64(24);
   r.node = row.text(25);
+  r.lost_runs = static_cast<int>(row.int64(26));
   if (with_document) r.document = row.text(kJobDocumentColumn);
   return r;
 }

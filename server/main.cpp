@@ -30,6 +30,7 @@
 #include "server/postgres_event_bus.h"
 #include "server/postgres_job_store.h"
 #include "server/postgres_notifications.h"
+#include "server/request_body.h"
 #include "server/retention.h"
 #include "server/scheduler.h"
 #include "server/sqlite_job_store.h"
@@ -83,7 +84,8 @@ int run(const Config& config) {
   std::unique_ptr<JobStore> store;
   if (shared_store) {
     try {
-      store = std::make_unique<PostgresJobStore>(config.store, node);
+      // A node stopped mid-transaction holds its rows no longer than a lease: then they are the others' to take.
+      store = std::make_unique<PostgresJobStore>(config.store, node, static_cast<int64_t>(config.lease_s * 1000));
     } catch (const JobStoreError& e) {
       log(LogLevel::kError, "cannot start: the job store cannot be opened", {{"error", e.what()}});
       std::fprintf(stderr, "tesserad: %s\n", e.what());
@@ -120,10 +122,9 @@ int run(const Config& config) {
   SchedulerOptions scheduler_options;
   scheduler_options.max_jobs = config.max_jobs;
   scheduler_options.max_running_per_user = config.max_running_per_user;
+  scheduler_options.crash_retries = config.crash_retries;
+  if (shared_store) scheduler_options.node = node;
   scheduler_options.lease = std::chrono::milliseconds(static_cast<int64_t>(config.lease_s * 1000));
-  scheduler_options.limits.max_width = config.max_width;
-  scheduler_options.limits.max_height = config.max_height;
-  scheduler_options.limits.max_spp = config.max_spp;
   scheduler_options.resolve_asset = asset_resolver(*assets);
   scheduler_options.max_gltf_instances = config.max_gltf_instances;
   Scheduler scheduler(*store, *files, pool, scheduler_options);
@@ -141,7 +142,10 @@ int run(const Config& config) {
   } stop_listening{notifications.get()};
 
   SubmissionLimits limits;
-  limits.render = scheduler_options.limits;
+  // A job's settings are judged against these once, at submission; its record keeps what was accepted.
+  limits.render.max_width = config.max_width;
+  limits.render.max_height = config.max_height;
+  limits.render.max_spp = config.max_spp;
   limits.max_work = config.max_work;
   limits.resolve_asset = scheduler_options.resolve_asset;
   limits.max_gltf_instances = config.max_gltf_instances;
@@ -165,6 +169,7 @@ int run(const Config& config) {
   }
   TransportLimits transport;
   transport.request_threads = config.http_threads;
+  transport.body_threads = config.body_threads;
   transport.stream_threads = config.max_event_streams;
   transport.max_connections = config.max_connections;
   transport.max_connections_per_client = config.max_connections_per_client;
@@ -174,6 +179,7 @@ int run(const Config& config) {
   // add to them, never this much.
   transport.max_body_wire_bytes = 2 * static_cast<uint64_t>(config.max_body_bytes) + (64u << 10);
   transport.is_long_lived = is_event_stream_target;
+  transport.check_method = check_method;
   HttpTransport http(transport);
   ctx.transport = &http;
   if (notifications) ctx.store_notifications_up = [n = notifications.get()] { return n->connected(); };
@@ -247,6 +253,7 @@ int run(const Config& config) {
        {"threads", pool.size()},
        {"max_jobs", config.max_jobs},
        {"http_threads", config.http_threads},
+       {"body_threads", config.body_threads},
        {"tokens", auth->enabled()},
        {"min_free_disk_bytes", config.min_free_disk_bytes},
        {"retain_finished_s", config.retain_finished_s},

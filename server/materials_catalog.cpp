@@ -1,6 +1,12 @@
 #include "server/materials_catalog.h"
 
+#include <algorithm>
+#include <map>
 #include <optional>
+#include <string>
+#include <vector>
+
+#include "proto/contract.h"
 
 namespace tessera::server {
 
@@ -53,6 +59,29 @@ json at_or_null(const json& v, const char* pointer) {
   return v.contains(p) ? v.at(p) : json();
 }
 
+// The names of the properties of the schema a $ref names (`ref`, resolved into the file `target_doc`) in the order
+// the file lists them. nlohmann::json keeps an object's members sorted by name, so this reads the compiled-in file
+// again (once: `files` keeps it), keeping its order: a client builds its form in the order the schema's author gave.
+// Empty when the file is not the contract's (a SchemaSet of the tests'): the catalogue then keeps the names' order.
+std::vector<std::string> property_order(const std::string& target_doc, const std::string& ref,
+                                        std::map<std::string, nlohmann::ordered_json>* files) {
+  const size_t hash = ref.find('#');
+  if (hash == std::string::npos) return {};
+  auto [it, added] = files->try_emplace(target_doc);
+  if (added) {
+    auto text = proto::contract_file("schemas/" + target_doc);
+    if (text) it->second = nlohmann::ordered_json::parse(*text, nullptr, false);
+  }
+  const nlohmann::ordered_json& file = it->second;
+  const nlohmann::ordered_json::json_pointer pointer(ref.substr(hash + 1));
+  if (!file.is_object() || !file.contains(pointer)) return {};
+  std::vector<std::string> names;
+  const nlohmann::ordered_json& schema = file.at(pointer);
+  if (auto p = schema.find("properties"); p != schema.end() && p->is_object())
+    for (const auto& [name, value] : p->items()) names.push_back(name);
+  return names;
+}
+
 }  // namespace
 
 json describe_materials(const proto::SchemaSet& set) {
@@ -61,6 +90,7 @@ json describe_materials(const proto::SchemaSet& set) {
   const json* doc = set.document(doc_name);
   if (!doc) return {{"materials", list}};
   const json models = doc->value("allOf", json::array());
+  std::map<std::string, nlohmann::ordered_json> files;
   for (const json& entry : models) {
     const json type = at_or_null(entry, "/if/properties/type/const");
     const json ref = at_or_null(entry, "/then/$ref");
@@ -70,8 +100,12 @@ json describe_materials(const proto::SchemaSet& set) {
     if (!model) continue;
     json params = json::array();
     const json properties = model->value("properties", json::object());
-    for (const auto& [name, raw] : properties.items()) {
-      if (name == "type") continue;
+    std::vector<std::string> names = property_order(model_doc, ref.get<std::string>(), &files);
+    for (const auto& [name, raw] : properties.items())
+      if (std::find(names.begin(), names.end(), name) == names.end()) names.push_back(name);
+    for (const std::string& name : names) {
+      if (name == "type" || !properties.contains(name)) continue;
+      const json& raw = properties.at(name);
       const json schema = inline_refs(set, model_doc, raw, 0);
       json p = {{"name", name}, {"description", schema.value("description", "")}, {"schema", schema}};
       if (schema.contains("default")) p["default"] = schema["default"];

@@ -10,7 +10,8 @@
 namespace tessera::server {
 
 // {"materials": [{"type", "title", "description", "parameters": [{"name", "description", "default", "minimum",
-// "maximum", "schema"}]}]}; the parameter schemas have their $refs resolved.
+// "maximum", "schema"}]}]}; the parameter schemas have their $refs resolved. Models and parameters come in the order
+// material.schema.json lists them (its allOf, each model's properties), the order a form shows them in.
 nlohmann::json describe_materials(const proto::SchemaSet& schemas);
 
 }  // namespace tessera::server

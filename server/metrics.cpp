@@ -50,8 +50,9 @@ std::string Metrics::render(const Gauges& g) const {
     out << "# HELP tessera_node_info The daemon: its node name and job store.\n"
         << "# TYPE tessera_node_info gauge\n"
         << "tessera_node_info{node=\"" << label_value(node_) << "\",store=\"" << label_value(store_) << "\"} 1\n";
-  out << "# HELP tessera_job_store_up Whether the job store works (0: it could not be read for this scrape, or the end "
-         "of a render waits for it to take a write; as /readyz's job_store_failing).\n"
+  out << "# HELP tessera_job_store_up Whether the job store works (0: it could not be read for this scrape, the end "
+         "of a render waits for it to take a write, or it refused the last change a client asked for; as /readyz's "
+         "job_store_failing).\n"
          "# TYPE tessera_job_store_up gauge\n"
       << "tessera_job_store_up " << (g.job_store_up ? 1 : 0) << "\n";
   if (g.store_notifications_up)

@@ -68,6 +68,18 @@ void PgConnection::connect() {
   // Notices (a table that exists already) are not news for the log.
   PQsetNoticeProcessor(
       conn_, [](void*, const char*) {}, nullptr);
+  if (idle_transaction_limit_ms_ > 0) {
+    const std::string set = "SET idle_in_transaction_session_timeout = " + std::to_string(idle_transaction_limit_ms_);
+    PGresult* r = PQexec(conn_, set.c_str());
+    const bool ok = r && PQresultStatus(r) == PGRES_COMMAND_OK;
+    PQclear(r);
+    if (!ok) {
+      std::string msg = PQerrorMessage(conn_);
+      while (!msg.empty() && msg.back() == '\n') msg.pop_back();
+      close();
+      throw JobStoreError("job store: cannot limit idle transactions: " + msg, false);
+    }
+  }
 }
 
 PgResult PgConnection::exec(const std::string& sql, const Params& params) {

@@ -48,8 +48,17 @@ class PgConnection {
   // Connects at the first statement (or connect()). TCP keepalives are on, so that a server that vanished without
   // closing the connection is noticed within about half a minute. `application_name` names the connection in the
   // server's pg_stat_activity ("tesserad NODE notifications"), unless the conninfo names it.
-  explicit PgConnection(std::string conninfo, std::string application_name = "tesserad")
-      : conninfo_(std::move(conninfo)), application_name_(std::move(application_name)) {}
+  //
+  // `idle_transaction_limit_ms` (0: the server's setting) is the session's idle_in_transaction_session_timeout: a
+  // process stopped between BEGIN and COMMIT (frozen by SIGSTOP, a debugger, a paused VM) would otherwise hold its row
+  // locks for as long as it is stopped, and every other node that writes those rows waits behind it. Past the limit
+  // the server ends the session and rolls its transaction back (PostgreSQL 15 manual, §20.11.1); the stopped process
+  // finds its connection closed when it runs again, and its statement fails as any lost connection's does.
+  explicit PgConnection(std::string conninfo, std::string application_name = "tesserad",
+                        int64_t idle_transaction_limit_ms = 0)
+      : conninfo_(std::move(conninfo)),
+        application_name_(std::move(application_name)),
+        idle_transaction_limit_ms_(idle_transaction_limit_ms) {}
   ~PgConnection();
   PgConnection(const PgConnection&) = delete;
   PgConnection& operator=(const PgConnection&) = delete;
@@ -68,6 +77,7 @@ class PgConnection {
  private:
   std::string conninfo_;
   std::string application_name_;
+  int64_t idle_transaction_limit_ms_;
   pg_conn* conn_ = nullptr;
 };
 

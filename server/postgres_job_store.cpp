@@ -171,8 +171,8 @@ class PostgresJobStore::Result : public PgResult {
   JobRecord record(bool with_document) const { return read_job_record(*this, with_document); }
 };
 
-PostgresJobStore::PostgresJobStore(const std::string& conninfo, std::string node)
-    : node_(std::move(node)), conn_(conninfo, "tesserad " + node_) {
+PostgresJobStore::PostgresJobStore(const std::string& conninfo, std::string node, int64_t idle_transaction_limit_ms)
+    : node_(std::move(node)), conn_(conninfo, "tesserad " + node_, idle_transaction_limit_ms) {
   std::lock_guard lock(mutex_);
   conn_.connect();
   migrate();
@@ -180,8 +180,20 @@ PostgresJobStore::PostgresJobStore(const std::string& conninfo, std::string node
 
 PostgresJobStore::~PostgresJobStore() = default;
 
+// Version 5: the runs of a job that were lost (JobRecord::lost_runs).
+constexpr const char* kMigration5 = R"sql(
+  ALTER TABLE tessera_jobs ADD COLUMN lost_runs INTEGER NOT NULL DEFAULT 0;
+)sql";
+
+// Version 6: when a unit's lease was last renewed (its node's clock), so that a unit whose node stopped renewing
+// shows as stalled before its lease runs out (UnitRecord::renewed_at_ms).
+constexpr const char* kMigration6 = R"sql(
+  ALTER TABLE tessera_units ADD COLUMN renewed_at BIGINT;
+)sql";
+
 const std::vector<const char*>& PostgresJobStore::migrations() {
-  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2, kMigration3, kMigration4};
+  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2, kMigration3,
+                                                       kMigration4, kMigration5, kMigration6};
   return kMigrations;
 }
 
@@ -288,12 +300,15 @@ std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms, int64_t le
       // come) is taken and the other's lock released with the transaction. A unit: queued, or running under a lease
       // that expired; the merge only once every range is done.
       Result whole = exec(
-          "SELECT seq, priority, owner FROM tessera_jobs j WHERE units = 1 AND (state = 'queued' OR (state = "
+          "SELECT seq, priority, owner, state, COALESCE(node, '') FROM tessera_jobs j WHERE units = 1 AND (state = "
+          "'queued' OR (state = "
           "'running' AND lease_expires_at < $1)) AND ($2::int <= 0 OR " +
               live_runs_of("j.owner") + " < $2::int) ORDER BY priority DESC, seq LIMIT 1 FOR UPDATE SKIP LOCKED",
           {now, cap});
       Result unit = exec(
-          "SELECT u.job_id, u.idx, j.seq, j.priority, j.owner FROM tessera_units u JOIN tessera_jobs j ON j.id = "
+          "SELECT u.job_id, u.idx, j.seq, j.priority, j.owner, u.state, COALESCE(u.node, '') FROM tessera_units u "
+          "JOIN tessera_jobs j ON "
+          "j.id = "
           "u.job_id WHERE j.state IN ('queued', 'running') AND (u.state = 'queued' OR (u.state = 'running' AND "
           "u.lease_expires_at < $1)) AND (u.idx < j.units OR NOT EXISTS (SELECT 1 FROM tessera_units d WHERE "
           "d.job_id = u.job_id AND d.idx < j.units AND d.state <> 'done')) AND ($2::int <= 0 OR " +
@@ -319,22 +334,29 @@ std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms, int64_t le
       if (!take_unit) {
         Result r = exec(std::string("UPDATE tessera_jobs SET state = 'running', started_at = $1, node = $2, passes = "
                                     "0, samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0, "
-                                    "epoch = epoch + 1, lease_expires_at = $1::bigint + $3::bigint WHERE seq = $4 "
+                                    "epoch = epoch + 1, lease_expires_at = $1::bigint + $3::bigint, lost_runs = "
+                                    "lost_runs + CASE WHEN state = 'running' THEN 1 ELSE 0 END WHERE seq = $4 "
                                     "RETURNING ") +
                             kJobColumns + ", document",
                         {now, node_, lease, whole.text(0)});
-        return r.record(true);
+        JobRecord record = r.record(true);
+        if (whole.text(3) == "running") record.taken_over_from = whole.text(4);
+        return record;
       }
       const std::string job_id = unit.text(0), idx = unit.text(1);
       // The job's epoch counter hands out the unit run's fencing token; the job runs from its first unit's claim.
+      // A unit taken over from a run whose lease expired is a lost run of its job.
+      const std::string lost = unit.text(5) == "running" ? "1" : "0";
       Result j = exec(std::string("UPDATE tessera_jobs SET epoch = epoch + 1, state = 'running', "
-                                  "started_at = COALESCE(started_at, $2) WHERE id = $1 RETURNING ") +
+                                  "started_at = COALESCE(started_at, $2), lost_runs = lost_runs + $3::int WHERE id = "
+                                  "$1 RETURNING ") +
                           kJobColumns + ", document",
-                      {job_id, now});
+                      {job_id, now, lost});
       JobRecord record = j.record(true);
       Result u = exec(
-          "UPDATE tessera_units SET state = 'running', epoch = $3, node = $4, lease_expires_at = $5::bigint + "
-          "$6::bigint WHERE job_id = $1 AND idx = $2 RETURNING first_sample, samples, checkpoint_epoch, "
+          "UPDATE tessera_units SET state = 'running', epoch = $3, node = $4, renewed_at = $5::bigint, "
+          "lease_expires_at = $5::bigint + $6::bigint WHERE job_id = $1 AND idx = $2 RETURNING first_sample, samples, "
+          "checkpoint_epoch, "
           "(SELECT units FROM tessera_jobs WHERE id = $1)",
           {job_id, idx, to_text(record.epoch), node_, now, lease});
       record.unit = static_cast<int>(std::strtol(idx.c_str(), nullptr, 10));
@@ -343,6 +365,7 @@ std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms, int64_t le
       record.unit_checkpoint_epoch = u.int64(2);
       record.units = static_cast<int>(u.int64(3));
       record.node = node_;
+      if (unit.text(5) == "running") record.taken_over_from = unit.text(6);
       return record;
     });
     if (claimed || !owner_full || attempt == 2) return claimed;
@@ -353,7 +376,9 @@ bool PostgresJobStore::renew_lease(const std::string& id, int64_t epoch, int64_t
   std::lock_guard lock(mutex_);
   // A unit run of a running job, or a job rendered whole: (id, epoch) names one of them at most.
   return exec(
-             "WITH u AS (UPDATE tessera_units u SET lease_expires_at = $3::bigint + $4::bigint FROM tessera_jobs j "
+             "WITH u AS (UPDATE tessera_units u SET renewed_at = $3::bigint, lease_expires_at = $3::bigint + "
+             "$4::bigint "
+             "FROM tessera_jobs j "
              "WHERE u.job_id = $1 AND u.epoch = $2 AND u.state = 'running' AND j.id = u.job_id AND "
              "j.state = 'running' RETURNING 1), w AS (UPDATE tessera_jobs SET lease_expires_at = $3::bigint + "
              "$4::bigint WHERE id = $1 AND state = 'running' AND epoch = $2 AND units = 1 RETURNING 1) "
@@ -465,8 +490,8 @@ bool PostgresJobStore::move(const std::string& id, JobState to, int64_t now_ms, 
     return exec(
                "UPDATE tessera_jobs SET state = 'queued', node = NULL, lease_expires_at = NULL, started_at = NULL, "
                "finished_at = NULL, stop_reason = NULL, error = NULL, passes = 0, samples_done = 0, elapsed_s = 0, "
-               "eta_s = NULL, samples_per_s = 0" +
-                   where,
+               "eta_s = NULL, samples_per_s = 0, lost_runs = CASE WHEN state IN (" +
+                   sql_terminal_states() + ") THEN 0 ELSE lost_runs END" + where,
                params)
                .affected() > 0;
   }
@@ -592,21 +617,40 @@ bool PostgresJobStore::remove(const std::string& id, std::optional<int64_t> only
 std::vector<UnitRecord> PostgresJobStore::units(const std::string& id) {
   std::lock_guard lock(mutex_);
   Result r = exec(
-      "SELECT u.idx, u.first_sample, u.samples, u.state, u.checkpoint_epoch FROM tessera_units u JOIN tessera_jobs j "
-      "ON j.id = u.job_id WHERE u.job_id = $1 AND u.idx < j.units ORDER BY u.idx",
+      "SELECT u.idx, u.first_sample, u.samples, u.state, u.checkpoint_epoch, COALESCE(u.node, ''), u.samples_done, "
+      "u.elapsed_s, u.samples_per_s, COALESCE(u.renewed_at, 0), COALESCE(u.lease_expires_at, 0) FROM tessera_units u "
+      "JOIN tessera_jobs j ON j.id = u.job_id WHERE u.job_id = $1 "
+      "AND u.idx < j.units ORDER BY u.idx",
       {id});
   std::vector<UnitRecord> out;
   for (int i = 0; i < r.rows(); ++i) {
     r.at(i);
-    out.push_back({static_cast<int>(r.int64(0)), static_cast<uint32_t>(r.int64(1)), static_cast<uint32_t>(r.int64(2)),
-                   r.text(3) == "done", r.int64(4)});
+    UnitRecord& u = out.emplace_back();
+    u.index = static_cast<int>(r.int64(0));
+    u.first_sample = static_cast<uint32_t>(r.int64(1));
+    u.samples = static_cast<uint32_t>(r.int64(2));
+    u.done = r.text(3) == "done";
+    u.running = r.text(3) == "running";
+    u.checkpoint_epoch = r.int64(4);
+    u.node = r.text(5);
+    u.samples_done = static_cast<uint32_t>(r.int64(6));
+    u.elapsed_s = r.real(7);
+    u.samples_per_s = r.real(8);
+    if (u.running) {
+      u.renewed_at_ms = r.int64(9);
+      u.lease_expires_at_ms = r.int64(10);
+    }
   }
   return out;
 }
 
 int PostgresJobStore::requeue_running() {
   std::lock_guard lock(mutex_);
-  // The units this node was rendering wait for any node, with their checkpoints.
+  // The units this node was rendering wait for any node, with their checkpoints; each job of them lost a run.
+  exec(
+      "UPDATE tessera_jobs SET lost_runs = lost_runs + 1 WHERE id IN (SELECT job_id FROM tessera_units WHERE state = "
+      "'running' AND node = $1)",
+      {node_});
   const int units = exec(
                         "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL "
                         "WHERE state = 'running' AND node = $1",
@@ -615,7 +659,7 @@ int PostgresJobStore::requeue_running() {
   return units +
          exec(
              "UPDATE tessera_jobs SET state = 'queued', node = NULL, lease_expires_at = NULL, started_at = NULL, "
-             "passes = 0, samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0 "
+             "passes = 0, samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0, lost_runs = lost_runs + 1 "
              "WHERE state = 'running' AND node = $1",
              {node_})
              .affected();

@@ -22,8 +22,10 @@ namespace tessera::server {
 class PostgresJobStore final : public JobStore {
  public:
   // Connects (a libpq connection string or URI), migrates. Throws JobStoreError when the database cannot be reached
-  // or has a newer schema. `node` names this daemon in the jobs it claims.
-  PostgresJobStore(const std::string& conninfo, std::string node);
+  // or has a newer schema. `node` names this daemon in the jobs it claims. A transaction of this store idle for
+  // `idle_transaction_limit_ms` (the daemon's lease; 0: the server's setting) is ended by the server with its locks:
+  // a node stopped mid-transaction then holds up the others no longer than its lease would (PgConnection).
+  PostgresJobStore(const std::string& conninfo, std::string node, int64_t idle_transaction_limit_ms = 0);
   ~PostgresJobStore() override;
   PostgresJobStore(const PostgresJobStore&) = delete;
   PostgresJobStore& operator=(const PostgresJobStore&) = delete;

@@ -59,6 +59,7 @@ nlohmann::json Problem::to_json() const {
     j["errors"] = nlohmann::json::array();
     for (const auto& [at, what] : errors) j["errors"].push_back({{"pointer", capped(at)}, {"detail", capped(what)}});
   }
+  if (pending) j["pending"] = *pending;
   return j;
 }
 

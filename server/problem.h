@@ -19,6 +19,8 @@ struct Problem {
   // Every error of a refused document, as (pointer, detail), when it has more than one: the first is `detail` and
   // `pointer`; the answer lists them all in "errors".
   std::vector<std::pair<std::string, std::string>> errors = {};
+  // With a document's errors: the checks that could not run because of them, and follow once they are fixed.
+  std::optional<std::string> pending = std::nullopt;
 
   // "https://tessera.dev/problems/<slug>" and a title, both chosen by the status.
   std::string type() const;

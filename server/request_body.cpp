@@ -49,10 +49,16 @@ bool has_body(const httplib::Request& req) {
   return !length.empty() && length.find_first_not_of('0') != std::string::npos;
 }
 
-std::optional<Problem> check_request_head(const httplib::Request& req, size_t max_body_bytes) {
+std::optional<Problem> check_method(std::string_view method) {
   static const char* const kMethods[] = {"GET", "HEAD", "POST", "PATCH", "DELETE", "PUT", "OPTIONS"};
-  if (std::none_of(std::begin(kMethods), std::end(kMethods), [&](const char* m) { return req.method == m; }))
-    return bad(501, "the method " + req.method.substr(0, 16) + " is not implemented by this server");
+  if (std::any_of(std::begin(kMethods), std::end(kMethods), [&](const char* m) { return method == m; }))
+    return std::nullopt;
+  // A method the server does not recognise or implement is answered 501 (RFC 9110, sections 9.1 and 15.6.2).
+  return bad(501, "the method " + std::string(method.substr(0, 16)) + " is not implemented by this server");
+}
+
+std::optional<Problem> check_request_head(const httplib::Request& req, size_t max_body_bytes) {
+  if (auto problem = check_method(req.method)) return problem;
 
   // A client must send Host in every HTTP/1.1 request, and a server must answer 400 to a request without one or with
   // more than one (RFC 9112, 3.2).

@@ -9,10 +9,15 @@
 
 #include <cstddef>
 #include <optional>
+#include <string_view>
 
 #include "server/problem.h"
 
 namespace tessera::server {
+
+// Nothing, or 501 for a method this server does not implement (GET, HEAD, POST, PATCH, DELETE, PUT and OPTIONS are
+// the ones it does).
+std::optional<Problem> check_method(std::string_view method);
 
 // Nothing, or why the request is refused without reading its body: 400 (framing), 413 (declared length above the
 // limit), 415 (content coding), 501 (method or transfer coding this server does not implement).

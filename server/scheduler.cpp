@@ -101,7 +101,7 @@ void stage_png(const JobFiles& files, const std::string& id, int64_t epoch, cons
 }  // namespace
 
 Scheduler::Scheduler(JobStore& store, const JobFiles& files, ThreadPool& pool, SchedulerOptions options)
-    : store_(store), files_(files), log_(files), pool_(pool), options_(std::move(options)) {}
+    : store_(store), files_(files), log_(files, options.node), pool_(pool), options_(std::move(options)) {}
 
 Scheduler::~Scheduler() {
   shutdown();
@@ -210,13 +210,18 @@ void Scheduler::reap_finished_locked(std::unique_lock<std::mutex>& lock) {
   }
 }
 
-// Renews the lease of each render under way once per poll interval. A lease the store refuses is lost: the render
+// Renews the lease of each render under way once per renewal period (lease_renewal_period_ms), or poll interval if
+// that is shorter. A lease the store refuses is lost: the render
 // stops and records nothing (the job ended, was paused or deleted elsewhere, or another daemon took it over after this
 // one failed to renew in time). A store that fails leaves the render going: its lease may still be renewed in time.
 void Scheduler::renew_leases_locked() {
   const auto now = std::chrono::steady_clock::now();
   for (auto& [id, slot] : running_)
-    if (now - slot->renewed_at >= options_.poll_interval) renew_lease_locked(*slot, "its lease renewal");
+    if (now - slot->renewed_at >= renewal_period()) renew_lease_locked(*slot, "its lease renewal");
+}
+
+std::chrono::milliseconds Scheduler::renewal_period() const {
+  return std::min(options_.poll_interval, std::chrono::milliseconds(lease_renewal_period_ms(options_.lease.count())));
 }
 
 void Scheduler::renew_lease_locked(RenderSlot& slot, const char* noticed_by) {
@@ -279,12 +284,12 @@ void Scheduler::dispatch_loop() {
       // A slot per job rendered whole, per unit of a split one (units of one job may render here side by side); a
       // run claimed again while the last one here winds down (it was paused and resumed) gets a slot of its own.
       std::string key = slot->unit < 0 ? slot->id : slot->id + "/" + std::to_string(slot->unit);
-      if (running_.contains(key)) key += "@" + std::to_string(slot->epoch);
+      if (running_.contains(key)) (key += '@') += std::to_string(slot->epoch);
       running_[key] = slot;
       slot->thread = std::thread([this, slot, rec = std::move(*record)] { run_job(slot, rec); });
     }
     renew_leases_locked();
-    cv_.wait_for(lock, options_.poll_interval);
+    cv_.wait_for(lock, running_.empty() ? options_.poll_interval : renewal_period());
   }
   // Shutting down: every render has been told to stop; wait for them to put their jobs back.
   while (!running_.empty()) {
@@ -321,6 +326,11 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     }
     cv_.notify_all();
   };
+  if (record.lost_runs > options_.crash_retries) {
+    fail_lost_too_often(*slot, record);
+    finish();
+    return;
+  }
   const bool is_unit = record.unit >= 0;
   if (is_unit && record.unit >= record.units) {
     try {
@@ -389,23 +399,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     }
   };
   try {
-    const json doc = json::parse(record.document);
-    JobLoadOptions options;
-    options.limits = options_.limits;
-    options.scene.resolve_asset = options_.resolve_asset;
-    options.scene.max_gltf_instances = options_.max_gltf_instances;
-    options.scene.stop = slot->load_stop.get_token();
-    log_.add(id, "loading the scene");
-    const auto load_start = std::chrono::steady_clock::now();
-    RenderJob job = load_job(doc, options);
-    if (is_unit) {
-      // One unit: its range of the job's sample indices (work_units.h).
-      job.settings.first_sample += record.unit_first_sample;
-      job.settings.job_spp = job.settings.spp;  // every unit's rays have the whole job's texture footprints
-      job.settings.spp = record.unit_samples;
-    }
-    log_.add(id, printf_string("scene loaded in %.3f s",
-                               std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count()));
+    RenderJob job = load_run(*slot, record);
     for (const std::string& w : job.scene->warnings) log_.add(id, "warning: " + w);
     if (!job.scene->warnings.empty()) {
       try {
@@ -419,24 +413,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     RenderSession session(job.scene, job.settings, pool_);
     const uint64_t settings_hash =
         is_unit ? unit_settings_hash(record.settings, record.unit) : fnv1a64(record.settings);
-    // A unit resumes from the checkpoint the store names as its own (of the last run that recorded one).
-    std::optional<std::string> checkpoint;
-    if (!is_unit)
-      checkpoint = files_.read(id, JobFile::kCheckpoint);
-    else if (record.unit_checkpoint_epoch > 0)
-      checkpoint = files_.read_unit(id, record.unit, record.unit_checkpoint_epoch);
-    if (auto& bytes = checkpoint) {
-      if (auto cp = decode_checkpoint(*bytes, job.settings.width, job.settings.height, settings_hash)) {
-        log(LogLevel::kInfo, "job resumed from its checkpoint",
-            {{"job", id}, {"samples_done", cp->film.samples()}, {"passes", cp->passes}});
-        log_.add(id, printf_string("resuming from its checkpoint: %u spp in %u passes",
-                                   static_cast<unsigned>(cp->film.samples()), static_cast<unsigned>(cp->passes)));
-        session.restore(std::move(cp->film), cp->passes, cp->elapsed_s);
-      } else {
-        log(LogLevel::kWarn, "checkpoint unusable; the render starts over", {{"job", id}});
-        log_.add(id, "warning: its checkpoint is unusable (damaged, or of other settings); the render starts over");
-      }
-    }
+    resume_from_checkpoint(*slot, record, job.settings, settings_hash, session);
     log(LogLevel::kInfo, "job started",
         {{"job", id}, {"samples_done", session.progress().samples_done}, {"unit", record.unit}});
     if (is_unit)
@@ -571,22 +548,9 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     } else {
       // The outputs first, staged (publish_outputs()): a file that cannot be written (a full disk) fails the job, as
       // it should.
-      const Film& film = session.film();
-      const std::vector<float> rgb = film.resolve();
-      if (job.want_png) {
-        std::vector<uint8_t> png = encode_png(rgb, film.width(), film.height(), job.settings.display);
-        stage_png(files_, id, slot->epoch, png);
-      }
-      if (job.want_exr) {
-        files_.stage(id, JobFile::kResultExr, slot->epoch, [&](const std::string& temp) {
-          write_exr(temp, rgb, film.width(), film.height(), job.settings.exr_half);
-        });
-      }
+      const std::string written = write_outputs(id, job.settings, job.outputs, session.film(), slot->epoch);
       JobProgress final_progress = to_job_progress(session.progress());
       final_progress.eta_s = 0;
-      std::string written;
-      if (job.want_png) written += " result.png";
-      if (job.want_exr) written += " result.exr";
       log_.add(id,
                printf_string("succeeded: %s after %.2f s, %u spp in %u passes; wrote%s", stop_explained(reason).c_str(),
                              final_progress.elapsed_s, static_cast<unsigned>(final_progress.samples_done),
@@ -617,6 +581,29 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
     record_failure(*slot, "unknown error", render_s, false);
   }
   finish();
+}
+
+RenderJob Scheduler::load_run(RenderSlot& slot, const JobRecord& record) {
+  RenderJob job;
+  job.settings = render_settings_from_text(record.settings);
+  job.outputs = output_spec_from_text(record.outputs);
+  if (record.unit >= 0) {
+    // One unit: its range of the job's sample indices (work_units.h).
+    job.settings.first_sample += record.unit_first_sample;
+    job.settings.job_spp = job.settings.spp;  // every unit's rays have the whole job's texture footprints
+    job.settings.spp = record.unit_samples;
+  }
+  SceneLoadOptions options;
+  options.resolve_asset = options_.resolve_asset;
+  options.max_gltf_instances = options_.max_gltf_instances;
+  options.stop = slot.load_stop.get_token();
+  log_.add(record.id, "loading the scene");
+  const auto load_start = std::chrono::steady_clock::now();
+  job.scene = load_job_scene(json::parse(record.document), job.settings, options);
+  log_.add(record.id,
+           printf_string("scene loaded in %.3f s",
+                         std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count()));
+  return job;
 }
 
 // A failing store is no fault of the job: the render's outcome stands and is written again, after 100 ms doubling up
@@ -691,6 +678,69 @@ bool Scheduler::record_terminal(RenderSlot& slot, JobState to, double render_s, 
 
 // Logs a job that failed (its scene, its outputs) and records it as record_terminal() does, with the stop reason
 // kInputRefused when its input is at fault; false when it was not recorded.
+// A run resumes from the job's checkpoint (a unit's: the one the store names as its own, of the last run that
+// recorded one), and what it holds is the job's progress from then on: recorded at once, not at the end of the next
+// pass, so that a job resumed after a restart does not read 0 samples done meanwhile.
+void Scheduler::resume_from_checkpoint(RenderSlot& slot, const JobRecord& record, const RenderSettings& settings,
+                                       uint64_t settings_hash, RenderSession& session) {
+  const std::string& id = record.id;
+  // A run taken over from a node that stopped renewing its lease says so, whatever it resumes from: the wait for the
+  // lease to expire is otherwise invisible in the log.
+  const std::string who = record.unit >= 0 ? printf_string("unit %d: ", record.unit + 1) : std::string();
+  const std::string takeover =
+      record.taken_over_from.empty()
+          ? std::string()
+          : who + "node " + record.taken_over_from + " stopped renewing its lease; taken over by this node, ";
+  std::optional<std::string> checkpoint;
+  if (record.unit < 0)
+    checkpoint = files_.read(id, JobFile::kCheckpoint);
+  else if (record.unit_checkpoint_epoch > 0)
+    checkpoint = files_.read_unit(id, record.unit, record.unit_checkpoint_epoch);
+  auto cp = checkpoint ? decode_checkpoint(*checkpoint, settings.width, settings.height, settings_hash) : std::nullopt;
+  if (checkpoint && !cp) {
+    log(LogLevel::kWarn, "checkpoint unusable; the render starts over", {{"job", id}});
+    log_.add(id, "warning: its checkpoint is unusable (damaged, or of other settings); the render starts over");
+  }
+  if (!cp) {
+    if (!takeover.empty()) log_.add(id, takeover + "starting over (it left no checkpoint)");
+    return;
+  }
+  log(LogLevel::kInfo, "job resumed from its checkpoint",
+      {{"job", id}, {"samples_done", cp->film.samples()}, {"passes", cp->passes}});
+  log_.add(id, printf_string("%sresuming from its checkpoint at %u spp (%u passes)",
+                             takeover.empty() ? "" : takeover.c_str(), static_cast<unsigned>(cp->film.samples()),
+                             static_cast<unsigned>(cp->passes)));
+  session.restore(std::move(cp->film), cp->passes, cp->elapsed_s);
+  const JobProgress restored = to_job_progress(session.progress());
+  {
+    std::lock_guard lock(mutex_);
+    slot.progress = restored;
+  }
+  try {
+    if (!store_.update_progress(id, slot.epoch, restored)) return;  // the run is no longer ours: its render finds out
+  } catch (const JobStoreError& e) {
+    count_store_error();
+    log(LogLevel::kWarn, "cannot record a resumed job's progress; the next pass does",
+        {{"job", id}, {"error", e.what()}});
+    return;
+  }
+  if (!hooks_.progress) return;
+  if (record.unit < 0) {
+    hooks_.progress(id, restored);
+  } else if (auto now = store_.get(id)) {  // the job's progress over every unit and node, as the store sums it
+    hooks_.progress(id, now->progress);
+  }
+}
+
+void Scheduler::fail_lost_too_often(RenderSlot& slot, const JobRecord& record) {
+  record_failure(slot,
+                 printf_string("the renderer stopped %d times while rendering this job (its process crashed or was "
+                               "killed: the scene may crash the renderer), more than the %d retries allowed "
+                               "(--crash-retries)",
+                               record.lost_runs, options_.crash_retries),
+                 0, true);
+}
+
 bool Scheduler::record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused) {
   log(LogLevel::kError, "job failed", {{"job", slot.id}, {"error", message}, {"input_refused", input_refused}});
   log_.add(slot.id,
@@ -741,32 +791,27 @@ void Scheduler::publish_outputs(RenderSlot& slot, bool recorded) {
   }
 }
 
-std::string Scheduler::write_outputs(const JobRecord& job, const Film& film, std::optional<int64_t> staged_epoch) {
-  const json settings = json::parse(job.settings);
-  DisplaySettings display;
-  display.exposure_ev = settings.value("exposure_ev", 0.0f);
-  parse_tonemap(settings.value("tonemap", "clamp"), &display.tonemap);
+std::string Scheduler::write_outputs(const std::string& id, const RenderSettings& settings, const OutputSpec& outputs,
+                                     const Film& film, std::optional<int64_t> staged_epoch) {
   const std::vector<float> rgb = film.resolve();
   std::string written;
-  for (const json& format : json::parse(job.outputs)) {
-    if (format == "png") {
-      std::vector<uint8_t> png = encode_png(rgb, film.width(), film.height(), display);
-      if (staged_epoch)
-        stage_png(files_, job.id, *staged_epoch, png);
-      else
-        files_.write(job.id, JobFile::kResultPng,
-                     std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
-      written += " result.png";
-    } else if (format == "exr") {
-      const auto writer = [&](const std::string& temp) {
-        write_exr(temp, rgb, film.width(), film.height(), settings.value("exr_precision", "half") == "half");
-      };
-      if (staged_epoch)
-        files_.stage(job.id, JobFile::kResultExr, *staged_epoch, writer);
-      else
-        files_.write_with(job.id, JobFile::kResultExr, writer);
-      written += " result.exr";
-    }
+  if (outputs.png) {
+    std::vector<uint8_t> png = encode_png(rgb, film.width(), film.height(), settings.display);
+    if (staged_epoch)
+      stage_png(files_, id, *staged_epoch, png);
+    else
+      files_.write(id, JobFile::kResultPng, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
+    written += " result.png";
+  }
+  if (outputs.exr) {
+    const auto writer = [&](const std::string& temp) {
+      write_exr(temp, rgb, film.width(), film.height(), settings.exr_half);
+    };
+    if (staged_epoch)
+      files_.stage(id, JobFile::kResultExr, *staged_epoch, writer);
+    else
+      files_.write_with(id, JobFile::kResultExr, writer);
+    written += " result.exr";
   }
   return written;
 }
@@ -790,10 +835,9 @@ std::optional<Film> Scheduler::merge_unit_films(const JobRecord& job, int width,
 
 void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
   const std::string& id = record.id;
-  const json settings = json::parse(record.settings);
-  const int width = settings.at("width"), height = settings.at("height");
+  const RenderSettings settings = render_settings_from_text(record.settings);
   const auto start = std::chrono::steady_clock::now();
-  std::optional<Film> film = merge_unit_films(record, width, height, false);
+  std::optional<Film> film = merge_unit_films(record, settings.width, settings.height, false);
   if (!film || film->samples() != record.progress.samples_total)
     throw std::runtime_error(printf_string("its units' films hold %u of its %u samples per pixel",
                                            static_cast<unsigned>(film ? film->samples() : 0),
@@ -805,12 +849,9 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
     lose_lease_locked(slot, "its lease checked before the merge");
     return;
   }
-  const std::string written = write_outputs(record, *film, slot.epoch);
+  const std::string written = write_outputs(id, settings, output_spec_from_text(record.outputs), *film, slot.epoch);
   {
-    DisplaySettings display;
-    display.exposure_ev = settings.value("exposure_ev", 0.0f);
-    parse_tonemap(settings.value("tonemap", "clamp"), &display.tonemap);
-    std::vector<uint8_t> png = encode_png(film->resolve(), width, height, display);
+    std::vector<uint8_t> png = encode_png(film->resolve(), settings.width, settings.height, settings.display);
     files_.write(id, JobFile::kPreviewPng, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
   }
   const double merge_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -826,21 +867,20 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
 
 void Scheduler::stage_partial_results(const JobRecord& job, int64_t key) {
   try {
-    const json settings = json::parse(job.settings);
-    const int width = settings.at("width"), height = settings.at("height");
+    const RenderSettings settings = render_settings_from_text(job.settings);
     std::optional<Film> film;
     uint32_t passes = 0;
     if (auto bytes = files_.read(job.id, JobFile::kCheckpoint)) {
-      if (auto cp = decode_checkpoint(*bytes, width, height, fnv1a64(job.settings))) {
+      if (auto cp = decode_checkpoint(*bytes, settings.width, settings.height, fnv1a64(job.settings))) {
         film = std::move(cp->film);
         passes = cp->passes;
       }
     } else {
       // A split job: what its units rendered.
-      film = merge_unit_films(job, width, height, true);
+      film = merge_unit_films(job, settings.width, settings.height, true);
     }
     if (!film || film->samples() == 0) return;
-    const std::string written = write_outputs(job, *film, key);
+    const std::string written = write_outputs(job.id, settings, output_spec_from_text(job.outputs), *film, key);
     log_.add(job.id,
              printf_string(
                  "kept what it rendered, %u spp in %u passes, as its partial results (once the cancel is taken):%s",

@@ -19,7 +19,9 @@
 #include <thread>
 #include <vector>
 
+#include "renderer/job.h"
 #include "renderer/scene_loader.h"
+#include "renderer/session.h"
 #include "renderer/thread_pool.h"
 #include "server/job_files.h"
 #include "server/job_log.h"
@@ -32,7 +34,12 @@ struct SchedulerOptions {
   // Runs (jobs rendered whole, work units) one owner's jobs may hold at once across every node of the store; 0: no
   // limit (JobStore::claim_next).
   int max_running_per_user = 0;
-  RenderLimits limits;
+  // Runs of a job that may be lost (its node died while rendering it: JobRecord::lost_runs) before it fails instead
+  // of rendering again: a scene that crashes the renderer fails after this many retries, never in a loop.
+  int crash_retries = 2;
+  // This daemon's name among the nodes sharing the store, written on the lines it adds to job logs; empty for a
+  // daemon alone.
+  std::string node;
   // Maps an asset reference of a job ("gltf", "environment.map") to its file (SceneLoadOptions::resolve_asset).
   std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
   uint64_t max_gltf_instances = 1'000'000;  // SceneLoadOptions::max_gltf_instances
@@ -121,6 +128,15 @@ class Scheduler {
   bool record_terminal(RenderSlot& slot, JobState to, double render_s, const std::string& stop_reason,
                        const std::string& error = "", const std::function<void()>& before = nullptr);
   bool record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused);
+  // What a run renders: the settings and outputs its record stores (render_settings.h), narrowed to a unit's sample
+  // range, and the scene its document describes (load_job_scene). Throws SceneError for a scene the renderer refuses,
+  // LoadStopped when the slot is asked to stop meanwhile.
+  RenderJob load_run(RenderSlot& slot, const JobRecord& record);
+  // Restores `session` from the run's checkpoint, if it has a usable one, and records the progress it holds.
+  void resume_from_checkpoint(RenderSlot& slot, const JobRecord& record, const RenderSettings& settings,
+                              uint64_t settings_hash, RenderSession& session);
+  // Fails a job claimed after more lost runs than options_.crash_retries, naming them; it is not rendered again.
+  void fail_lost_too_often(RenderSlot& slot, const JobRecord& record);
   void count_store_error();
   // The outputs of a job cancelled after a pass, from its checkpoint (the film of its last complete pass), so that
   // what it rendered stays viewable and downloadable. They are staged under `key` (JobFiles::stage) and published by
@@ -131,6 +147,8 @@ class Scheduler {
   void settle_partial_results(const std::string& id, int64_t key, bool cancel_taken);
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
   void renew_leases_locked();
+  // How often a render's lease is renewed: the store's renewal period for the lease, or the poll interval if shorter.
+  std::chrono::milliseconds renewal_period() const;
   // `noticed_by`: what found the lease gone, for the log (a notification, a renewal, a refused write).
   void renew_lease_locked(RenderSlot& slot, const char* noticed_by);
   void lose_lease_locked(RenderSlot& slot, const char* noticed_by);
@@ -150,7 +168,8 @@ class Scheduler {
   std::optional<Film> merge_unit_films(const JobRecord& job, int width, int height, bool in_progress) const;
   // The outputs the job asked for (result.png, result.exr), from `film`; the names written, for its log. With
   // `staged_epoch`, staged (JobFiles::stage) for publish_outputs().
-  std::string write_outputs(const JobRecord& job, const Film& film, std::optional<int64_t> staged_epoch = std::nullopt);
+  std::string write_outputs(const std::string& id, const RenderSettings& settings, const OutputSpec& outputs,
+                            const Film& film, std::optional<int64_t> staged_epoch = std::nullopt);
   // After the end of a run that staged its outputs: published when the store took that end (`recorded`, or read back
   // when it is unknown), removed when it refused it.
   void publish_outputs(RenderSlot& slot, bool recorded);

@@ -228,6 +228,11 @@ void SqliteJobStore::migrate() {
       exec("ALTER TABLE jobs ADD COLUMN node TEXT NOT NULL DEFAULT ''");
       exec("INSERT INTO schema_version (version) VALUES (4)");
     }
+    if (version < 5) {
+      // Version 5: the runs of a job that were lost (JobRecord::lost_runs).
+      exec("ALTER TABLE jobs ADD COLUMN lost_runs INTEGER NOT NULL DEFAULT 0");
+      exec("INSERT INTO schema_version (version) VALUES (5)");
+    }
     exec("COMMIT");
   } catch (...) {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
@@ -265,7 +270,7 @@ std::optional<JobRecord> SqliteJobStore::claim_next(int64_t now_ms, int64_t leas
   Statement s(*this,
               std::string("UPDATE jobs SET state = 'running', started_at = ?1, passes = 0, samples_done = 0, "
                           "elapsed_s = 0, eta_s = NULL, samples_per_s = 0, epoch = epoch + 1, "
-                          "lease_expires_at = ?1 + ?2 "
+                          "lease_expires_at = ?1 + ?2, lost_runs = lost_runs + (state = 'running') "
                           "WHERE seq = (SELECT seq FROM jobs c WHERE (c.state = 'queued' OR (c.state = 'running' "
                           "AND c.lease_expires_at < ?1)) AND (?3 <= 0 OR (SELECT count(*) FROM jobs r WHERE "
                           "r.owner = c.owner AND r.state = 'running' AND r.lease_expires_at >= ?1) < ?3) "
@@ -331,8 +336,8 @@ bool SqliteJobStore::move(const std::string& id, JobState to, int64_t now_ms, co
     sql =
         "UPDATE jobs SET state = 'queued', started_at = NULL, finished_at = NULL, stop_reason = NULL, error = NULL, "
         "passes = 0, samples_done = 0, elapsed_s = 0, eta_s = NULL, samples_per_s = 0, lease_expires_at = NULL, "
-        "node = ''" +
-        where;
+        "node = '', lost_runs = CASE WHEN state IN (" +
+        sql_terminal_states() + ") THEN 0 ELSE lost_runs END" + where;
   } else if (to == JobState::kRunning) {
     sql = "UPDATE jobs SET state = 'running', started_at = ?2" + where;
   } else if (to == JobState::kPaused) {
@@ -450,7 +455,8 @@ int SqliteJobStore::requeue_running() {
   std::lock_guard lock(mutex_);
   Statement s(*this,
               "UPDATE jobs SET state = 'queued', started_at = NULL, passes = 0, samples_done = 0, elapsed_s = 0, "
-              "eta_s = NULL, samples_per_s = 0, lease_expires_at = NULL, node = '' WHERE state = 'running'");
+              "eta_s = NULL, samples_per_s = 0, lease_expires_at = NULL, node = '', lost_runs = lost_runs + 1 "
+              "WHERE state = 'running'");
   s.step();
   return sqlite3_changes(db_);
 }

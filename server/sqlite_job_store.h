@@ -41,7 +41,7 @@ class SqliteJobStore final : public JobStore {
   bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt) override;
   int requeue_running() override;
 
-  static constexpr int kSchemaVersion = 4;
+  static constexpr int kSchemaVersion = 5;
 
  private:
   class Statement;

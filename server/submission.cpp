@@ -118,22 +118,6 @@ std::string media_type(std::string_view content_type) {
   return out;
 }
 
-json render_settings_json(const RenderSettings& s) {
-  return {{"width", s.width},
-          {"height", s.height},
-          {"spp", s.spp},
-          {"max_depth", s.integrator.max_depth},
-          {"integrator", s.integrator.name},
-          {"estimator", estimator_name(s.integrator.estimator)},
-          {"seed", s.seed},
-          {"sampler", s.sampler == SamplerKind::kSobol ? "sobol" : "independent"},
-          {"time_limit_s", s.time_limit_s},
-          {"noise_target", s.noise_target},
-          {"exposure_ev", s.display.exposure_ev},
-          {"tonemap", tonemap_name(s.display.tonemap)},
-          {"exr_precision", s.exr_half ? "half" : "float"}};
-}
-
 std::variant<AcceptedJob, Problem> check_submission(std::string_view content_type, std::string_view body,
                                                     const SubmissionLimits& limits) {
   if (media_type(content_type) != "application/json")
@@ -149,19 +133,34 @@ std::variant<AcceptedJob, Problem> check_submission(std::string_view content_typ
 std::variant<AcceptedJob, Problem> check_job_document(json document, const SubmissionLimits& limits) {
   AcceptedJob job;
   job.document = std::move(document);
-  if (const auto errors = proto::contract_schemas().validate_all(job.document, "job.schema.json", limits.max_depth);
-      !errors.empty()) {
-    Problem problem{422, errors.front().message, errors.front().pointer};
-    for (const proto::SchemaError& e : errors) problem.errors.emplace_back(e.pointer, e.message);
-    return problem;
-  }
-
   JobLoadOptions options;
   options.scene.build = false;  // names, indices and assets are checked; no BVH is built at submission
   options.scene.resolve_asset = limits.resolve_asset;
   options.scene.max_gltf_instances = limits.max_gltf_instances;
   options.scene.stop = limits.stop;
   options.limits = limits.render;
+
+  const proto::SchemaSet& schemas = proto::contract_schemas();
+  if (const auto errors = schemas.validate_all(job.document, "job.schema.json", limits.max_depth); !errors.empty()) {
+    Problem problem{422, errors.front().message, errors.front().pointer};
+    for (const proto::SchemaError& e : errors) problem.errors.emplace_back(e.pointer, e.message);
+    // One answer with every error there is to tell: the renderer's checks run on what the schema errors leave (an
+    // unknown material, say, next to a misspelt property); where they cannot, the answer says that they follow.
+    const auto rest = schemas.valid_remainder(job.document, "job.schema.json", errors, limits.max_depth);
+    if (rest && errors.size() < proto::kMaxReportedErrors) {
+      try {
+        load_job(*rest, options);
+      } catch (const SceneError& e) {
+        problem.errors.emplace_back(e.pointer(), e.what());
+      } catch (const LoadStopped&) {
+        return stopping_problem();
+      }
+    } else {
+      problem.pending = std::string(proto::kChecksPending);
+    }
+    return problem;
+  }
+
   RenderJob render_job;
   try {
     render_job = load_job(job.document, options);
@@ -181,11 +180,8 @@ std::variant<AcceptedJob, Problem> check_job_document(json document, const Submi
   if (render_job.scene) job.warnings = render_job.scene->warnings;
   job.kind = job.document.value("kind", "scene");
   job.priority = job.document.value("priority", 0);
-  job.settings = render_settings_json(render_job.settings);
-  job.outputs = json::array();
-  if (render_job.want_png) job.outputs.push_back("png");
-  if (render_job.want_exr) job.outputs.push_back("exr");
-  job.spp = render_job.settings.spp;
+  job.settings = render_job.settings;
+  job.outputs = render_job.outputs;
   return job;
 }
 

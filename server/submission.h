@@ -32,9 +32,8 @@ struct AcceptedJob {
   nlohmann::json document;
   std::string kind;
   int priority = 0;
-  nlohmann::json settings;  // the render settings, defaults filled in
-  nlohmann::json outputs;   // ["png", "exr"]
-  uint32_t spp = 0;
+  RenderSettings settings;  // stored as render_settings_text, outputs as output_spec_text
+  OutputSpec outputs;
   std::vector<std::string> warnings;  // from loading the scene (an optional glTF extension ignored, ...)
 };
 
@@ -48,8 +47,5 @@ std::variant<AcceptedJob, Problem> check_submission(std::string_view content_typ
 std::variant<AcceptedJob, Problem> check_job_document(nlohmann::json document, const SubmissionLimits& limits);
 // "application/json; charset=utf-8" -> "application/json".
 std::string media_type(std::string_view content_type);
-
-// The render settings as the job status shows them.
-nlohmann::json render_settings_json(const RenderSettings& s);
 
 }  // namespace tessera::server

@@ -3,21 +3,15 @@
 #include <algorithm>
 #include <cmath>
 
-#include <nlohmann/json.hpp>
-
 namespace tessera::server {
 
-int unit_count(const std::string& settings_json, uint64_t unit_pixel_samples) {
+int unit_count(const RenderSettings& settings, uint64_t unit_pixel_samples) {
   if (unit_pixel_samples == 0) return 1;
-  const nlohmann::json s = nlohmann::json::parse(settings_json, nullptr, false);
-  if (!s.is_object()) return 1;
-  if (s.value("time_limit_s", 0.0) > 0 || s.value("noise_target", 0.0) > 0) return 1;
-  const uint64_t width = s.value("width", 0u), height = s.value("height", 0u), spp = s.value("spp", 0u);
-  if (width == 0 || height == 0 || spp == 0) return 1;
+  if (settings.time_limit_s > 0 || settings.noise_target > 0) return 1;
   // In double: width x height x spp may pass 2^64; the unit count only needs to be about right.
-  const double units = std::ceil(static_cast<double>(width) * static_cast<double>(height) * static_cast<double>(spp) /
-                                 static_cast<double>(unit_pixel_samples));
-  return static_cast<int>(std::clamp<double>(units, 1, static_cast<double>(std::min<uint64_t>(spp, 1 << 16))));
+  const double units = std::ceil(static_cast<double>(settings.width) * static_cast<double>(settings.height) *
+                                 static_cast<double>(settings.spp) / static_cast<double>(unit_pixel_samples));
+  return static_cast<int>(std::clamp<double>(units, 1, static_cast<double>(std::min<uint64_t>(settings.spp, 1 << 16))));
 }
 
 std::vector<SampleRange> split_samples(uint32_t spp, int units) {

@@ -12,16 +12,17 @@
 #pragma once
 
 #include <cstdint>
-#include <string>
 #include <vector>
+
+#include "renderer/render_settings.h"
 
 namespace tessera::server {
 
 inline constexpr uint64_t kDefaultUnitPixelSamples = 20'000'000;
 
-// How many units a job of these render settings (the JSON of JobRecord::settings) is split into; 1 when
-// `unit_pixel_samples` is 0 (never split) or the job is small, stops on time or noise, or cannot be read.
-int unit_count(const std::string& settings_json, uint64_t unit_pixel_samples);
+// How many units a job of these render settings is split into; 1 when `unit_pixel_samples` is 0 (never split) or the
+// job is small, or stops on time or noise.
+int unit_count(const RenderSettings& settings, uint64_t unit_pixel_samples);
 
 struct SampleRange {
   uint32_t first = 0;

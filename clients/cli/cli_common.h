@@ -50,8 +50,32 @@ struct Failure : std::runtime_error {
   throw std::invalid_argument("unknown option " + option + proto::did_you_mean(option, known));
 }
 
-// A JSON document read from `name`: malformed text is fatal, with the line and column where it broke.
+// What a file that is not a JSON document is, by its first bytes (its magic number): an image given where a job
+// belongs ("a PNG image"), or "" when it is none of those the tool knows.
+inline std::string sniff_file_kind(std::string_view bytes) {
+  struct Magic {
+    std::string_view start;
+    const char* kind;
+  };
+  static constexpr Magic kMagics[] = {
+      {"\x89PNG\r\n\x1a\n", "a PNG image"},
+      {"\xff\xd8\xff", "a JPEG image"},
+      {"\x76\x2f\x31\x01", "an OpenEXR image"},
+      {"#?RADIANCE", "a Radiance HDR image"},
+      {"#?RGBE", "a Radiance HDR image"},
+      {"glTF", "a binary glTF scene (.glb) under another name"},
+      {"TSRFILM\n", "a tessera partial film (.tfilm)"},
+  };
+  for (const Magic& m : kMagics)
+    if (bytes.substr(0, m.start.size()) == m.start) return m.kind;
+  return "";
+}
+
+// A JSON document read from `name`: a file of another kind (an image) is fatal saying what it is and what a job is;
+// malformed text is fatal, with the line and column where it broke.
 inline nlohmann::json parse_json(const std::string& text, const std::string& name) {
+  if (const std::string kind = sniff_file_kind(text); !kind.empty())
+    fatal(name + " is " + kind + ", not a job: a job is a JSON document (.json), or a glTF scene (.glb or .gltf)");
   try {
     return nlohmann::json::parse(text);
   } catch (const nlohmann::json::exception& e) {  // parse_error; out_of_range for a number beyond a double

@@ -7,13 +7,15 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
+#include <map>
 #include <optional>
-#include <set>
 #include <string_view>
 
 #include <nlohmann/json.hpp>
 
 #include "clients/cli/cli_common.h"
+#include "clients/cli/fingerprint.h"
+#include "clients/cli/partial_film.h"
 #include "proto/contract.h"
 #include "renderer/image_io.h"
 #include "renderer/job.h"
@@ -46,7 +48,7 @@ const char* kRenderUsage =
     "  --seed N               random seed\n"
     "  --max-depth N          maximum bounces\n"
     "  --variant NAME         the glTF asset's KHR_materials_variants variant (scene.gltf_variant)\n"
-    "  -q, --quiet            no progress bar\n"
+    "  -q, --quiet            print nothing but errors and the scene's warnings (no progress bar, no summary)\n"
     "\n"
     "exit codes: 0 done, 1 bad input (fatal), 2 usage, 75 transient failure (retry)\n";
 
@@ -56,170 +58,17 @@ const char* kMergeUsage =
     "Combines partial films written by `tessera render --samples START:COUNT [--region X,Y,W,H] -o PART.tfilm` into\n"
     "the exact image one render of all their samples gives (the film's sums are integers: any order, same bits).\n"
     "The parts must come from the same job and settings (their fingerprints agree), must not overlap (no sample of\n"
-    "a pixel twice), and must together give every pixel the same contiguous range of samples.\n";
+    "a pixel twice), and must together give every pixel the same contiguous range of samples: the whole of the\n"
+    "job's budget (samples 0 to its render.spp), unless --allow-partial.\n"
+    "\n"
+    "options:\n"
+    "  -o, --output FILE   write the merged image; the extension picks the format (.png, .exr, .tfilm)\n"
+    "  --allow-partial     merge parts that leave samples of the budget out (a slice lost, or cut by a time limit):\n"
+    "                      the image of the samples there are, noisier than the job's\n";
 
-// ---------------------------------------------------------------------------------------------------------------
-// Partial films (.tfilm)
-//
-// A partial film is the raw state of a Film after rendering sample indices [first_sample, first_sample + count)
-// of a job, optionally for a pixel region only. All fields little-endian:
-//
-//   offset  size  field
-//        0     8  magic "TSRFILM\n"
-//        8     4  u32 version (1)
-//       12     4  i32 width            the full image
-//       16     4  i32 height
-//       20     4  u32 first_sample     the range's first sample index
-//       24     4  u32 sample_count     samples every pixel of the region received (a time limit may cut a range)
-//       28    16  i32 x, y, w, h       the region rendered (the whole image when not cropped)
-//       44     4  u32 flags            bit 0: the job's EXR output is half precision
-//       48     4  f32 exposure_ev      the job's display settings, for PNG outputs of a merge
-//       52     4  u32 tonemap          0 clamp, 1 ACES
-//       56     8  u64 fingerprint      FNV-1a of the scene and the settings the pixels depend on (not the sample
-//                                      range, region, time limit or display): parts of different jobs never merge
-//       64  52·N  the film's state (Film::append_state; zero outside the region): 3 × i128 per pixel (R, G, B),
-//                 row-major from the top left, fixed point in units of 2^-40, then an f32 per pixel, its sum of
-//                 squared luminance (for the noise estimate only)
-//
-// with N = width × height. The file size is checked exactly.
-
-constexpr char kFilmMagic[8] = {'T', 'S', 'R', 'F', 'I', 'L', 'M', '\n'};
-constexpr uint32_t kFilmVersion = 1;
-constexpr size_t kFilmHeader = 64;
-
-struct PartialFilm {
-  int width = 0, height = 0;
-  uint32_t first_sample = 0, sample_count = 0;
-  tessera::RenderSettings::Region region;
-  bool exr_half = true;
-  tessera::DisplaySettings display;
-  uint64_t fingerprint = 0;
-  tessera::Film film;
-  std::string path;  // where it was read from, for messages
-};
-
-template <typename T>
-void put(std::string& out, T v) {
-  char b[sizeof(T)];
-  std::memcpy(b, &v, sizeof(T));
-  out.append(b, sizeof(T));
-}
-template <typename T>
-T get(const std::string& in, size_t offset) {
-  T v;
-  std::memcpy(&v, in.data() + offset, sizeof(T));
-  return v;
-}
-
-std::string encode_film(const PartialFilm& p) {
-  static_assert(sizeof(tessera::FixedSum) == 16);  // the layout above
-  std::string out;
-  out.reserve(kFilmHeader + tessera::Film::state_size(p.width, p.height));
-  out.append(kFilmMagic, 8);
-  put<uint32_t>(out, kFilmVersion);
-  put<int32_t>(out, p.width);
-  put<int32_t>(out, p.height);
-  put<uint32_t>(out, p.first_sample);
-  put<uint32_t>(out, p.sample_count);
-  put<int32_t>(out, p.region.x);
-  put<int32_t>(out, p.region.y);
-  put<int32_t>(out, p.region.width);
-  put<int32_t>(out, p.region.height);
-  put<uint32_t>(out, p.exr_half ? 1u : 0u);
-  put<float>(out, p.display.exposure_ev);
-  put<uint32_t>(out, p.display.tonemap == tessera::ToneMap::kAces ? 1u : 0u);
-  put<uint64_t>(out, p.fingerprint);
-  p.film.append_state(out);
-  return out;
-}
-
-PartialFilm decode_film(const std::string& path) {
-  const std::string in = read_file(path);
-  if (in.size() < kFilmHeader || std::memcmp(in.data(), kFilmMagic, 8) != 0)
-    fatal(path + " is not a tessera partial film (.tfilm)");
-  if (uint32_t v = get<uint32_t>(in, 8); v != kFilmVersion)
-    fatal(path + ": partial film version " + std::to_string(v) + " (this tessera reads version 1)");
-  PartialFilm p;
-  p.path = path;
-  p.width = get<int32_t>(in, 12);
-  p.height = get<int32_t>(in, 16);
-  p.first_sample = get<uint32_t>(in, 20);
-  p.sample_count = get<uint32_t>(in, 24);
-  p.region = {get<int32_t>(in, 28), get<int32_t>(in, 32), get<int32_t>(in, 36), get<int32_t>(in, 40)};
-  p.exr_half = (get<uint32_t>(in, 44) & 1u) != 0;
-  p.display.exposure_ev = get<float>(in, 48);
-  p.display.tonemap = get<uint32_t>(in, 52) == 1 ? tessera::ToneMap::kAces : tessera::ToneMap::kClamp;
-  p.fingerprint = get<uint64_t>(in, 56);
-  if (p.width < 1 || p.height < 1 || p.width > 65536 || p.height > 65536) fatal(path + ": bad image size");
-  const auto& r = p.region;
-  if (r.x < 0 || r.y < 0 || r.width < 1 || r.height < 1 || r.x + r.width > p.width || r.y + r.height > p.height)
-    fatal(path + ": region outside the image");
-  if (in.size() != kFilmHeader + tessera::Film::state_size(p.width, p.height))
-    fatal(path + ": truncated or oversized (" + std::to_string(in.size()) + " bytes for " + std::to_string(p.width) +
-          "x" + std::to_string(p.height) + ")");
-  p.film = tessera::Film(p.width, p.height);
-  p.film.read_state(std::string_view(in).substr(kFilmHeader));  // the size is checked above
-  p.film.set_samples(p.sample_count);
-  return p;
-}
-
-uint64_t fnv1a(uint64_t h, std::string_view bytes) {
-  for (unsigned char c : bytes) {
-    h ^= c;
-    h *= 0x100000001b3ull;
-  }
-  return h;
-}
-
-// The same over a file's bytes, read a megabyte at a time (an environment map can be hundreds of megabytes).
-uint64_t fnv1a_file(uint64_t h, const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fatal("cannot open " + path.string() + ": " + std::strerror(errno));
-  std::vector<char> chunk(1 << 20);
-  while (in) {
-    in.read(chunk.data(), static_cast<std::streamsize>(chunk.size()));
-    h = fnv1a(h, std::string_view(chunk.data(), static_cast<size_t>(in.gcount())));
-  }
-  if (in.bad()) fatal("cannot read " + path.string());
-  return h;
-}
-
-// Asset files a document names ("gltf", "map", "texture" strings) and that exist beside the job: their bytes are
-// part of the fingerprint.
-void collect_assets(const json& v, std::set<std::string>* out) {
-  if (v.is_object()) {
-    for (const auto& [key, value] : v.items()) {
-      if ((key == "gltf" || key == "map" || key == "texture") && value.is_string())
-        out->insert(value.get<std::string>());
-      collect_assets(value, out);
-    }
-  } else if (v.is_array()) {
-    for (const json& e : v) collect_assets(e, out);
-  }
-}
-
-uint64_t fingerprint(const json& doc, const tessera::RenderSettings& s, const std::filesystem::path& asset_root) {
-  json scene = doc;
-  for (const char* key : {"render", "outputs", "priority"}) scene.erase(key);
-  json settings = {{"width", s.width},
-                   {"height", s.height},
-                   {"seed", s.seed},
-                   {"sampler", static_cast<int>(s.sampler)},
-                   {"integrator", s.integrator.name},
-                   {"estimator", static_cast<int>(s.integrator.estimator)},
-                   {"max_depth", s.integrator.max_depth},
-                   {"rr_start_depth", s.integrator.rr_start_depth}};
-  uint64_t h = 0xcbf29ce484222325ull;
-  h = fnv1a(h, scene.dump());
-  h = fnv1a(h, settings.dump());
-  std::set<std::string> assets;
-  collect_assets(doc, &assets);
-  for (const std::string& a : assets) {
-    std::error_code ec;
-    const auto file = asset_root / a;
-    if (std::filesystem::is_regular_file(file, ec)) h = fnv1a_file(fnv1a(h, a), file);
-  }
-  return h;
+// A partial film from the file `path` (clients/cli/partial_film.h); fatal when it is not one.
+PartialFilm read_film(const std::string& path) {
+  return decode_film(read_file(path), path);
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -271,8 +120,12 @@ int cmd_render(int argc, char** argv) {
   std::string input;
   std::vector<std::string> outputs;
   json overrides = json::object();
+  // The option and value that set each key of `overrides` (render.KEY, "--integrator bpdt"), to say that a refused
+  // value is the option's, not the file's.
+  std::map<std::string, std::string> option_of;
   int threads = 0;
-  bool quiet = !isatty(2);
+  bool quiet = false;               // -q: nothing but errors
+  const bool progress = isatty(2);  // a progress bar only where someone watches it
   std::optional<std::pair<long long, long long>> samples;
   std::optional<std::vector<long long>> region;
   std::optional<std::string> variant;
@@ -286,10 +139,15 @@ int cmd_render(int argc, char** argv) {
       std::fputs(kRenderUsage, stdout);
       return kExitOk;
     }
+    // A render setting given as an option: render.KEY of the job document.
+    auto set = [&](const std::string& key, json v) {
+      overrides[key] = std::move(v);
+      option_of[key] = a + " " + argv[i];  // argv[i]: the value, just read
+    };
     if (a == "-o" || a == "--output")
       outputs.push_back(value());
     else if (a == "--spp")
-      overrides["spp"] = parse_integer(a, value());
+      set("spp", parse_integer(a, value()));
     else if (a == "--samples") {
       auto v = parse_list(a, value(), ':', 2);
       if (v[0] < 0 || v[1] < 1 || v[0] + v[1] > (1ll << 32) - 1)
@@ -298,21 +156,21 @@ int cmd_render(int argc, char** argv) {
     } else if (a == "--region") {
       region = parse_list(a, value(), ',', 4);
     } else if (a == "--width")
-      overrides["width"] = parse_integer(a, value());
+      set("width", parse_integer(a, value()));
     else if (a == "--height")
-      overrides["height"] = parse_integer(a, value());
+      set("height", parse_integer(a, value()));
     else if (a == "--time-limit")
-      overrides["time_limit_s"] = parse_number(a, value());
+      set("time_limit_s", parse_number(a, value()));
     else if (a == "--threads")
       threads = static_cast<int>(parse_integer(a, value()));
     else if (a == "--integrator")
-      overrides["integrator"] = value();
+      set("integrator", value());
     else if (a == "--estimator")
-      overrides["estimator"] = value();
+      set("estimator", value());
     else if (a == "--seed")
-      overrides["seed"] = parse_integer(a, value());
+      set("seed", parse_integer(a, value()));
     else if (a == "--max-depth")
-      overrides["max_depth"] = parse_integer(a, value());
+      set("max_depth", parse_integer(a, value()));
     else if (a == "--variant")
       variant = value();
     else if (a == "-q" || a == "--quiet")
@@ -358,9 +216,13 @@ int cmd_render(int argc, char** argv) {
     // A sample range is a part of the job's budget: the whole of it must be there for the settings to load. The
     // job's own budget is kept: every slice's rays have the whole job's texture footprints (Camera::pixel_cone).
     if (samples && doc["render"].is_object()) {
-      const json& spp = doc["render"].value("spp", json());
-      job_spp = std::max<uint64_t>(spp.is_number_unsigned() ? spp.get<uint64_t>() : tessera::kDefaultSpp,
-                                   static_cast<uint64_t>(samples->first) + samples->second);
+      // Render settings the mapping refuses keep the default budget here: the checks below refuse them.
+      uint64_t spp = tessera::kDefaultSpp;
+      try {
+        spp = tessera::render_settings_from_json(doc["render"], "/render", {}).spp;
+      } catch (const tessera::SceneError&) {
+      }
+      job_spp = std::max<uint64_t>(spp, static_cast<uint64_t>(samples->first) + samples->second);
       doc["render"]["spp"] = samples->first + samples->second;
     }
     if (variant && doc.contains("scene") && doc["scene"].is_object()) doc["scene"]["gltf_variant"] = *variant;
@@ -378,9 +240,38 @@ int cmd_render(int argc, char** argv) {
   }
   if (const auto errors = tessera::proto::contract_schemas().validate_all(checked, "job.schema.json");
       !errors.empty()) {
+    // A value an option gave is a usage error naming the option (--integrator bpdt), not an error of the file.
+    std::string usage;
+    for (const tessera::proto::SchemaError& e : errors) {
+      const std::string prefix = "/render/";
+      if (e.pointer.rfind(prefix, 0) != 0) continue;
+      const auto option = option_of.find(e.pointer.substr(prefix.size()));
+      if (option == option_of.end()) continue;
+      usage += (usage.empty() ? "" : "\ntessera: ") + option->second + ": " + e.message;
+    }
+    if (!usage.empty()) throw std::invalid_argument(usage);
     std::string message;
     for (const tessera::proto::SchemaError& e : errors)
       message += (message.empty() ? "" : "\ntessera: ") + where(e.pointer) + e.message;
+    // With them, as the daemon answers: the renderer's error on what they leave, or that its checks follow.
+    auto rest = tessera::proto::contract_schemas().valid_remainder(checked, "job.schema.json", errors);
+    std::string more = input + ": " + std::string(tessera::proto::kChecksPending);
+    if (rest && errors.size() < tessera::proto::kMaxReportedErrors) {
+      more.clear();
+      for (std::string_view p : tessera::proto::kAssetRefPointers) {  // the files again, not the stand-in ids
+        const json::json_pointer pointer{std::string(p)};
+        if (rest->contains(pointer)) (*rest)[pointer] = doc[pointer];
+      }
+      tessera::JobLoadOptions check;
+      check.scene.build = false;  // names, indices and assets; nothing built
+      check.scene.asset_root = std::filesystem::absolute(std::filesystem::path(input)).parent_path();
+      try {
+        tessera::load_job(*rest, check);
+      } catch (const tessera::SceneError& e) {
+        more = where(e.pointer()) + e.what();
+      }
+    }
+    if (!more.empty()) message += "\ntessera: " + more;
     fatal(message);
   }
 
@@ -420,28 +311,30 @@ int cmd_render(int argc, char** argv) {
   tessera::ThreadPool pool(threads);
   tessera::RenderSession session(job.scene, job.settings, pool);
   tessera::StopReason reason = session.run([&](const tessera::RenderProgress& p, const tessera::Film&) {
-    if (!quiet) progress_bar(p);
+    if (progress && !quiet) progress_bar(p);
   });
   const tessera::RenderProgress& p = session.progress();
-  if (!quiet) std::fprintf(stderr, "\n");
-  std::fprintf(stderr,
-               "tessera: %dx%d, %u spp in %.2fs (load+BVH %.2fs, %zu triangles), %.3g samples/s, %.3g rays/s, "
-               "%d threads, stopped by %s\n",
-               job.settings.width, job.settings.height, p.samples_done, p.elapsed_s, load_s,
-               job.scene->triangle_count(), p.samples_per_s,
-               p.elapsed_s > 0 ? static_cast<double>(p.rays.total()) / p.elapsed_s : 0.0, pool.size(),
-               tessera::stop_reason_name(reason));
+  if (progress && !quiet) std::fprintf(stderr, "\n");
+  if (!quiet)
+    std::fprintf(stderr,
+                 "tessera: %dx%d, %u spp in %.2fs (load+BVH %.2fs, %zu triangles), %.3g samples/s, %.3g rays/s, "
+                 "%d threads, stopped by %s\n",
+                 job.settings.width, job.settings.height, p.samples_done, p.elapsed_s, load_s,
+                 job.scene->triangle_count(), p.samples_per_s,
+                 p.elapsed_s > 0 ? static_cast<double>(p.rays.total()) / p.elapsed_s : 0.0, pool.size(),
+                 tessera::stop_reason_name(reason));
 
   PartialFilm part;
   part.width = job.settings.width;
   part.height = job.settings.height;
   part.first_sample = job.settings.first_sample;
   part.sample_count = session.film().samples();
+  part.job_spp = job.settings.job_spp ? job.settings.job_spp : job.settings.first_sample + job.settings.spp;
   part.region = session.settings().region;
   if (part.region.width <= 0 || part.region.height <= 0) part.region = {0, 0, part.width, part.height};
   part.exr_half = job.settings.exr_half;
   part.display = job.settings.display;
-  part.fingerprint = fingerprint(doc, job.settings, options.scene.asset_root);
+  part.fingerprint = film_fingerprint(doc, job.settings, options.scene.asset_root);
   part.film = session.film();
   write_outputs(outputs, part);
   return kExitOk;
@@ -452,6 +345,7 @@ int cmd_render(int argc, char** argv) {
 
 int cmd_merge(int argc, char** argv) {
   std::vector<std::string> inputs, outputs;
+  bool allow_partial = false;
   for (int i = 0; i < argc; ++i) {
     std::string a = argv[i];
     if (a == "-h" || a == "--help") {
@@ -461,8 +355,10 @@ int cmd_merge(int argc, char** argv) {
     if (a == "-o" || a == "--output") {
       if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
       outputs.push_back(argv[++i]);
+    } else if (a == "--allow-partial") {
+      allow_partial = true;
     } else if (!a.empty() && a[0] == '-') {
-      unknown_option(a, {"--output", "--help"});
+      unknown_option(a, {"--output", "--allow-partial", "--help"});
     } else {
       inputs.push_back(a);
     }
@@ -472,7 +368,7 @@ int cmd_merge(int argc, char** argv) {
   check_outputs(outputs);
 
   std::vector<PartialFilm> parts;
-  for (const std::string& path : inputs) parts.push_back(decode_film(path));
+  for (const std::string& path : inputs) parts.push_back(read_film(path));
   const PartialFilm& first = parts.front();
   auto describe = [](const PartialFilm& p) {
     const auto& r = p.region;
@@ -488,6 +384,9 @@ int cmd_merge(int argc, char** argv) {
     if (p.fingerprint != first.fingerprint)
       fatal("cannot merge " + p.path + " with " + first.path +
             ": they come from different scenes or render settings (fingerprints differ)");
+    if (p.job_spp != first.job_spp)
+      fatal("cannot merge " + p.path + " with " + first.path + ": slices of jobs of " + std::to_string(p.job_spp) +
+            " and " + std::to_string(first.job_spp) + " samples per pixel (render every slice of one job document)");
   }
   // No sample of a pixel twice.
   for (size_t i = 0; i < parts.size(); ++i) {
@@ -528,11 +427,31 @@ int cmd_merge(int argc, char** argv) {
             " of samples " + std::to_string(lo[i]) + ".." + std::to_string(hi[i]));
   }
 
+  // The whole budget, or what the user allowed to be missing.
+  if (!allow_partial) {
+    if (first.job_spp == 0)
+      fatal(first.path +
+            " does not record its job's samples per pixel (a version 1 film, or a merge of such): whether the "
+            "parts cover the job cannot be told (merge with --allow-partial to take the samples they hold)");
+    if (lo[0] != 0 || hi[0] != first.job_spp) {
+      std::vector<std::string> gaps;
+      if (lo[0] > 0) gaps.push_back(std::string("0..").append(std::to_string(lo[0])));
+      if (hi[0] < first.job_spp)
+        gaps.push_back(std::to_string(hi[0]).append("..").append(std::to_string(first.job_spp)));
+      const std::string missing = gaps.size() == 2 ? gaps[0] + " and " + gaps[1] : gaps[0];
+      fatal("the parts hold samples " + std::to_string(lo[0]) + ".." + std::to_string(hi[0]) + " of the job's " +
+            std::to_string(first.job_spp) + ": samples " + missing +
+            " are missing (a slice not given, or cut short by a time limit); merge with --allow-partial for the "
+            "image of the samples there are");
+    }
+  }
+
   PartialFilm merged;
   merged.width = first.width;
   merged.height = first.height;
   merged.first_sample = lo[0];
   merged.sample_count = hi[0] - lo[0];
+  merged.job_spp = first.job_spp;
   merged.region = {0, 0, first.width, first.height};
   merged.exr_half = first.exr_half;
   merged.display = first.display;

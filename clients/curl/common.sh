@@ -17,7 +17,8 @@ print("" if v is None else (v if isinstance(v, str) else json.dumps(v)))
 }
 
 # request METHOD PATH [curl args...]: prints the body to stdout on a 2xx answer; otherwise prints the server's
-# problem ("status title: detail at pointer") to stderr and exits 1.
+# problem ("status title: detail at pointer", then each further error of a refused document on a line of its own, and
+# what checks are pending) to stderr and exits 1.
 request() {
   local method=$1 path=$2
   shift 2
@@ -36,6 +37,10 @@ try:
     p = json.loads(text)
     where = " at " + (p["pointer"] or "/") if "pointer" in p else ""
     print("error: HTTP %s %s: %s%s" % (p.get("status", sys.argv[2]), p.get("title", ""), p.get("detail", ""), where))
+    for e in p.get("errors", [])[1:]:
+        print("error: %s at %s" % (e.get("detail", ""), e.get("pointer") or "/"))
+    if p.get("pending"):
+        print("error: " + p["pending"])
 except Exception:
     print("error: HTTP %s: %s" % (sys.argv[2], text[:500]))
 ' "$body_file" "$status" >&2

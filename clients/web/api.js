@@ -153,6 +153,8 @@ export const api = {
     sendJson("PATCH", `/v1/jobs/${encodeURIComponent(id)}`, { priority }),
   remove: (id) => sendJson("DELETE", `/v1/jobs/${encodeURIComponent(id)}`),
   materials: () => getJson("/v1/materials"),
+  // The example jobs of proto/examples, {"<file name>": <job document>}: a file of the web client, like app.js.
+  examples: () => getJson("examples.json"),
   schema: (name) => getJson(`/v1/schemas/${encodeURIComponent(name)}`),
   eventsUrl: (id) => {
     const token = getToken();

@@ -1,9 +1,9 @@
 // The web client's page: the submit form, the queue, the job view. State lives in the daemon; this page polls the
 // job list and follows the selected job over Server-Sent Events (polling when the events endpoint is missing).
 import { api, allowed, ApiError, getBlob, getToken, onConnection, setToken, TERMINAL } from "./api.js";
-import { EXAMPLES } from "./examples.js";
+import { CLIENT_EXAMPLES, examplesFrom } from "./examples.js";
 import { decodeExr, ExrError } from "./exr.js";
-import { commonParameters, materialForm } from "./materials.js";
+import { materialForm } from "./materials.js";
 import { ImageViewer } from "./viewer.js";
 
 const $ = (sel) => document.querySelector(sel);
@@ -61,7 +61,12 @@ function setProgress(bar, job) {
 }
 
 // ---------------------------------------------------------------------------------------------------------------
-// Errors: problem+json title and detail, as dismissible toasts.
+// Errors: problem+json title and detail, in one dismissible banner under the top bar. It shows the latest error
+// only (an older one is replaced, not stacked), and goes when dismissed, after 20 s, or when a submit succeeds.
+
+function clearErrors() {
+  $("#toasts").replaceChildren();
+}
 
 function showError(err, context) {
   if (err?.name === "AbortError") return;
@@ -98,8 +103,7 @@ function showError(err, context) {
   close.textContent = "Dismiss";
   close.addEventListener("click", () => toast.remove());
   toast.append(title, detail, ...(list ? [list] : []), close);
-  toasts.append(toast);
-  while (toasts.children.length > 3) toasts.firstElementChild.remove();
+  toasts.replaceChildren(toast);
   // On a narrow screen the bar scrolls with the page: bring the error into view.
   if (toast.getBoundingClientRect().top < 0) toast.scrollIntoView({ block: "nearest" });
   setTimeout(() => toast.remove(), 20000);
@@ -180,8 +184,14 @@ function selectTab(tab, focus) {
     $("#json-doc").value = JSON.stringify(buildFromExample(), null, 2);
   }
 }
+// A tab the user picks starts another submission: the name typed for the last one does not carry over to it (an
+// upload would otherwise be queued under an example's name). Duplicate fills the name and picks the tab itself.
+function switchTab(tab, focus) {
+  if (tab.getAttribute("aria-selected") !== "true") $("#job-name").value = "";
+  selectTab(tab, focus);
+}
 for (const t of tabs) {
-  t.addEventListener("click", () => selectTab(t, false));
+  t.addEventListener("click", () => switchTab(t, false));
   t.addEventListener("keydown", (e) => {
     const i = tabs.indexOf(t);
     let next = null;
@@ -191,18 +201,20 @@ for (const t of tabs) {
     else if (e.key === "End") next = tabs[tabs.length - 1];
     if (next) {
       e.preventDefault();
-      selectTab(next, true);
+      switchTab(next, true);
     }
   });
 }
 
+// The examples: the client's own at first, the daemon's (proto/examples) ahead of them once they arrive.
 const exampleSelect = $("#example");
-for (const ex of EXAMPLES) {
-  const o = document.createElement("option");
-  o.value = ex.id;
-  o.textContent = ex.title;
-  exampleSelect.append(o);
+let examples = [...CLIENT_EXAMPLES];
+function listExamples() {
+  const keep = exampleSelect.value;
+  exampleSelect.replaceChildren(...examples.map((ex) => new Option(ex.title, ex.id)));
+  if (examples.some((ex) => ex.id === keep)) exampleSelect.value = keep;
 }
+listExamples();
 // The render settings the form chooses from a list (the contract's enums), by their control.
 const SELECT_SETTINGS = [
   ["#integrator", "integrator"],
@@ -237,8 +249,26 @@ function fillRenderFields(render = {}, outputs = ["png", "exr"]) {
   $("#output-exr").checked = outputs.includes("exr");
 }
 exampleSelect.addEventListener("change", () => fillRenderFields(currentExample().job.render, currentExample().job.outputs));
-const currentExample = () => EXAMPLES.find((e) => e.id === exampleSelect.value) || EXAMPLES[0];
+const currentExample = () => examples.find((e) => e.id === exampleSelect.value) || examples[0];
 fillRenderFields(currentExample().job.render, currentExample().job.outputs);
+// Whether the user changed a render setting (or the name) since the page loaded: the example list, which arrives a
+// moment later, then leaves the form as it is.
+let settingsEdited = false;
+$("#render-settings").addEventListener("input", () => (settingsEdited = true));
+async function loadExamples() {
+  let shipped;
+  try {
+    shipped = examplesFrom(await api.examples());
+  } catch (e) {
+    showError(e, "Loading the example jobs");
+    return;
+  }
+  examples = [...shipped, ...CLIENT_EXAMPLES];
+  listExamples();
+  if (settingsEdited || !shipped.length) return;
+  exampleSelect.value = examples[0].id;
+  fillRenderFields(currentExample().job.render, currentExample().job.outputs);
+}
 
 function renderSettings(base = {}) {
   const render = { ...base };
@@ -291,13 +321,11 @@ const buildFromExample = () => structuredClone(currentExample().job);
 
 // Material models, from the daemon.
 let materialModels = [];
-let commonMaterialParameters = new Set();
 let currentMaterialForm = null;
 async function loadMaterials() {
   try {
     const catalog = await api.materials();
     materialModels = catalog.materials || [];
-    commonMaterialParameters = commonParameters(materialModels);
   } catch (e) {
     if (!(e instanceof ApiError && e.status === 401)) showError(e, "Loading the material models");
     return;
@@ -317,7 +345,7 @@ async function loadMaterials() {
 function buildMaterialForm() {
   const model = materialModels.find((m) => m.type === $("#material-type").value);
   $("#material-desc").textContent = model?.description || "";
-  currentMaterialForm = model ? materialForm(model, commonMaterialParameters) : null;
+  currentMaterialForm = model ? materialForm(model) : null;
   $("#material-params").replaceChildren(...(currentMaterialForm ? [currentMaterialForm.element] : []));
 }
 $("#material-type").addEventListener("change", buildMaterialForm);
@@ -381,6 +409,10 @@ $("#submit-form").addEventListener("submit", async (e) => {
   try {
     const job = files ? await api.submitMultipart(doc, files) : await api.submitJson(doc);
     showNotice(`Job ${jobLabel(job)} queued.`);
+    // Submitted: the next submission starts unnamed, and an error about an earlier attempt is out of date.
+    $("#job-name").value = "";
+    clearErrors();
+    followEnd(job);
     await refreshQueue();
     select(job.id);
   } catch (err) {
@@ -568,6 +600,7 @@ async function refreshQueue() {
   try {
     const list = await api.listJobs();
     jobs = list.jobs || [];
+    for (const j of jobs) noteJobState(j);
     renderQueue();
     const sel = jobs.find((j) => j.id === selectedId);
     if (sel && !watcher.live) showJob(sel);
@@ -602,9 +635,15 @@ async function changePriority(id, input) {
   refreshQueue();
 }
 
+// A job as the page knows it, by its id: for messages about it.
+const knownJob = (id) => jobs.find((j) => j.id === id) || (currentJob?.id === id ? currentJob : { id });
+
 function confirmDelete(id) {
   const dialog = $("#confirm");
-  $("#confirm-text").textContent = `Job ${shortId(id)} and its images will be deleted. This cannot be undone.`;
+  // Named as the queue names it (a name is what the user recognises), with the short id the command line takes.
+  const job = knownJob(id);
+  const what = job.name ? `“${job.name}” (${shortId(id)})` : shortId(id);
+  $("#confirm-text").textContent = `Job ${what} and its images will be deleted. This cannot be undone.`;
   return new Promise((resolve) => {
     dialog.addEventListener("close", () => resolve(dialog.returnValue === "yes"), { once: true });
     dialog.returnValue = "no";
@@ -616,8 +655,9 @@ async function runAction(id, action) {
   try {
     if (action === "delete") {
       if (!(await confirmDelete(id))) return;
+      const label = jobLabel(knownJob(id));
       await api.remove(id);
-      showNotice(`Job ${shortId(id)} deleted.`);
+      showNotice(`Job ${label} deleted.`);
       if (id === selectedId) select(null);
     } else {
       const job = await api.action(id, action);
@@ -895,6 +935,20 @@ function select(id) {
   watcher.start(id);
 }
 
+// "4 of 9 done · unit 5 on n2 (31/128 spp) · 4 waiting · done by n1: 2, n2: 2", from the status's units.
+function unitsText(u) {
+  const parts = [`${u.done} of ${u.total} done`];
+  for (const r of u.running) {
+    // A unit whose node stopped renewing waits for its lease before another node takes it over.
+    const wait = r.stalled ? `, ${r.node} not responding: taken over in ${fmtSeconds(r.takeover_in_s)}` : "";
+    parts.push(`unit ${r.unit} on ${r.node} (${r.samples_done}/${r.samples} spp${wait})`);
+  }
+  if (u.queued) parts.push(`${u.queued} waiting`);
+  const by = Object.entries(u.done_by_node).map(([node, n]) => `${node}: ${n}`);
+  if (by.length) parts.push(`done by ${by.join(", ")}`);
+  return parts.join(" · ");
+}
+
 function stat(dl, name, value) {
   const dt = document.createElement("dt");
   dt.textContent = name;
@@ -905,6 +959,7 @@ function stat(dl, name, value) {
 
 function showJob(job) {
   if (job.id !== selectedId) return;
+  noteJobState(job);
   const previous = currentJob;
   currentJob = job;
   const badge = $("#job-state");
@@ -943,6 +998,11 @@ function showJob(job) {
   stat(dl, "Samples", `${p.samples_done ?? 0} / ${p.samples_total ?? 0} per pixel`);
   stat(dl, "Passes", String(p.passes ?? 0));
   stat(dl, "Elapsed", fmtSeconds(p.elapsed_s));
+  // A job split into work units: the render time of all its nodes together, and where its units are.
+  if (job.units) {
+    stat(dl, "Render time", `${fmtSeconds(p.render_s)} on all nodes`);
+    stat(dl, "Units", unitsText(job.units));
+  }
   if (job.state === "running") stat(dl, "ETA", fmtSeconds(p.eta_s));
   stat(dl, "Samples/s", fmtRate(p.samples_per_s));
   if (r.integrator) stat(dl, "Integrator", r.integrator);
@@ -1031,6 +1091,8 @@ async function rerender(job) {
   try {
     const created = await api.submitJson(await documentOf(job));
     showNotice(`Job ${jobLabel(job)} submitted again as ${shortId(created.id)}.`);
+    clearErrors();
+    followEnd(created);
     await refreshQueue();
     select(created.id);
   } catch (e) {
@@ -1066,10 +1128,105 @@ $("#download-png").addEventListener("click", () => download("png"));
 $("#download-exr").addEventListener("click", () => download("exr"));
 
 // ---------------------------------------------------------------------------------------------------------------
+// A job that ends while the page is in the background (another tab, a minimised window): the one followed in the
+// job view, or one submitted from this page. The tab's title says so ("✓ done: name — tessera") until the page is
+// seen again, and, when the user ticked "Notify me", a notification too. The browser's permission is asked when the
+// box is ticked, never when the page loads.
+
+const PAGE_TITLE = document.title;
+const ENDINGS = {
+  succeeded: { mark: "✓", word: "done" },
+  failed: { mark: "✗", word: "failed" },
+  cancelled: { mark: "■", word: "cancelled" },
+};
+const submittedHere = new Set();
+const lastStates = new Map(); // job id -> the state the page last saw it in
+let endedUnseen = [];
+
+function followEnd(job) {
+  submittedHere.add(job.id);
+  noteJobState(job);
+}
+// Called with every status the page sees (the job list, the followed job): a job seen running, queued or paused
+// and now ended, while the page is hidden, is announced.
+function noteJobState(job) {
+  const before = lastStates.get(job.id);
+  lastStates.set(job.id, job.state);
+  if (!before || TERMINAL.has(before) || !TERMINAL.has(job.state) || !ENDINGS[job.state]) return;
+  if (!document.hidden || !(job.id === selectedId || submittedHere.has(job.id))) return;
+  endedUnseen.push(job);
+  const ending = ENDINGS[job.state];
+  if (endedUnseen.length === 1) {
+    document.title = `${ending.mark} ${ending.word}: ${job.name || shortId(job.id)} — ${PAGE_TITLE}`;
+  } else {
+    const mark = endedUnseen.some((j) => j.state === "failed") ? ENDINGS.failed.mark : ending.mark;
+    document.title = `${mark} ${endedUnseen.length} jobs ended — ${PAGE_TITLE}`;
+  }
+  notifyEnded(job);
+}
+// The page is seen again: the title goes back.
+function seenEnded() {
+  endedUnseen = [];
+  document.title = PAGE_TITLE;
+}
+
+const NOTIFY_KEY = "tessera.notify";
+const notifyBox = $("#notify");
+const canNotify = () => "Notification" in window && Notification.permission === "granted";
+function rememberNotify(on) {
+  try {
+    if (on) localStorage.setItem(NOTIFY_KEY, "1");
+    else localStorage.removeItem(NOTIFY_KEY);
+  } catch {
+    // storage disabled: the choice lasts as long as the page
+  }
+}
+if (!("Notification" in window)) {
+  notifyBox.closest("label").hidden = true;
+} else {
+  // Ticked as the user left it, if the browser still allows notifications; nothing is asked here.
+  try {
+    notifyBox.checked = localStorage.getItem(NOTIFY_KEY) === "1" && canNotify();
+  } catch {
+    notifyBox.checked = false;
+  }
+}
+notifyBox.addEventListener("change", async () => {
+  if (notifyBox.checked && Notification.permission === "default") await Notification.requestPermission();
+  if (notifyBox.checked && !canNotify()) {
+    notifyBox.checked = false;
+    showNotice("This browser blocks notifications from this page: the tab's title still tells when a job ends.");
+  }
+  rememberNotify(notifyBox.checked);
+});
+function notifyEnded(job) {
+  if (!notifyBox.checked || !canNotify()) return;
+  const body =
+    job.state === "failed"
+      ? job.error || "no reason was recorded"
+      : `${job.state} · ${progressText(job)} · ${fmtSeconds(job.progress?.elapsed_s)}`;
+  try {
+    const n = new Notification(`tessera: ${job.name || shortId(job.id)} ${ENDINGS[job.state].word}`, {
+      body,
+      tag: `tessera-${job.id}`,
+    });
+    n.addEventListener("click", () => {
+      window.focus();
+      select(job.id);
+      n.close();
+    });
+  } catch {
+    // A browser that shows notifications from a service worker only (Chrome on Android): the title tells.
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
 // Start
 
 document.addEventListener("visibilitychange", () => {
-  if (!document.hidden) refreshQueue();
+  if (document.hidden) return;
+  seenEnded();
+  refreshQueue();
 });
 // The render settings' contract: the tone curves the viewer offers are the ones the daemon knows.
 let renderSchema = null;
@@ -1098,6 +1255,7 @@ async function loadRenderSchema() {
   }
 }
 
+loadExamples();
 loadMaterials();
 loadRenderSchema();
 refreshQueue().then(scheduleQueue);

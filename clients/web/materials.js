@@ -7,6 +7,20 @@
 // that the daemon applies the same default. A parameter without one (an override such as alpha_x, which otherwise
 // follows roughness, or eta and k, which otherwise come from the named metal) is not set until its "Set" box is
 // ticked: only then is its control shown, and sent.
+//
+// The order is one rule, PRIMARY_PARAMETERS: the parameters it names come first, in its order; every other one
+// follows in the order of the model's schema (GET /v1/materials keeps it), folded under "Advanced".
+
+// The parameters a user reaches for first, in the order they do: what colour, what metal (and, for Cook-Torrance,
+// whether its Fresnel term is a metal's at all), how rough, how metallic, what index of refraction; then a model's own
+// few (the specular lobe of Phong and Ward, glTF's transmission, the materials a mix or a two-sided material is made
+// of). Anisotropy, the overrides of a named metal, emission, normal maps and the like are Advanced.
+export const PRIMARY_PARAMETERS = [
+  "base_color", "albedo", "diffuse", "kd", "rho_d", "radiance", "fresnel", "metal",
+  "roughness", "alpha", "metallic", "ior",
+  "ks", "rho_s", "exponent", "transmission",
+  "material", "a", "b", "weight",
+];
 
 let uid = 0;
 const nextId = (name) => `mat-${name}-${++uid}`;
@@ -240,25 +254,24 @@ function parameterControl(p) {
   };
 }
 
-// Builds the form for one material model. `common` names the parameters every model takes (emission, normal map,
-// absorption): they go in a collapsed group after the model's own. Returns { element, value(), set(material) }:
-// value() is the material object to send, set() shows a material's values and returns false if some cannot be
-// shown (a texture in a number, an unknown key): the caller then offers the JSON tab instead.
-export function materialForm(model, common = new Set()) {
-  const own = [];
-  const shared = [];
+// Builds the form for one material model: its PRIMARY_PARAMETERS, then a closed "Advanced" group with the rest.
+// Returns { element, value(), set(material) }: value() is the material object to send, set() shows a material's
+// values (opening Advanced when one is there) and returns false if some cannot be shown (a texture in a number, an
+// unknown key): the caller then offers the JSON tab instead.
+export function materialForm(model) {
   const controls = new Map();
-  for (const p of model.parameters || []) {
-    const c = parameterControl(p);
-    controls.set(p.name, c);
-    (common.has(p.name) ? shared : own).push(c.row);
-  }
-  const element = el("div", { class: "material-params" }, ...own);
-  if (!own.length) element.append(el("p", { class: "muted", text: "This model has only the common parameters." }));
-  if (shared.length) {
-    const names = [...controls.keys()].filter((n) => common.has(n)).map((n) => n.replaceAll("_", " "));
-    const summary = el("summary", { text: `More: ${names.join(", ")}` });
-    element.append(el("details", { class: "more-params" }, summary, ...shared));
+  for (const p of model.parameters || []) controls.set(p.name, parameterControl(p));
+  const rank = (name) => PRIMARY_PARAMETERS.indexOf(name);
+  const primary = [...controls.keys()].filter((n) => rank(n) >= 0).sort((a, b) => rank(a) - rank(b));
+  const advanced = [...controls.keys()].filter((n) => rank(n) < 0);
+  const element = el("div", { class: "material-params" }, ...primary.map((n) => controls.get(n).row));
+  let details = null;
+  if (advanced.length) {
+    const summary = el("summary", { text: `Advanced (${advanced.length})` });
+    details = el("details", { class: "more-params" }, summary, ...advanced.map((n) => controls.get(n).row));
+    // A model with none of the primary parameters shows its own open.
+    details.open = !primary.length;
+    element.append(details);
   }
   return {
     element,
@@ -276,16 +289,9 @@ export function materialForm(model, common = new Set()) {
         if (name === "type") continue;
         const c = controls.get(name);
         if (!c || !c.set(v)) all = false;
-        else if (common.has(name)) element.querySelector(".more-params")?.setAttribute("open", "");
+        else if (details && advanced.includes(name)) details.open = true;
       }
       return all;
     },
   };
-}
-
-// The parameters every model takes.
-export function commonParameters(models) {
-  if (!models.length) return new Set();
-  const names = models.map((m) => new Set((m.parameters || []).map((p) => p.name)));
-  return new Set([...names[0]].filter((n) => names.every((s) => s.has(n))));
 }

@@ -1,5 +1,5 @@
-// The job view's image viewer: a canvas showing an image fitted to its frame or zoomed (1:1 and above, pixels kept
-// sharp) and panned by dragging; the pixel under the cursor read out; and an A/B wipe against a second image.
+// The job view's image viewer: a canvas showing an image fitted to its frame (never above 1:1) or zoomed (1:1 and
+// above, pixels kept sharp) and panned by dragging; the pixel under the cursor read out; and an A/B wipe against a second image.
 //
 // An image is either "linear" (a decoded EXR: radiance, to which the viewer applies the exposure in stops and the
 // tone curve itself, as the daemon does for its PNG) or "display" (an 8-bit sRGB PNG, shown as it is). The display
@@ -272,7 +272,9 @@ export class ImageViewer {
     if (this.fit) {
       const cw = c.clientWidth;
       const ch = c.clientHeight;
-      this.zoom = Math.min(cw / this.a.width, ch / this.a.height);
+      // Fit shrinks an image larger than the frame and leaves a smaller one at 1:1, centred: it shows the render's
+      // pixels as they are. Enlarging them (sharp, each a block of screen pixels) is the user's zoom, not Fit's.
+      this.zoom = Math.min(cw / this.a.width, ch / this.a.height, 1);
       this.panX = (cw - this.a.width * this.zoom) / 2;
       this.panY = (ch - this.a.height * this.zoom) / 2;
     }

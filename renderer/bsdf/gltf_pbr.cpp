@@ -35,7 +35,11 @@
 // reflection lobe mirrored through the surface (no refraction). The half vector of a transmitted pair is that of
 // its mirrored pair, so every term is symmetric in wo and wi (reciprocal), and with Fresnel weights <= 1 and
 // single-scattering microfacet lobes the albedo is at most 1 (energy is lost, not gained, at high roughness).
-// Roughness below 0.045 (alpha 0.002) is clamped there: the model has no delta lobes.
+// Roughness below 0.002 (alpha 4e-6) is clamped there: the model has no delta lobes, and a lobe that narrow spreads a
+// reflected or transmitted ray by micro-radians, so a smooth surface is a sharp mirror and a smooth thin wall clear
+// glass (a floor of alpha 0.002 would blur what is seen through such a wall by several pixels: the lobe itself, and the
+// texture footprint of the ray cone its density widens). GGX is evaluated in its tangent form (microfacet.cpp),
+// which float keeps accurate at that alpha.
 // Solid transmission ("thin_walled": false; glTF KHR_materials_volume with a thicknessFactor above 0): the object is
 // a dielectric volume, and the transmission lobe is the rough dielectric interface of Walter et al. 2007
 // (rough_dielectric.h) at the material's IOR, its transmitted part tinted by the base colour: glTF's
@@ -629,9 +633,9 @@ class GltfPbrMaterial final : public Material {
       rough = roughness.eval(sp);
     }
     l.metallic = clamp(metal, 0.0f, 1.0f);
-    float r = clamp(rough, 0.045f, 1.0f);
+    float r = clamp(rough, 0.002f, 1.0f);
     l.alpha = r * r;
-    const float rt = clamp(r * transmission_roughness_scale, 0.045f, 1.0f);
+    const float rt = clamp(r * transmission_roughness_scale, 0.002f, 1.0f);
     l.alpha_t = rt * rt;
     // A dispersive solid refracts, and reflects, by its index at the path's wavelength (spectrum.h).
     float eta = ior, f0 = f0_ior;
@@ -644,7 +648,7 @@ class GltfPbrMaterial final : public Material {
     l.solid = solid;
     l.eta = eta;
     l.clearcoat = clamp(clearcoat.eval(sp), 0.0f, 1.0f);
-    float rc = clamp(clearcoat_roughness.eval(sp), 0.045f, 1.0f);
+    float rc = clamp(clearcoat_roughness.eval(sp), 0.002f, 1.0f);
     l.alpha_c = rc * rc;
     if (l.clearcoat > 0 && length_squared(sp.coat_normal) > 0) l.coat_n = normalize(sp.frame.to_local(sp.coat_normal));
     l.sheen_color = vmin(vmax(sheen_color.eval(sp), Rgb(0)), Rgb(1));

@@ -3,7 +3,10 @@
 // another job, downloads the PNG, and saves a screenshot; submits every material model from the Material tab; checks
 // the image viewer against the daemon's images, a failed job's reason, errors that cover nothing and the queue at a
 // phone's width; jobs' names, their documents, Duplicate and Re-render, every render setting, an environment map from
-// the glTF tab and a cancelled job's partial image. Any failed step fails the test.
+// the glTF tab and a cancelled job's partial image; what users reported: the Name cleared after a submit and on a
+// change of tab, one error banner, the material form's common parameters first and the rest under Advanced, Fit at
+// most 1:1, the delete confirmation naming the job, the icon, every example of proto/examples, and the title (and a
+// notification) when a job ends while the tab is hidden. Any failed step fails the test.
 //
 // node --test tests/browser/web_client_test.mjs   with   TESSERAD=path/to/tesserad  ARTIFACTS=dir
 //   (CTest passes both; CHROMIUM overrides /usr/bin/chromium)
@@ -105,12 +108,6 @@ after(async () => {
     if (daemon.exitCode === null) daemon.kill("SIGKILL");
   }
   if (tmp) fs.rmSync(tmp, { recursive: true, force: true });
-});
-
-test("the built-in Cornell example equals proto/examples/cornell.json", async () => {
-  const { CORNELL } = await import(path.join(repo, "clients/web/examples.js"));
-  const file = JSON.parse(fs.readFileSync(path.join(repo, "proto/examples/cornell.json"), "utf8"));
-  assert.deepEqual(CORNELL, file);
 });
 
 // Steps run in order; after a failed one the rest are skipped (they depend on it).
@@ -384,6 +381,9 @@ test("every material model renders from the form as shown, with its defaults and
     // An override is sent once it is set, with the value its control shows.
     const row = page.locator('[data-param="alpha_x"]');
     assert.ok(await row.locator(".slider-row").isHidden(), "an unset override shows no value");
+    // The overrides are Advanced: folded until opened.
+    assert.ok(await row.isHidden(), "alpha_x is folded");
+    await page.locator("#material-params summary", { hasText: "Advanced" }).click();
     await row.getByRole("checkbox", { name: "Set alpha_x" }).check();
     await row.locator('input[type="number"]').fill("0.5");
     const set = await submitFromForm();
@@ -877,4 +877,337 @@ test("the web client honours Retry-After from an overloaded server", async () =>
   for (const gap of gaps) assert.ok(gap >= 2500, `the page asked again after ${gap} ms, not the 3 s it was told`);
   // Answered again, the page goes back to its own pace and shows the server online.
   await page.locator('#connection[data-state="online"]').waitFor();
+});
+
+// Emulates the tab going to the background (another tab in front, a minimised window) or coming back: what
+// document.hidden says, and the event the page listens to.
+async function setHidden(p, hidden) {
+  await p.evaluate((h) => {
+    Object.defineProperty(document, "hidden", { configurable: true, get: () => h });
+    Object.defineProperty(document, "visibilityState", { configurable: true, get: () => (h ? "hidden" : "visible") });
+    document.dispatchEvent(new Event("visibilitychange"));
+  }, hidden);
+}
+// Clicks "Submit job" on page `p` and returns the POST's request and its response's JSON (the job), after a 202.
+async function submitAccepted(p) {
+  const [res] = await Promise.all([
+    p.waitForResponse((r) => r.request().method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
+    p.getByRole("button", { name: "Submit job" }).click(),
+  ]);
+  assert.equal(res.status(), 202, await res.text());
+  return { sent: JSON.parse(res.request().postData() || "null"), job: await res.json() };
+}
+const nameField = () => page.getByLabel("Name", { exact: true });
+// What get() returns once it equals `want`, or within `ms` its last value, which then fails the assertion: a
+// readable failure for what the page changes a moment after an action (a field cleared after the answer, a title).
+async function settles(get, want, message, ms = 10000) {
+  let got;
+  for (const deadline = Date.now() + ms; ; await new Promise((r) => setTimeout(r, 100))) {
+    got = await get();
+    if (JSON.stringify(got) === JSON.stringify(want) || Date.now() > deadline) break;
+  }
+  assert.deepEqual(got, want, message);
+}
+// The labels of the material form's controls as the user sees them: shown first, then those under "Advanced".
+async function materialLabels() {
+  return page.evaluate(() => {
+    const form = document.querySelector("#material-params .material-params");
+    const label = (row) => row.querySelector("label").textContent;
+    return {
+      shown: [...form.querySelectorAll(":scope > [data-param]")].map(label),
+      advanced: [...form.querySelectorAll(":scope > details > [data-param]")].map(label),
+      params: [...form.querySelectorAll("[data-param]")].map((r) => r.dataset.param),
+      open: form.querySelector(":scope > details")?.open ?? null,
+      summary: form.querySelector(":scope > details > summary")?.textContent ?? null,
+    };
+  });
+}
+
+test("what users reported: the name, the error banner, the material form and the smaller things", async (t) => {
+  await page.setViewportSize({ width: 1440, height: 1000 });
+  await page.goto(`${baseUrl}/`);
+  await page.locator('#connection[data-state="online"]').waitFor();
+  const small = async () => {
+    await page.getByLabel("Width").fill("16");
+    await page.getByLabel("Height").fill("16");
+    await page.getByLabel("Samples per pixel").fill("1");
+  };
+
+  await t.test("the Name is cleared after a submit and on a change of tab, and kept until then", async () => {
+    await page.getByRole("tab", { name: "Example" }).click();
+    await page.getByLabel("Example scene").selectOption("material");
+    await small();
+    await nameField().fill("first job");
+    const first = await submitAccepted(page);
+    assert.equal(first.sent.name, "first job");
+    await settles(() => nameField().inputValue(), "", "the Name after a submit that succeeded");
+    // The report: an upload after that was queued under the previous job's name. It is called by its file.
+    await page.getByRole("tab", { name: "glTF" }).click();
+    await page.getByLabel("glTF files").setInputFiles({
+      name: "triangle.gltf", mimeType: "model/gltf+json", buffer: Buffer.from(JSON.stringify(triangleGltf())),
+    });
+    await small();
+    const upload = await submitAccepted(page);
+    assert.equal(upload.job.name, "triangle.gltf");
+    // A name typed for this submission is what it is called; typed and then the tab changed, it is gone.
+    await nameField().fill("my triangle");
+    const named = await submitAccepted(page);
+    assert.equal(named.job.name, "my triangle");
+    assert.equal(await nameField().inputValue(), "");
+    // (The JSON tab sends its document as it is: the render settings and the name are disabled there.)
+    for (const tab of ["Material", "glTF", "JSON", "Example"]) {
+      if (await nameField().isEnabled()) await nameField().fill(`typed before ${tab}`);
+      await page.getByRole("tab", { name: tab }).click();
+      assert.equal(await nameField().inputValue(), "", `the name is cleared on the way to the ${tab} tab`);
+    }
+    // Picking the tab already open changes nothing; the arrow keys change tabs as clicks do.
+    await nameField().fill("kept");
+    await page.getByRole("tab", { name: "Example" }).click();
+    assert.equal(await nameField().inputValue(), "kept");
+    await page.getByRole("tab", { name: "Example" }).press("ArrowRight");
+    assert.equal(await nameField().inputValue(), "");
+    await page.getByRole("tab", { name: "Example" }).click();
+  });
+
+  await t.test("one error banner at a time, gone after a submit succeeds or when dismissed", async () => {
+    await page.getByRole("tab", { name: "JSON" }).click();
+    const banners = page.locator("#toasts .toast");
+    for (const key of ["width", "height", "spp"]) {
+      await page.getByLabel("Job document").fill(`{"kind": "material", "material": {"type": "lambert"}, "render": {"${key}": 0}}`);
+      const [res] = await Promise.all([
+        page.waitForResponse((r) => r.request().method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
+        page.getByRole("button", { name: "Submit job" }).click(),
+      ]);
+      assert.equal(res.status(), 422);
+      await banners.filter({ hasText: `/render/${key}` }).waitFor();
+      assert.equal(await banners.count(), 1, `after the refused ${key}: ${await banners.allTextContents()}`);
+    }
+    const doc = { kind: "material", material: { type: "lambert" }, render: { width: 8, height: 8, spp: 1 } };
+    await page.getByLabel("Job document").fill(JSON.stringify(doc));
+    await submitAccepted(page);
+    await banners.first().waitFor({ state: "detached" });
+    assert.equal(await banners.count(), 0, "a submit that succeeded leaves no error about an earlier one");
+    await page.getByLabel("Job document").fill("{not json");
+    await page.getByRole("button", { name: "Submit job" }).click();
+    await banners.first().waitFor();
+    await banners.first().getByRole("button", { name: "Dismiss" }).click();
+    assert.equal(await banners.count(), 0);
+    await page.getByRole("tab", { name: "Example" }).click();
+  });
+
+  await t.test("the material form shows the common parameters first and folds the rest under Advanced", async () => {
+    const { materials } = await (await page.request.get(`${baseUrl}/v1/materials`)).json();
+    const { PRIMARY_PARAMETERS } = await import(path.join(repo, "clients/web/materials.js"));
+    await page.getByRole("tab", { name: "Material" }).click();
+    const pick = async (type) => {
+      await page.getByLabel("Material model").selectOption(type);
+      await page.locator(`#material-params [data-param]`).first().waitFor({ state: "attached" });
+      return materialLabels();
+    };
+    // What was reported: a conductor's roughness was the seventh control, under Alpha x, Alpha y, Eta and K.
+    const conductor = await pick("conductor");
+    assert.deepEqual(conductor.shown, ["Metal", "Roughness"]);
+    assert.deepEqual(conductor.advanced.slice(0, 5), ["Distribution", "Alpha x", "Alpha y", "Eta", "K"]);
+    assert.equal(conductor.open, false, "Advanced starts folded");
+    assert.match(conductor.summary, /^Advanced/);
+    assert.ok(await page.locator('[data-param="alpha_x"]').isHidden(), "alpha_x is out of the way");
+    assert.ok(await page.locator('[data-param="roughness"] input[type="number"]').isVisible());
+    await page.locator("#material-params summary").click();
+    assert.ok(await page.locator('[data-param="alpha_x"]').isVisible(), "opened, Advanced shows alpha_x");
+    const pbr = await pick("gltf_pbr");
+    assert.deepEqual(pbr.shown.slice(0, 4), ["Base color", "Roughness", "Metallic", "Ior"]);
+    assert.deepEqual((await pick("lambert")).shown, ["Albedo"]);
+    // Every model by the one rule: the common parameters in their order, the rest in the schema's order, folded.
+    for (const model of materials) {
+      const form = await pick(model.type);
+      const names = model.parameters.map((p) => p.name);
+      const rank = (n) => PRIMARY_PARAMETERS.indexOf(n);
+      const common = names.filter((n) => rank(n) >= 0).sort((a, b) => rank(a) - rank(b));
+      assert.ok(common.length, `${model.type} shows at least one control`);
+      assert.deepEqual(form.params, [...common, ...names.filter((n) => rank(n) < 0)], model.type);
+      assert.equal(form.shown.length, common.length, model.type);
+    }
+    await page.getByRole("tab", { name: "Example" }).click();
+  });
+
+  await t.test("Fit does not enlarge a small render beyond 1:1, and still shrinks a large one", async () => {
+    const material = { type: "lambert", albedo: [0.8, 0.5, 0.2] };
+    const submit = async (render) =>
+      (await (await page.request.post(`${baseUrl}/v1/jobs`, { data: { kind: "material", material, render } })).json()).id;
+    const tiny = await submit({ width: 40, height: 30, spp: 2 });
+    const wide = await submit({ width: 2400, height: 40, spp: 1 });
+    for (const id of [tiny, wide]) assert.equal((await finished(id)).status.state, "succeeded");
+    // The drawn image's size on the screen, in CSS pixels: the box of the canvas's painted (opaque) pixels.
+    const drawn = () =>
+      page.evaluate(() => {
+        const c = document.querySelector("#viewer canvas");
+        const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+        let [x0, y0, x1, y1] = [Infinity, Infinity, -1, -1];
+        for (let y = 0; y < c.height; ++y) {
+          for (let x = 0; x < c.width; ++x) {
+            if (d[4 * (y * c.width + x) + 3] === 0) continue;
+            [x0, y0, x1, y1] = [Math.min(x0, x), Math.min(y0, y), Math.max(x1, x), Math.max(y1, y)];
+          }
+        }
+        const dpr = window.devicePixelRatio || 1;
+        return { width: (x1 - x0 + 1) / dpr, height: (y1 - y0 + 1) / dpr, frame: c.clientWidth };
+      });
+    await page.goto(`${baseUrl}/`);
+    await page.locator(`#jobs tr[data-id="${tiny}"] button.link`).click();
+    await page.locator('#viewer[data-pass="final"]').waitFor();
+    await page.getByRole("button", { name: "Fit", exact: true }).click();
+    const size = await drawn();
+    assert.ok(size.frame > 200, `the frame is ${size.frame} px wide`);
+    assert.deepEqual([size.width, size.height], [40, 30], `a 40 x 30 render at Fit is drawn ${JSON.stringify(size)}`);
+    assert.match(await page.locator("#viewer .zoom").textContent(), /^100% \(fit\)/);
+    // Zooming in is how it gets larger.
+    await page.getByRole("button", { name: "Zoom in" }).click();
+    assert.deepEqual(Object.values(await drawn()).slice(0, 2), [80, 60]);
+    await page.locator(`#jobs tr[data-id="${wide}"] button.link`).click();
+    await page.locator('#viewer[data-pass="final"]').waitFor();
+    await page.getByRole("button", { name: "Fit", exact: true }).click();
+    const fitted = await drawn();
+    const zoom = Number(await page.locator("#viewer").getAttribute("data-zoom"));
+    assert.ok(zoom < 1, `2400 px wide at Fit: zoom ${zoom}`);
+    assert.ok(fitted.width <= fitted.frame && Math.abs(fitted.width - 2400 * zoom) <= 2, JSON.stringify(fitted));
+  });
+
+  await t.test("the delete confirmation names the job, with its short id", async () => {
+    const res = await page.request.post(`${baseUrl}/v1/jobs`, {
+      data: { kind: "material", name: "Teapot draft", material: { type: "lambert" }, render: { width: 8, height: 8, spp: 1 } },
+    });
+    const id = (await res.json()).id;
+    await finished(id);
+    await page.goto(`${baseUrl}/`);
+    const row = page.locator(`#jobs tr[data-id="${id}"]`);
+    await row.getByRole("button", { name: /^Delete job/ }).click();
+    await page.locator("#confirm[open]").waitFor();
+    const text = await page.locator("#confirm-text").textContent();
+    if (!text.includes("Teapot draft")) await page.locator("#confirm").getByRole("button", { name: "Keep" }).click();
+    assert.equal(text, `Job “Teapot draft” (${id.slice(0, 8)}) and its images will be deleted. This cannot be undone.`);
+    await page.locator("#confirm").getByRole("button", { name: "Delete" }).click();
+    await row.waitFor({ state: "detached" });
+    assert.match(await page.locator("#notice").textContent(), /Teapot draft/);
+  });
+
+  await t.test("the page has an icon, and /favicon.ico answers with it", async () => {
+    const ico = await page.request.get(`${baseUrl}/favicon.ico`);
+    assert.equal(ico.status(), 200, "GET /favicon.ico");
+    assert.equal(ico.headers()["content-type"], "image/svg+xml");
+    assert.ok((await ico.body()).length < 1024, "a tiny icon");
+    assert.equal(await page.locator('link[rel="icon"]').count(), 1, "index.html links an icon");
+    const href = await page.locator('link[rel="icon"]').getAttribute("href");
+    const linked = await page.request.get(new URL(href, `${baseUrl}/`).href);
+    assert.equal(linked.status(), 200);
+    assert.equal(linked.headers()["content-type"], "image/svg+xml");
+    // It is an image the browser draws.
+    const drawn = await page.evaluate(async (u) => {
+      const img = new Image();
+      img.src = u;
+      await img.decode();
+      return img.naturalWidth > 0;
+    }, `${baseUrl}/favicon.ico`);
+    assert.ok(drawn);
+  });
+
+  await t.test("the Example tab lists every job of proto/examples, as the file holds it", async () => {
+    const files = fs.readdirSync(path.join(repo, "proto/examples")).filter((f) => f.endsWith(".json")).sort();
+    assert.ok(files.length >= 4, `${files}`);
+    await page.goto(`${baseUrl}/`);
+    await page.getByRole("tab", { name: "Example" }).click();
+    const select = page.getByLabel("Example scene");
+    const listed = () => select.locator("option").evaluateAll((os) => os.map((o) => o.value));
+    // Each file by its name, and the client's own material preview after them.
+    const want = [...files.map((f) => f.replace(/\.json$/, "")), "material"];
+    await settles(listed, want, "the Example tab's list");
+    const titles = await select.locator("option").allTextContents();
+    assert.ok(titles.includes("Room lit through a gap (scene)"), `${titles}`);
+    for (const f of ["prism.json", "room_gap.json"]) {
+      const file = JSON.parse(fs.readFileSync(path.join(repo, "proto/examples", f), "utf8"));
+      await select.selectOption(f.replace(/\.json$/, ""));
+      // The example's own settings fill the form (its integrator, say).
+      assert.equal(await page.getByLabel("Integrator").inputValue(), file.render.integrator || "path");
+      await small();
+      const { sent, job } = await submitAccepted(page);
+      assert.deepEqual(sent.scene, file.scene, `${f}: the scene sent is the file's`);
+      assert.equal(sent.render.integrator, file.render.integrator);
+      await page.request.post(`${baseUrl}/v1/jobs/${job.id}/cancel`);
+    }
+  });
+
+  await t.test("a job that ends while the tab is hidden shows in the title, and notifies when asked to", async () => {
+    // A tab of its own: the spy on notifications stays in it.
+    await context.grantPermissions(["notifications"], { origin: baseUrl });
+    const tab = await context.newPage();
+    tab.setDefaultTimeout(30000);
+    tab.on("pageerror", (e) => pageErrors.push(`page error (second tab): ${e.message}`));
+    try {
+      await tab.addInitScript(() => {
+        const Real = window.Notification;
+        window.__shown = [];
+        window.__asked = 0;
+        const ask = Real.requestPermission.bind(Real);
+        Real.requestPermission = (...a) => (++window.__asked, ask(...a));
+        window.Notification = new Proxy(Real, {
+          construct(target, args) {
+            window.__shown.push(args[0]);
+            return Reflect.construct(target, args);
+          },
+          get: (target, key) => Reflect.get(target, key),
+        });
+      });
+      await tab.goto(`${baseUrl}/`);
+      await tab.locator('#connection[data-state="online"]').waitFor();
+      assert.equal(await tab.title(), "tessera");
+      assert.equal(await tab.evaluate(() => window.__asked), 0, "nothing is asked when the page loads");
+      await tab.getByRole("tab", { name: "Example" }).click();
+      await tab.getByLabel("Example scene").selectOption("material");
+      await tab.getByLabel("Width").fill("32");
+      await tab.getByLabel("Height").fill("32");
+      await tab.getByLabel("Samples per pixel").fill("65536");
+      await tab.getByLabel("Time limit (s)").fill("2");
+      const title = () => tab.title();
+
+      // The title: one job, followed in the job view (a submitted job is selected), ends while the tab is hidden. The
+      // tab is hidden before the submission: a job of 2 s may end before a loaded machine runs the next step.
+      await tab.getByLabel("Name", { exact: true }).fill("one");
+      await setHidden(tab, true);
+      const one = (await submitAccepted(tab)).job;
+      assert.equal(await title(), "tessera", "nothing has ended yet");
+      assert.equal((await finished(one.id)).status.state, "succeeded");
+      await settles(title, "✓ done: one — tessera", "the title after the job ended in the background");
+      await setHidden(tab, false);
+      assert.equal(await title(), "tessera", "seen again, the title is the page's own");
+      assert.deepEqual(await tab.evaluate(() => window.__shown), [], "no notification unless asked for");
+
+      // Notify me: two jobs, the first followed as submitted here, the second in the job view too.
+      const notify = tab.getByLabel("Notify me");
+      assert.equal(await notify.count(), 1, "a Notify me box");
+      await notify.check();
+      assert.ok(await notify.isChecked(), "permission granted: the box stays ticked");
+      await setHidden(tab, true);
+      await tab.getByLabel("Name", { exact: true }).fill("in the background");
+      const a = (await submitAccepted(tab)).job;
+      await tab.getByLabel("Name", { exact: true }).fill("watched");
+      const b = (await submitAccepted(tab)).job;
+      for (const id of [a.id, b.id]) assert.equal((await finished(id)).status.state, "succeeded");
+      await settles(title, "✓ 2 jobs ended — tessera", "the title after two jobs ended in the background");
+      const shown = await tab.evaluate(() => window.__shown);
+      assert.deepEqual(shown.sort(), ["tessera: in the background done", "tessera: watched done"]);
+      await setHidden(tab, false);
+      assert.equal(await title(), "tessera");
+
+      // A job that ends while the tab is seen changes nothing.
+      await tab.getByLabel("Time limit (s)").fill("");
+      await tab.getByLabel("Samples per pixel").fill("1");
+      const seen = (await submitAccepted(tab)).job;
+      await finished(seen.id);
+      await tab.waitForTimeout(1500);
+      assert.equal(await title(), "tessera");
+      assert.equal(await tab.evaluate(() => window.__shown.length), 2);
+    } finally {
+      await tab.close();
+    }
+  });
+  assert.deepEqual(pageErrors, []);
 });

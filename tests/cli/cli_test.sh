@@ -35,7 +35,7 @@ expect() {
 png_signature() { [[ $(head -c 8 "$1" | od -An -tx1 | tr -d ' \n') == 89504e470d0a1a0a ]]; }
 # The header and the fixed-point radiance sums of a .tfilm (the float luminance sums for the noise estimate that
 # follow are not order-independent).
-sums=$((64 + 48 * 40 * 32))
+sums=$((72 + 48 * 40 * 32))
 same_sums() { cmp -s -n "$sums" "$1" "$2"; }
 same_pixels() { idiff -fail 0 -failpercent 0 -warn 0 "$1" "$2" >/dev/null 2>&1; }
 # wait_for_samples ID: until the job has rendered a pass (at most 30 s).
@@ -51,17 +51,21 @@ cd "$tmp"
 
 # --- sample ranges and regions merge into exactly one render -----------------------------------------------------
 r=(--width 40 --height 32 --threads 2 -q)
+# The slices are of a job of 12 samples per pixel (its render.spp, the budget a merge must cover).
+job12=$tmp/cornell12.json
+python3 -c 'import json, sys; d = json.load(open(sys.argv[1])); d["render"]["spp"] = 12; json.dump(d, open(sys.argv[2], "w"))' \
+  "$job" "$job12"
 expect 0 "render all 12 samples" "$TESSERA" render "$job" "${r[@]}" --spp 12 -o all.exr -o all.png -o all.tfilm
-expect 0 "render samples 5:7" "$TESSERA" render "$job" "${r[@]}" --samples 5:7 --integrator path -o b.tfilm
+expect 0 "render samples 5:7" "$TESSERA" render "$job12" "${r[@]}" --samples 5:7 --integrator path -o b.tfilm
 expect 0 "render with bdpt" "$TESSERA" render "$job" "${r[@]}" --spp 2 --integrator bdpt -o bdpt.png
 expect 0 "render with light tracing" "$TESSERA" render "$job" "${r[@]}" --spp 2 --integrator light -o light.png
-expect 0 "render samples 0:5 of the top half" "$TESSERA" render "$job" "${r[@]}" --samples 0:5 --region 0,0,40,16 -o a1.tfilm
-expect 0 "render samples 0:5 of the bottom half" "$TESSERA" render "$job" "${r[@]}" --samples 0:5 --region 0,16,40,16 -o a2.tfilm
+expect 0 "render samples 0:5 of the top half" "$TESSERA" render "$job12" "${r[@]}" --samples 0:5 --region 0,0,40,16 -o a1.tfilm
+expect 0 "render samples 0:5 of the bottom half" "$TESSERA" render "$job12" "${r[@]}" --samples 0:5 --region 0,16,40,16 -o a2.tfilm
 expect 0 "merge three parts out of order" "$TESSERA" merge b.tfilm a2.tfilm a1.tfilm -o merged.exr -o merged.png -o merged.tfilm
 if same_sums merged.tfilm all.tfilm; then ok "the merged film has the single render's header and radiance sums, bit for bit"; else not_ok "merged film differs"; fi
 if same_pixels merged.exr all.exr; then ok "the merged EXR has the single render's pixels"; else not_ok "merged EXR differs"; fi
 if cmp -s merged.png all.png; then ok "the merged PNG equals the single render's PNG"; else not_ok "merged PNG differs"; fi
-expect 0 "render samples 0:5 whole" "$TESSERA" render "$job" "${r[@]}" --samples 0:5 -o a.tfilm
+expect 0 "render samples 0:5 whole" "$TESSERA" render "$job12" "${r[@]}" --samples 0:5 -o a.tfilm
 expect 0 "merge two ranges" "$TESSERA" merge a.tfilm b.tfilm -o two.tfilm
 if same_sums two.tfilm all.tfilm; then ok "two ranges merge into the single render"; else not_ok "two ranges differ"; fi
 expect 0 "a merged film merges again (nothing to add: one part)" "$TESSERA" merge two.tfilm -o again.tfilm
@@ -121,13 +125,32 @@ fi
 expect 1 "overlapping ranges are refused" "$TESSERA" merge a.tfilm all.tfilm -o x.exr
 grep -q "overlapping" "$tmp/err" && ok "the refusal says the parts overlap" || not_ok "no overlap message"
 expect 1 "a gap is refused" "$TESSERA" merge a1.tfilm b.tfilm -o x.exr
-"$TESSERA" render "$job" "${r[@]}" --samples 0:5 --seed 7 -o other-seed.tfilm 2>/dev/null
+# The parts must cover the job's whole budget: a slice lost at either end is named, and refused unless allowed.
+expect 1 "parts missing the end of the budget are refused" "$TESSERA" merge a.tfilm -o x.exr
+grep -qF "samples 5..12 are missing" "$tmp/err" && ok "the refusal names the missing end" || not_ok "no missing end: $(cat "$tmp/err")"
+expect 1 "parts missing the start of the budget are refused" "$TESSERA" merge b.tfilm -o x.exr
+grep -qF "samples 0..5 are missing" "$tmp/err" && ok "the refusal names the missing start" || not_ok "no missing start: $(cat "$tmp/err")"
+grep -qF -- "--allow-partial" "$tmp/err" && ok "the refusal says how to merge anyway" || not_ok "no --allow-partial hint"
+expect 0 "--allow-partial merges what there is" "$TESSERA" merge b.tfilm --allow-partial -o partial.exr -o partial.tfilm
+expect 1 "a merge of a partial merge is still partial" "$TESSERA" merge partial.tfilm -o x.exr
+"$TESSERA" render "$job12" "${r[@]}" --samples 0:5 --time-limit 0.000001 -o cut.tfilm 2>/dev/null
+expect 1 "a slice a time limit cut short leaves a gap" "$TESSERA" merge cut.tfilm b.tfilm -o x.exr
+"$TESSERA" render "$job" "${r[@]}" --samples 0:5 -o of256.tfilm 2>/dev/null
+expect 1 "slices of jobs of different budgets are refused" "$TESSERA" merge of256.tfilm b.tfilm -o x.exr
+grep -qE "(256 and 12|12 and 256) samples per pixel" "$tmp/err" && ok "the refusal names both budgets" || not_ok "no budgets: $(cat "$tmp/err")"
+"$TESSERA" render "$job12" "${r[@]}" --samples 0:5 --seed 7 -o other-seed.tfilm 2>/dev/null
 expect 1 "parts of different settings are refused" "$TESSERA" merge other-seed.tfilm b.tfilm -o x.exr
 grep -q "fingerprint" "$tmp/err" && ok "the refusal names the fingerprint" || not_ok "no fingerprint message"
 "$TESSERA" render "$job" --width 20 --height 32 --threads 2 -q --samples 0:5 -o small.tfilm 2>/dev/null
 expect 1 "parts of different sizes are refused" "$TESSERA" merge small.tfilm b.tfilm -o x.exr
 head -c 100 all.tfilm >truncated.tfilm
 expect 1 "a truncated film is refused" "$TESSERA" merge truncated.tfilm -o x.exr
+# A region whose right edge is past 2^31 (x + width overflows an int) is outside the image, not a region it wraps
+# into (found by tests/fuzz's fuzz_tfilm: the header's x and width at offsets 28 and 36).
+python3 -c 'import struct, sys; b = bytearray(open(sys.argv[1], "rb").read()); b[28:32] = struct.pack("<i", 2**31 - 100)
+b[36:40] = struct.pack("<i", 200); open(sys.argv[2], "wb").write(b)' a.tfilm far.tfilm
+expect 1 "a region past the largest integer is refused" "$TESSERA" merge far.tfilm -o x.exr
+grep -q "region outside the image" "$tmp/err" && ok "the refusal says the region is outside" || not_ok "no region message"
 echo "not a film" >junk.tfilm
 expect 1 "a file that is not a film is refused" "$TESSERA" merge junk.tfilm -o x.exr
 expect 1 "a missing job file is fatal" "$TESSERA" render "$tmp/none.json" -o x.png
@@ -184,9 +207,17 @@ for line in 'at /render/spp: must be at least 1' 'at /render/width: must be an i
   'at /scene/materials/n/type: must be one of "lambert", '; do
   grep -qF "many.json: $line" "$tmp/err" && ok "render says: $line" || not_ok "render did not say '$line': $(cat "$tmp/err")"
 done
+grep -qxF "tessera: many.json: more checks (material names, indices, assets, limits) follow once these errors are fixed" \
+  "$tmp/err" && ok "render says that more checks follow" || not_ok "render of many.json said: $(cat "$tmp/err")"
 grep -q 'at least 1\.0' "$tmp/err" && not_ok "an integer limit printed as a float" || ok "integer limits print as integers"
 grep -qF '(did you mean "lambert"?)' "$tmp/err" && ok "an unknown material type suggests the closest" \
   || not_ok "no suggestion for lamber: $(cat "$tmp/err")"
+echo '{"kind": "scene", "scene": {"objects": [{"shape": "sphere", "center": [0,0,0], "radius": 1, "material": "purple"}],
+       "materials": {"m": {"type": "lambert", "albdo": 0.5}}, "camera": {"from": [0, 0, 4], "to": [0, 0, 0]}}}' >mixed.json
+expect 1 "render refuses a misspelt property and an unknown material" "$TESSERA" render mixed.json -o x.png -q
+grep -qF 'mixed.json: at /scene/materials/m/albdo: unknown property "albdo"' "$tmp/err" \
+  && grep -qF 'mixed.json: at /scene/objects/0/material: unknown material "purple"' "$tmp/err" \
+  && ok "render names the unknown material with the schema's error" || not_ok "render of mixed.json said: $(cat "$tmp/err")"
 echo '{"kind": "scene", "scene": {"objects": [{"shape": "sphere", "center": [0,0,0], "radius": 1, "material": "mirror"}],
        "materials": {"mirorr": {"type": "conductor"}}, "camera": {"from": [0, 0, 4], "to": [0, 0, 0]}}}' >mirror.json
 expect 1 "render refuses a misspelt material name" "$TESSERA" render mirror.json -o x.png -q
@@ -199,7 +230,39 @@ grep -qF "comma.json is not valid JSON: parse error at line 2, column 22" "$tmp/
 expect 1 "submit of broken JSON is fatal before any request" "$TESSERA" submit comma.json --url http://127.0.0.1:9
 grep -qF "comma.json is not valid JSON: parse error at line 2, column 22" "$tmp/err" && ok "submit gives line and column" \
   || not_ok "submit said: $(cat "$tmp/err")"
-expect 1 "an unknown --integrator is fatal" "$TESSERA" render "$job" "${r[@]}" --spp 1 --integrator photon_mapping -o x.png
+# A file that is not a job says what it is (by its magic bytes) and what a job is.
+cp all.png render.png
+expect 1 "submit of a PNG is fatal before any request" "$TESSERA" submit render.png --url http://127.0.0.1:9
+grep -qF "render.png is a PNG image, not a job: a job is a JSON document (.json), or a glTF scene (.glb or .gltf)" \
+  "$tmp/err" && ok "submit says the file is a PNG image" || not_ok "submit of a PNG said: $(cat "$tmp/err")"
+cp all.exr render.json
+expect 1 "render of an EXR named .json is fatal" "$TESSERA" render render.json -o x.png -q
+grep -qF "render.json is an OpenEXR image, not a job" "$tmp/err" && ok "render says the file is an EXR image" \
+  || not_ok "render of an EXR said: $(cat "$tmp/err")"
+# A .gltf whose buffer is not beside it: said by the command line, before anything is sent.
+python3 - <<'PY'
+import json
+json.dump({"asset": {"version": "2.0"}, "buffers": [{"byteLength": 36, "uri": "Box0.bin"}]}, open("assets/Box.gltf", "w"))
+PY
+expect 1 "submit of a .gltf without its .bin is fatal before any request" "$TESSERA" submit assets/Box.gltf \
+  --url http://127.0.0.1:9
+grep -qF "Box0.bin not found beside assets/Box.gltf" "$tmp/err" && ok "submit names the missing buffer" \
+  || not_ok "submit of a .gltf without its .bin said: $(cat "$tmp/err")"
+# A render setting given as an option is the option's error (usage, 2), with the closest valid value.
+expect 2 "an unknown --integrator is usage" "$TESSERA" render "$job" "${r[@]}" --spp 1 --integrator bpdt -o x.png
+grep -qF -- '--integrator bpdt: must be one of "bdpt", "light" or "path" (did you mean "bdpt"?)' "$tmp/err" \
+  && ok "render names --integrator and suggests bdpt" || not_ok "render --integrator bpdt said: $(cat "$tmp/err")"
+grep -qF "/render/integrator" "$tmp/err" && not_ok "the option's error points into the job file" \
+  || ok "the option's error does not point into the job file"
+expect 2 "an unknown --integrator far from any is usage" "$TESSERA" render "$job" "${r[@]}" --integrator photon_mapping \
+  -o x.png
+expect 2 "--spp 0 is usage" "$TESSERA" render "$job" "${r[@]}" --spp 0 -o x.png
+grep -qF -- "--spp 0: must be at least 1" "$tmp/err" && ok "render names --spp" || not_ok "render --spp 0 said: $(cat "$tmp/err")"
+# -q prints nothing but errors: no progress, no summary.
+expect 0 "render -q" "$TESSERA" render "$job" "${r[@]}" --spp 1 -o quiet.png
+[[ ! -s $tmp/err && ! -s $tmp/out ]] && ok "render -q printed nothing" || not_ok "render -q printed: $(cat "$tmp/out" "$tmp/err")"
+expect 0 "render without -q" "$TESSERA" render "$job" --width 40 --height 32 --threads 2 --spp 1 -o loud.png
+grep -qF " spp in " "$tmp/err" && ok "render without -q prints its summary" || not_ok "no summary: $(cat "$tmp/err")"
 expect 1 "a region outside the image is fatal" "$TESSERA" render "$job" "${r[@]}" --samples 0:1 --region 30,0,20,10 -o x.tfilm
 
 # --- usage: 2 ----------------------------------------------------------------------------------------------------
@@ -275,6 +338,7 @@ else
   python3 - "$job" small.json long.json <<'PY'
 import json, sys
 j = json.load(open(sys.argv[1]))
+del j["name"]  # a job is called by its file unless it names itself
 j["render"].update(width=32, height=32, spp=8)
 json.dump(j, open(sys.argv[2], "w"))
 j["render"].update(width=256, height=256, spp=65536)
@@ -285,6 +349,8 @@ PY
   expect 0 "tessera watch follows it to success" "$TESSERA" watch "$id"
   grep -q succeeded "$tmp/out" && ok "watch printed the final state" || not_ok "watch printed no final state"
   expect 0 "tessera list" "$TESSERA" list
+  head -1 "$tmp/out" | grep -qE '^ID +STATE +PRIO +SAMPLES +CREATED +NAME$' && ok "list has a header row" \
+    || not_ok "list's first line: $(head -1 "$tmp/out")"
   grep -q "$id" "$tmp/out" && ok "list shows the job" || not_ok "list misses the job"
   grep "$id" "$tmp/out" | grep -q "small.json" && ok "list names the job after its file" ||
     not_ok "list gives no name: $(grep "$id" "$tmp/out")"
@@ -295,10 +361,31 @@ PY
   # A job id may be shortened to the 8 digits the web client shows, or any start that only one job has.
   expect 0 "fetch by the 8-digit prefix of an id" "$TESSERA" fetch "${id:0:8}" -d by-prefix
   [[ -s by-prefix/$id.png ]] && ok "the prefix named the whole id" || not_ok "no by-prefix/$id.png"
-  for i in $(seq 17); do "$TESSERA" submit small.json --spp 1 >/dev/null 2>&1; done
-  shared=$("$TESSERA" list --limit 100 | cut -c1 | sort | uniq -d | head -1)  # 18 ids, 16 first digits
-  expect 1 "an ambiguous prefix is fatal" "$TESSERA" watch "$shared"
-  if grep -q "ambiguous" "$tmp/err" && [[ $(grep -c "^  $shared[0-9a-f]\{31\} " "$tmp/err") -ge 2 ]]; then
+  # Fewer than 4 digits name a job by chance: a usage error, for every command that takes an id, before any request.
+  for c in watch fetch cancel log; do
+    expect 2 "tessera $c refuses a one-digit id prefix" "$TESSERA" "$c" "${id:0:1}"
+    grep -qF "\"${id:0:1}\" is too short for a job id: give at least 4 of its hex digits" "$tmp/err" \
+      && ok "tessera $c names the 4-digit rule" || not_ok "tessera $c ${id:0:1} said: $(cat "$tmp/err")"
+  done
+  expect 2 "a three-digit prefix is usage" "$TESSERA" cancel "${id:0:3}"
+  expect 0 "a four-digit prefix names the job" "$TESSERA" log "${id:0:4}"
+  # An ambiguous prefix lists its candidates: two jobs of a stand-in daemon share 4 digits (random ids rarely do).
+  mkdir -p fake/v1
+  echo '{"jobs": [{"id": "abcd0000000000000000000000000001", "state": "succeeded", "name": "one"},
+                  {"id": "abcd0000000000000000000000000002", "state": "queued", "name": "two"}]}' >fake/v1/jobs
+  python3 -u -m http.server 0 --bind 127.0.0.1 --directory fake >fake.out 2>&1 &
+  fake_pid=$!
+  fake_port=""
+  for _ in $(seq 100); do
+    fake_port=$(sed -n 's/.* port \([0-9]*\) .*/\1/p' fake.out | head -1)
+    [[ -n $fake_port ]] && break
+    sleep 0.1
+  done
+  expect 1 "an ambiguous prefix is fatal" "$TESSERA" watch abcd --url "http://127.0.0.1:$fake_port"
+  kill "$fake_pid" 2>/dev/null
+  wait "$fake_pid" 2>/dev/null
+  if grep -q "the job id prefix abcd is ambiguous: 2 jobs start with it" "$tmp/err" &&
+    [[ $(grep -c "^  abcd[0-9a-f]\{28\} " "$tmp/err") == 2 ]]; then
     ok "the ambiguous prefix lists its candidates"
   else
     not_ok "an ambiguous prefix said: $(cat "$tmp/err")"
@@ -349,12 +436,29 @@ PY
     not_ok "the daemon said: $(cat "$tmp/err"); tessera render: $(cat render-albdo.err)"
   fi
   expect 1 "submit refuses a job with four errors" "$TESSERA" submit many.json
-  if [[ $(grep -c "^tessera: submit: " "$tmp/err") == 4 ]] && grep -qF 'must be at least 1 (at /render/spp)' "$tmp/err" \
+  if [[ $(grep -c "^tessera: submit: " "$tmp/err") == 5 ]] && grep -qF 'must be at least 1 (at /render/spp)' "$tmp/err" \
+    && grep -qxF 'tessera: submit: more checks (material names, indices, assets, limits) follow once these errors are fixed' \
+      "$tmp/err" \
     && grep -qF 'must be an integer (at /render/width)' "$tmp/err" \
     && grep -qF '(did you mean "lambert"?) (at /scene/materials/n/type)' "$tmp/err"; then
-    ok "submit shows the daemon's four errors, as render does"
+    ok "submit shows the daemon's four errors and that more checks follow, as render does"
   else
     not_ok "submit said: $(cat "$tmp/err"); render: $(cat render-many.err)"
+  fi
+  # One answer with the schema's errors and the renderer's that do not depend on them.
+  expect 1 "submit refuses a misspelt property and an unknown material" "$TESSERA" submit mixed.json
+  if grep -qF 'unknown property "albdo" (did you mean "albedo"?) (at /scene/materials/m/albdo)' "$tmp/err" \
+    && grep -qF 'unknown material "purple"' "$tmp/err" && grep -qF "(at /scene/objects/0/material)" "$tmp/err"; then
+    ok "submit names the unknown material with the schema's error, in one answer"
+  else
+    not_ok "submit of mixed.json said: $(cat "$tmp/err")"
+  fi
+  expect 1 "submit.sh of a job with four errors fails" "$curl_dir/submit.sh" many.json
+  if [[ $(grep -c "^error: " "$tmp/err") == 5 ]] && grep -qF "error: must be an integer at /render/width" "$tmp/err" \
+    && grep -qF "error: more checks" "$tmp/err"; then
+    ok "submit.sh prints every error"
+  else
+    not_ok "submit.sh of many.json said: $(cat "$tmp/err")"
   fi
   echo '{"kind": "scene", "render": {"width": 0}}' >invalid.json
   expect 1 "a refused job is fatal" "$TESSERA" submit invalid.json

@@ -5,7 +5,9 @@
 # tracked files whose build/ is this build, against a tesserad on a free port (the README's http://127.0.0.1:8080 is
 # replaced by its address).
 # Synopses (lines that start with a bare `tessera `) are not commands and are skipped; so are the sections that
-# install, deploy or benchmark (the deploy and container tests run those). The sample assets must come out unchanged.
+# install, deploy or benchmark (the deploy and container tests run those). The sample assets must come out unchanged,
+# and `git status` clean: the examples write their outputs where .gitignore keeps them out of the way (the copy is a
+# repository of its own, with the tracked files committed, to ask git).
 # usage: readme_examples.sh BUILD_DIR     (run by CTest)
 set -uo pipefail
 build=${1:?usage: readme_examples.sh BUILD_DIR}
@@ -24,6 +26,11 @@ trap cleanup EXIT
 mkdir -p "$tmp/clone"
 (cd "$repo" && git ls-files -z --cached --others --exclude-standard | tar --null -T - -cf -) | tar -C "$tmp/clone" -xf -
 ln -s "$build" "$tmp/clone/build"
+(
+  cd "$tmp/clone" && git init -q && echo /build >>.git/info/exclude && git add -A &&
+    git -c user.name=readme -c user.email=readme@localhost commit -qm "the tracked files"
+) || { echo "cannot make the copy a git repository"; exit 1; }
+[[ -z $(git -C "$tmp/clone" status --porcelain) ]] || { echo "the copy is not clean before the examples"; exit 1; }
 assets_before=$(cd "$tmp/clone" && find examples -type f -print0 | sort -z | xargs -0 sha256sum)
 
 "$build/server/tesserad" --port 0 --listen 127.0.0.1 --data-dir "$tmp/data" --threads 2 --log-level warn \
@@ -69,9 +76,13 @@ else
   echo "ok - $blocks README blocks ran"
 fi
 [[ $blocks -ge 6 ]] && echo "ok - every section's examples were found" || { echo "not ok - only $blocks blocks"; failed=1; }
-for f in out/result.png cornell.png quick.png duck.png prism.png out.exr out.png; do
+for f in out/result.png out/result.exr out/preview.png out/cornell.png out/quick.png out/duck.png out/prism.png \
+  out/merged.exr out/merged.png; do
   [[ -s $tmp/clone/$f ]] && echo "ok - the examples wrote $f" || { echo "not ok - no $f"; failed=1; }
 done
 assets_after=$(cd "$tmp/clone" && find examples -type f -print0 | sort -z | xargs -0 sha256sum)
 [[ $assets_before == "$assets_after" ]] && echo "ok - examples/ is unchanged" || { echo "not ok - examples/ changed"; failed=1; }
+untracked=$(git -C "$tmp/clone" status --porcelain)
+[[ -z $untracked ]] && echo "ok - git status is clean after the examples" \
+  || { echo "not ok - the examples left files git sees:"; echo "$untracked" | sed 's/^/    /'; failed=1; }
 exit $failed

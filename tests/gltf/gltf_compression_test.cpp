@@ -12,9 +12,13 @@
 #include <array>
 #include <cmath>
 #include <cstdlib>
+#include <random>
 
 #include "renderer/gltf_loader.h"
+#include "renderer/job.h"
 #include "renderer/scene_error.h"
+#include "renderer/session.h"
+#include "renderer/thread_pool.h"
 #include "tests/renderer/gltf_fixture.h"
 
 namespace tessera {
@@ -294,6 +298,68 @@ TEST(GltfCompression, MalformedMeshoptStreamsAreRefused) {
     } catch (const SceneError& e) {
       EXPECT_NE(std::string(e.what()).find("EXT_meshopt_compression"), std::string::npos) << e.what();
     }
+  }
+}
+
+// Renders `file` of the fixture folder as a job would: the path tracer, 16x16, 2 samples per pixel.
+void render_small(const std::filesystem::path& file) {
+  JobLoadOptions options;
+  options.scene.asset_root = fixture_dir();
+  RenderJob job = load_job(
+      json{{"scene", {{"gltf", file.filename().string()}}}, {"render", {{"width", 16}, {"height", 16}, {"spp", 2}}}},
+      options);
+  ThreadPool pool(2);
+  RenderSession session(job.scene, job.settings, pool);
+  session.run();
+}
+
+// A fuzzer's mutations of a valid Draco stream (1 to 16 bytes changed at random places) that Draco still decodes
+// can hold any coordinates: each is refused when it loads, or loads as geometry that renders. Before geometry was
+// checked, some made rays Embree aborts on (its RayK::valid assertion), and the process died.
+TEST(GltfCompression, MutatedDracoStreamsAreRefusedOrRender) {
+  const Grid g = grid(6);
+  int position_id, normal_id;
+  const std::vector<unsigned char> stream = draco_bytes(g, &position_id, &normal_id, draco::MESH_SEQUENTIAL_ENCODING);
+  std::mt19937 random(20261127);
+  int refused = 0, rendered = 0;
+  for (int trial = 0; trial < 150; ++trial) {
+    std::vector<unsigned char> mutated = stream;
+    const int changes = 1 + static_cast<int>(random() % 16);
+    for (int k = 0; k < changes; ++k) mutated[random() % mutated.size()] = static_cast<unsigned char>(random());
+    const auto file = write_draco(g, mutated, position_id, normal_id, "mutated");
+    try {
+      render_small(file);
+      ++rendered;
+    } catch (const SceneError&) {
+      ++refused;
+    }
+  }
+  EXPECT_GT(refused, 0);
+  EXPECT_GT(rendered, 0);
+}
+
+// meshopt's decoder writes the whole declared output before it can tell the data is bad: a view declaring 8e6
+// vertices of 256 bytes over a few bytes of data is refused for what it would make, before it is made.
+TEST(GltfCompression, AMeshoptViewCannotDeclareMoreThanItsBytesAllow) {
+  const Grid g = grid(4);
+  const auto file = write_meshopt(g, "meshopt_huge");
+  json doc = json::parse(std::ifstream(file));
+  for (json& view : doc["bufferViews"]) {
+    json& ext = view["extensions"]["EXT_meshopt_compression"];
+    if (ext["mode"] != "ATTRIBUTES") continue;
+    ext["count"] = 8'000'000;
+    ext["byteStride"] = 256;
+    view["byteLength"] = 8'000'000ull * 256;
+  }
+  std::ofstream(file) << doc.dump();
+  Scene scene;
+  try {
+    import_gltf(file, "/scene/gltf", scene, {});
+    ADD_FAILURE() << "accepted";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("EXT_meshopt_compression would make the asset's decoded geometry larger than"),
+              std::string::npos)
+        << e.what();
   }
 }
 

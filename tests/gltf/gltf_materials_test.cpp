@@ -78,6 +78,53 @@ TEST(GltfMaterials, SpecularGlossinessTextureIsBakedPerTexel) {
   EXPECT_EQ(pbr["roughnessFactor"], 1.0);
 }
 
+// The Khronos sample SpecGlossVsMetalRough: its gold is in the specular-glossiness texture, over a black diffuse
+// texture. Converted per texel from both textures, the gold texel is a gold metal (metallic 1, base colour the
+// specular colour) and the black-specular texel a dielectric with the diffuse colour; the diffuse alpha is kept.
+TEST(GltfMaterials, AMetalInTheSpecularTextureOverABlackDiffuseTextureIsAMetalOfThatColour) {
+  auto sg = std::make_shared<ImagePixels>();  // texel 0: gold (sRGB 255, 225, 156), glossy; texel 1: 4 % grey
+  sg->width = 2;
+  sg->height = 1;
+  sg->channels = 4;
+  sg->data.assign({255, 225, 156, 255, 56, 56, 56, 128});
+  auto diffuse = std::make_shared<ImagePixels>();  // black, then mid grey; alpha 1 and 0.2
+  diffuse->width = 2;
+  diffuse->height = 1;
+  diffuse->channels = 4;
+  diffuse->data.assign({0, 0, 0, 255, 188, 188, 188, 51});
+  std::map<std::string, std::shared_ptr<const ImagePixels>> images = {{"image0", sg}, {"image1", diffuse}};
+  json doc = {{"images", {json::object(), json::object()}}, {"textures", {{{"source", 0}}, {{"source", 1}}}}};
+  json m = gltf::spec_gloss_to_metal_rough(
+      doc, spec_gloss({{"specularGlossinessTexture", {{"index", 0}}}, {"diffuseTexture", {{"index", 1}}}}), images,
+      nullptr);
+  const json& pbr = m["pbrMetallicRoughness"];
+  ASSERT_TRUE(pbr.contains("baseColorTexture"));
+  ASSERT_TRUE(pbr.contains("metallicRoughnessTexture"));
+  auto pixels = [&](const char* key) {
+    const int tex = pbr[key]["index"].get<int>();
+    return images.at("image" + std::to_string(doc["textures"][tex]["source"].get<int>()));
+  };
+  const ImagePixels& base = *pixels("baseColorTexture");
+  const ImagePixels& mr = *pixels("metallicRoughnessTexture");
+  EXPECT_EQ(mr.data[2], 255);  // metallic of the gold texel
+  EXPECT_EQ(mr.data[1], 0);    // its roughness
+  EXPECT_NEAR(base.data[0], 255, 1);
+  EXPECT_NEAR(base.data[1], 225, 1);
+  EXPECT_NEAR(base.data[2], 156, 1);
+  EXPECT_EQ(base.data[3], 255);
+  EXPECT_EQ(mr.data[6], 0);  // the grey texel: a dielectric of the diffuse colour
+  EXPECT_NEAR(mr.data[5], 128, 1);
+  EXPECT_NEAR(base.data[4], 188, 1);
+  EXPECT_EQ(base.data[7], 51);
+  EXPECT_EQ(pbr["baseColorFactor"], json({1.0, 1.0, 1.0, 1.0}));
+  // A diffuse texture mapped otherwise (another texCoord) is not read per texel: it stays the base colour's.
+  json other = gltf::spec_gloss_to_metal_rough(
+      doc,
+      spec_gloss({{"specularGlossinessTexture", {{"index", 0}}}, {"diffuseTexture", {{"index", 1}, {"texCoord", 1}}}}),
+      images, nullptr);
+  EXPECT_EQ(other["pbrMetallicRoughness"]["baseColorTexture"]["index"], 1);
+}
+
 TEST(GltfMaterials, SpecularGlossinessAssetsImportWithAWarningSayingItIsApproximated) {
   test::GltfBuilder b;
   const int mat =

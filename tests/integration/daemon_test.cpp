@@ -396,5 +396,42 @@ TEST(DaemonRestart, QueuedJobsRunAfterACrash) {
   EXPECT_EQ(daemon.stop(SIGTERM), 0);
 }
 
+// A job whose renderer dies while rendering it (here the whole daemon, killed) is rendered again at the next start,
+// up to --crash-retries times; then it fails naming the crashes, and later starts leave it failed: a scene that
+// crashes the renderer cannot crash the daemon at every start.
+TEST(DaemonRestart, AJobLostMoreOftenThanItsRetriesFailsInsteadOfLooping) {
+  TempDir dir;
+  const fs::path data = dir.path() / "data";
+  std::vector<std::string> args = kDaemonArgs;
+  args.insert(args.end(), {"--crash-retries", "1"});
+  std::string id;
+  json last_start;
+  for (int start = 0; start < 2; ++start) {  // killed while rendering it, twice
+    Daemon daemon(data, args);
+    auto c = daemon.client();
+    if (id.empty()) id = submit(*c, long_cornell_job());
+    // Running under this daemon: the store still says running for the killed one until this start requeues it.
+    const json running = wait_for(
+        *c, id, [&](const json& s) { return in_state(s, "running") && s.value("started_at", json()) != last_start; });
+    ASSERT_TRUE(in_state(running, "running")) << "start " << start << ": " << running.dump();
+    last_start = running.value("started_at", json());
+    EXPECT_EQ(daemon.stop(SIGKILL), 128 + SIGKILL);
+  }
+  json finished_at;
+  for (int start = 2; start < 4; ++start) {
+    Daemon daemon(data, args);
+    auto c = daemon.client();
+    const json failed = wait_for(*c, id, [](const json& s) { return in_state(s, "failed"); });
+    ASSERT_TRUE(in_state(failed, "failed")) << failed.dump();
+    EXPECT_NE(failed.value("error", "").find("the renderer stopped 2 times while rendering this job"),
+              std::string::npos)
+        << failed.dump();
+    // Failed at the third start, and left so by the fourth.
+    if (start == 2) finished_at = failed.at("finished_at");
+    EXPECT_EQ(failed.at("finished_at"), finished_at) << "ended again: " << failed.dump();
+    EXPECT_EQ(daemon.stop(SIGTERM), 0);
+  }
+}
+
 }  // namespace
 }  // namespace tessera::server::test

@@ -108,6 +108,8 @@ const Case kCases[] = {
      "/scene/lights/0/position", "required"},
     {"outputs_unknown", R"([{"op":"replace","path":"/outputs/0","value":"jpg"}])", "/outputs/0", "enum"},
     {"outputs_empty", R"([{"op":"replace","path":"/outputs","value":[]}])", "/outputs", "minItems"},
+    // 2^53 + 1, which a double reads as 2^53, the maximum.
+    {"seed_above_2_53", R"([{"op":"add","path":"/render/seed","value":9007199254740993}])", "/render/seed", "maximum"},
     {"priority_too_high", R"([{"op":"add","path":"/priority","value":1000}])", "/priority", "maximum"},
     {"scene_missing", R"([{"op":"remove","path":"/scene"}])", "/scene", "required"},
 };

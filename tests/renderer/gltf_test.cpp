@@ -1,6 +1,7 @@
 // glTF import: fixtures written here, rendered, and checked against where things must land and what light must
 // arrive; malformed and hostile files must be refused with a SceneError, never a crash.
 #include <gtest/gtest.h>
+#include <tiny_gltf.h>
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
@@ -9,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <stop_token>
 #include <thread>
@@ -282,6 +284,56 @@ std::vector<unsigned char> read_bytes(const std::filesystem::path& p) {
   return std::vector<unsigned char>(std::istreambuf_iterator<char>(in), {});
 }
 
+// The loader decodes a buffer's data: URI itself (tinygltf would copy its text three times first), as tinygltf decodes
+// it: every variant that tinygltf::DecodeDataURI takes for the buffer loads the same triangle, and every one it
+// refuses is refused with tinygltf's message, the URI named by its header.
+TEST(GltfHostile, DataUrisAreDecodedAsTinygltfDecodesThem) {
+  GltfBuilder triangle = one_triangle();
+  triangle.bin.resize(triangle.bin.size() + 2);  // 44 bytes: the base64 ends with a group of three characters
+  triangle.write(fixture_dir(), "data-uri");
+  const json doc = json::parse(std::ifstream(fixture_dir() / "data-uri.gltf"));
+  const std::string header = "data:application/octet-stream;base64,";
+  const std::string data = doc["buffers"][0]["uri"].get<std::string>().substr(header.size());
+  const std::string bare = data.substr(0, data.find('='));
+  ASSERT_NE(bare.size() % 4, 0u) << "the buffer should end with a partial group";
+  Scene reference;
+  import_gltf(fixture_dir() / "data-uri.gltf", "/scene/gltf", reference, {});
+  ASSERT_EQ(reference.meshes.size(), 1u);
+  const std::string variants[] = {
+      header + data,
+      header + bare,                                       // no padding
+      header + data + "=AAAA",                             // decoding stops at the first '='
+      "data:application/gltf-buffer;base64," + data,       // another header tinygltf reads
+      "data:image/png;base64," + data,                     // an image's header, on a buffer
+      header + bare.substr(0, bare.size() - 1),            // one character short: a byte short
+      header + data.substr(0, 8) + "\n" + data.substr(8),  // decoding stops at a character outside base64
+      header,                                              // no bytes
+  };
+  for (const std::string& uri : variants) {
+    SCOPED_TRACE(uri);
+    json variant = doc;
+    variant["buffers"][0]["uri"] = uri;
+    std::ofstream(fixture_dir() / "data-uri-variant.gltf") << variant.dump();
+    std::vector<unsigned char> decoded;
+    std::string mime;
+    if (tinygltf::DecodeDataURI(&decoded, mime, uri, doc["buffers"][0]["byteLength"].get<size_t>(), true)) {
+      Scene scene;
+      import_gltf(fixture_dir() / "data-uri-variant.gltf", "/scene/gltf", scene, {});
+      ASSERT_EQ(scene.meshes.size(), 1u);
+      EXPECT_EQ(scene.meshes[0].positions, reference.meshes[0].positions);
+      EXPECT_EQ(scene.meshes[0].indices, reference.meshes[0].indices);
+    } else {
+      expect_refused(fixture_dir() / "data-uri-variant.gltf",
+                     "Failed to decode 'uri' : " + uri.substr(0, uri.find(',') + 1) + " in Buffer");
+    }
+  }
+  // An image whose data: URI holds no bytes is refused naming the image, as tinygltf names it.
+  GltfBuilder empty_image = one_triangle();
+  empty_image.texture_png({});
+  empty_image.write(fixture_dir(), "data-uri-empty-image");
+  expect_refused(fixture_dir() / "data-uri-empty-image.gltf", "Failed to decode 'uri' for image[0]");
+}
+
 TEST(GltfHostile, UrisThatLeaveTheUploadAreRefused) {
   for (const std::string uri : {"../secret.bin", "/etc/passwd", "http://example.com/a.bin", "file:///etc/passwd",
                                 "C:\\x.bin", "%2e%2e/x.bin", "sub/../../x.bin", "%2Fetc/passwd",
@@ -403,6 +455,11 @@ TEST(GltfHostile, InconsistentBuffersAndAccessorsAreRefused) {
   }
   {
     GltfBuilder b = one_triangle();
+    b.doc["scene"] = 3;  // the default scene, of one
+    expect_refused(b.write(fixture_dir(), "scene"), "the asset's scene 3 does not exist (it has 1 scenes)");
+  }
+  {
+    GltfBuilder b = one_triangle();
     b.node({{"children", {0}}}, false);
     b.doc["nodes"][0]["children"] = {1};  // a cycle
     b.write(fixture_dir(), "cycle");
@@ -454,6 +511,121 @@ TEST(GltfHostile, AStopTokenEndsALongLoad) {
   scene_options.max_gltf_instances = options.max_instances;
   scene_options.stop = stop.get_token();
   EXPECT_THROW(load_scene(json{{"gltf", "long.glb"}}, "/scene", scene_options), LoadStopped);
+}
+
+// An accessor without a buffer view is zeros that the import makes (glTF 2.0, 5.1 accessor.bufferView): a file of a
+// few hundred bytes could declare gigabytes of them. Its count is held against the vertex limit, and its bytes
+// against what the asset's own bytes allow, before anything is made.
+TEST(GltfHostile, AccessorsWithoutDataAreBoundedBeforeTheyAreMade) {
+  const std::pair<uint64_t, const char*> cases[] = {{150'000'000, "the limit of 50000000 vertices"},
+                                                    {30'000'000, "MiB, the limit for an asset of this size"}};
+  for (const auto& [count, refusal] : cases) {
+    GltfBuilder b = one_triangle();
+    b.write(fixture_dir(), "zeros");
+    json doc = json::parse(std::ifstream(fixture_dir() / "zeros.gltf"));
+    doc["accessors"][0].erase("bufferView");
+    doc["accessors"][0]["count"] = count;
+    std::ofstream(fixture_dir() / "zeros.gltf") << doc.dump();
+    expect_refused(fixture_dir() / "zeros.gltf", refusal);
+  }
+  // Within both, zeros are read as zeros: a triangle of three vertices at the origin.
+  GltfBuilder b = one_triangle();
+  b.write(fixture_dir(), "few_zeros");
+  json doc = json::parse(std::ifstream(fixture_dir() / "few_zeros.gltf"));
+  doc["accessors"][0].erase("bufferView");
+  std::ofstream(fixture_dir() / "few_zeros.gltf") << doc.dump();
+  Scene scene;
+  import_gltf(fixture_dir() / "few_zeros.gltf", "/scene/gltf", scene, {});
+  ASSERT_EQ(scene.meshes.size(), 1u);
+  for (const Vec3& p : scene.meshes[0].positions) EXPECT_EQ(length(p), 0.0f);
+}
+
+// Geometry Embree could not trace (a coordinate beyond kMaxSceneCoordinate, or one that a node's transform takes
+// past the largest float) is refused when the scene is loaded, naming it, never handed to the renderer.
+TEST(GltfHostile, GeometryBeyondTheSceneExtentIsRefused) {
+  {
+    GltfBuilder b;
+    b.node({{"mesh", b.mesh({0, 0, 0, 3e38f, 0, 0, 0, 1, 0}, {0, 1, 2}, -1)}}, true);
+    b.write(fixture_dir(), "far");
+    SceneLoadOptions options;
+    options.asset_root = fixture_dir();
+    try {
+      load_scene(json{{"gltf", "far.gltf"}}, "/scene", options);
+      ADD_FAILURE() << "a vertex at 3e38 was accepted";
+    } catch (const SceneError& e) {
+      EXPECT_EQ(e.pointer(), "/scene");
+      EXPECT_NE(std::string(e.what()).find("reaches 3e+38 units from the origin, beyond the 1e+12"), std::string::npos)
+          << e.what();
+    }
+  }
+  {
+    GltfBuilder b = one_triangle();
+    b.doc["nodes"][0]["scale"] = {1e30, 1e30, 1e30};
+    b.node({{"scale", {1e30, 1e30, 1e30}}, {"children", {0}}}, true);
+    b.doc["scenes"][0]["nodes"] = {1};
+    b.write(fixture_dir(), "overflow");
+    SceneLoadOptions options;
+    options.asset_root = fixture_dir();
+    EXPECT_THROW(load_scene(json{{"gltf", "overflow.gltf"}}, "/scene", options), SceneError);
+  }
+  // A JSON scene's sphere, whose coordinates the contract allows up to 1e30, is held to the same extent.
+  const json far_sphere = {
+      {"materials", {{"m", {{"type", "lambert"}}}}},
+      {"objects", {{{"shape", "sphere"}, {"center", {1e20, 0, 0}}, {"radius", 1}, {"material", "m"}}}}};
+  EXPECT_THROW(load_scene(far_sphere, "/scene", {}), SceneError);
+}
+
+// A ray Embree 3 would abort on (a component of its origin or direction beyond 1.844e18, a NaN anywhere) is answered
+// as a miss, alone or in a packet, and the rays beside it in the packet are traced as ever.
+TEST(GltfHostile, RaysEmbreeCannotTraceAreMisses) {
+  Scene scene;
+  import_gltf(one_triangle().write(fixture_dir(), "traced"), "/scene/gltf", scene, {});
+  scene.finalize();
+  const Ray good{Vec3(0.25f, 0.25f, 1), Vec3(0, 0, -1)};
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const Ray bad[] = {{Vec3(nan, 0.25f, 1), Vec3(0, 0, -1)},
+                     {Vec3(0.25f, 0.25f, 1), Vec3(0, nan, -1)},
+                     {Vec3(0.25f, 0.25f, 3e18f), Vec3(0, 0, -1)},
+                     {Vec3(0.25f, 0.25f, 1), Vec3(0, 0, -1), nan},
+                     {Vec3(0.25f, 0.25f, 1), Vec3(0, 0, -1), 0, nan}};
+  RayHit hit;
+  EXPECT_TRUE(scene.accel().intersect(good, &hit));
+  for (const Ray& ray : bad) {
+    EXPECT_FALSE(scene.accel().intersect(ray, &hit));
+    EXPECT_FALSE(scene.accel().occluded(ray));
+  }
+  Ray packet[Accel::kPacketSize];
+  for (int i = 0; i < Accel::kPacketSize; ++i) packet[i] = i % 2 ? bad[i / 2 % 5] : good;
+  RayHit hits[Accel::kPacketSize];
+  bool found[Accel::kPacketSize];
+  scene.accel().intersect_packet(packet, Accel::kPacketSize, hits, found);
+  for (int i = 0; i < Accel::kPacketSize; ++i) EXPECT_EQ(found[i], i % 2 == 0) << "ray " << i;
+}
+
+// An asset listing ten thousand extensions nobody knows makes one warning that names a few and counts the rest, at
+// once; a scene's warnings are at most kMaxWarnings, each once, then a count of the rest.
+TEST(GltfHostile, ManyUnknownExtensionsMakeOneWarning) {
+  GltfBuilder b = one_triangle();
+  b.doc["extensionsUsed"] = json::array();
+  for (int i = 0; i < 10000; ++i) b.doc["extensionsUsed"].push_back("EXT_unknown_" + std::to_string(i));
+  Scene scene;
+  const GltfImport imported = import_gltf(b.write(fixture_dir(), "extensions"), "/scene/gltf", scene, {});
+  ASSERT_EQ(imported.warnings.size(), 1u);
+  EXPECT_NE(imported.warnings[0].find("EXT_unknown_0, "), std::string::npos) << imported.warnings[0];
+  EXPECT_NE(imported.warnings[0].find(" and 9992 more are not supported and were ignored"), std::string::npos)
+      << imported.warnings[0];
+
+  std::vector<std::string> warnings;
+  for (int i = 0; i < 100; ++i) warnings.push_back("material " + std::to_string(i % 50) + " is approximated");
+  tidy_warnings(&warnings);
+  ASSERT_EQ(warnings.size(), kMaxWarnings + 1);
+  EXPECT_EQ(warnings.front(), "material 0 is approximated");
+  EXPECT_EQ(warnings.back(), "and " + std::to_string(50 - kMaxWarnings) + " more warnings");
+  // Tidied again with more (a scene holding an asset's tidied warnings), the counts add up.
+  warnings.push_back("the scene's own warning");
+  warnings.push_back("and 5 more warnings");
+  tidy_warnings(&warnings);
+  EXPECT_EQ(warnings.back(), "and " + std::to_string(50 - kMaxWarnings + 1 + 5) + " more warnings");
 }
 
 // What is not rendered as written says so, once, naming the node or material: a node's own morph weights. A
@@ -1003,29 +1175,37 @@ TEST(GltfHostile, ACheckedSceneReadsImageHeadersOnly) {
   EXPECT_THROW(import_gltf(fixture_dir() / "garbage.gltf", "/scene/gltf", scene, check), SceneError);
 }
 
-// A JPEG cut short (libjpeg would decode it with a warning only, the missing rows grey) is refused when the scene is
-// checked and when it is imported, naming the image; the whole JPEG is taken.
-TEST(GltfHostile, TruncatedJpegsAreRefused) {
-  for (bool progressive : {false, true}) {
-    SCOPED_TRACE(progressive ? "progressive JPEG" : "baseline JPEG");
-    std::vector<unsigned char> jpeg = jpeg_rgb(40, 30, progressive);
+// A JPEG cut short (libjpeg would decode it with a warning only, the missing rows grey) or a PNG cut short (see
+// png_complete) is refused when the scene is checked and when it is imported, naming the image; the whole image is
+// taken.
+TEST(GltfHostile, TruncatedJpegsAndPngsAreRefused) {
+  struct Case {
+    const char* name;
+    std::vector<unsigned char> image;
+  };
+  const Case cases[] = {{"JPEG", jpeg_rgb(40, 30, false)},
+                        {"JPEG", jpeg_rgb(40, 30, true)},
+                        {"PNG", png_rgba(40, 30, std::vector<unsigned char>(40 * 30 * 4, 200))}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
     for (bool cut : {false, true}) {
       GltfBuilder b = one_triangle();
-      b.texture_png(cut ? std::vector<unsigned char>(jpeg.begin(), jpeg.end() - 20) : jpeg);
-      b.write(fixture_dir(), "cut-jpeg");
+      b.texture_png(cut ? std::vector<unsigned char>(c.image.begin(), c.image.end() - 20) : c.image);
+      b.write(fixture_dir(), "cut-image");
       for (bool headers_only : {true, false}) {
         Scene scene;
         GltfImportOptions options;
         options.headers_only = headers_only;
         if (!cut) {
-          EXPECT_NO_THROW(import_gltf(fixture_dir() / "cut-jpeg.gltf", "/scene/gltf", scene, options));
+          EXPECT_NO_THROW(import_gltf(fixture_dir() / "cut-image.gltf", "/scene/gltf", scene, options));
           continue;
         }
         try {
-          import_gltf(fixture_dir() / "cut-jpeg.gltf", "/scene/gltf", scene, options);
-          ADD_FAILURE() << "a truncated JPEG was accepted (headers only: " << headers_only << ")";
+          import_gltf(fixture_dir() / "cut-image.gltf", "/scene/gltf", scene, options);
+          ADD_FAILURE() << "a truncated image was accepted (headers only: " << headers_only << ")";
         } catch (const SceneError& e) {
-          EXPECT_NE(std::string(e.what()).find("image 0 is a truncated JPEG"), std::string::npos) << e.what();
+          EXPECT_NE(std::string(e.what()).find(std::string("image 0 is a truncated ") + c.name), std::string::npos)
+              << e.what();
         }
       }
     }
@@ -1509,6 +1689,66 @@ TEST(GltfTransmission, SolidGlassRefractsBySnellsLaw) {
   EXPECT_NEAR(found[0], column_of(0), 1.0);
   EXPECT_NEAR(found[1], column_of(-shift), 1.0);
   EXPECT_GT(std::abs(column_of(-shift) - column_of(0)), 15);  // the test can tell the two apart
+}
+
+// A smooth (roughness 0) thin-walled pane of KHR_materials_transmission lets light through unbent, so what is seen
+// through it is what is seen without it, only dimmer: a checker texture 4 units behind the pane is as sharp through it
+// as without it (as in the Khronos sample TransmissionTest, whose smooth thin-walled spheres show the checker behind
+// them sharp). Compared: each image divided by its mean, then the root mean square of their difference against the
+// checker's own contrast. A lobe or a texture footprint widened by the pane (a roughness floor too high, a ray cone
+// spread by a near-specular lobe) blurs the squares' edges and raises it.
+TEST(GltfTransmission, ASmoothThinWallDoesNotBlurWhatIsBehindIt) {
+  constexpr int kTexels = 512, kSquare = 32;
+  std::vector<unsigned char> rgba;
+  for (int y = 0; y < kTexels; ++y)
+    for (int x = 0; x < kTexels; ++x) {
+      const unsigned char v = ((x / kSquare + y / kSquare) % 2) ? 230 : 25;
+      rgba.insert(rgba.end(), {v, v, v, 255});
+    }
+  const std::vector<unsigned char> checker = png_rgba(kTexels, kTexels, rgba);
+  Rendered images[2];
+  for (int pane = 0; pane < 2; ++pane) {
+    GltfBuilder b;
+    b.doc["extensionsUsed"] = {"KHR_materials_transmission"};
+    const int tex = b.texture_png(checker);
+    const int backdrop = b.material({{"emissiveFactor", {1, 1, 1}},
+                                     {"emissiveTexture", {{"index", tex}}},
+                                     {"pbrMetallicRoughness", {{"baseColorFactor", {0, 0, 0, 1}}}}});
+    b.node({{"mesh", b.textured_mesh({-2, 2, -4, 2, 2, -4, 2, -2, -4, -2, -2, -4}, {0, 0, 1, 0, 1, 1, 0, 1},
+                                     {0, 3, 2, 0, 2, 1}, backdrop)}},
+           true);
+    if (pane) {
+      const int glass = b.material(
+          {{"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 1}}, {"metallicFactor", 0}, {"roughnessFactor", 0}}},
+           {"doubleSided", true},
+           {"extensions", {{"KHR_materials_transmission", {{"transmissionFactor", 1}}}}}});
+      b.node({{"mesh", b.mesh({-1, 1, 0, 1, 1, 0, 1, -1, 0, -1, -1, 0}, {0, 3, 2, 0, 2, 1}, glass)}}, true);
+    }
+    b.write(fixture_dir(), "pane");
+    const json job = {{"kind", "scene"},
+                      {"scene",
+                       {{"gltf", "pane.gltf"},
+                        {"camera", {{"type", "perspective"}, {"from", {0, 0, 1}}, {"to", {0, 0, 0}}, {"fov_deg", 40}}},
+                        {"environment", {{"color", 0}}}}},
+                      {"render", {{"width", 256}, {"height", 256}, {"spp", 16}, {"max_depth", 4}}}};
+    images[pane] = render_job(job);
+  }
+  auto mean = [](const Rendered& img) {
+    double sum = 0;
+    for (size_t i = 0; i < img.rgb.size(); i += 3) sum += img.rgb[i + 1];
+    return sum / static_cast<double>(img.rgb.size() / 3);
+  };
+  const double without = mean(images[0]), through = mean(images[1]);
+  ASSERT_GT(through, 0.5 * without);  // the pane lets most of the light through
+  double diff2 = 0, contrast2 = 0;
+  for (size_t i = 1; i < images[0].rgb.size(); i += 3) {
+    const double a = images[0].rgb[i] / without, b = images[1].rgb[i] / through;
+    diff2 += (a - b) * (a - b);
+    contrast2 += (a - 1) * (a - 1);
+  }
+  const double relative = std::sqrt(diff2 / contrast2);
+  EXPECT_LT(relative, 0.1) << "the checker seen through the pane differs from the checker by " << relative
+                           << " of its contrast";
 }
 
 // KHR_materials_dispersion parts the colours by Snell's law at each wavelength: a slab as above, 3 thick, of dispersion

@@ -1,14 +1,18 @@
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <thread>
+#include <vector>
 
 #include <OpenImageIO/imageio.h>
 
+#include "renderer/gltf_loader.h"
 #include "renderer/image_io.h"
+#include "tests/renderer/gltf_fixture.h"
 
 namespace tessera {
 namespace {
@@ -136,7 +140,7 @@ TEST(ImageIo, ReadsAGivenNumberOfChannels) {
     SCOPED_TRACE("stored " + std::to_string(c.stored) + ", read " + std::to_string(c.wanted));
     std::vector<float> values;
     for (int t = 0; t < 3 * 2; ++t) values.insert(values.end(), c.texel.begin(), c.texel.end());
-    const auto path = write_channels("c" + std::to_string(k) + ".exr", 3, 2, c.stored, values);
+    const auto path = write_channels(std::string("c").append(std::to_string(k)) + ".exr", 3, 2, c.stored, values);
     const ImageData img = read_image(path.string(), c.wanted);
     ASSERT_EQ(img.channels, static_cast<int>(c.expected.size()));
     ASSERT_EQ(img.pixels.size(), 3u * 2u * c.expected.size());
@@ -317,6 +321,166 @@ TEST(ImageIo, TruncatedJpegsAreToldFromWholeOnes) {
     }
     EXPECT_NO_THROW(read_image(path.string()));
   }
+}
+
+// A PNG is complete when its chunks are whole up to its IEND chunk: no proper prefix of a file is, the file is, and
+// so is the file with data after it; read_image refuses a cut file (OpenImageIO 2.4.7 would lose the memory of its
+// error message reading it: see png_complete), and read_image_header one cut before its image data.
+TEST(ImageIo, TruncatedPngsAreToldFromWholeOnes) {
+  const auto path = temp_file("whole.png");
+  auto out = OIIO::ImageOutput::create(path.string());
+  OIIO::ImageSpec spec(24, 16, 3, OIIO::TypeDesc::UINT8);
+  ASSERT_TRUE(out->open(path.string(), spec));
+  std::vector<unsigned char> rgb(24 * 16 * 3);
+  for (size_t i = 0; i < rgb.size(); ++i) rgb[i] = static_cast<unsigned char>(i * 37);
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, rgb.data()));
+  out->close();
+  const std::string whole = file_bytes(path);
+  const std::vector<unsigned char> bytes(whole.begin(), whole.end());
+  EXPECT_TRUE(png_complete(bytes.data(), bytes.size()));
+  EXPECT_TRUE(truncation(bytes.data(), bytes.size()).empty());
+  size_t prefixes_taken_whole = 0;
+  for (size_t n = 0; n < bytes.size(); ++n) prefixes_taken_whole += png_complete(bytes.data(), n);
+  EXPECT_EQ(prefixes_taken_whole, 0u);
+  std::vector<unsigned char> appended = bytes;
+  appended.insert(appended.end(), 64, 0xFF);
+  EXPECT_TRUE(png_complete(appended.data(), appended.size()));
+  // A chunk whose length reaches past the end of the data (2^32 - 1, beyond any size_t sum of a 32-bit length).
+  std::vector<unsigned char> long_chunk = bytes;
+  std::fill(long_chunk.begin() + 8, long_chunk.begin() + 12, 0xFF);
+  EXPECT_FALSE(png_complete(long_chunk.data(), long_chunk.size()));
+  const auto cut = truncated_copy(path, bytes.size() - 30, "cut.png");  // in the image data
+  try {
+    read_image(cut.string());
+    ADD_FAILURE() << "a cut PNG was read";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("cut.png: it is a truncated PNG"), std::string::npos) << e.what();
+  }
+  EXPECT_NO_THROW(read_image(path.string()));
+  // A header read reads the chunks before the image data: a file cut in its pixels has a header, one cut before them
+  // has none.
+  EXPECT_EQ(read_image_header(cut.string()).width, 24);
+  const size_t image_data = whole.find("IDAT");
+  ASSERT_NE(image_data, std::string::npos);
+  const auto cut_header = truncated_copy(path, image_data - 7, "cut-header.png");
+  try {
+    read_image_header(cut_header.string());
+    ADD_FAILURE() << "the header of a PNG cut before its image data was read";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("cut-header.png: it is a truncated PNG"), std::string::npos) << e.what();
+  }
+}
+
+// An ICC profile (ICC.1:2001-04, section 6: a 128-byte header, a tag count, a tag table) whose `tags` tags all hold
+// one XYZType value under signatures made from `seed`, none of them a tag OpenImageIO knows by name.
+std::vector<unsigned char> icc_profile_with_unknown_tags(int seed, int tags) {
+  std::vector<unsigned char> p(128 + 4 + 12 * static_cast<size_t>(tags), 0);
+  auto be32 = [&](size_t at, uint32_t v) {
+    for (int i = 0; i < 4; ++i) p[at + i] = static_cast<unsigned char>(v >> (24 - 8 * i));
+  };
+  be32(8, 0x02100000);  // version 2.1
+  std::memcpy(&p[12], "mntrRGB XYZ ", 12);
+  std::memcpy(&p[36], "acsp", 4);
+  be32(128, static_cast<uint32_t>(tags));
+  for (int t = 0; t < tags; ++t) {
+    const size_t at = 132 + 12 * static_cast<size_t>(t);
+    const int id = seed * tags + t;
+    const char signature[4] = {static_cast<char>('a' + id % 26), static_cast<char>('a' + id / 26 % 26),
+                               static_cast<char>('a' + id / 676 % 26), static_cast<char>('A' + id / 17576 % 26)};
+    std::memcpy(&p[at], signature, 4);
+    be32(at + 4, static_cast<uint32_t>(p.size()));
+    be32(at + 8, 20);
+    const unsigned char xyz[20] = {'X', 'Y', 'Z', ' '};
+    p.insert(p.end(), xyz, xyz + 20);
+  }
+  be32(0, static_cast<uint32_t>(p.size()));
+  return p;
+}
+
+void write_jpeg_with_icc_profile(const std::filesystem::path& path, const std::vector<unsigned char>& profile) {
+  OIIO::ImageSpec spec(8, 8, 3, OIIO::TypeDesc::UINT8);
+  spec.attribute("ICCProfile", OIIO::TypeDesc(OIIO::TypeDesc::UINT8, static_cast<int>(profile.size())), profile.data());
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out && out->open(path.string(), spec));
+  const std::vector<unsigned char> pixels(8 * 8 * 3, 128);
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+  out->close();
+}
+
+// Debian 12's OpenImageIO (2.4.7) decodes a JPEG's ICC profile on open with lookups that insert each tag name it has
+// not seen into a table shared by the process: two threads opening such JPEGs at once corrupt it and crash. Every
+// reader of the renderer opens through one lock (open_image_input): here many threads read JPEGs whose profiles hold
+// thousands of names new to the process, through read_image and through the glTF importer's parallel texture
+// decoding, and all of them are read. Without the lock this test process segfaults in two runs of three on a 2-core
+// machine.
+TEST(ImageIo, JpegsWithIccProfilesAreReadOnManyThreadsAtOnce) {
+  constexpr int kThreads = 8, kFilesPerThread = 60, kTags = 400;
+  std::vector<std::filesystem::path> files;
+  for (int f = 0; f < kThreads * kFilesPerThread; ++f) {
+    files.push_back(temp_file("icc" + std::to_string(f) + ".jpg"));
+    write_jpeg_with_icc_profile(files.back(), icc_profile_with_unknown_tags(f, kTags));
+  }
+  // The same count of assets, each of kFilesPerThread JPEG images beside it, with signatures new again.
+  std::vector<std::filesystem::path> assets;
+  for (int a = 0; a < kThreads; ++a) {
+    const std::filesystem::path dir = temp_file("icc-asset" + std::to_string(a));
+    test::GltfBuilder b;
+    b.doc["images"] = nlohmann::json::array();
+    for (int i = 0; i < kFilesPerThread; ++i) {
+      const std::string name = std::string("t").append(std::to_string(i)) + ".jpg";
+      std::filesystem::create_directories(dir);
+      write_jpeg_with_icc_profile(dir / name,
+                                  icc_profile_with_unknown_tags(kThreads * kFilesPerThread * (a + 1) + i, kTags));
+      b.doc["images"].push_back({{"uri", name}});
+    }
+    b.node({{"mesh", b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, -1)}}, true);
+    assets.push_back(b.write(dir, "asset"));
+  }
+  std::atomic<int> read{0}, imported{0};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kThreads; ++t)
+    threads.emplace_back([&, t] {
+      for (int i = 0; i < kFilesPerThread; ++i)
+        if (read_image(files[static_cast<size_t>(t * kFilesPerThread + i)].string()).width == 8) ++read;
+      Scene scene;
+      import_gltf(assets[static_cast<size_t>(t)], "/scene/gltf", scene, {});
+      ++imported;
+    });
+  for (std::thread& t : threads) t.join();
+  EXPECT_EQ(read.load(), kThreads * kFilesPerThread);
+  EXPECT_EQ(imported.load(), kThreads);
+}
+
+// OpenEXR 3.1 allocates the size a header attribute declares before reading it: a 32-byte file declaring a 2 GiB
+// string made the daemon allocate 2 GiB (found by fuzz_image). Such a header is refused from its bytes, before
+// OpenEXR sees it, through every reader; a sound EXR (as write_exr writes them) passes.
+TEST(ImageIo, AnExrHeaderDeclaringMoreThanTheFileHoldsIsRefused) {
+  std::vector<unsigned char> bad = {0x76, 0x2F, 0x31, 0x01, 2, 0, 0, 0};  // magic, version 2
+  for (const char* text : {"comments", "string"}) bad.insert(bad.end(), text, text + std::strlen(text) + 1);
+  bad.insert(bad.end(), {0xF0, 0xFF, 0xFF, 0x7F, 'o', 'i', 'i', 'o'});  // declares 2147483632 bytes, holds 4
+  EXPECT_NE(exr_header_problem(bad.data(), bad.size())
+                .find("its header attribute \"comments\" declares 2147483632 bytes, more than the file holds"),
+            std::string::npos)
+      << exr_header_problem(bad.data(), bad.size());
+  const auto path = temp_file("declares-2gib.exr");
+  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(bad.data()), static_cast<long>(bad.size()));
+  for (auto read :
+       {+[](const std::string& p) { read_image_header(p); }, +[](const std::string& p) { read_image(p); }}) {
+    try {
+      read(path.string());
+      ADD_FAILURE() << "read";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("declares-2gib.exr: its header attribute \"comments\" declares"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  const auto good = temp_file("sound.exr");
+  write_exr(good.string(), gradient(8, 4), 8, 4, true);
+  std::ifstream in(good, std::ios::binary);
+  const std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(exr_header_problem(bytes.data(), bytes.size()), "");
+  EXPECT_EQ(read_image_header(good.string()).width, 8);
 }
 
 // The message names the file but not the folder it is in (a daemon's data directory).

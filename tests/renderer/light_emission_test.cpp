@@ -14,7 +14,7 @@ using nlohmann::json;
 
 uint32_t add_material(Scene& scene, const json& params) {
   scene.materials.push_back(MaterialRegistry::builtin().create(params, "/m", MaterialContext{}));
-  scene.material_names.push_back("m" + std::to_string(scene.materials.size()));
+  scene.material_names.push_back(std::string("m").append(std::to_string(scene.materials.size())));
   return static_cast<uint32_t>(scene.materials.size() - 1);
 }
 

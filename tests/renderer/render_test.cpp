@@ -321,11 +321,11 @@ TEST(Integrators, RegistryMakesThemByNameAndTheJobNamesOne) {
   const IntegratorRegistry& registry = IntegratorRegistry::builtin();
   EXPECT_TRUE(registry.has("path"));
   EXPECT_FALSE(registry.has("photon_mapping"));
-  EXPECT_EQ(parse_render_settings(json::object(), "/render", RenderLimits{}).integrator.name, "path");
-  EXPECT_EQ(parse_render_settings({{"integrator", "path"}}, "/render", RenderLimits{}).integrator.name, "path");
+  EXPECT_EQ(render_settings_from_json(json::object(), "/render", RenderLimits{}).integrator.name, "path");
+  EXPECT_EQ(render_settings_from_json({{"integrator", "path"}}, "/render", RenderLimits{}).integrator.name, "path");
   for (const json& bad : {json("photon_mapping"), json(3)}) {
     try {
-      parse_render_settings({{"integrator", bad}}, "/render", RenderLimits{});
+      render_settings_from_json({{"integrator", bad}}, "/render", RenderLimits{});
       ADD_FAILURE() << "accepted " << bad;
     } catch (const SceneError& e) {
       EXPECT_EQ(e.pointer(), "/render/integrator");
@@ -370,6 +370,14 @@ TEST(SceneLoading, ErrorsNameTheField) {
   bad = scene;
   bad["objects"][0]["shape"] = "torus";
   expect_error(bad, "/scene/objects/0/shape");
+  // Integers are read exactly: 2^53 + 1, which a double reads as 2^53 (the seed's maximum), is beyond it.
+  EXPECT_EQ(render_settings_from_json(json{{"seed", 9007199254740992ull}}, "/render", {}).seed, 9007199254740992ull);
+  try {
+    render_settings_from_json(json{{"seed", 9007199254740993ull}}, "/render", {});
+    ADD_FAILURE() << "a seed of 2^53 + 1 was taken";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.pointer(), "/render/seed") << e.what();
+  }
 }
 
 }  // namespace

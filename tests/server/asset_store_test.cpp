@@ -4,9 +4,12 @@
 #include <gtest/gtest.h>
 
 #include <cerrno>
+#include <fstream>
+#include <iterator>
 
 #include "server/assets.h"
 #include "server/file_io.h"
+#include "tests/renderer/gltf_fixture.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {
@@ -97,6 +100,49 @@ TEST(AssetStore, EncodedDotSlashAndSubfolderUrisNameFilesOfTheUpload) {
   auto hidden = with_uri("tri.bin", "../tri.bin");
   ASSERT_TRUE(std::holds_alternative<Problem>(hidden));
   EXPECT_EQ(std::get<Problem>(hidden).status, 422);
+}
+
+// Content addressing shares bytes, never names: the same bytes uploaded by another user under another name are an
+// asset of their own that lists that user's name, and the first user's asset still lists the first name. The same
+// bytes under the same name are the same asset, with both owners.
+TEST(AssetStore, TheSameBytesUnderAnotherNameAreAnotherAsset) {
+  test::TempDir dir;
+  DirectoryAssetStore assets(dir.path());
+  tessera::test::GltfBuilder b;
+  b.node({{"mesh", b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, -1)}}, true);
+  std::ifstream in(b.write(dir.path() / "fixture", "triangle"), std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  auto store = [&](const std::string& name, const std::string& owner) {
+    auto stored = assets.store({{name, bytes}}, owner);
+    EXPECT_TRUE(std::holds_alternative<StoredAsset>(stored)) << std::get<Problem>(stored).detail;
+    return std::get<StoredAsset>(stored).info;
+  };
+  const AssetInfo alices = store("alice.gltf", "alice");
+  const AssetInfo bobs = store("bob.gltf", "bob");
+  EXPECT_NE(bobs.id, alices.id);
+  EXPECT_EQ(bobs.files, std::vector<std::string>{"bob.gltf"});
+  EXPECT_EQ(bobs.owners, std::vector<std::string>{"bob"});
+  EXPECT_EQ(assets.get(alices.id)->files, std::vector<std::string>{"alice.gltf"});
+  const AssetInfo shared = store("alice.gltf", "carol");
+  EXPECT_EQ(shared.id, alices.id);
+  EXPECT_EQ(shared.owners, (std::vector<std::string>{"alice", "carol"}));
+}
+
+// An environment map is judged by its bytes, not its name: a glTF binary uploaded as an .hdr (or .exr) is refused.
+TEST(AssetStore, AGlbNamedAsAnEnvironmentMapIsRefused) {
+  test::TempDir dir;
+  DirectoryAssetStore assets(dir.path());
+  tessera::test::GltfBuilder b;
+  b.node({{"mesh", b.mesh({0, 0, 0, 1, 0, 0, 0, 1, 0}, {0, 1, 2}, -1)}}, true);
+  std::ifstream in(b.write_glb(dir.path() / "fixture", "triangle"), std::ios::binary);
+  const std::string glb((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  for (const char* name : {"sky.hdr", "sky.exr"}) {
+    auto stored = assets.store({{name, glb}}, "alice");
+    ASSERT_TRUE(std::holds_alternative<Problem>(stored)) << name << " was stored";
+    EXPECT_EQ(std::get<Problem>(stored).status, 422) << std::get<Problem>(stored).detail;
+    EXPECT_NE(std::get<Problem>(stored).detail.find("cannot read the environment map"), std::string::npos)
+        << std::get<Problem>(stored).detail;
+  }
 }
 
 }  // namespace

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <set>
+#include <string>
+#include <vector>
 
 #include "proto/contract.h"
 #include "server/http_api.h"
@@ -66,6 +68,13 @@ TEST(Contract, ProblemsMatchTheirSchema) {
     EXPECT_FALSE(e) << status << ": " << e->pointer << " " << e->message;
     EXPECT_FALSE(p.title().empty());
   }
+  // A refused document's every error, and the checks that follow once they are fixed.
+  Problem many{422, "must be at least 1", std::string("/render/spp")};
+  many.errors = {{"/render/spp", "must be at least 1"}, {"/scene/objects/0", "missing property \"shape\""}};
+  many.pending = std::string(proto::kChecksPending);
+  auto e = proto::contract_schemas().validate(many.to_json(), "problem.schema.json");
+  EXPECT_FALSE(e) << e->pointer << " " << e->message;
+  EXPECT_EQ(many.to_json().value("pending", ""), proto::kChecksPending);
   const Problem full{507, "", std::nullopt};
   EXPECT_EQ(full.type(), "https://tessera.dev/problems/insufficient-storage");
   EXPECT_EQ(full.title(), "Insufficient storage");
@@ -99,6 +108,57 @@ TEST(Contract, JobStatusMatchesItsSchema) {
   EXPECT_EQ(done["progress"]["fraction"], 1.0);
 }
 
+// A split job one of whose nodes stopped renewing its unit's lease: the status says which unit waits, and for how
+// long, and its ETA counts that wait and the unit's rest at the rate it rendered, where the store's ETA (from the
+// rates of the units running) did not.
+TEST(Contract, AStalledUnitShowsItsTakeoverAndItsWaitIsInTheEta) {
+  JobRecord r;
+  r.id = new_job_id();
+  r.kind = "scene";
+  r.state = JobState::kRunning;
+  r.created_at_ms = 1714560000000;
+  r.started_at_ms = r.created_at_ms;
+  r.settings = R"({"width":64,"height":64,"spp":64,"max_depth":8,"integrator":"path","estimator":"mis","seed":1})";
+  r.outputs = R"(["png","exr"])";
+  r.progress.samples_total = 64;
+  r.progress.samples_done = 60;
+  r.progress.eta_s = 1.5;  // the store's, from the stalled unit's last rate
+  const int64_t now = r.created_at_ms + 60000;
+  std::vector<UnitRecord> units(2);
+  units[0].index = 0;
+  units[0].samples = 32;
+  units[0].done = true;
+  units[0].node = "n1";
+  units[1].index = 1;
+  units[1].first_sample = 32;
+  units[1].samples = 32;
+  units[1].running = true;
+  units[1].node = "n2";
+  units[1].samples_done = 28;
+  units[1].elapsed_s = 56;  // 2 s a sample per pixel: 4 left, 8 s
+  // Its lease of 30 s was last renewed 10 s ago: 20 s to wait.
+  units[1].renewed_at_ms = now - 10000;
+  units[1].lease_expires_at_ms = units[1].renewed_at_ms + 30000;
+  json status = job_status_json(r, std::nullopt, std::nullopt, units, now);
+  auto e = proto::contract_schemas().validate(status, "job-status.schema.json");
+  EXPECT_FALSE(e) << e->pointer << " " << e->message;
+  const json& running = status["units"]["running"];
+  ASSERT_EQ(running.size(), 1u) << status["units"];
+  EXPECT_EQ(running[0]["stalled"], true);
+  EXPECT_DOUBLE_EQ(running[0]["takeover_in_s"].get<double>(), 20.0);
+  EXPECT_DOUBLE_EQ(status["progress"]["eta_s"].get<double>(), 28.0);
+
+  // Renewed a second ago: rendering, and the store's ETA stands.
+  units[1].renewed_at_ms = now - 1000;
+  units[1].lease_expires_at_ms = units[1].renewed_at_ms + 30000;
+  status = job_status_json(r, std::nullopt, std::nullopt, units, now);
+  e = proto::contract_schemas().validate(status, "job-status.schema.json");
+  EXPECT_FALSE(e) << e->pointer << " " << e->message;
+  EXPECT_EQ(status["units"]["running"][0]["stalled"], false);
+  EXPECT_TRUE(status["units"]["running"][0]["takeover_in_s"].is_null());
+  EXPECT_DOUBLE_EQ(status["progress"]["eta_s"].get<double>(), 1.5);
+}
+
 TEST(Contract, MaterialCatalogComesFromTheSchema) {
   const json catalog = describe_materials(proto::contract_schemas());
   std::map<std::string, json> by_type;
@@ -123,6 +183,22 @@ TEST(Contract, MaterialCatalogComesFromTheSchema) {
     EXPECT_TRUE(by_type.count(t.get<std::string>())) << t;
 }
 
+// Parameters come in the order the schema file gives them, not sorted by name (nlohmann::json sorts an object's
+// members): a conductor's roughness comes right after its distribution, before the anisotropic overrides.
+TEST(Contract, MaterialCatalogKeepsTheSchemasOrder) {
+  const json catalog = describe_materials(proto::contract_schemas());
+  for (const json& m : catalog.at("materials")) {
+    if (m.at("type") != "conductor") continue;
+    std::vector<std::string> names;
+    for (const json& p : m.at("parameters")) names.push_back(p.at("name"));
+    ASSERT_GE(names.size(), 6u);
+    EXPECT_EQ(std::vector<std::string>(names.begin(), names.begin() + 6),
+              (std::vector<std::string>{"distribution", "roughness", "alpha_x", "alpha_y", "metal", "eta"}));
+    return;
+  }
+  FAIL() << "no conductor in the catalogue";
+}
+
 TEST(Contract, WebClientIsEmbedded) {
   auto page = web_file("index.html");
   ASSERT_TRUE(page);
@@ -131,6 +207,24 @@ TEST(Contract, WebClientIsEmbedded) {
   for (const char* f : {"app.js", "api.js"})
     if (auto s = web_file(f)) uses_api = uses_api || s->find("/v1/jobs") != std::string::npos;
   EXPECT_TRUE(uses_api);
+}
+
+// Browsers ask for /favicon.ico whatever the page links: it is the page's SVG icon, served as one. examples.json holds
+// the example jobs of proto/examples, each a valid job.
+TEST(Contract, WebClientHasItsIconAndTheExamples) {
+  auto icon = web_file("favicon.ico");
+  ASSERT_TRUE(icon);
+  EXPECT_EQ(*icon, web_file("favicon.svg").value_or(""));
+  EXPECT_EQ(web_media_type("favicon.ico"), "image/svg+xml");
+  EXPECT_EQ(web_media_type("app.js"), "text/javascript; charset=utf-8");
+  auto text = web_file("examples.json");
+  ASSERT_TRUE(text);
+  const json examples = json::parse(*text);
+  EXPECT_TRUE(examples.contains("cornell.json")) << examples.dump();
+  for (const auto& [name, job] : examples.items()) {
+    auto e = proto::contract_schemas().validate(job, "job.schema.json");
+    EXPECT_FALSE(e) << name << ": " << e->pointer << " " << e->message;
+  }
 }
 
 }  // namespace

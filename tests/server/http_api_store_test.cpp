@@ -7,6 +7,8 @@
 #include <httplib.h>
 
 #include <atomic>
+#include <fstream>
+#include <iterator>
 #include <memory>
 #include <thread>
 
@@ -363,6 +365,29 @@ TEST_F(ApiStoreFailure, MetricsAnswerWithoutJobCountsWhileTheStoreFails) {
   EXPECT_EQ(metric_value(res->body, "tessera_queue_length"), 1);
 }
 
+// A store that answers reads but refuses a client's change is failing too: /metrics says so (as /readyz does, from
+// the same JobService::store_failing) until a change goes through again.
+TEST_F(ApiStoreFailure, AStoreThatRefusesOnlyClientWritesIsDown) {
+  const std::string id = queue_job(5);
+  const auto store_up = [&] {
+    auto metrics = client_->Get("/metrics");
+    EXPECT_TRUE(metrics);
+    return metrics ? metric_value(metrics->body, "tessera_job_store_up") : -1.0;
+  };
+  EXPECT_EQ(store_up(), 1);
+  store_.failure = FlakyStore::Failure::kLocked;
+  store_.writes_only = true;
+  auto res = client_->Patch(("/v1/jobs/" + id).c_str(), R"({"priority": 9})", "application/json");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 503);
+  EXPECT_EQ(store_up(), 0);
+  store_.failure = FlakyStore::Failure::kNone;
+  res = client_->Patch(("/v1/jobs/" + id).c_str(), R"({"priority": 9})", "application/json");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 200) << res->body;
+  EXPECT_EQ(store_up(), 1);
+}
+
 // /readyz and /metrics say the same of the store: while the end of a render waits for the store to take it (a full
 // disk), both say it fails, and the job counts, which can still be read, stay in the scrape.
 TEST_F(ApiStoreFailure, ReadyzAndMetricsAgreeWhileAnEndWaitsForTheStore) {
@@ -390,6 +415,39 @@ TEST_F(ApiStoreFailure, ReadyzAndMetricsAgreeWhileAnEndWaitsForTheStore) {
   // Recovered: both say so.
   store_.failure = FlakyStore::Failure::kNone;
   EXPECT_TRUE(test::eventually([&] { return health() == std::pair<int, double>{0, 1}; }, 30));
+}
+
+// The same API with a store that does not fail: a multipart job whose scene names a file it did not send is told
+// which file, where the schema would say only that scene.gltf is not an asset id.
+using ApiMultipart = ApiStoreFailure;
+
+TEST_F(ApiMultipart, AJobNamingAFileItDidNotSendIsToldWhichFile) {
+  std::ifstream in("examples/box/Box.glb", std::ios::binary);  // tests run from the repository
+  const std::string box((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(box.empty());
+  const json job = {{"kind", "scene"}, {"scene", {{"gltf", "Duck.glb"}}}};
+  const std::string expected =
+      "scene.gltf names Duck.glb, which this request did not send: add it as a file part, or give an uploaded "
+      "asset's id";
+  // Another file sent, and none at all.
+  for (const httplib::MultipartFormDataItems& items :
+       {httplib::MultipartFormDataItems{{"job", job.dump(), "", "application/json"},
+                                        {"file", box, "Box.glb", "model/gltf-binary"}},
+        httplib::MultipartFormDataItems{{"job", job.dump(), "", "application/json"}}}) {
+    const json p = problem_of(client_->Post("/v1/jobs", items), 422);
+    EXPECT_EQ(p.value("detail", ""), expected) << p.dump();
+    EXPECT_EQ(p.value("pointer", ""), "/scene/gltf");
+  }
+  // An environment map likewise, by its own field.
+  const json sky = {{"kind", "scene"}, {"scene", {{"gltf", "Box.glb"}, {"environment", {{"map", "sky.hdr"}}}}}};
+  const json p = problem_of(
+      client_->Post("/v1/jobs", httplib::MultipartFormDataItems{{"job", sky.dump(), "", "application/json"},
+                                                                {"file", box, "Box.glb", "model/gltf-binary"}}),
+      422);
+  EXPECT_EQ(p.value("detail", ""),
+            "scene.environment.map names sky.hdr, which this request did not send: add it as a file part, or give an "
+            "uploaded asset's id");
+  EXPECT_EQ(p.value("pointer", ""), "/scene/environment/map");
 }
 
 }  // namespace

@@ -571,5 +571,37 @@ TYPED_TEST(JobStoreConformance, ARestartRequeuesItsRunningJobsAndKeepsTheRest) {
   EXPECT_EQ(store->claim_next(8)->id, queued.id);
 }
 
+// A run is lost when its process dies without ending it: found by the next start (requeue_running) or by a claim of
+// a run whose lease expired. Each loss counts once; a run ended on purpose (the daemon stopping puts the job back,
+// a pause) counts none; a client's requeue of an ended job starts the count over.
+TYPED_TEST(JobStoreConformance, LostRunsAreCountedOnceEach) {
+  JobRecord job = make_job(0, 1);
+  {
+    std::unique_ptr<JobStore> first = this->backend.open();
+    first->create(job);
+    ASSERT_EQ(first->claim_next(10, 100)->lost_runs, 0);
+  }  // the process dies with the job running
+  std::unique_ptr<JobStore> store = this->backend.open();
+  EXPECT_EQ(store->requeue_running(), 1);
+  EXPECT_EQ(store->get(job.id)->lost_runs, 1);
+  // Claimed again, and again it stops renewing: the next claim, past the lease, takes over a lost run.
+  const JobRecord second = store->claim_next(20, 100).value();
+  EXPECT_EQ(second.lost_runs, 1);
+  const JobRecord third = store->claim_next(200, 100).value();
+  EXPECT_EQ(third.lost_runs, 2);
+  // Ended on purpose: no loss.
+  ASSERT_TRUE(store->end_run(job.id, third.epoch, JobState::kQueued, 210));
+  const JobRecord fourth = store->claim_next(220, 100).value();
+  EXPECT_EQ(fourth.lost_runs, 2);
+  ASSERT_TRUE(store->end_run(job.id, fourth.epoch, JobState::kPaused, 230));
+  ASSERT_TRUE(store->transition(job.id, JobState::kQueued, 240));
+  EXPECT_EQ(store->get(job.id)->lost_runs, 2);
+  // Failed, then requeued by a client: the count starts over.
+  const JobRecord fifth = store->claim_next(250, 100).value();
+  ASSERT_TRUE(store->end_run(job.id, fifth.epoch, JobState::kFailed, 260, "", "it broke"));
+  ASSERT_TRUE(store->transition(job.id, JobState::kQueued, 270));
+  EXPECT_EQ(store->get(job.id)->lost_runs, 0);
+}
+
 }  // namespace
 }  // namespace tessera::server

@@ -27,6 +27,7 @@ TEST(SqliteJobStore, KeepsTheJobsNameAndGivesOlderJobsAnEmptyOne) {
   ASSERT_EQ(sqlite3_exec(db,
                          "ALTER TABLE jobs DROP COLUMN name; ALTER TABLE jobs DROP COLUMN epoch; "
                          "ALTER TABLE jobs DROP COLUMN lease_expires_at; ALTER TABLE jobs DROP COLUMN node; "
+                         "ALTER TABLE jobs DROP COLUMN lost_runs; "
                          "DELETE FROM schema_version WHERE version >= 3",
                          nullptr, nullptr, nullptr),
             SQLITE_OK)

@@ -6,8 +6,10 @@
 #include <stdlib.h>
 
 #include <atomic>
+#include <chrono>
 #include <thread>
 
+#include "server/postgres_connection.h"
 #include "server/postgres_job_store.h"
 #include "tests/server/postgres_cluster.h"
 #include "tests/server/test_util.h"
@@ -137,6 +139,28 @@ TEST(PostgresJobStore, UnitsAreLeasedFencedAndMergedOnce) {
   EXPECT_FALSE(b.claim_next(5000, 1000));
 }
 
+// A unit whose node died is a lost run of its job: taken over past its lease, or put back by its node's restart,
+// each counts once, however many of the job's units that node held.
+TEST(PostgresJobStore, ALostUnitIsALostRunOfItsJob) {
+  const std::string uri = PostgresCluster::shared().create_database();
+  PostgresJobStore a(uri, "node-a"), b(uri, "node-b");
+  JobRecord job = make_job(0, 1);
+  job.units = 3;
+  a.create(job);
+  ASSERT_TRUE(a.claim_next(10, 1000) && a.claim_next(10, 1000));  // units 0 and 1 on node a
+  ASSERT_EQ(b.claim_next(10, 1000)->lost_runs, 0);                // unit 2 on node b
+  PostgresJobStore a_again(uri, "node-a");
+  EXPECT_EQ(a_again.requeue_running(), 2);
+  EXPECT_EQ(a.get(job.id, false)->lost_runs, 1);
+  // Node b dies too: its unit is taken over past its lease.
+  auto taken = a_again.claim_next(3000, 1000);
+  ASSERT_TRUE(taken);
+  EXPECT_EQ(a.get(job.id, false)->lost_runs, 1) << "a requeued unit claimed again is no new loss";
+  while (auto next = a_again.claim_next(3000, 1000)) {
+  }
+  EXPECT_EQ(a.get(job.id, false)->lost_runs, 2);
+}
+
 // A whole job of a higher priority goes before the units of a split one; a split job of a higher priority before a
 // whole one; a paused split job's running units wait, unclaimable, until it is resumed.
 TEST(PostgresJobStore, UnitsAndWholeJobsAreClaimedByPriorityThenAge) {
@@ -193,6 +217,35 @@ TEST(PostgresJobStore, ARequeuedSplitJobStartsItsUnitsOver) {
   EXPECT_EQ(again->unit_checkpoint_epoch, 0);  // from its first sample
 }
 
+// A unit's lease records when its node last renewed it, beside when it runs out: the status tells from them that a
+// node stopped renewing before its lease is up.
+TEST(PostgresJobStore, AUnitsLeaseRecordsItsLastRenewal) {
+  const std::string uri = PostgresCluster::shared().create_database();
+  PostgresJobStore a(uri, "node-a");
+  JobRecord job = make_job(0, 1);
+  job.units = 2;
+  a.create(job);
+  auto u0 = a.claim_next(100, 1000);
+  ASSERT_TRUE(u0);
+  auto running = [&] {
+    for (const UnitRecord& u : a.units(job.id))
+      if (u.running) return u;
+    return UnitRecord{};
+  };
+  EXPECT_EQ(running().renewed_at_ms, 100);
+  EXPECT_EQ(running().lease_expires_at_ms, 1100);
+  ASSERT_TRUE(a.renew_lease(job.id, u0->epoch, 700, 1000));
+  EXPECT_EQ(running().node, "node-a");
+  EXPECT_EQ(running().renewed_at_ms, 700);
+  EXPECT_EQ(running().lease_expires_at_ms, 1700);
+  // A unit not running shows no lease.
+  for (const UnitRecord& u : a.units(job.id)) {
+    if (!u.running) {
+      EXPECT_EQ(u.renewed_at_ms, 0);
+    }
+  }
+}
+
 // The server restarted (an upgrade, a failover): the call that finds the connection broken fails as the store
 // failing, and the next one connects again; nothing committed is lost.
 TEST(PostgresJobStore, ReconnectsAfterTheServerRestarted) {
@@ -213,6 +266,26 @@ TEST(PostgresJobStore, ReconnectsAfterTheServerRestarted) {
   ASSERT_TRUE(got);
   EXPECT_EQ(got->state, JobState::kQueued);
   EXPECT_EQ(store.claim_next(5)->id, j.id);
+}
+
+// A node stopped between BEGIN and COMMIT (SIGSTOP, a paused VM) holding a job's row: past its idle-transaction limit
+// (the daemon's lease) the server ends its session and the row is the other nodes' to write; the stopped node, run
+// again, finds its transaction gone and its next statement connects afresh.
+TEST(PostgresJobStore, ATransactionLeftOpenHoldsItsRowsNoLongerThanItsLimit) {
+  PostgresCluster& pg = PostgresCluster::shared();
+  const std::string uri = pg.create_database();
+  PostgresJobStore store(uri, "a");
+  JobRecord j = make_job(0, 1);
+  store.create(j);
+  PgConnection stopped(uri, "stopped node", 300);
+  stopped.exec("BEGIN");
+  stopped.exec("SELECT 1 FROM tessera_jobs WHERE id = $1 FOR UPDATE", {j.id});
+  std::this_thread::sleep_for(std::chrono::milliseconds(1000));  // the node does nothing: stopped
+  PgConnection other(uri, "another node");
+  other.exec("SET lock_timeout = 3000");  // without the limit: blocked behind the row lock, then this error
+  EXPECT_NO_THROW(other.exec("UPDATE tessera_jobs SET priority = 7 WHERE id = $1", {j.id}));
+  EXPECT_THROW(stopped.exec("COMMIT"), JobStoreError);  // its transaction was rolled back with its session
+  EXPECT_EQ(stopped.exec("SELECT priority FROM tessera_jobs WHERE id = $1", {j.id}).int64(0), 7);
 }
 
 TEST(PostgresCluster, WithoutTheServerProgramsATestFailsNamingThePackage) {

@@ -8,6 +8,7 @@
 #include <climits>
 #include <functional>
 #include <memory>
+#include <mutex>
 
 #include "renderer/film.h"
 #include "renderer/thread_pool.h"
@@ -278,6 +279,112 @@ TEST_F(SchedulerStoreFailure, ACancelRefusedBecauseTheJobSucceededLeavesItsFinis
     const std::string name = entry.path().filename().string();
     EXPECT_FALSE(name.starts_with("result.e") && name != "result.exr") << name;
   }
+}
+
+// A job resumed from its checkpoint reports the checkpoint's progress at once: the first progress the next run
+// gives is the checkpoint's (same passes and samples), not the end of a new pass, so a status read after a restart
+// never says 0 samples done for a job with hundreds rendered.
+TEST_F(SchedulerStoreFailure, AResumedJobReportsItsCheckpointsProgressBeforeItsNextPass) {
+  const std::string id = queue_job(test::cornell_job(32, 65536));
+  std::mutex mutex;
+  std::optional<JobProgress> last, first_resumed;
+  auto first = make_scheduler(1ms, 20ms);
+  SchedulerHooks hooks;
+  hooks.progress = [&](const std::string&, const JobProgress& p) {
+    std::lock_guard lock(mutex);
+    last = p;
+  };
+  first->set_hooks(std::move(hooks));
+  first->start();
+  ASSERT_TRUE(test::eventually(
+      [&] {
+        std::lock_guard lock(mutex);
+        return last && last->passes >= 3;
+      },
+      120));
+  first->shutdown();  // back in the queue, its checkpoint kept
+  first.reset();
+  ASSERT_EQ(state_of(id), JobState::kQueued);
+  const JobProgress checkpointed = *last;
+
+  auto second = make_scheduler(1ms, 20ms);
+  SchedulerHooks resumed_hooks;
+  resumed_hooks.progress = [&](const std::string&, const JobProgress& p) {
+    std::lock_guard lock(mutex);
+    if (!first_resumed) first_resumed = p;
+  };
+  second->set_hooks(std::move(resumed_hooks));
+  second->start();
+  ASSERT_TRUE(test::eventually(
+      [&] {
+        std::lock_guard lock(mutex);
+        return first_resumed.has_value();
+      },
+      120));
+  second->shutdown();
+  EXPECT_EQ(first_resumed->passes, checkpointed.passes);
+  EXPECT_EQ(first_resumed->samples_done, checkpointed.samples_done);
+  EXPECT_GT(first_resumed->samples_done, 0u);
+}
+
+// A job stored before the settings had one mapping: its record holds the text that version wrote for its document
+// (captured from it: 32x32, 65536 spp, EXR only, in float), which the scheduler reads for the run's settings and
+// fingerprints its checkpoints with. It renders, resumes from its checkpoint after a stop, and writes the outputs
+// the text asks for.
+TEST_F(SchedulerStoreFailure, AJobStoredWithTheEarlierSettingsTextRunsAndResumes) {
+  nlohmann::json doc = test::cornell_job(32, 65536);
+  doc["render"]["exr_precision"] = "float";
+  doc["outputs"] = {"exr"};
+  JobRecord job = test::accepted_job_record(doc);
+  job.settings =
+      R"({"estimator":"mis","exposure_ev":0.0,"exr_precision":"float","height":32,"integrator":"path","max_depth":8,)"
+      R"("noise_target":0.0,"sampler":"sobol","seed":1,"spp":65536,"time_limit_s":0.0,"tonemap":"clamp","width":32})";
+  job.outputs = R"(["exr"])";
+  EXPECT_EQ(test::accepted_job_record(doc).settings, job.settings);  // what the mapping writes today too
+  sqlite_.create(job);
+  std::mutex mutex;
+  std::optional<JobProgress> last, first_resumed;
+  auto first = make_scheduler(1ms, 20ms);
+  SchedulerHooks hooks;
+  hooks.progress = [&](const std::string&, const JobProgress& p) {
+    std::lock_guard lock(mutex);
+    last = p;
+  };
+  first->set_hooks(std::move(hooks));
+  first->start();
+  ASSERT_TRUE(test::eventually(
+      [&] {
+        std::lock_guard lock(mutex);
+        return last && last->passes >= 2;
+      },
+      120));
+  first->shutdown();
+  first.reset();
+  ASSERT_EQ(state_of(job.id), JobState::kQueued);
+  const JobProgress checkpointed = *last;
+
+  auto second = make_scheduler(1ms, 20ms);
+  SchedulerHooks resumed_hooks;
+  resumed_hooks.progress = [&](const std::string&, const JobProgress& p) {
+    std::lock_guard lock(mutex);
+    if (!first_resumed) first_resumed = p;
+  };
+  second->set_hooks(std::move(resumed_hooks));
+  second->start();
+  ASSERT_TRUE(test::eventually(
+      [&] {
+        std::lock_guard lock(mutex);
+        return first_resumed.has_value();
+      },
+      120));
+  EXPECT_EQ(first_resumed->samples_done, checkpointed.samples_done);  // its checkpoint matched its settings
+  ASSERT_EQ(second->cancel(job.id), Scheduler::Outcome::kInProgress);
+  ASSERT_TRUE(test::eventually([&] { return has_ended(job.id); }, 120));
+  second->shutdown();
+  EXPECT_EQ(state_of(job.id), JobState::kCancelled);
+  // Its partial results: the formats the stored outputs name.
+  EXPECT_TRUE(files_.read(job.id, JobFile::kResultExr));
+  EXPECT_FALSE(files_.read(job.id, JobFile::kResultPng));
 }
 
 }  // namespace

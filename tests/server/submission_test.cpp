@@ -1,6 +1,8 @@
 // Submission checks without HTTP: media type, syntax, schema, then the renderer's semantic checks.
 #include <gtest/gtest.h>
 
+#include "proto/contract.h"
+#include "server/job_json.h"
 #include "server/submission.h"
 #include "tests/server/test_util.h"
 
@@ -21,12 +23,12 @@ TEST(Submission, AcceptsTheCornellBox) {
   auto* job = std::get_if<AcceptedJob>(&r);
   ASSERT_TRUE(job) << std::get<Problem>(r).detail;
   EXPECT_EQ(job->kind, "scene");
-  EXPECT_EQ(job->spp, 256u);
-  EXPECT_EQ(job->settings["width"], 512);
-  EXPECT_EQ(job->settings["integrator"], "path");
-  EXPECT_EQ(job->settings["estimator"], "mis");
-  EXPECT_EQ(job->settings["tonemap"], "clamp");
-  EXPECT_EQ(job->outputs, json::array({"png", "exr"}));
+  EXPECT_EQ(job->settings.spp, 256u);
+  EXPECT_EQ(job->settings.width, 512);
+  EXPECT_EQ(job->settings.integrator.name, "path");
+  EXPECT_EQ(job->settings.integrator.estimator, Estimator::kMis);
+  EXPECT_EQ(job->settings.display.tonemap, ToneMap::kClamp);
+  EXPECT_EQ(job->outputs, OutputSpec{});
 }
 
 TEST(Submission, RefusesBySyntaxAndType) {
@@ -38,6 +40,129 @@ TEST(Submission, RefusesBySyntaxAndType) {
   EXPECT_EQ(refused("application/json", "{\"width\": NaN}").status, 400);
   Problem deep = refused("application/json", std::string(10000, '[') + std::string(10000, ']'));
   EXPECT_EQ(deep.status, 422);
+}
+
+// One answer tells what can be told: with the schema's errors, the renderer's error on what they leave (an unknown
+// material next to a misspelt property and a bad spp); where the renderer's checks cannot run (a required property
+// missing), the answer says that they follow.
+TEST(Submission, SchemaErrorsComeWithTheRenderersErrorsThatDoNotDependOnThem) {
+  json doc = test::cornell_job();
+  doc["scene"]["objects"][3]["material"] = "purple";
+  doc["render"]["spp"] = 0;
+  doc["render"]["spp_"] = 4;
+  Problem p = refused("application/json", doc.dump());
+  EXPECT_EQ(p.status, 422);
+  EXPECT_EQ(p.pointer, "/render/spp");
+  ASSERT_EQ(p.errors.size(), 3u) << p.to_json().dump();
+  EXPECT_EQ(p.errors[0].first, "/render/spp");
+  EXPECT_EQ(p.errors[1].first, "/render/spp_");
+  EXPECT_EQ(p.errors[2].first, "/scene/objects/3/material");
+  EXPECT_NE(p.errors[2].second.find("purple"), std::string::npos) << p.errors[2].second;
+  EXPECT_FALSE(p.pending) << *p.pending;
+  EXPECT_EQ(p.to_json()["errors"].size(), 3u);
+
+  // A schema error the renderer's checks would stumble over: they follow, and the answer says so.
+  doc = test::cornell_job();
+  doc["scene"]["objects"][3]["material"] = "purple";
+  doc["scene"]["objects"][0].erase("shape");
+  p = refused("application/json", doc.dump());
+  ASSERT_TRUE(p.pending) << p.to_json().dump();
+  EXPECT_EQ(p.to_json().value("pending", ""),
+            "more checks (material names, indices, assets, limits) follow once these errors are fixed");
+  for (const auto& [at, what] : p.errors) EXPECT_EQ(what.find("purple"), std::string::npos) << at << ": " << what;
+
+  // Schema errors only, and the renderer finds nothing else: neither an error more nor a pending note.
+  doc = test::cornell_job();
+  doc["render"]["spp"] = 0;
+  p = refused("application/json", doc.dump());
+  EXPECT_TRUE(p.errors.size() <= 1) << p.to_json().dump();
+  EXPECT_FALSE(p.to_json().contains("pending"));
+}
+
+// The status of a job without a time limit or noise target shows none (the README's default, "none"), where it
+// showed 0.0; one with them shows them. Both as job-status.schema.json says.
+TEST(Submission, AStatusLeavesOutTheStoppingRulesThatAreOff) {
+  auto status_of = [](const json& doc) {
+    auto r = check_submission("application/json", doc.dump(), {});
+    const auto* job = std::get_if<AcceptedJob>(&r);
+    EXPECT_TRUE(job) << std::get<Problem>(r).detail;
+    JobRecord record;
+    record.id = "0123456789abcdef0123456789abcdef";
+    record.kind = "scene";
+    record.settings = job ? render_settings_text(job->settings) : "{}";
+    record.outputs = R"(["png"])";
+    const json status = job_status_json(record);
+    const auto e = proto::contract_schemas().validate(status, "job-status.schema.json");
+    EXPECT_FALSE(e) << e->pointer << " " << e->message;
+    return status["render"];
+  };
+  const json off = status_of(test::cornell_job());
+  EXPECT_FALSE(off.contains("time_limit_s")) << off.dump();
+  EXPECT_FALSE(off.contains("noise_target")) << off.dump();
+  json doc = test::cornell_job();
+  doc["render"]["time_limit_s"] = 30;
+  doc["render"]["noise_target"] = 0.02;
+  const json on = status_of(doc);
+  EXPECT_EQ(on.value("time_limit_s", 0.0), 30.0) << on.dump();
+  EXPECT_FLOAT_EQ(on.value("noise_target", 0.0), 0.02) << on.dump();  // a float in RenderSettings
+}
+
+// Submitted, stored and shown: the status's "render" and "outputs" are what they were before the settings had one
+// mapping (captured from that version's check_submission and job_status_json), and the record holds the same text.
+TEST(Submission, TheStatusShowsTheSettingsAndOutputsAsBefore) {
+  struct Case {
+    json render;
+    json outputs;  // null: none in the document
+    std::string status_render;
+    std::string status_outputs;
+  };
+  const Case cases[] = {
+      {json(), json(),
+       R"({"estimator":"mis","exposure_ev":0.0,"exr_precision":"half","height":512,"integrator":"path","max_depth":8,)"
+       R"("sampler":"sobol","seed":0,"spp":64,"tonemap":"clamp","width":512})",
+       R"(["png","exr"])"},
+      {{{"width", 640},
+        {"height", 360},
+        {"spp", 100},
+        {"max_depth", 0},
+        {"integrator", "bdpt"},
+        {"estimator", "hemisphere"},
+        {"seed", 9007199254740992ull},
+        {"sampler", "independent"},
+        {"time_limit_s", 0.3},
+        {"noise_target", 0.01},
+        {"exposure_ev", 0.1},
+        {"tonemap", "aces"},
+        {"exr_precision", "float"}},
+       {"exr"},
+       R"({"estimator":"hemisphere","exposure_ev":0.10000000149011612,"exr_precision":"float","height":360,)"
+       R"("integrator":"bdpt","max_depth":0,"noise_target":0.009999999776482582,"sampler":"independent",)"
+       R"("seed":9007199254740992,"spp":100,"time_limit_s":0.30000001192092896,"tonemap":"aces","width":640})",
+       R"(["exr"])"},
+      {{{"estimator", "area"},
+        {"integrator", "light"},
+        {"exposure_ev", -3.25},
+        {"time_limit_s", 600},
+        {"noise_target", 1}},
+       {"exr", "png"},
+       R"({"estimator":"area","exposure_ev":-3.25,"exr_precision":"half","height":512,"integrator":"light",)"
+       R"("max_depth":8,"noise_target":1.0,"sampler":"sobol","seed":0,"spp":64,"time_limit_s":600.0,)"
+       R"("tonemap":"clamp","width":512})",
+       R"(["png","exr"])"},
+  };
+  for (const Case& c : cases) {
+    json doc = test::cornell_job();
+    doc.erase("render");
+    if (!c.render.is_null()) doc["render"] = c.render;
+    if (!c.outputs.is_null()) doc["outputs"] = c.outputs;
+    const JobRecord record = test::accepted_job_record(doc);
+    EXPECT_EQ(record.outputs, c.status_outputs);
+    const json status = job_status_json(record);
+    EXPECT_EQ(status["render"].dump(), c.status_render);
+    EXPECT_EQ(status["outputs"].dump(), c.status_outputs);
+    const auto e = proto::contract_schemas().validate(status, "job-status.schema.json");
+    EXPECT_FALSE(e) << e->pointer << " " << e->message;
+  }
 }
 
 TEST(Submission, SemanticErrorsNameTheField) {

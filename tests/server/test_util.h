@@ -71,9 +71,9 @@ inline JobRecord accepted_job_record(const nlohmann::json& doc) {
   job.kind = accepted.kind;
   job.created_at_ms = 1;
   job.document = accepted.document.dump();
-  job.settings = accepted.settings.dump();
-  job.outputs = accepted.outputs.dump();
-  job.progress.samples_total = accepted.spp;
+  job.settings = render_settings_text(accepted.settings);
+  job.outputs = output_spec_text(accepted.outputs);
+  job.progress.samples_total = accepted.settings.spp;
   return job;
 }
 

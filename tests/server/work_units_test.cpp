@@ -6,23 +6,27 @@
 namespace tessera::server {
 namespace {
 
+// The units of a job whose record holds the settings `text`.
+int units(const std::string& text, uint64_t unit_pixel_samples) {
+  return unit_count(render_settings_from_text(text), unit_pixel_samples);
+}
+
 TEST(WorkUnits, AJobIsSplitByItsPixelSamples) {
   const std::string settings = R"({"width":100,"height":100,"spp":64,"time_limit_s":0,"noise_target":0})";
-  EXPECT_EQ(unit_count(settings, 0), 1);       // never split
-  EXPECT_EQ(unit_count(settings, 640000), 1);  // exactly one unit's worth
-  EXPECT_EQ(unit_count(settings, 639999), 2);  // a little more
-  EXPECT_EQ(unit_count(settings, 80000), 8);   // 8 samples each
-  EXPECT_EQ(unit_count(settings, 1), 64);      // at most one unit per sample
-  EXPECT_EQ(unit_count(settings, kDefaultUnitPixelSamples), 1);
+  EXPECT_EQ(units(settings, 0), 1);       // never split
+  EXPECT_EQ(units(settings, 640000), 1);  // exactly one unit's worth
+  EXPECT_EQ(units(settings, 639999), 2);  // a little more
+  EXPECT_EQ(units(settings, 80000), 8);   // 8 samples each
+  EXPECT_EQ(units(settings, 1), 64);      // at most one unit per sample
+  EXPECT_EQ(units(settings, kDefaultUnitPixelSamples), 1);
   // 1920 x 1080 at 1024 spp: about 2.1e9 pixel samples, 107 units of 9 or 10 samples; 512 x 512 at 64 spp, one.
-  EXPECT_EQ(unit_count(R"({"width":1920,"height":1080,"spp":1024})", kDefaultUnitPixelSamples), 107);
-  EXPECT_EQ(unit_count(R"({"width":512,"height":512,"spp":64})", kDefaultUnitPixelSamples), 1);
+  EXPECT_EQ(units(R"({"width":1920,"height":1080,"spp":1024})", kDefaultUnitPixelSamples), 107);
+  EXPECT_EQ(units(R"({"width":512,"height":512,"spp":64})", kDefaultUnitPixelSamples), 1);
 }
 
 TEST(WorkUnits, AJobThatStopsOnTimeOrNoiseIsOneUnit) {
-  EXPECT_EQ(unit_count(R"({"width":100,"height":100,"spp":64,"time_limit_s":10})", 1000), 1);
-  EXPECT_EQ(unit_count(R"({"width":100,"height":100,"spp":64,"noise_target":0.01})", 1000), 1);
-  EXPECT_EQ(unit_count("not json", 1000), 1);
+  EXPECT_EQ(units(R"({"width":100,"height":100,"spp":64,"time_limit_s":10})", 1000), 1);
+  EXPECT_EQ(units(R"({"width":100,"height":100,"spp":64,"noise_target":0.01})", 1000), 1);
 }
 
 TEST(WorkUnits, SampleRangesAreContiguousAndCoverTheBudget) {

@@ -1,0 +1,203 @@
+#include "renderer/render_settings.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "renderer/json_fields.h"
+#include "renderer/scene_error.h"
+
+namespace tessera {
+
+using nlohmann::json;
+
+namespace {
+
+using fields::at;
+using fields::number_key;
+
+// A value and the name documents give it: each table is read both ways, and its order is that of the error
+// messages' lists.
+template <typename T>
+struct Named {
+  T value;
+  const char* name;
+};
+
+constexpr Named<SamplerKind> kSamplers[] = {{SamplerKind::kSobol, "sobol"}, {SamplerKind::kIndependent, "independent"}};
+constexpr Named<Estimator> kEstimators[] = {
+    {Estimator::kMis, "mis"}, {Estimator::kArea, "area"}, {Estimator::kHemisphere, "hemisphere"}};
+constexpr Named<ToneMap> kTonemaps[] = {{ToneMap::kClamp, "clamp"}, {ToneMap::kAces, "aces"}};
+constexpr Named<bool> kExrPrecisions[] = {{true, "half"}, {false, "float"}};  // RenderSettings::exr_half
+constexpr Named<bool OutputSpec::*> kOutputFormats[] = {{&OutputSpec::png, "png"}, {&OutputSpec::exr, "exr"}};
+
+template <typename T, size_t N>
+const char* name_of(const Named<T> (&table)[N], T value) {
+  for (const Named<T>& e : table)
+    if (e.value == value) return e.name;
+  return table[0].name;  // every value of the enumerations is in its table
+}
+
+// "\"a\", \"b\" or \"c\"" (with `last` "or").
+std::string quoted_list(const std::vector<std::string>& names, const char* last) {
+  std::string out;
+  for (size_t i = 0; i < names.size(); ++i)
+    out += (i == 0                  ? ""
+            : i + 1 == names.size() ? std::string(" ") + last + " "
+                                    : std::string(", ")) +
+           ("\"" + names[i] + "\"");
+  return out;
+}
+
+template <typename T, size_t N>
+std::vector<std::string> names_of(const Named<T> (&table)[N]) {
+  std::vector<std::string> out;
+  for (const Named<T>& e : table) out.push_back(e.name);
+  return out;
+}
+
+// obj[key], one of the table's names; `fallback` when absent.
+template <typename T, size_t N>
+T named_key(const json& obj, const std::string& key, const std::string& pointer, const Named<T> (&table)[N],
+            T fallback) {
+  auto it = obj.find(key);
+  if (it == obj.end()) return fallback;
+  if (it->is_string())
+    for (const Named<T>& e : table)
+      if (*it == e.name) return e.value;
+  throw SceneError(at(pointer, key), "must be " + quoted_list(names_of(table), "or"));
+}
+
+}  // namespace
+
+const char* sampler_name(SamplerKind sampler) {
+  return name_of(kSamplers, sampler);
+}
+const char* estimator_name(Estimator estimator) {
+  return name_of(kEstimators, estimator);
+}
+const char* tonemap_name(ToneMap tonemap) {
+  return name_of(kTonemaps, tonemap);
+}
+
+RenderSettings render_settings_from_json(const json& render, const std::string& pointer, const RenderLimits& limits) {
+  RenderSettings s;
+  if (render.is_null()) return s;
+  if (!render.is_object()) throw SceneError(pointer, "must be an object");
+  // An integer within [lo, hi], read exactly: a double holds every integer only up to 2^53 (2^53 + 1 read as one is
+  // 2^53), so integers are compared as integers, and a number written with a fraction or exponent only where it is a
+  // whole number a double holds exactly.
+  auto integer = [&](const std::string& key, int64_t fallback, int64_t lo, int64_t hi) -> int64_t {
+    auto it = render.find(key);
+    if (it == render.end()) return fallback;
+    const std::string range = "must be between " + std::to_string(lo) + " and " + std::to_string(hi);
+    if (it->is_number_unsigned() && it->get<uint64_t>() > static_cast<uint64_t>(hi))
+      throw SceneError(at(pointer, key), range);
+    if (it->is_number_integer()) {
+      const int64_t v = it->get<int64_t>();
+      if (v < lo || v > hi) throw SceneError(at(pointer, key), range);
+      return v;
+    }
+    const double d = it->is_number_float() ? it->get<double>() : std::nan("");
+    if (!std::isfinite(d) || d != std::floor(d)) throw SceneError(at(pointer, key), "must be an integer");
+    if (d < static_cast<double>(lo) || d > static_cast<double>(hi) || std::abs(d) > 9007199254740992.0)
+      throw SceneError(at(pointer, key), range);
+    return static_cast<int64_t>(d);
+  };
+  const RenderSettings defaults;
+  s.width = static_cast<int>(integer("width", defaults.width, 1, limits.max_width));
+  s.height = static_cast<int>(integer("height", defaults.height, 1, limits.max_height));
+  s.spp = static_cast<uint32_t>(integer("spp", kDefaultSpp, 1, limits.max_spp));
+  s.integrator.max_depth = static_cast<int>(integer("max_depth", defaults.integrator.max_depth, 0, limits.max_depth));
+  s.seed = static_cast<uint64_t>(integer("seed", 0, 0, (int64_t{1} << 53)));
+  if (auto it = render.find("integrator"); it != render.end()) {
+    const IntegratorRegistry& integrators = IntegratorRegistry::builtin();
+    if (!it->is_string() || !integrators.has(it->get<std::string>()))
+      throw SceneError(at(pointer, "integrator"), "must be " + quoted_list(integrators.names(), "or"));
+    s.integrator.name = it->get<std::string>();
+  }
+  s.integrator.estimator = named_key(render, "estimator", pointer, kEstimators, defaults.integrator.estimator);
+  s.sampler = named_key(render, "sampler", pointer, kSamplers, defaults.sampler);
+  // Read as the other numbers of documents, as floats (fields::number_key): the settings hold what was read.
+  s.time_limit_s = number_key(render, "time_limit_s", pointer, 0, 0, 7 * 24 * 3600.0);
+  s.noise_target = number_key(render, "noise_target", pointer, 0, 0, 1);
+  s.display.exposure_ev = number_key(render, "exposure_ev", pointer, 0, -20, 20);
+  s.display.tonemap = named_key(render, "tonemap", pointer, kTonemaps, defaults.display.tonemap);
+  s.exr_half = named_key(render, "exr_precision", pointer, kExrPrecisions, defaults.exr_half);
+  return s;
+}
+
+json render_settings_to_json(const RenderSettings& s) {
+  return {{"width", s.width},
+          {"height", s.height},
+          {"spp", s.spp},
+          {"max_depth", s.integrator.max_depth},
+          {"integrator", s.integrator.name},
+          {"estimator", estimator_name(s.integrator.estimator)},
+          {"seed", s.seed},
+          {"sampler", sampler_name(s.sampler)},
+          {"time_limit_s", s.time_limit_s},
+          {"noise_target", s.noise_target},
+          {"exposure_ev", s.display.exposure_ev},
+          {"tonemap", tonemap_name(s.display.tonemap)},
+          {"exr_precision", name_of(kExrPrecisions, s.exr_half)}};
+}
+
+json render_settings_status_json(const RenderSettings& s) {
+  json out = render_settings_to_json(s);
+  if (!(s.time_limit_s > 0)) out.erase("time_limit_s");
+  if (!(s.noise_target > 0)) out.erase("noise_target");
+  return out;
+}
+
+OutputSpec output_spec_from_json(const json& outputs, const std::string& pointer) {
+  if (!outputs.is_array() || outputs.empty())
+    throw SceneError(pointer, "must be a non-empty array of " + quoted_list(names_of(kOutputFormats), "and"));
+  OutputSpec o;
+  o.png = o.exr = false;
+  for (size_t i = 0; i < outputs.size(); ++i) {
+    const Named<bool OutputSpec::*>* format = nullptr;
+    for (const auto& e : kOutputFormats)
+      if (outputs[i] == e.name) format = &e;
+    if (!format) throw SceneError(at(pointer, i), "must be " + quoted_list(names_of(kOutputFormats), "or"));
+    o.*(format->value) = true;
+  }
+  return o;
+}
+
+json output_spec_to_json(const OutputSpec& o) {
+  json out = json::array();
+  for (const auto& e : kOutputFormats)
+    if (o.*(e.value)) out.push_back(e.name);
+  return out;
+}
+
+std::string render_settings_text(const RenderSettings& settings) {
+  return render_settings_to_json(settings).dump();
+}
+
+RenderSettings render_settings_from_text(std::string_view text) {
+  const json doc = json::parse(text, nullptr, false);
+  if (!doc.is_object()) throw std::runtime_error("the stored render settings are not a JSON object");
+  try {
+    // Stored settings passed the limits of the server that took the job; they are read within the contract's.
+    return render_settings_from_json(doc, "", RenderLimits{});
+  } catch (const SceneError& e) {
+    throw std::runtime_error("the stored render settings are refused at " + e.pointer() + ": " + e.what());
+  }
+}
+
+std::string output_spec_text(const OutputSpec& outputs) {
+  return output_spec_to_json(outputs).dump();
+}
+
+OutputSpec output_spec_from_text(std::string_view text) {
+  const json doc = json::parse(text, nullptr, false);
+  try {
+    return output_spec_from_json(doc, "");
+  } catch (const SceneError& e) {
+    throw std::runtime_error("the stored outputs are refused at " + e.pointer() + ": " + e.what());
+  }
+}
+
+}  // namespace tessera

@@ -1,0 +1,98 @@
+// How a job renders (RenderSettings) and which files it writes (OutputSpec), and their one mapping to and from JSON.
+//
+// The JSON side has two readers and one writer. A job document's "render" and "outputs" (proto/schemas/
+// render.schema.json, job.schema.json) are read with every check the schema cannot make (the server's configured
+// limits, integrators that exist) and defaults for what they leave out. The writer gives the normalised form: every
+// field the document can set, defaults filled in, names for the enumerations; its text is what a job record stores
+// (JobRecord::settings, JobRecord::outputs), and the job status shows it. The stored text is read back by the
+// document reader, so that a record written by an earlier version, with fewer fields, takes the defaults for the
+// rest, as a document would.
+//
+// The names of every enumeration a document spells out (sampler, estimator, tone curve, EXR precision, output format)
+// are tables in render_settings.cpp, read both ways; the integrators' names are their registry's (integrator.h).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include <nlohmann/json.hpp>
+
+#include "renderer/image_io.h"
+#include "renderer/integrator.h"
+#include "renderer/sampler.h"
+
+namespace tessera {
+
+struct RenderSettings {
+  int width = 512;
+  int height = 512;
+  uint32_t spp = 64;  // samples per pixel budget
+  uint64_t seed = 0;
+  SamplerKind sampler = SamplerKind::kSobol;
+  IntegratorSettings integrator;  // which integrator renders, and its settings
+  double time_limit_s = 0;        // stop after the pass that crosses this; 0: none
+  double noise_target = 0;        // stop when Film::relative_error() falls below; 0: none
+  DisplaySettings display;        // for PNG outputs and previews
+  bool exr_half = true;           // EXR channel precision
+
+  // Set by whoever renders a part of a job, never by a document (not in the JSON mapping); integrator.rr_start_depth
+  // neither.
+  uint32_t first_sample = 0;  // render sample indices [first_sample, first_sample + spp): a range of a larger job
+  uint32_t job_spp = 0;       // that larger job's samples per pixel (rays' texture footprints depend on it); 0: spp
+  // Crop window in pixels (render only these; the film keeps the full size). Empty (w or h 0): the whole image.
+  using Region = PixelRegion;
+  Region region;
+  int tile_size = 32;
+
+  bool operator==(const RenderSettings&) const = default;
+};
+
+// The result files a job writes.
+struct OutputSpec {
+  bool png = true;
+  bool exr = true;
+
+  bool operator==(const OutputSpec&) const = default;
+};
+
+// render.spp when the job does not say (the contract's default).
+constexpr uint32_t kDefaultSpp = 64;
+
+// The largest settings a server takes; the defaults are the contract's maxima (render.schema.json).
+struct RenderLimits {
+  int max_width = 8192;
+  int max_height = 8192;
+  uint32_t max_spp = 1u << 16;
+  int max_depth = 1024;
+};
+
+// A document's "render" object (`pointer` is its JSON pointer, "/render" in a job): defaults for absent keys, null
+// for none at all. Throws SceneError naming the field.
+RenderSettings render_settings_from_json(const nlohmann::json& render, const std::string& pointer,
+                                         const RenderLimits& limits);
+// The normalised form: every field a document can set, defaults filled in.
+nlohmann::json render_settings_to_json(const RenderSettings& settings);
+// The same as the job status shows it: a stopping rule that is off (time_limit_s, noise_target at 0, the documents'
+// default) is left out, as a document leaves it out, so that it reads as "none" rather than as a limit of zero.
+nlohmann::json render_settings_status_json(const RenderSettings& settings);
+
+// A document's "outputs" array (`pointer` its JSON pointer); a document without one asks for OutputSpec{}, both
+// formats. Throws SceneError.
+OutputSpec output_spec_from_json(const nlohmann::json& outputs, const std::string& pointer);
+// The normalised form: the formats' names, in the order png, exr.
+nlohmann::json output_spec_to_json(const OutputSpec& outputs);
+
+// The text a job record stores, and the settings it holds. The readers take the text of any version (older ones
+// wrote fewer fields) and throw std::runtime_error for text that is not such a record's.
+std::string render_settings_text(const RenderSettings& settings);
+RenderSettings render_settings_from_text(std::string_view text);
+std::string output_spec_text(const OutputSpec& outputs);
+OutputSpec output_spec_from_text(std::string_view text);
+
+// The names documents give them.
+const char* sampler_name(SamplerKind sampler);
+const char* estimator_name(Estimator estimator);
+const char* tonemap_name(ToneMap tonemap);
+
+}  // namespace tessera
