@@ -452,11 +452,11 @@ Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<c
       const json& v = ext["KHR_materials_volume"];
       double distance = v.value("attenuationDistance", 0.0);
       json color = v.value("attenuationColor", json{1, 1, 1});
-      if (distance > 0 && color.is_array() && color.size() == 3)
-        for (int c = 0; c < 3; ++c) {
-          double col = color[c].is_number() ? std::clamp(color[c].get<double>(), 1e-6, 1.0) : 1.0;
-          material->volume_sigma_a[c] = static_cast<float>(-std::log(col) / distance);
-        }
+      if (color.is_array() && color.size() == 3) {
+        double rgb[3];
+        for (int c = 0; c < 3; ++c) rgb[c] = color[c].is_number() ? color[c].get<double>() : 1.0;
+        material->interior = absorbing_medium(rgb, distance);
+      }
     }
     scene.materials.push_back(std::move(material));
     scene.material_names.push_back(m.name.empty() ? "gltf:" + std::to_string(i) : m.name);

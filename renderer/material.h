@@ -12,6 +12,7 @@
 
 #include "renderer/arena.h"
 #include "renderer/bsdf/bsdf.h"
+#include "renderer/medium.h"
 #include "renderer/texture.h"
 
 namespace tessera {
@@ -41,9 +42,9 @@ class Material {
   FloatParam alpha{1.0f, nullptr};  // coverage in [0, 1]
   float coverage(const ShadingPoint& sp) const { return alpha.eval(sp); }
 
-  // Absorption of the medium this surface encloses (Beer-Lambert, per metre of path inside): light refracted in
-  // through the front side is attenuated by exp(-sigma_a d) until it leaves (glTF KHR_materials_volume).
-  Rgb volume_sigma_a{0, 0, 0};
+  // The medium this surface encloses (medium.h; null: none): light refracted in through the front side travels in it
+  // until it leaves through a back side (glTF KHR_materials_volume; the JSON materials' attenuation_color).
+  std::shared_ptr<const Medium> interior;
 
   // Tangent-space normal map (glTF normalTexture: linear RGB, x and y scaled by normal_scale), applied to the
   // shading frame at every hit.

@@ -66,7 +66,8 @@ std::unique_ptr<Material> MaterialRegistry::create(const nlohmann::json& params,
   if (params.contains("attenuation_distance") || params.contains("attenuation_color")) {
     const float distance = params::number(params, "attenuation_distance", pointer, 1.0f, 1e-6f, 1e9f);
     const Rgb color = params::rgb(params, "attenuation_color", pointer, Rgb(1), 1e-6f, 1.0f);
-    for (int c = 0; c < 3; ++c) material->volume_sigma_a[c] = -std::log(color[c]) / distance;
+    const double rgb[3] = {color.x, color.y, color.z};
+    material->interior = absorbing_medium(rgb, distance);
   }
   return material;
 }

@@ -185,8 +185,8 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
   const Scene& scene = c.scene;
   const float beta_ref = std::max(max_component(beta), 1e-30f);
   float pdf_fwd = pdf_dir;
-  float eta_scale = 1;  // radiance's eta^2 across refractions, kept out of Russian roulette
-  Rgb sigma_a(0);       // absorption of the medium the walk is in
+  float eta_scale = 1;   // radiance's eta^2 across refractions, kept out of Russian roulette
+  MediumTracker medium;  // the medium the walk is in
   int n = 0;
   for (;;) {
     Vertex& v = path[n + 1];
@@ -205,10 +205,7 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
       }
       break;
     }
-    if (!is_black(sigma_a)) {
-      const float d = si.t * length(ray.dir);
-      beta *= Rgb(std::exp(-sigma_a.x * d), std::exp(-sigma_a.y * d), std::exp(-sigma_a.z * d));
-    }
+    medium.attenuate(beta, ray, si.t);
     v = Vertex();
     v.kind = VertexKind::kSurface;
     si.sp.wavelength_nm = wavelength_nm;
@@ -250,7 +247,7 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
     }
     if (transmit) {
       if (mode == TransportMode::kRadiance) eta_scale *= sqr(bs->eta);
-      sigma_a = si.sp.front_face ? si.material->volume_sigma_a : Rgb(0);
+      medium.refract(si.sp.front_face, si.material->interior.get());
     }
     prev.pdf_rev = to_area(pdf_rev, v, prev);
     // Russian roulette on the throughput relative to the subpath's start.

@@ -62,7 +62,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
   float prev_pdf = 0;
   Vec3 prev_p;
   float eta_scale = 1;     // product of eta^2 across refractions, kept out of Russian roulette
-  Rgb sigma_a(0);          // absorption of the medium the path is travelling through (zero: vacuum)
+  MediumTracker medium;    // the medium the path is travelling through
   bool dispersed = false;  // the throughput carries the wavelength's weight
   ++counters.camera;
 
@@ -91,11 +91,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       }
       break;
     }
-    if (!is_black(sigma_a)) {
-      // Beer-Lambert attenuation over the segment inside an absorbing object.
-      const float d = si.t * length(ray.dir);
-      throughput *= Rgb(std::exp(-sigma_a.x * d), std::exp(-sigma_a.y * d), std::exp(-sigma_a.z * d));
-    }
+    medium.attenuate(throughput, ray, si.t);
     const Vec3 wo_world = -ray.dir;
     if (si.material->emissive()) {
       Rgb le = si.material->emitted(si.sp, wo_world);
@@ -162,8 +158,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     if (!is_finite(throughput)) break;
     if (transmit) {
       eta_scale *= sqr(bs->eta);
-      // Refracting in through the front side enters the object's medium; through the back side leaves it.
-      sigma_a = si.sp.front_face ? si.material->volume_sigma_a : Rgb(0);
+      medium.refract(si.sp.front_face, si.material->interior.get());
     }
     // The cone goes on from its width here. A lobe of density p spreads over a solid angle of about 1/p, a cone of
     // full angle 2 / sqrt(pi p): after a diffuse or glossy bounce textures are read as blurred as that lobe sees
