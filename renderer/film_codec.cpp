@@ -44,6 +44,7 @@ bool valid_header(const FilmFile& f, std::string* why) {
     return no("samples " + std::to_string(f.first_sample) + ".." + std::to_string(f.first_sample + f.sample_count) +
               " outside the job's budget of " + std::to_string(f.job_spp));
   if (!std::isfinite(f.elapsed_s) || f.elapsed_s < 0) return no("bad elapsed time");
+  if (!std::isfinite(f.display.exposure_ev)) return no("bad exposure");
   return true;
 }
 
@@ -120,8 +121,7 @@ std::optional<FilmFile> decode_v3(std::string_view in, std::string* why) {
   if (in.size() < kHeaderBytes) return refuse(why, "truncated header");
   FilmFile f;
   read_common_fields(f, in);
-  if ((get_field<uint32_t>(in, 44) & ~1u) != 0 || get_field<uint32_t>(in, 52) > 1 ||
-      !std::isfinite(f.display.exposure_ev) || get_field<uint32_t>(in, 84) != 0)
+  if ((get_field<uint32_t>(in, 44) & ~1u) != 0 || get_field<uint32_t>(in, 52) > 1 || get_field<uint32_t>(in, 84) != 0)
     return refuse(why, "bad display fields or reserved bits");
   f.job_spp = get_field<uint32_t>(in, 64);
   f.passes = get_field<uint32_t>(in, 68);

@@ -23,7 +23,9 @@ struct Checkpoint {
 
 // The checkpoint of `film` rendered with `settings` (its sample range and the job's budget are recorded).
 std::string encode_checkpoint(const Film& film, uint32_t passes, double elapsed_s, uint64_t settings_hash,
-                              const RenderSettings& settings = {});
+                              const RenderSettings& settings);
+// The checkpoint of `film` as samples 0 … of a job of unknown budget.
+std::string encode_checkpoint(const Film& film, uint32_t passes, double elapsed_s, uint64_t settings_hash);
 // Nothing when the bytes are not a complete, intact checkpoint of a `width`×`height` render with these settings.
 std::optional<Checkpoint> decode_checkpoint(std::string_view bytes, int width, int height, uint64_t settings_hash);
 

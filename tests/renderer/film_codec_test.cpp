@@ -225,6 +225,7 @@ TEST(FilmCodec, RefusesMalformedFilesOfTheEarlierFormats) {
   EXPECT_FALSE(decode_film_file(set(tfilm, 12, 65537))) << ".tfilm width";
   EXPECT_FALSE(decode_film_file(set(tfilm, 28, 0x7fffffff))) << ".tfilm region";
   EXPECT_FALSE(decode_film_file(set(tfilm, 64, 3))) << ".tfilm samples past the budget";
+  EXPECT_FALSE(decode_film_file(set(tfilm, 48, 0x7fc00000u))) << ".tfilm NaN exposure (version 3 would refuse it)";
 }
 
 }  // namespace
