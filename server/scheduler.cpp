@@ -829,8 +829,11 @@ std::optional<Film> Scheduler::merge_unit_films(const JobRecord& job, int width,
       if (!u.done) continue;  // a checkpoint being replaced; the next one will do
       throw std::runtime_error(printf_string("the film of unit %d is missing or damaged", u.index + 1));
     }
-    if (!merged) merged.emplace(width, height);
-    merged->merge(cp->film);  // integer sums: exact in any order (film.h)
+    // Every layer's integer sums and the per-pixel counts: exact in any order (film.h).
+    if (!merged)
+      merged = std::move(cp->film);
+    else
+      merged->merge(cp->film);
   }
   return merged;
 }
