@@ -1,42 +1,147 @@
 #include "renderer/film.h"
 
+#include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <stdexcept>
 
 namespace tessera {
 
 Film::Film(int width, int height)
-    : width_(width), height_(height), sum_(3 * pixel_count(), 0), sum_lum2_(pixel_count(), 0.0f) {}
-
-std::vector<float> Film::resolve() const {
-  std::vector<float> out(sum_.size());
-  double inv = samples_ > 0 ? 1.0 / (kFixedScale * samples_) : 0.0;
-  for (size_t i = 0; i < sum_.size(); ++i) out[i] = static_cast<float>(static_cast<double>(sum_[i]) * inv);
-  return out;
+    : width_(width), height_(height), sum_lum2_(pixel_count(), 0.0f), pixel_samples_(pixel_count(), 0) {
+  beauty_.name = kBeauty;
+  beauty_.channels = 3;
+  beauty_.kind = LayerKind::kRadiance;
+  beauty_.sums.assign(3 * pixel_count(), 0);
 }
 
-size_t Film::state_size(int width, int height) {
-  return static_cast<size_t>(width) * static_cast<size_t>(height) * (3 * sizeof(FixedSum) + sizeof(float));
+void Film::set_samples(uint32_t n) {
+  samples_ = n;
+  std::fill(pixel_samples_.begin(), pixel_samples_.end(), n);
 }
 
-void Film::append_state(std::string& out) const {
-  out.append(reinterpret_cast<const char*>(sum_.data()), sum_.size() * sizeof(FixedSum));
-  out.append(reinterpret_cast<const char*>(sum_lum2_.data()), sum_lum2_.size() * sizeof(float));
+void Film::set_samples(uint32_t n, int x, int y, int w, int h) {
+  samples_ = n;
+  for (int py = 0; py < height_; ++py)
+    for (int px = 0; px < width_; ++px)
+      pixel_samples_[index(px, py)] = px >= x && px < x + w && py >= y && py < y + h ? n : 0;
 }
 
-bool Film::read_state(std::string_view bytes) {
-  if (bytes.size() != state_size(width_, height_)) return false;
-  const size_t sums_bytes = sum_.size() * sizeof(FixedSum);
-  std::memcpy(sum_.data(), bytes.data(), sums_bytes);
-  std::memcpy(sum_lum2_.data(), bytes.data() + sums_bytes, sum_lum2_.size() * sizeof(float));
+int Film::add_layer(std::string name, int channels, LayerKind kind) {
+  if (name.empty() || name.size() > kMaxNameLength)
+    throw std::invalid_argument("a film layer's name has 1 to " + std::to_string(kMaxNameLength) + " characters");
+  for (char c : name)
+    if (c <= ' ' || c > '~') throw std::invalid_argument("a film layer's name is printable ASCII without spaces");
+  if (layer(name) >= 0) throw std::invalid_argument("the film already has a layer " + name);
+  if (channels < 1 || channels > kMaxChannels || (kind == LayerKind::kDistance && channels != 1))
+    throw std::invalid_argument("film layer " + name + ": bad channel count");
+  if (kind != LayerKind::kRadiance && kind != LayerKind::kSigned && kind != LayerKind::kDistance)
+    throw std::invalid_argument("film layer " + name + ": unknown kind");
+  if (layer_count() >= kMaxLayers) throw std::invalid_argument("a film holds at most 64 layers");
+  FilmLayer l;
+  l.name = std::move(name);
+  l.channels = channels;
+  l.kind = kind;
+  l.sums.assign(static_cast<size_t>(channels) * pixel_count(), 0);
+  if (kind == LayerKind::kDistance) l.hits.assign(pixel_count(), 0);
+  extra_.push_back(std::move(l));
+  return layer_count() - 1;
+}
+
+int Film::layer(std::string_view name) const {
+  for (int i = 0; i < layer_count(); ++i)
+    if (layer_at(i).name == name) return i;
+  return -1;
+}
+
+bool Film::same_layout(const Film& other) const {
+  if (other.width_ != width_ || other.height_ != height_ || other.layer_count() != layer_count()) return false;
+  for (int i = 0; i < layer_count(); ++i) {
+    const FilmLayer &a = layer_at(i), &b = other.layer_at(i);
+    if (a.name != b.name || a.channels != b.channels || a.kind != b.kind) return false;
+  }
   return true;
 }
 
+void Film::add_layer_sample(int layer, int x, int y, const float* values) {
+  if (layer == 0) return add_sample(x, y, Rgb(values[0], values[1], values[2]));
+  FilmLayer& l = layer_at(layer);
+  const size_t i = index(x, y), c = static_cast<size_t>(l.channels);
+  switch (l.kind) {
+    case LayerKind::kRadiance:
+      for (size_t k = 0; k < c; ++k) l.sums[c * i + k] += to_fixed(values[k]);
+      break;
+    case LayerKind::kSigned:
+      for (size_t k = 0; k < c; ++k) l.sums[c * i + k] += to_fixed_signed(values[k]);
+      break;
+    case LayerKind::kDistance:
+      if (std::isfinite(values[0]) && values[0] >= 0) {
+        l.sums[i] += to_fixed(values[0]);
+        l.hits[i] += 1;
+      }
+      break;
+  }
+}
+
+void Film::add_layer_sample_shared(int layer, int x, int y, const float* values) {
+  if (layer == 0) return splat(x, y, Rgb(values[0], values[1], values[2]));
+  FilmLayer& l = layer_at(layer);
+  const size_t i = index(x, y), c = static_cast<size_t>(l.channels);
+  switch (l.kind) {
+    case LayerKind::kRadiance:
+      for (size_t k = 0; k < c; ++k) atomic_add(l.sums[c * i + k], to_fixed(values[k]));
+      break;
+    case LayerKind::kSigned:
+      for (size_t k = 0; k < c; ++k) atomic_add(l.sums[c * i + k], to_fixed_signed(values[k]));
+      break;
+    case LayerKind::kDistance:
+      if (std::isfinite(values[0]) && values[0] >= 0) {
+        atomic_add(l.sums[i], to_fixed(values[0]));
+        __atomic_fetch_add(&l.hits[i], 1u, __ATOMIC_RELAXED);
+      }
+      break;
+  }
+}
+
+std::vector<float> Film::resolve() const {
+  std::vector<float> out(beauty_.sums.size());
+  double inv = samples_ > 0 ? 1.0 / (kFixedScale * samples_) : 0.0;
+  for (size_t i = 0; i < beauty_.sums.size(); ++i)
+    out[i] = static_cast<float>(static_cast<double>(beauty_.sums[i]) * inv);
+  return out;
+}
+
+std::vector<float> Film::resolve_layer(int layer) const {
+  const FilmLayer& l = layer_at(layer);
+  const size_t c = static_cast<size_t>(l.channels);
+  std::vector<float> out(l.sums.size());
+  for (size_t i = 0; i < pixel_count(); ++i) {
+    // The same arithmetic as resolve(): a film whose pixels all have samples() samples resolves to the same bits.
+    const uint32_t n = l.kind == LayerKind::kDistance ? l.hits[i] : pixel_samples_[i];
+    const double inv = n > 0 ? 1.0 / (kFixedScale * n) : 0.0;
+    for (size_t k = 0; k < c; ++k)
+      out[c * i + k] = l.kind == LayerKind::kDistance && n == 0
+                           ? INFINITY
+                           : static_cast<float>(static_cast<double>(l.sums[c * i + k]) * inv);
+  }
+  return out;
+}
+
+std::vector<float> Film::resolve_layer(std::string_view name) const {
+  const int i = layer(name);
+  if (i < 0) throw std::invalid_argument("the film has no layer " + std::string(name));
+  return resolve_layer(i);
+}
+
 void Film::merge(const Film& other) {
-  if (other.width_ != width_ || other.height_ != height_) throw std::invalid_argument("films of different sizes");
-  for (size_t i = 0; i < sum_.size(); ++i) sum_[i] += other.sum_[i];
+  if (!same_layout(other)) throw std::invalid_argument("films of different sizes or layers");
+  for (int k = 0; k < layer_count(); ++k) {
+    FilmLayer& a = layer_at(k);
+    const FilmLayer& b = other.layer_at(k);
+    for (size_t i = 0; i < a.sums.size(); ++i) a.sums[i] += b.sums[i];
+    for (size_t i = 0; i < a.hits.size(); ++i) a.hits[i] += b.hits[i];
+  }
   for (size_t i = 0; i < sum_lum2_.size(); ++i) sum_lum2_[i] += other.sum_lum2_[i];
+  for (size_t i = 0; i < pixel_samples_.size(); ++i) pixel_samples_[i] += other.pixel_samples_[i];
   samples_ += other.samples_;
 }
 
@@ -45,9 +150,10 @@ double Film::relative_error() const {
   const double n = samples_;
   double var_sum = 0, lum_sum = 0;
   size_t count = 0;
+  const std::vector<FixedSum>& sum = beauty_.sums;
   for (size_t i = 0; i < pixel_count(); ++i) {
-    double mean = (0.2126 * static_cast<double>(sum_[3 * i]) + 0.7152 * static_cast<double>(sum_[3 * i + 1]) +
-                   0.0722 * static_cast<double>(sum_[3 * i + 2])) /
+    double mean = (0.2126 * static_cast<double>(sum[3 * i]) + 0.7152 * static_cast<double>(sum[3 * i + 1]) +
+                   0.0722 * static_cast<double>(sum[3 * i + 2])) /
                   (kFixedScale * n);
     double var = (sum_lum2_[i] / n - mean * mean) * n / (n - 1);  // unbiased sample variance
     if (var < 0) var = 0;

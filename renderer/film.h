@@ -1,12 +1,26 @@
-// The film: per-pixel sums of linear radiance samples (each pixel's estimate of the measurement equation, Dutré, Bala
-// & Bekaert, Advanced Global Illumination, 2nd ed., §2.8, with a box pixel filter), plus what the noise estimate needs.
+// The film: per-pixel sums of samples in named layers (each pixel's estimate of the measurement equation, Dutré, Bala
+// & Bekaert, Advanced Global Illumination, 2nd ed., §2.8, with a box pixel filter), plus what the noise estimate and
+// per-pixel sampling need.
 //
-// Radiance sums are kept in 128-bit fixed point (units of 2^-40). Integer addition is associative, so a pixel's sum
-// does not depend on the order its samples were added in: films of disjoint sample ranges merge into exactly the
-// image of one render of all samples, whatever the threads, tiles, passes or resumes. Samples are clamped to
-// [0, 2^80] (far beyond any physical radiance) so sums cannot overflow.
+// Sums are kept in 128-bit fixed point (units of 2^-40). Integer addition is associative, so a pixel's sum does not
+// depend on the order its samples were added in: films of disjoint sample ranges merge into exactly the image of one
+// render of all samples, whatever the threads, tiles, passes or resumes, for every layer. Each sample is clamped to
+// ±2^80 (far beyond any physical value, and finite); a sum stays within its 127 bits for up to 2^32 samples of
+// magnitude below 2^55.
+//
+// Layer 0 is always the beauty, "radiance": 3 channels (R, G, B) clamped to [0, 2^80] as radiance is non-negative,
+// with a float sum of squared luminance per pixel for the noise estimate. Further layers are added by name, each of
+// one kind:
+//   - kRadiance: non-negative values (albedo, emission), clamped as the beauty is;
+//   - kSigned:   values of either sign (normal, position, uv), clamped symmetrically to [-2^80, 2^80];
+//   - kDistance: one channel of distances (depth): only finite non-negative values are summed, and a per-pixel count
+//                of them is kept beside the sum, so a ray that escapes (infinite distance) is counted out rather than
+//                putting an infinity in a sum; the pixel's mean is over its hits, infinite where there were none.
+// Every pixel also has its own sample count (adaptive sampling gives pixels different counts); the film's samples()
+// is the count of a film whose pixels all advance together.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <string_view>
@@ -19,23 +33,59 @@ namespace tessera {
 using FixedSum = __int128;
 inline constexpr double kFixedScale = 0x1p40;
 
+enum class LayerKind : uint32_t { kRadiance = 0, kSigned = 1, kDistance = 2 };
+
+// One named layer's per-pixel statistics.
+struct FilmLayer {
+  std::string name;
+  int channels = 0;
+  LayerKind kind = LayerKind::kRadiance;
+  std::vector<FixedSum> sums;  // `channels` per pixel, interleaved, row-major from the top left
+  std::vector<uint32_t> hits;  // kDistance: per pixel, the samples whose distance was finite; empty otherwise
+};
+
 class Film {
  public:
+  static constexpr const char* kBeauty = "radiance";
+  static constexpr int kMaxLayers = 64;
+  static constexpr int kMaxChannels = 16;
+  static constexpr size_t kMaxNameLength = 31;
+
   Film() = default;
   Film(int width, int height);
 
   int width() const { return width_; }
   int height() const { return height_; }
   size_t pixel_count() const { return static_cast<size_t>(width_) * static_cast<size_t>(height_); }
-  // Samples every pixel has received (all pixels advance together, pass by pass).
+  // Samples every pixel has received, for a film whose pixels all advance together (pass by pass).
   uint32_t samples() const { return samples_; }
-  void set_samples(uint32_t n) { samples_ = n; }
+  // Sets the film's count and every pixel's to `n`.
+  void set_samples(uint32_t n);
+  // Sets the film's count to `n`, the count of each pixel of the rectangle (x, y, w, h) to `n` and of every other
+  // pixel to 0: a film of a region of the image.
+  void set_samples(uint32_t n, int x, int y, int w, int h);
+  uint32_t pixel_samples(int x, int y) const { return pixel_samples_[index(x, y)]; }
+  const std::vector<uint32_t>& pixel_sample_counts() const { return pixel_samples_; }
+  std::vector<uint32_t>& pixel_sample_counts() { return pixel_samples_; }
+
+  // Layers. add_layer returns the new layer's index (the beauty's is 0), and throws std::invalid_argument for a name
+  // already there, empty, longer than kMaxNameLength or not printable ASCII, a channel count outside
+  // [1, kMaxChannels] (a distance layer has one), or more than kMaxLayers layers. Look a layer up by name once, and
+  // add samples by its index: no lookup per sample.
+  int add_layer(std::string name, int channels, LayerKind kind);
+  // The index of the layer named `name`, or -1.
+  int layer(std::string_view name) const;
+  int layer_count() const { return 1 + static_cast<int>(extra_.size()); }
+  const FilmLayer& layer_at(int i) const { return i == 0 ? beauty_ : extra_[static_cast<size_t>(i - 1)]; }
+  FilmLayer& layer_at(int i) { return i == 0 ? beauty_ : extra_[static_cast<size_t>(i - 1)]; }
+  // Whether `other` has the same size and the same layers (names, channels, kinds, in order).
+  bool same_layout(const Film& other) const;
 
   void add_sample(int x, int y, const Rgb& radiance) {
     size_t i = index(x, y);
-    sum_[3 * i] += to_fixed(radiance.x);
-    sum_[3 * i + 1] += to_fixed(radiance.y);
-    sum_[3 * i + 2] += to_fixed(radiance.z);
+    beauty_.sums[3 * i] += to_fixed(radiance.x);
+    beauty_.sums[3 * i + 1] += to_fixed(radiance.y);
+    beauty_.sums[3 * i + 2] += to_fixed(radiance.z);
     float l = luminance(radiance);
     sum_lum2_[i] += l * l;
   }
@@ -46,7 +96,7 @@ class Film {
   // count as samples and leave the squared-luminance sums (the noise estimate's) alone.
   void splat(int x, int y, const Rgb& value) {
     size_t i = index(x, y);
-    for (int c = 0; c < 3; ++c) atomic_add(sum_[3 * i + static_cast<size_t>(c)], to_fixed(value[c]));
+    for (int c = 0; c < 3; ++c) atomic_add(beauty_.sums[3 * i + static_cast<size_t>(c)], to_fixed(value[c]));
   }
   // add_sample on a film that other threads splat onto at the same time: the radiance sums added as splat() adds
   // them; the squared luminance as add_sample does (only the calling thread adds samples to this pixel).
@@ -55,35 +105,40 @@ class Film {
     float l = luminance(radiance);
     sum_lum2_[index(x, y)] += l * l;
   }
+  // Adds one sample of layer `layer` (an index from add_layer or layer()) to pixel (x, y): `values` holds the layer's
+  // channels. On the beauty (layer 0) it is add_sample.
+  void add_layer_sample(int layer, int x, int y, const float* values);
+  // add_layer_sample while other threads may add to the same pixel (the sums and hit counts added atomically, as
+  // splat() adds; on the beauty, as splat(): no squared luminance).
+  void add_layer_sample_shared(int layer, int x, int y, const float* values);
+
   // Mean radiance of a pixel.
   Rgb pixel(int x, int y) const {
     size_t i = index(x, y);
     double inv = samples_ > 0 ? 1.0 / (kFixedScale * samples_) : 0.0;
-    return Rgb(static_cast<float>(static_cast<double>(sum_[3 * i]) * inv),
-               static_cast<float>(static_cast<double>(sum_[3 * i + 1]) * inv),
-               static_cast<float>(static_cast<double>(sum_[3 * i + 2]) * inv));
+    return Rgb(static_cast<float>(static_cast<double>(beauty_.sums[3 * i]) * inv),
+               static_cast<float>(static_cast<double>(beauty_.sums[3 * i + 1]) * inv),
+               static_cast<float>(static_cast<double>(beauty_.sums[3 * i + 2]) * inv));
   }
-  // Adds the samples of `other` (same size, a disjoint sample range): exact for the radiance sums.
+  // Adds the samples of `other` (same layout, a disjoint sample range): exact for every layer's sums and hit counts
+  // and for the per-pixel counts; throws std::invalid_argument for another layout.
   void merge(const Film& other);
-  // Mean radiance of every pixel, RGB interleaved, row-major from the top-left.
+  // Mean radiance of every pixel over the film's samples(), RGB interleaved, row-major from the top-left.
   std::vector<float> resolve() const;
+  // Mean of every pixel of a layer, its channels interleaved: over the pixel's own sample count (0 for a pixel
+  // without samples); a distance layer's over the pixel's hits (infinite for a pixel without any).
+  std::vector<float> resolve_layer(int layer) const;
+  // resolve_layer of the layer named `name`; throws std::invalid_argument when there is none.
+  std::vector<float> resolve_layer(std::string_view name) const;
   // Estimated relative standard error of the image mean luminance: sqrt(mean pixel variance of the mean) divided by
   // the mean luminance (over pixels whose mean luminance is above a small floor).
   double relative_error() const;
 
-  // The film's state as bytes, the one layout of checkpoints and partial films: 3 × 128-bit fixed-point sums per
-  // pixel (R, G, B, units of 2^-40), row-major from the top left, then one f32 sum of squared luminance per pixel;
-  // in the machine's byte order (little-endian on the machines we run on). The sample count is not part of it.
-  static size_t state_size(int width, int height);
-  void append_state(std::string& out) const;
-  // Reads state_size(width(), height()) bytes of append_state(); false, and the film unchanged, for any other size.
-  bool read_state(std::string_view bytes);
-
-  // Raw state: 3 fixed-point sums per pixel (RGB), and per-pixel sums of squared luminance (float, only for the noise
-  // estimate).
-  const std::vector<FixedSum>& sums() const { return sum_; }
+  // Raw state of the beauty: 3 fixed-point sums per pixel (RGB), and per-pixel sums of squared luminance (float,
+  // only for the noise estimate). The film codec (renderer/film_codec.h) reads and writes every layer's.
+  const std::vector<FixedSum>& sums() const { return beauty_.sums; }
   const std::vector<float>& sums_lum2() const { return sum_lum2_; }
-  std::vector<FixedSum>& sums() { return sum_; }
+  std::vector<FixedSum>& sums() { return beauty_.sums; }
   std::vector<float>& sums_lum2() { return sum_lum2_; }
 
   static FixedSum to_fixed(float v) {
@@ -95,10 +150,19 @@ class Film {
     if (d > 0x1p80) d = 0x1p80;
     return static_cast<FixedSum>(d * kFixedScale);
   }
+  // to_fixed for values of either sign: clamped to [-2^80, 2^80], truncated toward zero, NaN as 0.
+  static FixedSum to_fixed_signed(float v) {
+    double d = static_cast<double>(v);
+    if (!(d == d)) return 0;
+    if (d > -0x1p23 && d < 0x1p23) return static_cast<int64_t>(d * kFixedScale);
+    d = std::fmin(std::fmax(d, -0x1p80), 0x1p80);
+    return static_cast<FixedSum>(d * kFixedScale);
+  }
 
  private:
   static void atomic_add(FixedSum& sum, FixedSum value) {
-    // Little-endian: the low word first. Sums are non-negative and below 2^127, the words' wrap-around is exact.
+    // Little-endian: the low word first. The two words' additions with the carry are the 128-bit two's complement
+    // addition, exact for values of either sign while the sum stays within 128 bits.
     static_assert(sizeof(FixedSum) == 2 * sizeof(uint64_t));
     uint64_t* words = reinterpret_cast<uint64_t*>(&sum);
     const uint64_t lo = static_cast<uint64_t>(value), hi = static_cast<uint64_t>(value >> 64);
@@ -111,8 +175,10 @@ class Film {
   }
   int width_ = 0, height_ = 0;
   uint32_t samples_ = 0;
-  std::vector<FixedSum> sum_;
-  std::vector<float> sum_lum2_;
+  FilmLayer beauty_;                     // layer 0, kept apart so add_sample reaches its sums in one step
+  std::vector<float> sum_lum2_;          // the beauty's, per pixel
+  std::vector<FilmLayer> extra_;         // layers 1 …
+  std::vector<uint32_t> pixel_samples_;  // per pixel
 };
 
 }  // namespace tessera

@@ -40,6 +40,8 @@ struct RenderSettings {
   // neither.
   uint32_t first_sample = 0;  // render sample indices [first_sample, first_sample + spp): a range of a larger job
   uint32_t job_spp = 0;       // that larger job's samples per pixel (rays' texture footprints depend on it); 0: spp
+  // The whole job's sample budget: samples [0, budget) of every pixel make its image.
+  uint32_t budget() const { return job_spp ? job_spp : first_sample + spp; }
   // Crop window in pixels (render only these; the film keeps the full size). Empty (w or h 0): the whole image.
   using Region = PixelRegion;
   Region region;

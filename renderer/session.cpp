@@ -87,7 +87,10 @@ StopReason RenderSession::run(const std::function<void(const RenderProgress&, co
     integrator_->render_pass(settings_.first_sample + first, count, film_, cancel_);
     if (cancel_.load()) return StopReason::kCancelled;
     const double pass_s = std::chrono::duration<double>(clock::now() - pass_start).count();
-    film_.set_samples(first + count);
+    {
+      const RenderSettings::Region& r = settings_.region;
+      film_.set_samples(first + count, r.x, r.y, r.width, r.height);
+    }
     progress_.pass += 1;
     progress_.samples_done = first + count;
     progress_.elapsed_s = elapsed_before + std::chrono::duration<double>(clock::now() - start).count();

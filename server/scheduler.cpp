@@ -447,10 +447,12 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
         // A unit's checkpoint is named by its run's epoch: the store's update below makes it the unit's. A split
         // job's preview is the merge of its done units (finish_unit).
         if (is_unit) {
-          files_.write_unit(id, record.unit, slot->epoch, encode_checkpoint(film, p.pass, p.elapsed_s, settings_hash));
+          files_.write_unit(id, record.unit, slot->epoch,
+                            encode_checkpoint(film, p.pass, p.elapsed_s, settings_hash, job.settings));
           checkpointed_samples = p.samples_done;
         } else {
-          files_.write(id, JobFile::kCheckpoint, encode_checkpoint(film, p.pass, p.elapsed_s, settings_hash));
+          files_.write(id, JobFile::kCheckpoint,
+                       encode_checkpoint(film, p.pass, p.elapsed_s, settings_hash, job.settings));
           files_.write(id, JobFile::kPreviewPng, [&] {
             std::vector<uint8_t> png = encode_png(film.resolve(), film.width(), film.height(), job.settings.display);
             return std::string(png.begin(), png.end());
@@ -518,7 +520,7 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
       const RenderProgress& p = session.progress();
       if (checkpointed_samples != p.samples_done)
         files_.write_unit(id, record.unit, slot->epoch,
-                          encode_checkpoint(session.film(), p.pass, p.elapsed_s, settings_hash));
+                          encode_checkpoint(session.film(), p.pass, p.elapsed_s, settings_hash, job.settings));
       log_.add(id, printf_string("unit %d of %d done: samples %u..%u in %.2f s", record.unit + 1, record.units,
                                  static_cast<unsigned>(job.settings.first_sample),
                                  static_cast<unsigned>(job.settings.first_sample + job.settings.spp), p.elapsed_s));
@@ -827,8 +829,11 @@ std::optional<Film> Scheduler::merge_unit_films(const JobRecord& job, int width,
       if (!u.done) continue;  // a checkpoint being replaced; the next one will do
       throw std::runtime_error(printf_string("the film of unit %d is missing or damaged", u.index + 1));
     }
-    if (!merged) merged.emplace(width, height);
-    merged->merge(cp->film);  // integer sums: exact in any order (film.h)
+    // Every layer's integer sums and the per-pixel counts: exact in any order (film.h).
+    if (!merged)
+      merged = std::move(cp->film);
+    else
+      merged->merge(cp->film);
   }
   return merged;
 }

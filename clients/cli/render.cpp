@@ -329,7 +329,7 @@ int cmd_render(int argc, char** argv) {
   part.height = job.settings.height;
   part.first_sample = job.settings.first_sample;
   part.sample_count = session.film().samples();
-  part.job_spp = job.settings.job_spp ? job.settings.job_spp : job.settings.first_sample + job.settings.spp;
+  part.job_spp = job.settings.budget();
   part.region = session.settings().region;
   if (part.region.width <= 0 || part.region.height <= 0) part.region = {0, 0, part.width, part.height};
   part.exr_half = job.settings.exr_half;
@@ -400,6 +400,9 @@ int cmd_merge(int argc, char** argv) {
         fatal("overlapping parts: " + describe(a) + " and " + describe(b) + " render some samples of the same pixels");
     }
   }
+  for (const PartialFilm& p : parts)
+    if (!p.film.same_layout(first.film))
+      fatal(p.path + " and " + first.path + " hold different film layers (the parts of one job hold the same)");
   // Every pixel must end with the same contiguous range [lo, hi) of samples.
   const size_t n = static_cast<size_t>(first.width) * static_cast<size_t>(first.height);
   std::vector<uint32_t> lo(n, UINT32_MAX), hi(n, 0), total(n, 0);
@@ -456,8 +459,9 @@ int cmd_merge(int argc, char** argv) {
   merged.exr_half = first.exr_half;
   merged.display = first.display;
   merged.fingerprint = first.fingerprint;
-  merged.film = tessera::Film(first.width, first.height);
-  for (const PartialFilm& p : parts) merged.film.merge(p.film);  // integer sums: exact in any order
+  // Every layer's integer sums, hit counts and per-pixel sample counts: exact in any order.
+  merged.film = first.film;
+  for (size_t i = 1; i < parts.size(); ++i) merged.film.merge(parts[i].film);
   // Film::merge counts every part's samples; parts of different regions share a sample range.
   merged.film.set_samples(merged.sample_count);
   write_outputs(outputs, merged);

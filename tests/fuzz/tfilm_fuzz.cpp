@@ -1,5 +1,6 @@
-// Fuzz target: a partial film (.tfilm) as `tessera merge` reads one (clients/cli/partial_film.h decode_film). Bytes
-// that are not a partial film are fatal (cli::Failure, exit code 1); any other exception, a crash or a sanitizer
+// Fuzz target: a partial film (.tfilm) as `tessera merge` reads one (clients/cli/partial_film.h decode_film: the film
+// codec of renderer/film_codec.h, every version it reads, layers and per-pixel counts included). Bytes that are not a
+// partial film are fatal (cli::Failure, exit code 1); any other exception, a crash or a sanitizer
 // report is a finding. A film that decodes must encode to one that decodes to the same film and fields.
 #include <cstddef>
 #include <cstdint>

@@ -2,9 +2,13 @@
 // settings or size, a torn or corrupted file, another format) is refused rather than resumed from.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
+#include <fstream>
 #include <random>
+#include <sstream>
 
+#include "renderer/film_codec.h"
 #include "server/checkpoint.h"
 
 namespace tessera::server {
@@ -51,21 +55,65 @@ TEST(Checkpoint, RefusesAnotherRenderAndDamagedBytes) {
   }
 }
 
-// A checkpoint of the format before the header was checksummed (version 2: the checksum covers the payload only)
-// still resumes, so an upgrade does not restart the jobs it interrupted.
-TEST(Checkpoint, ReadsTheVersionBeforeTheHeaderWasChecksummed) {
-  const Film film = noisy_film(4, 3, 5);
-  std::string bytes = encode_checkpoint(film, 3, 0.75, 7);
-  const uint32_t v2 = 2;
-  std::memcpy(bytes.data() + 8, &v2, sizeof v2);
-  const std::string_view payload = std::string_view(bytes).substr(48 + 8);
-  const uint64_t payload_checksum = fnv1a64(payload);
-  std::memcpy(bytes.data() + 48, &payload_checksum, sizeof payload_checksum);
-  const std::optional<Checkpoint> c = decode_checkpoint(bytes, 4, 3, 7);
+std::string read_fixture(const std::string& name) {
+  std::ifstream in("tests/renderer/fixtures/" + name, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Checkpoints of the formats before the film codec ("TSRCKPT1" version 2, the checksum over the payload only, and 3,
+// over the header too; tests/renderer/fixtures, written by that encoder) still resume, so an upgrade does not restart
+// the jobs it interrupted.
+TEST(Checkpoint, ReadsTheFormatsBeforeTheFilmCodec) {
+  Film film(3, 2);
+  for (uint32_t s = 0; s < 5; ++s)
+    for (int y = 0; y < 2; ++y)
+      for (int x = 0; x < 3; ++x)
+        film.add_sample(x, y, Rgb(0.25f * (s + 1) + x, 1.5f * y + 0.125f * s, s == 2 ? -1.0f : 3.0f + x * y + s));
+  for (const char* name : {"checkpoint-v2.ckpt", "checkpoint-v3.ckpt"}) {
+    const std::string bytes = read_fixture(name);
+    const std::optional<Checkpoint> c = decode_checkpoint(bytes, 3, 2, 0x1234abcd5678ef00ull);
+    ASSERT_TRUE(c) << name;
+    EXPECT_EQ(c->film.samples(), 5u);
+    EXPECT_EQ(c->film.pixel_samples(2, 1), 5u);
+    EXPECT_EQ(c->passes, 3u);
+    EXPECT_EQ(c->elapsed_s, 1.25);
+    EXPECT_TRUE(c->film.sums() == film.sums());
+    EXPECT_TRUE(c->film.sums_lum2() == film.sums_lum2());
+    EXPECT_FALSE(decode_checkpoint(bytes, 3, 2, 0x1234abcd5678ef01ull)) << name << ": other render settings";
+    EXPECT_FALSE(decode_checkpoint(bytes, 2, 3, 0x1234abcd5678ef00ull)) << name << ": another size";
+  }
+}
+
+// A checkpoint records its sample range and its job's budget (a work unit's, of the whole job's), and every layer.
+TEST(Checkpoint, RecordsTheSampleRangeTheBudgetAndEveryLayer) {
+  Film film = noisy_film(4, 3, 6);
+  const int depth = film.add_layer("depth", 1, LayerKind::kDistance);
+  const float d = 2.5f, escaped = INFINITY;
+  film.add_layer_sample(depth, 1, 1, &d);
+  film.add_layer_sample(depth, 1, 1, &escaped);
+  RenderSettings unit;
+  unit.width = 4;
+  unit.height = 3;
+  unit.first_sample = 10;
+  unit.spp = 6;
+  unit.job_spp = 40;
+  const std::string bytes = encode_checkpoint(film, 2, 0.5, 77, unit);
+  const std::optional<FilmFile> f = decode_film_file(bytes);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(f->first_sample, 10u);
+  EXPECT_EQ(f->sample_count, 6u);
+  EXPECT_EQ(f->job_spp, 40u);
+  EXPECT_EQ(f->fingerprint, 77u);
+  const std::optional<Checkpoint> c = decode_checkpoint(bytes, 4, 3, 77);
   ASSERT_TRUE(c);
-  EXPECT_EQ(c->film.samples(), 5u);
-  EXPECT_EQ(c->passes, 3u);
-  EXPECT_TRUE(c->film.sums() == film.sums());
+  ASSERT_EQ(c->film.layer("depth"), depth);
+  EXPECT_EQ(c->film.layer_at(depth).hits, film.layer_at(depth).hits);
+  EXPECT_TRUE(c->film.layer_at(depth).sums == film.layer_at(depth).sums);
+  unit.job_spp = 0;
+  unit.first_sample = 0;
+  EXPECT_EQ(decode_film_file(encode_checkpoint(film, 2, 0.5, 77, unit))->job_spp, 6u) << "a whole job's budget";
 }
 
 }  // namespace
