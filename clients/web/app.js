@@ -593,13 +593,21 @@ function renderQueue() {
 
 let queueTimer = null;
 let queueBusy = false;
+// job id -> when the page last saw the job ended, and that status. A job list asked for before then may still show
+// it running (the job's own stream, or an action's answer, told its end first): the ended status stands.
+const endsObserved = new Map();
+function fresher(job, askedAt) {
+  const ended = endsObserved.get(job.id);
+  return ended && ended.at > askedAt && !TERMINAL.has(job.state) ? ended.job : job;
+}
 // Refreshes the job list; returns how long the server asked to wait before the next refresh (0 if it did not).
 async function refreshQueue() {
   if (queueBusy) return 0;
   queueBusy = true;
   try {
+    const sent = performance.now();
     const list = await api.listJobs();
-    jobs = list.jobs || [];
+    jobs = (list.jobs || []).map((j) => fresher(j, sent));
     for (const j of jobs) noteJobState(j);
     renderQueue();
     const sel = jobs.find((j) => j.id === selectedId);
@@ -1141,6 +1149,10 @@ const ENDINGS = {
 };
 const submittedHere = new Set();
 const lastStates = new Map(); // job id -> the state the page last saw it in
+// job id -> the finished_at of the last end the page saw: an answer sent before that end and arriving after it (a
+// job list and the job's own stream race) shows the job running again, and its next answer must not end it twice. A
+// job requeued and ended again has another finished_at.
+const endsSeen = new Map();
 let endedUnseen = [];
 
 function followEnd(job) {
@@ -1150,9 +1162,12 @@ function followEnd(job) {
 // Called with every status the page sees (the job list, the followed job): a job seen running, queued or paused
 // and now ended, while the page is hidden, is announced.
 function noteJobState(job) {
+  if (TERMINAL.has(job.state)) endsObserved.set(job.id, { at: performance.now(), job });
   const before = lastStates.get(job.id);
   lastStates.set(job.id, job.state);
   if (!before || TERMINAL.has(before) || !TERMINAL.has(job.state) || !ENDINGS[job.state]) return;
+  if (endsSeen.get(job.id) === job.finished_at) return;
+  endsSeen.set(job.id, job.finished_at);
   if (!document.hidden || !(job.id === selectedId || submittedHere.has(job.id))) return;
   endedUnseen.push(job);
   const ending = ENDINGS[job.state];

@@ -1185,6 +1185,14 @@ test("what users reported: the name, the error banner, the material form and the
       assert.equal(await notify.count(), 1, "a Notify me box");
       await notify.check();
       assert.ok(await notify.isChecked(), "permission granted: the box stays ticked");
+      // The job list's answers arrive 1.5 s late, after the followed job's stream has told its end: a late answer
+      // shows that job running again, and the next one ends it a second time. Each end is told once.
+      const late = async (route) => {
+        const response = await route.fetch();
+        await new Promise((r) => setTimeout(r, 1500));
+        await route.fulfill({ response }).catch(() => {});
+      };
+      await tab.route(/\/v1\/jobs\?limit=/, late);
       await setHidden(tab, true);
       await tab.getByLabel("Name", { exact: true }).fill("in the background");
       const a = (await submitAccepted(tab)).job;
@@ -1192,8 +1200,12 @@ test("what users reported: the name, the error banner, the material form and the
       const b = (await submitAccepted(tab)).job;
       for (const id of [a.id, b.id]) assert.equal((await finished(id)).status.state, "succeeded");
       await settles(title, "✓ 2 jobs ended — tessera", "the title after two jobs ended in the background");
+      // Past a late answer or two: still two.
+      await tab.waitForTimeout(3500);
+      assert.equal(await title(), "✓ 2 jobs ended — tessera");
       const shown = await tab.evaluate(() => window.__shown);
       assert.deepEqual(shown.sort(), ["tessera: in the background done", "tessera: watched done"]);
+      await tab.unroute(/\/v1\/jobs\?limit=/, late);
       await setHidden(tab, false);
       assert.equal(await title(), "tessera");
 
