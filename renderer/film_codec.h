@@ -47,8 +47,8 @@
 #include <string>
 #include <string_view>
 
+#include "renderer/display.h"
 #include "renderer/film.h"
-#include "renderer/image_io.h"
 #include "renderer/integrator.h"
 
 namespace tessera {

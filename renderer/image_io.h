@@ -1,4 +1,5 @@
-// Image output and input through OpenImageIO: linear EXR, tone-mapped sRGB PNG.
+// Image input through OpenImageIO, and the checks made of image data before it is decoded. Images are written by
+// the output pipeline (renderer/output.h).
 #pragma once
 
 #include <cstdint>
@@ -7,28 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "renderer/film.h"
-
 namespace tessera {
-
-enum class ToneMap { kClamp, kAces };
-
-struct DisplaySettings {
-  float exposure_ev = 0;  // scale by 2^exposure_ev before the tone curve
-  ToneMap tonemap = ToneMap::kClamp;
-  bool operator==(const DisplaySettings&) const = default;
-};
-
-// Linear radiance (RGB float, row-major) to 8-bit sRGB, applying exposure and the tone curve.
-std::vector<uint8_t> to_display(const std::vector<float>& rgb, int width, int height, const DisplaySettings& display);
-
-// Writes `rgb` (width*height*3 linear floats) as an OpenEXR file, half or float channels. Throws on failure.
-void write_exr(const std::string& path, const std::vector<float>& rgb, int width, int height, bool half);
-// Writes a tone-mapped sRGB PNG. Throws on failure.
-void write_png(const std::string& path, const std::vector<float>& rgb, int width, int height,
-               const DisplaySettings& display);
-// Encodes a tone-mapped sRGB PNG in memory.
-std::vector<uint8_t> encode_png(const std::vector<float>& rgb, int width, int height, const DisplaySettings& display);
 
 struct ImageData {
   int width = 0, height = 0, channels = 0;

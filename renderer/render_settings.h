@@ -18,7 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "renderer/image_io.h"
+#include "renderer/display.h"
 #include "renderer/integrator.h"
 #include "renderer/sampler.h"
 

@@ -11,7 +11,6 @@
 
 #include "renderer/camera.h"
 #include "renderer/film.h"
-#include "renderer/image_io.h"
 #include "renderer/integrator.h"
 #include "renderer/render_settings.h"
 #include "renderer/sampler.h"

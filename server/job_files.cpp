@@ -34,17 +34,6 @@ void fsync_dir(const fs::path& p) {
   ::close(fd);
 }
 
-// A file just written, before it is renamed over the last good version: a filesystem that allocates late (NFS,
-// XFS, btrfs, a quota) reports ENOSPC or EIO only here, and a file whose data never reached the disk must not replace
-// a good one. 0 or the errno.
-int fsync_file(const fs::path& p) {
-  int fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return errno;
-  const int error = ::fsync(fd) == 0 ? 0 : errno;
-  ::close(fd);
-  return error;
-}
-
 [[noreturn]] void write_failed(const char* name, int error) {
   throw std::system_error(error, std::generic_category(), std::string("cannot write ") + name);
 }
@@ -124,6 +113,10 @@ const char* job_file_name(JobFile f) {
   return "preview.png";
 }
 
+JobFile result_file(ImageFormat format) {
+  return format == ImageFormat::kPng ? JobFile::kResultPng : JobFile::kResultExr;
+}
+
 const char* job_file_media_type(JobFile f) {
   if (f == JobFile::kCheckpoint) return "application/octet-stream";
   if (f == JobFile::kLog) return "text/plain; charset=utf-8";
@@ -148,27 +141,11 @@ fs::path DirectoryJobFiles::path(const std::string& id, JobFile f) const {
   return dir(id) / job_file_name(f);
 }
 
-void DirectoryJobFiles::write_with(const std::string& id, JobFile f,
-                                   const std::function<void(const std::string&)>& writer) const {
-  publish(id, f, writer, false);
-}
-
 void DirectoryJobFiles::write(const std::string& id, JobFile f, std::string_view bytes) const {
-  publish(
-      id, f,
-      [&](const std::string& temp) {
-        if (int error = write_file_synced(temp, bytes); error != 0) write_failed(job_file_name(f), error);
-      },
-      true);
+  publish_path(path(id, f), job_file_name(f), bytes);
 }
 
-void DirectoryJobFiles::publish(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer,
-                                bool writer_synced) const {
-  publish_path(path(id, f), job_file_name(f), writer, writer_synced);
-}
-
-void DirectoryJobFiles::publish_path(const fs::path& final_path, const char* name,
-                                     const std::function<void(const std::string&)>& writer, bool writer_synced) const {
+void DirectoryJobFiles::publish_path(const fs::path& final_path, const char* name, std::string_view bytes) const {
   // The folder is made when the job starts rendering; if it is gone, the job was deleted: write nothing.
   if (!fs::is_directory(final_path.parent_path()))
     throw std::runtime_error("job " + final_path.parent_path().filename().string() + " has no folder (deleted)");
@@ -177,9 +154,7 @@ void DirectoryJobFiles::publish_path(const fs::path& final_path, const char* nam
       final_path.parent_path() / (final_path.stem().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
                                   std::to_string(g_temp_counter.fetch_add(1)) + final_path.extension().string());
   try {
-    writer(temp.string());
-    if (!writer_synced)
-      if (int error = fsync_file(temp); error != 0) write_failed(name, error);
+    if (int error = write_file_synced(temp.string(), bytes); error != 0) write_failed(name, error);
     fs::rename(temp, final_path);
   } catch (...) {
     std::error_code ignored;
@@ -195,9 +170,8 @@ fs::path DirectoryJobFiles::staged_path(const std::string& id, JobFile f, int64_
          (final_path.stem().string() + ".e" + std::to_string(epoch) + final_path.extension().string());
 }
 
-void DirectoryJobFiles::stage(const std::string& id, JobFile f, int64_t epoch,
-                              const std::function<void(const std::string&)>& writer) const {
-  publish_path(staged_path(id, f, epoch), job_file_name(f), writer, false);
+void DirectoryJobFiles::stage(const std::string& id, JobFile f, int64_t epoch, std::string_view bytes) const {
+  publish_path(staged_path(id, f, epoch), job_file_name(f), bytes);
 }
 
 bool DirectoryJobFiles::publish_staged(const std::string& id, JobFile f, int64_t epoch) const {
@@ -267,12 +241,7 @@ void DirectoryJobFiles::update(const std::string& id, JobFile f, const std::func
   }
   const std::string bytes = change(now.value_or(""));
   const std::string name = file.filename().string();
-  publish_path(
-      file, name.c_str(),
-      [&](const std::string& temp) {
-        if (int error = write_file_synced(temp, bytes); error != 0) write_failed(name.c_str(), error);
-      },
-      true);
+  publish_path(file, name.c_str(), bytes);
 }
 
 std::vector<std::string> DirectoryJobFiles::read_parts(const std::string& id, JobFile f) const {
@@ -311,12 +280,7 @@ fs::path DirectoryJobFiles::unit_path(const std::string& id, int unit, int64_t e
 void DirectoryJobFiles::write_unit(const std::string& id, int unit, int64_t epoch, std::string_view bytes) const {
   const fs::path p = unit_path(id, unit, epoch);
   const std::string name = p.filename().string();
-  publish_path(
-      p, name.c_str(),
-      [&](const std::string& temp) {
-        if (int error = write_file_synced(temp, bytes); error != 0) write_failed(name.c_str(), error);
-      },
-      true);
+  publish_path(p, name.c_str(), bytes);
 }
 
 std::optional<std::string> DirectoryJobFiles::read_unit(const std::string& id, int unit, int64_t epoch) const {

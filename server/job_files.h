@@ -14,11 +14,16 @@
 #include <string_view>
 #include <vector>
 
+#include "renderer/output.h"
+
 namespace tessera::server {
 
 enum class JobFile { kPreviewPng, kResultPng, kResultExr, kCheckpoint, kLog };
 const char* job_file_name(JobFile f);
 const char* job_file_media_type(JobFile f);
+// The file each output format is published as (OutputPipeline), and all of them.
+JobFile result_file(ImageFormat format);
+inline constexpr JobFile kResultFiles[] = {JobFile::kResultPng, JobFile::kResultExr};
 
 // One version of a stored file, opened for reading in pieces (an HTTP answer streams it): a version written
 // meanwhile does not mix into it.
@@ -45,16 +50,11 @@ class JobFiles {
   // Writes `bytes` atomically: on failure (a full disk: std::system_error with ENOSPC, "cannot write
   // checkpoint.bin") the file's last version stays as it was and nothing half-written is left.
   virtual void write(const std::string& id, JobFile f, std::string_view bytes) const = 0;
-  // Atomically publishes a file written by `writer` to the local temp path it is given (which keeps the final
-  // extension, for writers that choose the format by it), failing like write().
-  virtual void write_with(const std::string& id, JobFile f,
-                          const std::function<void(const std::string&)>& writer) const = 0;
-  // Outputs fenced by the end of the run that made them (a result file): `writer` writes it, as write_with() does,
+  // Outputs fenced by the end of the run that made them (a result file): `bytes` are written as write() writes them,
   // under a name of the run's epoch beside the final one, where no reader looks. publish_staged() renames it over the
   // final name once the store has taken the run's end; discard_staged() removes it when the store refused that end.
   // publish_staged() is false (and changes nothing) when no such file exists: already published, or never staged.
-  virtual void stage(const std::string& id, JobFile f, int64_t epoch,
-                     const std::function<void(const std::string&)>& writer) const = 0;
+  virtual void stage(const std::string& id, JobFile f, int64_t epoch, std::string_view bytes) const = 0;
   virtual bool publish_staged(const std::string& id, JobFile f, int64_t epoch) const = 0;
   virtual void discard_staged(const std::string& id, JobFile f, int64_t epoch) const = 0;
   // The file's bytes, or nothing when it does not exist.
@@ -97,11 +97,8 @@ class DirectoryJobFiles final : public JobFiles {
   void prepare(const std::string& id) const override;
   // Temp file beside the final one, fsync, rename.
   void write(const std::string& id, JobFile f, std::string_view bytes) const override;
-  void write_with(const std::string& id, JobFile f,
-                  const std::function<void(const std::string&)>& writer) const override;
   // <data>/jobs/<id>/result.e<epoch>.png (the final name's stem, the epoch, its extension)
-  void stage(const std::string& id, JobFile f, int64_t epoch,
-             const std::function<void(const std::string&)>& writer) const override;
+  void stage(const std::string& id, JobFile f, int64_t epoch, std::string_view bytes) const override;
   bool publish_staged(const std::string& id, JobFile f, int64_t epoch) const override;
   void discard_staged(const std::string& id, JobFile f, int64_t epoch) const override;
   std::optional<std::string> read(const std::string& id, JobFile f) const override;
@@ -119,10 +116,8 @@ class DirectoryJobFiles final : public JobFiles {
   void remove_units(const std::string& id) const override;
 
  private:
-  void publish(const std::string& id, JobFile f, const std::function<void(const std::string&)>& writer,
-               bool writer_synced) const;
-  void publish_path(const std::filesystem::path& final_path, const char* name,
-                    const std::function<void(const std::string&)>& writer, bool writer_synced) const;
+  // Temp file beside `final_path`, fsync, rename, fsync of the folder; `name` is the file's for messages.
+  void publish_path(const std::filesystem::path& final_path, const char* name, std::string_view bytes) const;
   std::filesystem::path unit_path(const std::string& id, int unit, int64_t epoch) const;
   std::filesystem::path staged_path(const std::string& id, JobFile f, int64_t epoch) const;
 

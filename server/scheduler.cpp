@@ -9,8 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "renderer/image_io.h"
 #include "renderer/job.h"
+#include "renderer/output.h"
 #include "renderer/scene.h"
 #include "renderer/scene_error.h"
 #include "renderer/session.h"
@@ -87,15 +87,6 @@ JobProgress to_job_progress(const RenderProgress& p) {
   jp.eta_s = p.eta_s;
   jp.samples_per_s = p.samples_per_s;
   return jp;
-}
-
-// A result.png staged for the end of a run of `epoch` (Scheduler::publish_outputs()).
-void stage_png(const JobFiles& files, const std::string& id, int64_t epoch, const std::vector<uint8_t>& png) {
-  files.stage(id, JobFile::kResultPng, epoch, [&](const std::string& temp) {
-    const std::string_view bytes(reinterpret_cast<const char*>(png.data()), png.size());
-    if (int error = write_file_synced(temp, bytes); error != 0)
-      throw std::system_error(error, std::generic_category(), "cannot write result.png");
-  });
 }
 
 }  // namespace
@@ -298,291 +289,329 @@ void Scheduler::dispatch_loop() {
   }
 }
 
+// A run's steps: claimed by dispatch_loop(), it restores (load_run, resume_from_checkpoint), renders (render_passes)
+// and publishes its end (end_interrupted, end_unit, end_job); the merge of a split job's units and the failure of a
+// job lost too often are runs of their own. Whatever the end, finish_run() releases the slot.
 void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record) {
-  const std::string& id = record.id;
   // The job's files have their place from here on; writes never make it (JobFiles::prepare), so a render still
   // winding down cannot bring back the files of a job that was deleted meanwhile.
-  files_.prepare(id);
-  notify_state(id);
-  auto detach = [&] {
-    std::lock_guard lock(mutex_);
-    slot->session = nullptr;
-  };
-  // The slot's last step, whatever the run's end: the files of a job deleted meanwhile go; the dispatcher, woken,
-  // reaps the slot (and may claim what the end made claimable: a split job's merge).
-  const auto finish = [&] {
-    bool deleted;
-    {
-      std::lock_guard lock(mutex_);
-      deleted = slot->delete_requested;
-    }
-    if (deleted)
-      files_.remove(id);
-    else
-      notify_state(id);
-    {
-      std::lock_guard lock(mutex_);
-      slot->done = true;
-    }
-    cv_.notify_all();
-  };
+  files_.prepare(record.id);
+  notify_state(record.id);
   if (record.lost_runs > options_.crash_retries) {
     fail_lost_too_often(*slot, record);
-    finish();
-    return;
-  }
-  const bool is_unit = record.unit >= 0;
-  if (is_unit && record.unit >= record.units) {
+  } else if (record.unit >= 0 && record.unit >= record.units) {
     try {
       merge_units(*slot, record);
     } catch (const std::exception& e) {
       record_failure(*slot, std::string("cannot merge its units: ") + e.what(), 0, false);
     }
-    finish();
-    return;
+  } else {
+    render_run(*slot, record);
   }
+  finish_run(*slot);
+}
+
+// The slot's last step, whatever the run's end: the files of a job deleted meanwhile go; the dispatcher, woken, reaps
+// the slot (and may claim what the end made claimable: a split job's merge).
+void Scheduler::finish_run(RenderSlot& slot) {
+  bool deleted;
+  {
+    std::lock_guard lock(mutex_);
+    deleted = slot.delete_requested;
+  }
+  if (deleted)
+    files_.remove(slot.id);
+  else
+    notify_state(slot.id);
+  {
+    std::lock_guard lock(mutex_);
+    slot.done = true;
+  }
+  cv_.notify_all();
+}
+
+// One run of a job here: what it renders, and what it has published so far.
+struct Scheduler::Run {
+  RenderSlot& slot;
+  const JobRecord& record;
+  RenderJob job;
+  OutputPipeline outputs;
+  uint64_t settings_hash = 0;  // what its checkpoints are checked against
+  RenderSession* session = nullptr;
+  uint32_t samples_counted = 0;       // the samples per pixel counted in SchedulerHooks::samples_rendered
+  uint32_t checkpointed_samples = 0;  // of a unit: its last checkpoint written (its film, once it is done)
+
+  Run(RenderSlot& s, const JobRecord& r, RenderJob j)
+      : slot(s), record(r), job(std::move(j)), outputs(job.settings, job.outputs) {}
+  const std::string& id() const { return record.id; }
+  bool is_unit() const { return record.unit >= 0; }
+};
+
+void Scheduler::render_run(RenderSlot& slot, const JobRecord& record) {
   double render_s = 0;
-  // A render (or a load) that stopped before its end: the job is deleted, cancelled, paused or (the daemon stopping)
-  // back in the queue, to resume from its last checkpoint.
-  const auto end_interrupted = [&](uint32_t samples_done) {
-    bool cancelled_by_client, paused, deleted, lease_lost, settled;
-    {
-      std::lock_guard lock(mutex_);
-      cancelled_by_client = slot->cancel_requested;
-      paused = slot->pause_requested;
-      deleted = slot->delete_requested;
-      lease_lost = slot->lease_lost;
-      settled = slot->settled;
-    }
-    // The end of the run goes to the store through record_end(): retried while the store fails; when the daemon
-    // stops first, the job stays running in the store, with its checkpoint, for the next start to resume.
-    if (deleted) {
-      log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
-    } else if (settled) {
-      // The store has the client's change already, made before this unit was asked to stop.
-      log_.add(id, printf_string("unit %d stopped at %u spp: the job was %s by a client", record.unit + 1,
-                                 static_cast<unsigned>(samples_done), cancelled_by_client ? "cancelled" : "paused"));
-      log(LogLevel::kInfo, "unit stopped: its job was cancelled or paused",
-          {{"job", id}, {"unit", record.unit}, {"samples_done", samples_done}});
-    } else if (lease_lost) {
-      // Whoever holds the job now owns its end. Its files go only if the job is gone.
-      log_.add(id, printf_string("stopped at %u spp: the job was changed or taken over elsewhere",
-                                 static_cast<unsigned>(samples_done)));
-      log(LogLevel::kInfo, "render stopped: the job was changed or taken over elsewhere",
-          {{"job", id}, {"samples_done", samples_done}});
-      try {
-        if (!store_.get(id)) files_.remove(id);
-      } catch (const JobStoreError& e) {
-        count_store_error();
-        log(LogLevel::kWarn, "cannot tell whether a job taken away was deleted; its files stay",
-            {{"job", id}, {"error", e.what()}});
-      }
-    } else if (cancelled_by_client) {
-      log_.add(id, printf_string("cancelled by a client at %u spp", static_cast<unsigned>(samples_done)));
-      // Staged under this run's epoch: its own outputs are never staged on this path.
-      stage_partial_results(record, slot->epoch);
-      const bool recorded = record_terminal(*slot, JobState::kCancelled, render_s, "cancelled");
-      settle_partial_results(id, slot->epoch, recorded);
-      if (recorded) log(LogLevel::kInfo, "job cancelled", {{"job", id}});
-    } else if (paused) {
-      log_.add(id, printf_string("paused by a client at %u spp; its checkpoint is kept",
-                                 static_cast<unsigned>(samples_done)));
-      if (record_end(*slot, [&] { return store_.end_run(id, slot->epoch, JobState::kPaused, now_ms()); }))
-        log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", samples_done}});
-    } else {
-      // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
-      log_.add(id, printf_string("the daemon is stopping: back in the queue at %u spp, to resume from its checkpoint",
-                                 static_cast<unsigned>(samples_done)));
-      if (record_end(*slot, [&] { return store_.end_run(id, slot->epoch, JobState::kQueued, now_ms()); }))
-        log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
-            {{"job", id}, {"samples_done", samples_done}});
-    }
+  const auto detach = [&] {
+    std::lock_guard lock(mutex_);
+    slot.session = nullptr;
   };
   try {
-    RenderJob job = load_run(*slot, record);
-    for (const std::string& w : job.scene->warnings) log_.add(id, "warning: " + w);
-    if (!job.scene->warnings.empty()) {
-      try {
-        store_.set_warnings(id, json(job.scene->warnings).dump());
-      } catch (const JobStoreError& e) {
-        // Only the job's status misses them: not worth the render.
-        count_store_error();
-        log(LogLevel::kWarn, "cannot record the warnings of a job", {{"job", id}, {"error", e.what()}});
-      }
-    }
-    RenderSession session(job.scene, job.settings, pool_);
-    const uint64_t settings_hash =
-        is_unit ? unit_settings_hash(record.settings, record.unit) : fnv1a64(record.settings);
-    resume_from_checkpoint(*slot, record, job.settings, settings_hash, session);
-    log(LogLevel::kInfo, "job started",
-        {{"job", id}, {"samples_done", session.progress().samples_done}, {"unit", record.unit}});
-    if (is_unit)
-      log_.add(id,
-               printf_string("unit %d of %d: rendering samples %u..%u of %dx%d, integrator %s, on %d threads (epoch "
-                             "%lld)",
-                             record.unit + 1, record.units, static_cast<unsigned>(job.settings.first_sample),
-                             static_cast<unsigned>(job.settings.first_sample + job.settings.spp), job.settings.width,
-                             job.settings.height, job.settings.integrator.name.c_str(), pool_.size(),
-                             static_cast<long long>(slot->epoch)));
-    else
-      log_.add(id, printf_string("rendering %dx%d, %u spp, integrator %s, on %d threads", job.settings.width,
-                                 job.settings.height, static_cast<unsigned>(job.settings.spp),
-                                 job.settings.integrator.name.c_str(), pool_.size()));
-    {
-      std::lock_guard lock(mutex_);
-      slot->session = &session;
-      if (slot->cancel_requested || slot->delete_requested || slot->lease_lost || slot->settled) session.cancel();
-      if (slot->pause_requested || stopping_) session.stop();
-    }
-    uint32_t samples_before = session.progress().samples_done;
-    uint32_t checkpointed_samples = 0;  // of a unit: its last checkpoint written (its film, once it is done)
-    const uint64_t pixels = static_cast<uint64_t>(job.settings.width) * static_cast<uint64_t>(job.settings.height);
-    const StopReason reason = session.run([&](const RenderProgress& p, const Film& film) {
-      const JobProgress jp = to_job_progress(p);
-      if (hooks_.samples_rendered) hooks_.samples_rendered(pixels * (p.samples_done - samples_before));
-      samples_before = p.samples_done;
-      try {
-        // Files first, then the news: once the progress says N samples, a crash resumes from N and the preview of
-        // that pass can be fetched.
-        // A unit's checkpoint is named by its run's epoch: the store's update below makes it the unit's. A split
-        // job's preview is the merge of its done units (finish_unit).
-        if (is_unit) {
-          files_.write_unit(id, record.unit, slot->epoch,
-                            encode_checkpoint(film, p.pass, p.elapsed_s, settings_hash, job.settings));
-          checkpointed_samples = p.samples_done;
-        } else {
-          files_.write(id, JobFile::kCheckpoint,
-                       encode_checkpoint(film, p.pass, p.elapsed_s, settings_hash, job.settings));
-          files_.write(id, JobFile::kPreviewPng, [&] {
-            std::vector<uint8_t> png = encode_png(film.resolve(), film.width(), film.height(), job.settings.display);
-            return std::string(png.begin(), png.end());
-          }());
-        }
-        {
-          std::lock_guard lock(mutex_);
-          slot->progress = jp;
-        }
-        log_.add(id, printf_string("%spass %u: %u/%u spp, %.2f s, %.3g samples/s",
-                                   is_unit ? printf_string("unit %d: ", record.unit + 1).c_str() : "",
-                                   static_cast<unsigned>(p.pass), static_cast<unsigned>(p.samples_done),
-                                   static_cast<unsigned>(p.samples_total), p.elapsed_s, p.samples_per_s));
-        if (!store_.update_progress(id, slot->epoch, jp)) {
-          std::lock_guard lock(mutex_);
-          lose_lease_locked(*slot, "its progress refused");
-          return;
-        }
-        if (!is_unit) {
-          if (hooks_.progress) hooks_.progress(id, jp);
-          if (hooks_.preview) hooks_.preview(id, p.pass);
-        } else if (hooks_.progress) {
-          // The job's progress over every unit and node, as the store sums it.
-          if (auto now = store_.get(id)) hooks_.progress(id, now->progress);
-        }
-      } catch (const std::exception& e) {
-        {
-          std::lock_guard lock(mutex_);
-          slot->progress = jp;
-        }
-        if (dynamic_cast<const JobStoreError*>(&e)) count_store_error();
-        // A missed checkpoint or preview (a full disk) is not worth the render: the last good checkpoint stays,
-        // and the next pass writes both again.
-        log(LogLevel::kWarn, "cannot publish progress; retried after the next pass",
-            {{"job", id}, {"error", e.what()}});
-      }
-    });
+    Run run(slot, record, load_run(slot, record));
+    record_warnings(record.id, run.job.scene->warnings);
+    RenderSession session(run.job.scene, run.job.settings, pool_);
+    run.session = &session;
+    run.settings_hash = run.is_unit() ? unit_settings_hash(record.settings, record.unit) : fnv1a64(record.settings);
+    resume_from_checkpoint(slot, record, run.job.settings, run.settings_hash, session);
+    log_start(run);
+    const StopReason reason = render_passes(run);
     detach();
     render_s = session.progress().elapsed_s;
-
-    bool deleted;
-    {
-      std::lock_guard lock(mutex_);
-      deleted = slot->delete_requested;
-    }
     const bool interrupted = reason == StopReason::kStopped || reason == StopReason::kCancelled;
-    // Before the outputs, which land where other daemons may read them (a shared data directory): is the run still
-    // this daemon's? A store that fails here changes nothing: the end is recorded, fenced, and retried as ever.
-    bool lease_lost = false;
-    if (!deleted && !interrupted) {
-      try {
-        if (!store_.renew_lease(id, slot->epoch, now_ms(), options_.lease.count())) {
-          std::lock_guard lock(mutex_);
-          lose_lease_locked(*slot, "its lease checked before its outputs");
-          lease_lost = true;
-        }
-      } catch (const JobStoreError&) {
-        count_store_error();
-      }
-    }
-    if (deleted || interrupted || lease_lost) {
-      end_interrupted(session.progress().samples_done);
-    } else if (is_unit) {
-      // The unit's film is its last checkpoint; written again if the last pass's could not be.
-      const RenderProgress& p = session.progress();
-      if (checkpointed_samples != p.samples_done)
-        files_.write_unit(id, record.unit, slot->epoch,
-                          encode_checkpoint(session.film(), p.pass, p.elapsed_s, settings_hash, job.settings));
-      log_.add(id, printf_string("unit %d of %d done: samples %u..%u in %.2f s", record.unit + 1, record.units,
-                                 static_cast<unsigned>(job.settings.first_sample),
-                                 static_cast<unsigned>(job.settings.first_sample + job.settings.spp), p.elapsed_s));
-      if (record_end(*slot, [&] { return store_.end_run(id, slot->epoch, JobState::kSucceeded, now_ms()); })) {
-        log(LogLevel::kInfo, "unit done",
-            {{"job", id}, {"unit", record.unit}, {"epoch", slot->epoch}, {"elapsed_s", p.elapsed_s}});
-        // The preview refines as units finish: the merge of those done so far, when 1, 2, 4, 8, ... are done, so
-        // that the films all previews read stay under twice those of the job's merge (a merge reads every done
-        // unit's film; after each unit, a job of n units would read n^2 / 2). Best effort.
-        try {
-          const std::vector<UnitRecord> units = store_.units(id);
-          const auto done = static_cast<unsigned>(
-              std::count_if(units.begin(), units.end(), [](const UnitRecord& u) { return u.done; }));
-          std::optional<Film> film;
-          if (std::has_single_bit(done) && done < units.size())
-            film = merge_unit_films(record, job.settings.width, job.settings.height, false);
-          if (film) {
-            std::vector<uint8_t> png = encode_png(film->resolve(), film->width(), film->height(), job.settings.display);
-            files_.write(id, JobFile::kPreviewPng,
-                         std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
-            if (hooks_.preview) hooks_.preview(id, film->samples());
-          }
-        } catch (const std::exception& e) {
-          log(LogLevel::kWarn, "cannot write the preview of a split job", {{"job", id}, {"error", e.what()}});
-        }
-      }
-    } else {
-      // The outputs first, staged (publish_outputs()): a file that cannot be written (a full disk) fails the job, as
-      // it should.
-      const std::string written = write_outputs(id, job.settings, job.outputs, session.film(), slot->epoch);
-      JobProgress final_progress = to_job_progress(session.progress());
-      final_progress.eta_s = 0;
-      log_.add(id,
-               printf_string("succeeded: %s after %.2f s, %u spp in %u passes; wrote%s", stop_explained(reason).c_str(),
-                             final_progress.elapsed_s, static_cast<unsigned>(final_progress.samples_done),
-                             static_cast<unsigned>(final_progress.passes), written.c_str()));
-      const bool recorded = record_terminal(*slot, JobState::kSucceeded, render_s, stop_reason_name(reason), "",
-                                            [&] { store_.update_progress(id, slot->epoch, final_progress); });
-      publish_outputs(*slot, recorded);
-      if (recorded) {
-        log(LogLevel::kInfo, "job succeeded",
-            {{"job", id},
-             {"elapsed_s", final_progress.elapsed_s},
-             {"samples_per_s", final_progress.samples_per_s},
-             {"stop_reason", stop_reason_name(reason)}});
-      }
-    }
+    if (interrupted || !still_ours_before_outputs(slot))
+      end_interrupted(slot, record, session.progress().samples_done, render_s);
+    else if (run.is_unit())
+      end_unit(run);
+    else
+      end_job(run, reason);
   } catch (const LoadStopped&) {
     detach();
-    end_interrupted(0);
+    end_interrupted(slot, record, 0, render_s);
   } catch (const std::exception& e) {
     detach();
     std::string message = e.what();
     // The renderer refused the scene or an asset it names: the input is at fault, not this run.
     const auto* se = dynamic_cast<const SceneError*>(&e);
     if (se && !se->pointer().empty()) message = se->pointer() + ": " + message;
-    record_failure(*slot, message, render_s, se != nullptr);
+    record_failure(slot, message, render_s, se != nullptr);
   } catch (...) {
     detach();
-    record_failure(*slot, "unknown error", render_s, false);
+    record_failure(slot, "unknown error", render_s, false);
   }
-  finish();
+}
+
+void Scheduler::record_warnings(const std::string& id, const std::vector<std::string>& warnings) {
+  for (const std::string& w : warnings) log_.add(id, "warning: " + w);
+  if (warnings.empty()) return;
+  try {
+    store_.set_warnings(id, json(warnings).dump());
+  } catch (const JobStoreError& e) {
+    // Only the job's status misses them: not worth the render.
+    count_store_error();
+    log(LogLevel::kWarn, "cannot record the warnings of a job", {{"job", id}, {"error", e.what()}});
+  }
+}
+
+void Scheduler::log_start(const Run& run) {
+  const RenderSettings& s = run.job.settings;
+  const JobRecord& record = run.record;
+  log(LogLevel::kInfo, "job started",
+      {{"job", record.id}, {"samples_done", run.session->progress().samples_done}, {"unit", record.unit}});
+  if (run.is_unit())
+    log_.add(record.id,
+             printf_string("unit %d of %d: rendering samples %u..%u of %dx%d, integrator %s, on %d threads (epoch "
+                           "%lld)",
+                           record.unit + 1, record.units, static_cast<unsigned>(s.first_sample),
+                           static_cast<unsigned>(s.first_sample + s.spp), s.width, s.height, s.integrator.name.c_str(),
+                           pool_.size(), static_cast<long long>(run.slot.epoch)));
+  else
+    log_.add(record.id, printf_string("rendering %dx%d, %u spp, integrator %s, on %d threads", s.width, s.height,
+                                      static_cast<unsigned>(s.spp), s.integrator.name.c_str(), pool_.size()));
+}
+
+StopReason Scheduler::render_passes(Run& run) {
+  RenderSession& session = *run.session;
+  {
+    // Signals that came before the render could take them (RenderSlot).
+    std::lock_guard lock(mutex_);
+    run.slot.session = &session;
+    if (run.slot.cancel_requested || run.slot.delete_requested || run.slot.lease_lost || run.slot.settled)
+      session.cancel();
+    if (run.slot.pause_requested || stopping_) session.stop();
+  }
+  run.samples_counted = session.progress().samples_done;
+  return session.run([&](const RenderProgress& p, const Film& film) { publish_pass(run, p, film); });
+}
+
+void Scheduler::publish_pass(Run& run, const RenderProgress& p, const Film& film) {
+  const std::string& id = run.id();
+  const JobProgress jp = to_job_progress(p);
+  if (hooks_.samples_rendered) {
+    const uint64_t pixels = static_cast<uint64_t>(film.width()) * static_cast<uint64_t>(film.height());
+    hooks_.samples_rendered(pixels * (p.samples_done - run.samples_counted));
+  }
+  run.samples_counted = p.samples_done;
+  try {
+    // Files first, then the news: once the progress says N samples, a crash resumes from N and the preview of that
+    // pass can be fetched. A unit's checkpoint is named by its run's epoch: the store's update below makes it the
+    // unit's. A split job's preview is the merge of its done units (end_unit).
+    const std::string checkpoint = encode_checkpoint(film, p.pass, p.elapsed_s, run.settings_hash, run.job.settings);
+    if (run.is_unit()) {
+      files_.write_unit(id, run.record.unit, run.slot.epoch, checkpoint);
+      run.checkpointed_samples = p.samples_done;
+    } else {
+      files_.write(id, JobFile::kCheckpoint, checkpoint);
+      files_.write(id, JobFile::kPreviewPng, run.outputs.preview_png(film));
+    }
+    {
+      std::lock_guard lock(mutex_);
+      run.slot.progress = jp;
+    }
+    log_.add(id, printf_string("%spass %u: %u/%u spp, %.2f s, %.3g samples/s",
+                               run.is_unit() ? printf_string("unit %d: ", run.record.unit + 1).c_str() : "",
+                               static_cast<unsigned>(p.pass), static_cast<unsigned>(p.samples_done),
+                               static_cast<unsigned>(p.samples_total), p.elapsed_s, p.samples_per_s));
+    if (!store_.update_progress(id, run.slot.epoch, jp)) {
+      std::lock_guard lock(mutex_);
+      lose_lease_locked(run.slot, "its progress refused");
+      return;
+    }
+    if (!run.is_unit()) {
+      if (hooks_.progress) hooks_.progress(id, jp);
+      if (hooks_.preview) hooks_.preview(id, p.pass);
+    } else if (hooks_.progress) {
+      // The job's progress over every unit and node, as the store sums it.
+      if (auto now = store_.get(id)) hooks_.progress(id, now->progress);
+    }
+  } catch (const std::exception& e) {
+    {
+      std::lock_guard lock(mutex_);
+      run.slot.progress = jp;
+    }
+    if (dynamic_cast<const JobStoreError*>(&e)) count_store_error();
+    // A missed checkpoint or preview (a full disk) is not worth the render: the last good checkpoint stays, and the
+    // next pass writes both again.
+    log(LogLevel::kWarn, "cannot publish progress; retried after the next pass", {{"job", id}, {"error", e.what()}});
+  }
+}
+
+// Before the outputs, which land where other daemons may read them (a shared data directory): is the run still this
+// daemon's? A store that fails here changes nothing: the end is recorded, fenced, and retried as ever. False for a
+// job deleted meanwhile too.
+bool Scheduler::still_ours_before_outputs(RenderSlot& slot) {
+  {
+    std::lock_guard lock(mutex_);
+    if (slot.delete_requested) return false;
+  }
+  try {
+    if (!store_.renew_lease(slot.id, slot.epoch, now_ms(), options_.lease.count())) {
+      std::lock_guard lock(mutex_);
+      lose_lease_locked(slot, "its lease checked before its outputs");
+      return false;
+    }
+  } catch (const JobStoreError&) {
+    count_store_error();
+  }
+  return true;
+}
+
+// A render (or a load) that stopped before its end: the job is deleted, cancelled, paused or (the daemon stopping)
+// back in the queue, to resume from its last checkpoint. The end goes to the store through record_end(): retried
+// while the store fails; when the daemon stops first, the job stays running in the store, with its checkpoint, for
+// the next start to resume.
+void Scheduler::end_interrupted(RenderSlot& slot, const JobRecord& record, uint32_t samples_done, double render_s) {
+  const std::string& id = record.id;
+  bool cancelled_by_client, paused, deleted, lease_lost, settled;
+  {
+    std::lock_guard lock(mutex_);
+    cancelled_by_client = slot.cancel_requested;
+    paused = slot.pause_requested;
+    deleted = slot.delete_requested;
+    lease_lost = slot.lease_lost;
+    settled = slot.settled;
+  }
+  const auto spp = static_cast<unsigned>(samples_done);
+  if (deleted) {
+    log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
+  } else if (settled) {
+    // The store has the client's change already, made before this unit was asked to stop.
+    log_.add(id, printf_string("unit %d stopped at %u spp: the job was %s by a client", record.unit + 1, spp,
+                               cancelled_by_client ? "cancelled" : "paused"));
+    log(LogLevel::kInfo, "unit stopped: its job was cancelled or paused",
+        {{"job", id}, {"unit", record.unit}, {"samples_done", samples_done}});
+  } else if (lease_lost) {
+    // Whoever holds the job now owns its end. Its files go only if the job is gone.
+    log_.add(id, printf_string("stopped at %u spp: the job was changed or taken over elsewhere", spp));
+    log(LogLevel::kInfo, "render stopped: the job was changed or taken over elsewhere",
+        {{"job", id}, {"samples_done", samples_done}});
+    try {
+      if (!store_.get(id)) files_.remove(id);
+    } catch (const JobStoreError& e) {
+      count_store_error();
+      log(LogLevel::kWarn, "cannot tell whether a job taken away was deleted; its files stay",
+          {{"job", id}, {"error", e.what()}});
+    }
+  } else if (cancelled_by_client) {
+    log_.add(id, printf_string("cancelled by a client at %u spp", spp));
+    // Staged under this run's epoch: its own outputs are never staged on this path.
+    stage_partial_results(record, slot.epoch);
+    const bool recorded = record_terminal(slot, JobState::kCancelled, render_s, "cancelled");
+    settle_staged(id, slot.epoch, recorded);
+    if (recorded) log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+  } else if (paused) {
+    log_.add(id, printf_string("paused by a client at %u spp; its checkpoint is kept", spp));
+    if (record_end(slot, [&] { return store_.end_run(id, slot.epoch, JobState::kPaused, now_ms()); }))
+      log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", samples_done}});
+  } else {
+    // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
+    log_.add(id,
+             printf_string("the daemon is stopping: back in the queue at %u spp, to resume from its checkpoint", spp));
+    if (record_end(slot, [&] { return store_.end_run(id, slot.epoch, JobState::kQueued, now_ms()); }))
+      log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
+          {{"job", id}, {"samples_done", samples_done}});
+  }
+}
+
+void Scheduler::end_unit(Run& run) {
+  const std::string& id = run.id();
+  const JobRecord& record = run.record;
+  const RenderSettings& s = run.job.settings;
+  // The unit's film is its last checkpoint; written again if the last pass's could not be.
+  const RenderProgress& p = run.session->progress();
+  if (run.checkpointed_samples != p.samples_done)
+    files_.write_unit(id, record.unit, run.slot.epoch,
+                      encode_checkpoint(run.session->film(), p.pass, p.elapsed_s, run.settings_hash, s));
+  log_.add(id, printf_string("unit %d of %d done: samples %u..%u in %.2f s", record.unit + 1, record.units,
+                             static_cast<unsigned>(s.first_sample), static_cast<unsigned>(s.first_sample + s.spp),
+                             p.elapsed_s));
+  if (!record_end(run.slot, [&] { return store_.end_run(id, run.slot.epoch, JobState::kSucceeded, now_ms()); })) return;
+  log(LogLevel::kInfo, "unit done",
+      {{"job", id}, {"unit", record.unit}, {"epoch", run.slot.epoch}, {"elapsed_s", p.elapsed_s}});
+  // The preview refines as units finish: the merge of those done so far, when 1, 2, 4, 8, ... are done, so that the
+  // films all previews read stay under twice those of the job's merge (a merge reads every done unit's film; after
+  // each unit, a job of n units would read n^2 / 2). Best effort.
+  try {
+    const std::vector<UnitRecord> units = store_.units(id);
+    const auto done =
+        static_cast<unsigned>(std::count_if(units.begin(), units.end(), [](const UnitRecord& u) { return u.done; }));
+    std::optional<Film> film;
+    if (std::has_single_bit(done) && done < units.size()) film = merge_unit_films(record, s.width, s.height, false);
+    if (film) {
+      files_.write(id, JobFile::kPreviewPng, run.outputs.preview_png(*film));
+      if (hooks_.preview) hooks_.preview(id, film->samples());
+    }
+  } catch (const std::exception& e) {
+    log(LogLevel::kWarn, "cannot write the preview of a split job", {{"job", id}, {"error", e.what()}});
+  }
+}
+
+void Scheduler::end_job(Run& run, StopReason reason) {
+  const std::string& id = run.id();
+  // The outputs first, staged (publish_outputs()): a file that cannot be written (a full disk) fails the job, as it
+  // should.
+  const std::string written = write_outputs(id, run.outputs, run.session->film(), run.slot.epoch);
+  JobProgress final_progress = to_job_progress(run.session->progress());
+  final_progress.eta_s = 0;
+  log_.add(id, printf_string("succeeded: %s after %.2f s, %u spp in %u passes; wrote%s", stop_explained(reason).c_str(),
+                             final_progress.elapsed_s, static_cast<unsigned>(final_progress.samples_done),
+                             static_cast<unsigned>(final_progress.passes), written.c_str()));
+  const bool recorded =
+      record_terminal(run.slot, JobState::kSucceeded, final_progress.elapsed_s, stop_reason_name(reason), "",
+                      [&] { store_.update_progress(id, run.slot.epoch, final_progress); });
+  publish_outputs(run.slot, recorded);
+  if (recorded)
+    log(LogLevel::kInfo, "job succeeded",
+        {{"job", id},
+         {"elapsed_s", final_progress.elapsed_s},
+         {"samples_per_s", final_progress.samples_per_s},
+         {"stop_reason", stop_reason_name(reason)}});
 }
 
 RenderJob Scheduler::load_run(RenderSlot& slot, const JobRecord& record) {
@@ -785,36 +814,17 @@ void Scheduler::publish_outputs(RenderSlot& slot, bool recorded) {
   }
   if (!publish)
     log_.add(slot.id, "its outputs are not published: the job was changed elsewhere before its end was recorded");
-  for (JobFile f : {JobFile::kResultPng, JobFile::kResultExr}) {
-    if (publish)
-      files_.publish_staged(slot.id, f, slot.epoch);
-    else
-      files_.discard_staged(slot.id, f, slot.epoch);
-  }
+  settle_staged(slot.id, slot.epoch, publish);
 }
 
-std::string Scheduler::write_outputs(const std::string& id, const RenderSettings& settings, const OutputSpec& outputs,
-                                     const Film& film, std::optional<int64_t> staged_epoch) {
-  const std::vector<float> rgb = film.resolve();
+std::string Scheduler::write_outputs(const std::string& id, const OutputPipeline& outputs, const Film& film,
+                                     int64_t staged_epoch) {
   std::string written;
-  if (outputs.png) {
-    std::vector<uint8_t> png = encode_png(rgb, film.width(), film.height(), settings.display);
-    if (staged_epoch)
-      stage_png(files_, id, *staged_epoch, png);
-    else
-      files_.write(id, JobFile::kResultPng, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
-    written += " result.png";
-  }
-  if (outputs.exr) {
-    const auto writer = [&](const std::string& temp) {
-      write_exr(temp, rgb, film.width(), film.height(), settings.exr_half);
-    };
-    if (staged_epoch)
-      files_.stage(id, JobFile::kResultExr, *staged_epoch, writer);
-    else
-      files_.write_with(id, JobFile::kResultExr, writer);
-    written += " result.exr";
-  }
+  outputs.run(film, [&](ImageFormat format, std::string_view bytes) {
+    const JobFile f = result_file(format);
+    files_.stage(id, f, staged_epoch, bytes);
+    (written += ' ') += job_file_name(f);
+  });
   return written;
 }
 
@@ -854,11 +864,9 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
     lose_lease_locked(slot, "its lease checked before the merge");
     return;
   }
-  const std::string written = write_outputs(id, settings, output_spec_from_text(record.outputs), *film, slot.epoch);
-  {
-    std::vector<uint8_t> png = encode_png(film->resolve(), settings.width, settings.height, settings.display);
-    files_.write(id, JobFile::kPreviewPng, std::string_view(reinterpret_cast<const char*>(png.data()), png.size()));
-  }
+  const OutputPipeline outputs(settings, output_spec_from_text(record.outputs));
+  const std::string written = write_outputs(id, outputs, *film, slot.epoch);
+  files_.write(id, JobFile::kPreviewPng, outputs.preview_png(*film));
   const double merge_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   log_.add(id, printf_string("succeeded: its %d units merged in %.3f s, %u spp; wrote%s", record.units, merge_s,
                              static_cast<unsigned>(film->samples()), written.c_str()));
@@ -885,7 +893,8 @@ void Scheduler::stage_partial_results(const JobRecord& job, int64_t key) {
       film = merge_unit_films(job, settings.width, settings.height, true);
     }
     if (!film || film->samples() == 0) return;
-    const std::string written = write_outputs(job.id, settings, output_spec_from_text(job.outputs), *film, key);
+    const std::string written =
+        write_outputs(job.id, OutputPipeline(settings, output_spec_from_text(job.outputs)), *film, key);
     log_.add(job.id,
              printf_string(
                  "kept what it rendered, %u spp in %u passes, as its partial results (once the cancel is taken):%s",
@@ -896,15 +905,15 @@ void Scheduler::stage_partial_results(const JobRecord& job, int64_t key) {
   }
 }
 
-void Scheduler::settle_partial_results(const std::string& id, int64_t key, bool cancel_taken) {
-  for (JobFile f : {JobFile::kResultPng, JobFile::kResultExr}) {
+void Scheduler::settle_staged(const std::string& id, int64_t key, bool publish) {
+  for (JobFile f : kResultFiles) {
     try {
-      if (cancel_taken)
+      if (publish)
         files_.publish_staged(id, f, key);
       else
         files_.discard_staged(id, f, key);
     } catch (const std::exception& e) {
-      log(LogLevel::kWarn, "cannot settle the partial results of a cancelled job", {{"job", id}, {"error", e.what()}});
+      log(LogLevel::kWarn, "cannot settle the staged results of a job", {{"job", id}, {"error", e.what()}});
     }
   }
 }
@@ -965,7 +974,7 @@ Scheduler::Outcome Scheduler::cancel(const std::string& id) {
     const int64_t key = -static_cast<int64_t>(std::random_device{}() | 1u);
     stage_partial_results(*job, key);
     const bool taken = store_.transition(id, JobState::kCancelled, now_ms(), "cancelled");
-    settle_partial_results(id, key, taken);
+    settle_staged(id, key, taken);
     if (!taken) return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
     settle_locked(slots, true);
   }
@@ -1023,8 +1032,8 @@ Scheduler::Outcome Scheduler::requeue(const std::string& id) {
     if (!action_allowed(JobAction::kRequeue, job->state, job->input_refused())) return Outcome::kConflict;
     if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", job->state)) return Outcome::kConflict;
     // From scratch: nothing of the last run survives.
-    for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng, JobFile::kResultPng, JobFile::kResultExr})
-      files_.remove(id, f);
+    for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng}) files_.remove(id, f);
+    for (JobFile f : kResultFiles) files_.remove(id, f);
     files_.remove_units(id);  // a split job's units start over too (the store forgot their checkpoints)
   }
   log(LogLevel::kInfo, "job requeued", {{"job", id}});

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "renderer/job.h"
+#include "renderer/output.h"
 #include "renderer/scene_loader.h"
 #include "renderer/session.h"
 #include "renderer/thread_pool.h"
@@ -122,8 +123,26 @@ class Scheduler {
 
  private:
   class RenderSlot;
+  struct Run;
   void dispatch_loop();
+  // A claimed run, on its own thread: a render (render_run), a split job's merge, or the failure of a job lost too
+  // often; then finish_run().
   void run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record);
+  void finish_run(RenderSlot& slot);
+  // restore (load_run, resume_from_checkpoint) → render (render_passes, publish_pass after each pass) → the end
+  // (end_interrupted, end_unit or end_job). A scene the renderer refuses fails the job.
+  void render_run(RenderSlot& slot, const JobRecord& record);
+  void record_warnings(const std::string& id, const std::vector<std::string>& warnings);
+  void log_start(const Run& run);
+  StopReason render_passes(Run& run);
+  // A pass ended: its checkpoint, its preview, its progress (in memory, in the store, to the hooks).
+  void publish_pass(Run& run, const RenderProgress& progress, const Film& film);
+  bool still_ours_before_outputs(RenderSlot& slot);
+  void end_interrupted(RenderSlot& slot, const JobRecord& record, uint32_t samples_done, double render_s);
+  // A unit rendered its range: its film kept, its end recorded, the split job's preview refined.
+  void end_unit(Run& run);
+  // A job rendered whole: its outputs staged, its end recorded, its outputs published.
+  void end_job(Run& run, StopReason reason);
   bool record_end(RenderSlot& slot, const std::function<bool()>& write);
   bool record_terminal(RenderSlot& slot, JobState to, double render_s, const std::string& stop_reason,
                        const std::string& error = "", const std::function<void()>& before = nullptr);
@@ -140,11 +159,12 @@ class Scheduler {
   void count_store_error();
   // The outputs of a job cancelled after a pass, from its checkpoint (the film of its last complete pass), so that
   // what it rendered stays viewable and downloadable. They are staged under `key` (JobFiles::stage) and published by
-  // settle_partial_results() only once the store took the cancel: a cancel that loses the race with the run's own
+  // settle_staged() only once the store took the cancel: a cancel that loses the race with the run's own
   // end (refused: the job succeeded meanwhile) must not put its older image over the finished one. Best effort:
   // nothing without a usable checkpoint; a file that cannot be written is logged, and the cancel goes on.
   void stage_partial_results(const JobRecord& job, int64_t key);
-  void settle_partial_results(const std::string& id, int64_t key, bool cancel_taken);
+  // The result files staged under `key` (an epoch, or a cancel's key): published over the final names, or removed.
+  void settle_staged(const std::string& id, int64_t key, bool publish);
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
   void renew_leases_locked();
   // How often a render's lease is renewed: the store's renewal period for the lease, or the poll interval if shorter.
@@ -166,10 +186,10 @@ class Scheduler {
   // (samples rendered, not a contiguous range: an unbiased, noisier image). Nothing for a job rendered whole or when
   // no unit has a film; throws when a done unit's film is missing or damaged.
   std::optional<Film> merge_unit_films(const JobRecord& job, int width, int height, bool in_progress) const;
-  // The outputs the job asked for (result.png, result.exr), from `film`; the names written, for its log. With
-  // `staged_epoch`, staged (JobFiles::stage) for publish_outputs().
-  std::string write_outputs(const std::string& id, const RenderSettings& settings, const OutputSpec& outputs,
-                            const Film& film, std::optional<int64_t> staged_epoch = std::nullopt);
+  // The outputs the job asked for (result.png, result.exr), from `film` through its output pipeline, staged
+  // (JobFiles::stage) under `staged_epoch` for publish_outputs(); the names written, for its log.
+  std::string write_outputs(const std::string& id, const OutputPipeline& outputs, const Film& film,
+                            int64_t staged_epoch);
   // After the end of a run that staged its outputs: published when the store took that end (`recorded`, or read back
   // when it is unknown), removed when it refused it.
   void publish_outputs(RenderSlot& slot, bool recorded);

@@ -137,7 +137,7 @@ inline std::string read_file(const std::filesystem::path& path) {
 }
 
 // Writes through a temporary file renamed into place: a reader never sees half a file.
-inline void write_file_atomic(const std::string& path, const std::string& bytes) {
+inline void write_file_atomic(const std::string& path, std::string_view bytes) {
   const std::string tmp = path + ".part";
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);

@@ -17,8 +17,8 @@
 #include "clients/cli/fingerprint.h"
 #include "clients/cli/partial_film.h"
 #include "proto/contract.h"
-#include "renderer/image_io.h"
 #include "renderer/job.h"
+#include "renderer/output.h"
 #include "renderer/scene_error.h"
 
 namespace {
@@ -85,32 +85,33 @@ void progress_bar(const tessera::RenderProgress& p) {
   std::fflush(stderr);
 }
 
-// Writes the film (or its resolved image) to every output; the extension picks the format.
+// Writes the film to every output; the extension picks the format: .tfilm the film itself (the film codec), an
+// image format through the output pipeline that the daemon's results go through, each format encoded once.
 void write_outputs(const std::vector<std::string>& outputs, const PartialFilm& part) {
-  std::vector<float> rgb;
+  std::vector<tessera::ImageFormat> formats;
   for (const std::string& out : outputs) {
-    const std::string ext = lower_extension(out);
-    if (ext == ".tfilm") {
+    if (lower_extension(out) == ".tfilm") {
       write_file_atomic(out, encode_film(part));
-      continue;
+    } else if (const auto f = tessera::image_format_of(out);
+               f && std::find(formats.begin(), formats.end(), *f) == formats.end()) {
+      formats.push_back(*f);
     }
-    if (rgb.empty()) rgb = part.film.resolve();
-    try {
-      if (ext == ".exr")
-        tessera::write_exr(out, rgb, part.width, part.height, part.exr_half);
-      else
-        tessera::write_png(out, rgb, part.width, part.height, part.display);
-    } catch (const std::exception& e) {
-      retry(e.what());
-    }
+  }
+  const tessera::OutputPipeline pipeline(tessera::EncodeOptions{part.display, part.exr_half}, formats);
+  try {
+    pipeline.run(part.film, [&](tessera::ImageFormat format, std::string_view bytes) {
+      for (const std::string& out : outputs)
+        if (tessera::image_format_of(out) == format) write_file_atomic(out, bytes);
+    });
+  } catch (const std::exception& e) {
+    retry(e.what());
   }
 }
 
 // Usage errors (an unknown format) first, then whether every output can be written: all before any work.
 void check_outputs(const std::vector<std::string>& outputs) {
   for (const std::string& out : outputs) {
-    const std::string ext = lower_extension(out);
-    if (ext != ".png" && ext != ".exr" && ext != ".tfilm")
+    if (lower_extension(out) != ".tfilm" && !tessera::image_format_of(out))
       throw std::invalid_argument(out + ": unknown output format (use .png, .exr or .tfilm)");
   }
   for (const std::string& out : outputs) check_writable(out);

@@ -20,6 +20,7 @@
 
 #include "proto/contract.h"
 #include "renderer/image_io.h"
+#include "renderer/output.h"
 #include "tests/integration/daemon.h"
 #include "tests/server/test_util.h"
 
@@ -243,7 +244,9 @@ TEST_F(ServiceTest, MultipartJobWithGltfAndBin) {
 // and fails the job when it starts, naming the image; the daemon goes on.
 TEST_F(ServiceTest, ImagesAreCheckedByTheirHeadersAtSubmissionAndByTheirPixelsAtRender) {
   start();
-  std::vector<uint8_t> png = tessera::encode_png(std::vector<float>(8 * 8 * 3, 0.5f), 8, 8, tessera::DisplaySettings{});
+  std::string png = tessera::encode_image(
+      tessera::Image{8, 8, {tessera::ImageLayer{"", {"R", "G", "B"}, std::vector<float>(8 * 8 * 3, 0.5f), false}}},
+      tessera::ImageFormat::kPng, tessera::EncodeOptions{});
   const auto idat = std::search(png.begin(), png.end(), std::begin("IDAT"), std::begin("IDAT") + 4);
   ASSERT_LT(idat - png.begin() + 12, static_cast<std::ptrdiff_t>(png.size()));
   for (auto it = idat + 4; it < idat + 12; ++it) *it ^= 0x5a;  // the compressed pixels, not the header

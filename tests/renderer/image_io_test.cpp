@@ -12,6 +12,7 @@
 
 #include "renderer/gltf_loader.h"
 #include "renderer/image_io.h"
+#include "renderer/output.h"
 #include "tests/renderer/gltf_fixture.h"
 
 namespace tessera {
@@ -41,6 +42,23 @@ std::vector<float> gradient(int w, int h) {
       p[2] = 4.0f;  // above 1: only EXR keeps it
     }
   return rgb;
+}
+
+// An RGB image through the output pipeline's encoders (renderer/output.h), in memory or to a file.
+Image rgb_image(const std::vector<float>& rgb, int w, int h) {
+  return Image{w, h, {ImageLayer{"", {"R", "G", "B"}, rgb, false}}};
+}
+std::vector<uint8_t> encode_png(const std::vector<float>& rgb, int w, int h, const DisplaySettings& display) {
+  const std::string bytes = encode_image(rgb_image(rgb, w, h), ImageFormat::kPng, EncodeOptions{display, true});
+  return std::vector<uint8_t>(bytes.begin(), bytes.end());
+}
+void write_png(const std::string& path, const std::vector<float>& rgb, int w, int h, const DisplaySettings& display) {
+  std::ofstream(path, std::ios::binary) << encode_image(rgb_image(rgb, w, h), ImageFormat::kPng,
+                                                        EncodeOptions{display, true});
+}
+void write_exr(const std::string& path, const std::vector<float>& rgb, int w, int h, bool half) {
+  std::ofstream(path, std::ios::binary) << encode_image(rgb_image(rgb, w, h), ImageFormat::kExr,
+                                                        EncodeOptions{{}, half});
 }
 
 TEST(ImageIo, ExrRoundTripsLinearValues) {

@@ -37,13 +37,8 @@ TEST(JobFiles, AFailedWriteKeepsTheLastGoodVersion) {
       EXPECT_EQ(e.code().value(), EFBIG) << e.what();
       EXPECT_NE(std::string(e.what()).find("cannot write checkpoint.bin"), std::string::npos) << e.what();
     }
-    // The same through write_with (the EXR path): a writer that fails midway.
-    EXPECT_THROW(files.write_with(id, JobFile::kResultExr,
-                                  [](const std::string& temp) {
-                                    std::ofstream(temp) << "half";
-                                    throw std::runtime_error("disk full");
-                                  }),
-                 std::runtime_error);
+    // The same for a staged result.
+    EXPECT_THROW(files.stage(id, JobFile::kResultExr, 7, std::string(100000, 'e')), std::system_error);
   }
   EXPECT_EQ(files.read(id, JobFile::kCheckpoint), good);
   EXPECT_EQ(names_in(files.dir(id)), std::vector<std::string>{"checkpoint.bin"});

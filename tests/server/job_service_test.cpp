@@ -153,8 +153,7 @@ TEST_F(JobServiceTest, ASucceededJobsStagedResultIsPublishedWhenAsked) {
   const JobRecord job = job_in(JobState::kSucceeded);
   files_.prepare(job.id);
   const auto stage = [&](int64_t epoch, const std::string& bytes) {
-    files_.stage(job.id, JobFile::kResultPng, epoch,
-                 [&](const std::string& temp) { std::ofstream(temp, std::ios::binary) << bytes; });
+    files_.stage(job.id, JobFile::kResultPng, epoch, bytes);
   };
   stage(job.epoch + 1, "the image of a run whose end was refused");
   EXPECT_TRUE(std::holds_alternative<Problem>(jobs_.result(job, JobFile::kResultPng)));

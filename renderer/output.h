@@ -1,0 +1,94 @@
+// The one way a film becomes files: resolve → post stages → encode → publish. The daemon (a job's results and its
+// previews) and the command line (`tessera render`, `tessera merge`) both run it; they differ only in where the
+// encoded bytes are published (a job's files, fenced by its run; paths on the user's disk).
+//
+//   resolve   the film's sums divided by their sample counts: a linear image of named layers, the beauty first
+//   post      stages that change the resolved image in order (a denoiser goes here); none yet
+//   encode    each format the job asks for, in memory: OpenEXR (every layer, linear, half or float channels) and
+//             PNG (the beauty, exposed and tone-mapped to 8-bit sRGB)
+//   publish   the caller's: it receives each format's bytes
+//
+// Encoding is deterministic: the same film gives the same bytes (no time stamps), so renders are compared with cmp.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "renderer/display.h"
+#include "renderer/film.h"
+#include "renderer/render_settings.h"
+
+namespace tessera {
+
+// One layer of a resolved image: its channels interleaved per pixel, row-major.
+struct ImageLayer {
+  std::string name;                   // empty for the beauty, whose channels are stored as R, G, B
+  std::vector<std::string> channels;  // "R", "G", "B"; a layer "albedo" is stored as albedo.R, albedo.G, ...
+  std::vector<float> pixels;          // width * height * channels.size()
+  bool always_float = false;          // stored as 32-bit float whatever the EXR precision (ids, depth, positions)
+};
+
+struct Image {
+  int width = 0;
+  int height = 0;
+  std::vector<ImageLayer> layers;  // the beauty first
+  const ImageLayer& beauty() const { return layers.front(); }
+};
+
+enum class ImageFormat { kPng, kExr };
+// ".png", ".exr"
+const char* image_format_extension(ImageFormat format);
+// The format a file name's extension names (case-insensitive), or nothing.
+std::optional<ImageFormat> image_format_of(std::string_view path);
+
+struct EncodeOptions {
+  DisplaySettings display;  // PNG: exposure and tone curve
+  bool exr_half = true;     // EXR channel precision, where a layer does not ask for float
+};
+
+// resolve: the beauty (Film::resolve) as the layer every image has.
+Image resolve_image(const Film& film);
+
+// encode: the image in `format`. PNG holds the beauty alone; EXR every layer, the beauty as R, G, B and each other
+// layer's channels as <layer>.<channel>, zip-compressed. Throws std::runtime_error with OpenImageIO's message.
+std::string encode_image(const Image& image, ImageFormat format, const EncodeOptions& options);
+
+// A stage between resolve and encode, applied to the linear image in place; deterministic (the same image gives
+// the same bits on any machine and thread count).
+class PostStage {
+ public:
+  virtual ~PostStage() = default;
+  virtual const char* name() const = 0;
+  virtual void apply(Image& image) const = 0;
+};
+
+class OutputPipeline {
+ public:
+  // Receives each format's encoded bytes, in the order of formats().
+  using Publish = std::function<void(ImageFormat format, std::string_view bytes)>;
+
+  OutputPipeline(EncodeOptions options, std::vector<ImageFormat> formats);
+  // A job's: its display settings and EXR precision, the formats its outputs ask for (PNG, then EXR).
+  OutputPipeline(const RenderSettings& settings, const OutputSpec& outputs);
+
+  void add_post_stage(std::shared_ptr<const PostStage> stage);
+  const std::vector<ImageFormat>& formats() const { return formats_; }
+
+  // resolve → post stages.
+  Image image(const Film& film) const;
+  // The whole pipeline: each format encoded from one image and handed to `publish`.
+  void run(const Film& film, const Publish& publish) const;
+  // A render's preview: the same image, as PNG, whatever the formats.
+  std::string preview_png(const Film& film) const;
+
+ private:
+  EncodeOptions options_;
+  std::vector<ImageFormat> formats_;
+  std::vector<std::shared_ptr<const PostStage>> post_;
+};
+
+}  // namespace tessera
