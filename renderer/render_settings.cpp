@@ -109,6 +109,8 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
   s.height = static_cast<int>(integer("height", defaults.height, 1, limits.max_height));
   s.spp = static_cast<uint32_t>(integer("spp", kDefaultSpp, 1, limits.max_spp));
   s.integrator.max_depth = static_cast<int>(integer("max_depth", defaults.integrator.max_depth, 0, limits.max_depth));
+  s.integrator.max_volume_depth =
+      static_cast<int>(integer("max_volume_depth", defaults.integrator.max_volume_depth, 0, limits.max_volume_depth));
   s.seed = static_cast<uint64_t>(integer("seed", 0, 0, (int64_t{1} << 53)));
   if (auto it = render.find("integrator"); it != render.end()) {
     const IntegratorRegistry& integrators = IntegratorRegistry::builtin();
@@ -132,6 +134,7 @@ json render_settings_to_json(const RenderSettings& s) {
           {"height", s.height},
           {"spp", s.spp},
           {"max_depth", s.integrator.max_depth},
+          {"max_volume_depth", s.integrator.max_volume_depth},
           {"integrator", s.integrator.name},
           {"estimator", estimator_name(s.integrator.estimator)},
           {"seed", s.seed},

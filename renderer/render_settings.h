@@ -67,6 +67,7 @@ struct RenderLimits {
   int max_height = 8192;
   uint32_t max_spp = 1u << 16;
   int max_depth = 1024;
+  int max_volume_depth = 4096;
 };
 
 // A document's "render" object (`pointer` is its JSON pointer, "/render" in a job): defaults for absent keys, null
