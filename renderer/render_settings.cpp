@@ -130,20 +130,24 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
 }
 
 json render_settings_to_json(const RenderSettings& s) {
-  return {{"width", s.width},
-          {"height", s.height},
-          {"spp", s.spp},
-          {"max_depth", s.integrator.max_depth},
-          {"max_volume_depth", s.integrator.max_volume_depth},
-          {"integrator", s.integrator.name},
-          {"estimator", estimator_name(s.integrator.estimator)},
-          {"seed", s.seed},
-          {"sampler", sampler_name(s.sampler)},
-          {"time_limit_s", s.time_limit_s},
-          {"noise_target", s.noise_target},
-          {"exposure_ev", s.display.exposure_ev},
-          {"tonemap", tonemap_name(s.display.tonemap)},
-          {"exr_precision", name_of(kExrPrecisions, s.exr_half)}};
+  json out = {{"width", s.width},
+              {"height", s.height},
+              {"spp", s.spp},
+              {"max_depth", s.integrator.max_depth},
+              {"integrator", s.integrator.name},
+              {"estimator", estimator_name(s.integrator.estimator)},
+              {"seed", s.seed},
+              {"sampler", sampler_name(s.sampler)},
+              {"time_limit_s", s.time_limit_s},
+              {"noise_target", s.noise_target},
+              {"exposure_ev", s.display.exposure_ev},
+              {"tonemap", tonemap_name(s.display.tonemap)},
+              {"exr_precision", name_of(kExrPrecisions, s.exr_half)}};
+  // Written only when it is not the default: records (and their checkpoints' fingerprints, FNV-1a of this text) of
+  // jobs stored before the key existed keep their text byte for byte.
+  if (s.integrator.max_volume_depth != IntegratorSettings{}.max_volume_depth)
+    out["max_volume_depth"] = s.integrator.max_volume_depth;
+  return out;
 }
 
 json render_settings_status_json(const RenderSettings& s) {

@@ -74,7 +74,8 @@ struct RenderLimits {
 // for none at all. Throws SceneError naming the field.
 RenderSettings render_settings_from_json(const nlohmann::json& render, const std::string& pointer,
                                          const RenderLimits& limits);
-// The normalised form: every field a document can set, defaults filled in.
+// The normalised form: every field a document can set, defaults filled in (but max_volume_depth only when it is not
+// its default, so that records written before it existed keep their text).
 nlohmann::json render_settings_to_json(const RenderSettings& settings);
 // The same as the job status shows it: a stopping rule that is off (time_limit_s, noise_target at 0, the documents'
 // default) is left out, as a document leaves it out, so that it reads as "none" rather than as a limit of zero.
