@@ -39,8 +39,11 @@ enum class Estimator {
 struct IntegratorSettings {
   std::string name = "path";              // the integrator, by its registry name
   Estimator estimator = Estimator::kMis;  // the path tracer's
-  int max_depth = 8;                      // maximum number of scattering events along a path
-  int rr_start_depth = 3;                 // Russian roulette from this many bounces on
+  int max_depth = 8;                      // maximum number of surface scattering events along a path
+  // Maximum number of scattering events in media and crossings of index-matched boundaries along a path (they do not
+  // count towards max_depth; Blender Cycles keeps the same separate limit for volume bounces).
+  int max_volume_depth = 256;
+  int rr_start_depth = 3;  // Russian roulette from this many bounces on
   bool operator==(const IntegratorSettings&) const = default;
 };
 
@@ -152,6 +155,10 @@ class IntegratorRegistry {
 // What keeps the integrator `name` from rendering through `camera`, or empty: light tracing and BDPT join paths to
 // the lens through the camera's importance, which only a perspective camera has.
 std::string integrator_camera_problem(const std::string& name, const Camera& camera);
+// What keeps the integrator `name` from rendering `scene`, or empty: light tracing and BDPT have no medium vertices
+// yet, so they refuse a medium that scatters and a medium around the objects (the camera and lights sit in vacuum for
+// them); absorbing media inside objects they render.
+std::string integrator_scene_problem(const std::string& name, const Scene& scene);
 
 // Adds every integrator the renderer ships to `registry` (one line per integrator in integrators/registry.cpp).
 void register_builtin_integrators(IntegratorRegistry& registry);

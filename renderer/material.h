@@ -46,6 +46,10 @@ class Material {
   // until it leaves through a back side (glTF KHR_materials_volume; the JSON materials' attenuation_color).
   std::shared_ptr<const Medium> interior;
 
+  // True for a boundary between media of the same index of refraction that is not drawn (the `interface` material):
+  // paths cross it straight on, changing medium, and the path tracer does not count the crossing as a bounce.
+  bool index_matched = false;
+
   // Tangent-space normal map (glTF normalTexture: linear RGB, x and y scaled by normal_scale), applied to the
   // shading frame at every hit.
   std::shared_ptr<const Texture> normal_map;

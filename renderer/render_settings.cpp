@@ -109,6 +109,8 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
   s.height = static_cast<int>(integer("height", defaults.height, 1, limits.max_height));
   s.spp = static_cast<uint32_t>(integer("spp", kDefaultSpp, 1, limits.max_spp));
   s.integrator.max_depth = static_cast<int>(integer("max_depth", defaults.integrator.max_depth, 0, limits.max_depth));
+  s.integrator.max_volume_depth =
+      static_cast<int>(integer("max_volume_depth", defaults.integrator.max_volume_depth, 0, limits.max_volume_depth));
   s.seed = static_cast<uint64_t>(integer("seed", 0, 0, (int64_t{1} << 53)));
   if (auto it = render.find("integrator"); it != render.end()) {
     const IntegratorRegistry& integrators = IntegratorRegistry::builtin();
@@ -128,19 +130,24 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
 }
 
 json render_settings_to_json(const RenderSettings& s) {
-  return {{"width", s.width},
-          {"height", s.height},
-          {"spp", s.spp},
-          {"max_depth", s.integrator.max_depth},
-          {"integrator", s.integrator.name},
-          {"estimator", estimator_name(s.integrator.estimator)},
-          {"seed", s.seed},
-          {"sampler", sampler_name(s.sampler)},
-          {"time_limit_s", s.time_limit_s},
-          {"noise_target", s.noise_target},
-          {"exposure_ev", s.display.exposure_ev},
-          {"tonemap", tonemap_name(s.display.tonemap)},
-          {"exr_precision", name_of(kExrPrecisions, s.exr_half)}};
+  json out = {{"width", s.width},
+              {"height", s.height},
+              {"spp", s.spp},
+              {"max_depth", s.integrator.max_depth},
+              {"integrator", s.integrator.name},
+              {"estimator", estimator_name(s.integrator.estimator)},
+              {"seed", s.seed},
+              {"sampler", sampler_name(s.sampler)},
+              {"time_limit_s", s.time_limit_s},
+              {"noise_target", s.noise_target},
+              {"exposure_ev", s.display.exposure_ev},
+              {"tonemap", tonemap_name(s.display.tonemap)},
+              {"exr_precision", name_of(kExrPrecisions, s.exr_half)}};
+  // Written only when it is not the default: records (and their checkpoints' fingerprints, FNV-1a of this text) of
+  // jobs stored before the key existed keep their text byte for byte.
+  if (s.integrator.max_volume_depth != IntegratorSettings{}.max_volume_depth)
+    out["max_volume_depth"] = s.integrator.max_volume_depth;
+  return out;
 }
 
 json render_settings_status_json(const RenderSettings& s) {

@@ -67,13 +67,15 @@ struct RenderLimits {
   int max_height = 8192;
   uint32_t max_spp = 1u << 16;
   int max_depth = 1024;
+  int max_volume_depth = 4096;
 };
 
 // A document's "render" object (`pointer` is its JSON pointer, "/render" in a job): defaults for absent keys, null
 // for none at all. Throws SceneError naming the field.
 RenderSettings render_settings_from_json(const nlohmann::json& render, const std::string& pointer,
                                          const RenderLimits& limits);
-// The normalised form: every field a document can set, defaults filled in.
+// The normalised form: every field a document can set, defaults filled in (but max_volume_depth only when it is not
+// its default, so that records written before it existed keep their text).
 nlohmann::json render_settings_to_json(const RenderSettings& settings);
 // The same as the job status shows it: a stopping rule that is off (time_limit_s, noise_target at 0, the documents'
 // default) is left out, as a document leaves it out, so that it reads as "none" rather than as a limit of zero.

@@ -1,5 +1,6 @@
 #include "renderer/scene.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <set>
@@ -33,10 +34,13 @@ void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
   for (Mesh& mesh : meshes) mesh.positions.reserve(mesh.positions.size() + 1);
   std::vector<const Material*> material_ptrs;
   dispersive_ = false;
+  index_matched_ = false;
   for (const auto& m : materials) {
     material_ptrs.push_back(m.get());
     dispersive_ = dispersive_ || m->dispersive;
+    index_matched_ = index_matched_ || m->index_matched;
   }
+  scattering_ = has_scattering_media();
   accel_.build(meshes, spheres, groups, instances, material_ptrs);
   lights_.build(*this, punctual);
   // Record each emitter's light index on its geometry, in the order LightSet::build enumerates them.
@@ -279,6 +283,12 @@ void apply_normal_map(const Material& material, const Vec3& wo, ShadingPoint* sp
   const Vec3 n = mapped_normal(*material.normal_map, material.normal_scale, *sp);
   if (length_squared(n) > 0)
     sp->frame = Frame::from_normal_tangent(keep_reflection_above_surface(n, sp->ng, wo), sp->frame.s);
+}
+
+bool Scene::has_scattering_media() const {
+  if (medium && medium->scatters()) return true;
+  return std::any_of(materials.begin(), materials.end(),
+                     [](const auto& m) { return m->interior && m->interior->scatters(); });
 }
 
 Vec3 offset_ray_origin(const Vec3& p, const Vec3& ng, const Vec3& dir) {

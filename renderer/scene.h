@@ -84,6 +84,9 @@ class Scene {
   std::vector<Instance> instances;
   CameraDesc camera;
   Environment environment;
+  // The medium around the objects, where the camera and the lights sit (null: vacuum); objects' media are their
+  // materials' interiors (Material::interior).
+  std::shared_ptr<const Medium> medium;
   std::vector<std::string> warnings;  // things the user should fix or know were ignored
   std::vector<std::string> notes;     // defaults that were applied
 
@@ -109,6 +112,13 @@ class Scene {
   double build_seconds() const { return build_seconds_; }
   // Whether any material disperses (Material::dispersive): only then do paths carry a wavelength.
   bool dispersive() const { return dispersive_; }
+  // Whether some medium scatters light (Medium::scatters), worked out afresh from the fields above (a scene that
+  // was not finalized may ask); scattering() is the same, as finalize found it.
+  bool has_scattering_media() const;
+  bool scattering() const { return scattering_; }
+  // Whether some material is an index-matched boundary (Material::index_matched): only then may shadow rays cross
+  // surfaces.
+  bool index_matched() const { return index_matched_; }
 
  private:
   Accel accel_;
@@ -116,6 +126,8 @@ class Scene {
   Bounds bounds_;
   double build_seconds_ = 0;
   bool dispersive_ = false;
+  bool scattering_ = false;
+  bool index_matched_ = false;
 };
 
 // Keeps the first of each warning given more than once, in order, and at most kMaxWarnings of them: the rest are

@@ -153,6 +153,26 @@ std::filesystem::path resolve(const SceneLoadOptions& options, const json& ref, 
   return *full;
 }
 
+// A homogeneous medium from {"sigma_a": [r, g, b], "sigma_s": [r, g, b], "g": 0} (coefficients per scene unit, each
+// a number or three; every key optional, 0 by default).
+std::shared_ptr<const Medium> load_medium(const json& m, const std::string& pointer) {
+  if (!m.is_object()) throw SceneError(pointer, "must be an object with \"sigma_a\", \"sigma_s\" and \"g\"");
+  for (const auto& [key, value] : m.items()) {
+    if (key != "sigma_a" && key != "sigma_s" && key != "g")
+      throw SceneError(at(pointer, key), "unknown medium parameter \"" + key.substr(0, 64) + "\"" +
+                                             proto::did_you_mean(key, {"sigma_a", "sigma_s", "g"}));
+  }
+  const Rgb sigma_a = params::rgb(m, "sigma_a", pointer, Rgb(0), 0.0f, 1e9f);
+  const Rgb sigma_s = params::rgb(m, "sigma_s", pointer, Rgb(0), 0.0f, 1e9f);
+  float g = 0;
+  if (auto it = m.find("g"); it != m.end()) {
+    g = static_cast<float>(finite_number(*it, at(pointer, "g")));
+    // |g| = 1 is a delta phase function (no scattering at all, or a mirror), not a Henyey–Greenstein lobe.
+    if (!(std::abs(g) < 1)) throw SceneError(at(pointer, "g"), "must lie strictly between -1 and 1");
+  }
+  return std::make_shared<HomogeneousMedium>(sigma_a, sigma_s, g);
+}
+
 // A camera that sees the whole of `b` from the front and a little above.
 CameraDesc framing_camera(const Bounds& b) {
   CameraDesc desc;
@@ -249,6 +269,8 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
   const std::string op = at(pointer, "objects");
   if (!objects.is_array()) throw SceneError(op, "must be an array of objects");
   size_t triangles = scene->triangle_count();
+  const json* material_docs = nullptr;
+  if (auto it = doc.find("materials"); it != doc.end()) material_docs = &*it;
   for (size_t i = 0; i < objects.size(); ++i) {
     if (options.stop.stop_requested()) throw LoadStopped();
     const json& obj = objects[i];
@@ -258,6 +280,32 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     if (!shape.is_string()) throw SceneError(at(p, "shape"), "must be \"mesh\", \"sphere\" or \"rectangle\"");
     uint32_t material = material_index(obj, p, names);
     const std::string s = shape.get<std::string>();
+    if (auto m = obj.find("medium"); m != obj.end()) {
+      // The medium fills the shape; its boundary is the object's material, which a path crosses to get in and out:
+      // a dielectric (refracting) or an interface (index-matched, not drawn). The object gets a material of its own
+      // with that interior (materials are shared by name, media are per object).
+      const std::string mp = at(p, "medium");
+      if (s == "rectangle")
+        throw SceneError(mp, "a rectangle encloses no volume: a medium needs a closed shape (a sphere or a mesh)");
+      const std::string& name = obj["material"].get_ref<const std::string&>();
+      const json& material_doc = (*material_docs)[name];
+      const std::string type = material_doc.value("type", std::string());
+      if (type != "dielectric" && type != "interface")
+        throw SceneError(at(p, "material"),
+                         "the boundary of a medium must be a \"dielectric\" or \"interface\" material; \"" + name +
+                             "\" is a \"" + type + "\"");
+      if (material_doc.contains("attenuation_color") || material_doc.contains("attenuation_distance"))
+        throw SceneError(mp, "the material \"" + name +
+                                 "\" has attenuation_color or attenuation_distance, an absorbing interior of its own: "
+                                 "give the object a medium or the material an attenuation, not both");
+      std::shared_ptr<const Medium> interior = load_medium(*m, mp);
+      std::unique_ptr<Material> own =
+          MaterialRegistry::builtin().create(material_doc, at(at(pointer, "materials"), name), mctx);
+      own->interior = std::move(interior);
+      material = static_cast<uint32_t>(scene->materials.size());
+      scene->materials.push_back(std::move(own));
+      scene->material_names.push_back(name);
+    }
     if (s == "sphere") {
       Sphere sphere;
       sphere.center = vec3_key(obj, "center", p);
@@ -367,6 +415,20 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
       }
       punctual.push_back(light);
     }
+  }
+
+  if (auto it = doc.find("medium"); it != doc.end()) {
+    scene->medium = load_medium(*it, at(pointer, "medium"));
+    // Light from infinitely far (the environment, directional lights) crosses an infinite stretch of the medium: in
+    // a channel that interacts at all none of it arrives.
+    const Rgb far = scene->medium->transmittance(kInfinity);
+    const bool directional = std::any_of(punctual.begin(), punctual.end(), [](const PunctualLight& l) {
+      return l.kind == PunctualLight::Kind::kDirectional;
+    });
+    if ((!scene->environment.black() || directional) && is_black(far))
+      scene->warnings.push_back(
+          "the medium around the objects fills all space: no light from the environment or from directional lights "
+          "crosses it (light it with lights at a finite distance)");
   }
 
   if (scene->meshes.empty() && scene->spheres.empty() && scene->environment.black() && punctual.empty())

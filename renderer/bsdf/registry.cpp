@@ -13,6 +13,7 @@ void register_plastic(MaterialRegistry& registry);
 void register_gltf_pbr(MaterialRegistry& registry);
 void register_mix(MaterialRegistry& registry);
 void register_two_sided(MaterialRegistry& registry);
+void register_interface(MaterialRegistry& registry);
 
 void register_builtin_materials(MaterialRegistry& registry) {
   register_lambert(registry);
@@ -25,6 +26,7 @@ void register_builtin_materials(MaterialRegistry& registry) {
   register_gltf_pbr(registry);
   register_mix(registry);
   register_two_sided(registry);
+  register_interface(registry);
 }
 
 }  // namespace tessera

@@ -333,7 +333,8 @@ float mis_weight(const Context& c, Vertex* light, Vertex* camera, Vertex& sample
 class BidirectionalIntegrator final : public Integrator {
  public:
   BidirectionalIntegrator(const IntegratorSetup& setup, bool light_only) : Integrator(setup), light_only_(light_only) {
-    const std::string problem = integrator_camera_problem(setup_.settings.name, setup_.camera);
+    std::string problem = integrator_camera_problem(setup_.settings.name, setup_.camera);
+    if (problem.empty()) problem = integrator_scene_problem(setup_.settings.name, *setup_.scene);
     if (!problem.empty()) throw std::invalid_argument(problem);
     const double image = static_cast<double>(setup_.width) * setup_.height;
     const double region = static_cast<double>(setup_.region.width) * setup_.region.height;
@@ -592,6 +593,13 @@ Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, 
 std::string integrator_camera_problem(const std::string& name, const Camera& camera) {
   if ((name == "light" || name == "bdpt") && !camera.has_importance())
     return "the " + name + " integrator needs a perspective camera";
+  return {};
+}
+
+std::string integrator_scene_problem(const std::string& name, const Scene& scene) {
+  if (name != "light" && name != "bdpt") return {};
+  if (scene.has_scattering_media()) return "integrator " + name + " does not render scattering media yet; use path";
+  if (scene.medium) return "integrator " + name + " does not render a medium around the objects yet; use path";
   return {};
 }
 

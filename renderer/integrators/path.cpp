@@ -1,8 +1,11 @@
 // The path tracer (`path`): unbiased path tracing of the rendering equation from the camera (Kajiya 1986, "The
 // Rendering Equation"; Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed., §2.6 and ch. 5), with direct light
 // estimated by BSDF sampling, light sampling, or both weighted by multiple importance sampling (Veach 1997, ch. 9), and
-// Russian roulette.
+// Russian roulette. In participating media the path samples free flights and scatters by the phase function, with
+// next-event estimation through the media to the lights (the volumetric path tracer of Pharr, Jakob and Humphreys,
+// Physically Based Rendering, 4th ed., §14.2, with the transmittance of homogeneous media in closed form).
 #include "renderer/integrator.h"
+#include "renderer/phase.h"
 #include "renderer/scene.h"
 #include "renderer/spectrum.h"
 #include "renderer/thread_pool.h"
@@ -11,10 +14,38 @@ namespace tessera {
 
 namespace {
 
+// The fraction of radiance that travels along `shadow` (to its tmax) through the media from `medium` on: zero when a
+// surface blocks it, else the media's transmittance. Index-matched boundaries (Material::index_matched) do not block:
+// the shadow ray crosses them and changes medium as a path does, up to `max_crossings` of them.
+Rgb shadow_transmittance(const Scene& scene, Ray shadow, MediumTracker medium, int max_crossings,
+                         RayCounters& counters) {
+  ++counters.shadow;
+  Rgb tr(1);
+  if (!scene.index_matched()) {
+    if (scene.occluded(shadow)) return Rgb(0);
+    medium.attenuate(tr, shadow, shadow.tmax);
+    return tr;
+  }
+  for (int crossings = 0;; ++crossings) {
+    SurfaceInteraction si;
+    if (!scene.intersect(shadow, &si)) {
+      medium.attenuate(tr, shadow, shadow.tmax);
+      return tr;
+    }
+    if (!si.material->index_matched || crossings >= max_crossings) return Rgb(0);
+    medium.attenuate(tr, shadow, si.t);
+    medium.refract(si.sp.front_face, si.material->interior.get());
+    shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, shadow.dir);
+    shadow.tmax -= si.t;
+    ++counters.shadow;
+  }
+}
+
 // Next-event estimation at a path vertex: one light sample's contribution, before the path's throughput, weighed
-// against BSDF sampling by the power heuristic with `mis`.
+// against BSDF sampling by the power heuristic with `mis`. `medium` is the medium the path arrived in.
 Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& bsdf, uint32_t flags,
-                 const Vec3& wo_world, const Vec3& wo, bool mis, float u_select, Vec2 u, RayCounters& counters) {
+                 const Vec3& wo_world, const Vec3& wo, bool mis, float u_select, Vec2 u, const MediumTracker& medium,
+                 int max_crossings, RayCounters& counters) {
   LightSample ls;
   if (!scene.lights().sample(scene, si.sp.p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
   const Vec3 wi = si.sp.frame.to_local(ls.wi);
@@ -28,10 +59,29 @@ Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& b
   const Rgb f = (weigh ? bsdf.eval_pdf(wo, wi, &bsdf_pdf) : bsdf.eval(wo, wi)) * std::abs(wi.z);
   if (is_black(f)) return {};
   const Ray shadow = shadow_ray_to_light(si.sp.p, si.sp.ng, ls);
-  ++counters.shadow;
-  if (scene.occluded(shadow)) return {};
+  // The shadow ray starts in the medium on the light's side of the surface.
+  MediumTracker beyond = medium;
+  if (light_transmits) beyond.refract(si.sp.front_face, si.material->interior.get());
+  const Rgb tr = shadow_transmittance(scene, shadow, beyond, max_crossings, counters);
+  if (is_black(tr)) return {};
   const float w = weigh ? power_heuristic(ls.pdf, bsdf_pdf) : 1.0f;
-  return f * ls.radiance * (w / ls.pdf);
+  return f * ls.radiance * (w / ls.pdf) * tr;
+}
+
+// Next-event estimation at a scattering event in a medium, at `p`: the phase function takes the BSDF's place.
+Rgb direct_light_in_medium(const Scene& scene, const Vec3& p, const Vec3& wo_world, const HenyeyGreenstein& phase,
+                           bool mis, float u_select, Vec2 u, const MediumTracker& medium, int max_crossings,
+                           RayCounters& counters) {
+  LightSample ls;
+  if (!scene.lights().sample(scene, p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
+  const float f = phase.p(wo_world, ls.wi);
+  if (!(f > 0)) return {};
+  // A point in a medium has no surface to leave: the shadow ray starts at it.
+  const Ray shadow = shadow_ray_to_light(p, Vec3(0), ls);
+  const Rgb tr = shadow_transmittance(scene, shadow, medium, max_crossings, counters);
+  if (is_black(tr)) return {};
+  const float w = mis && !ls.delta ? power_heuristic(ls.pdf, f) : 1.0f;
+  return ls.radiance * tr * (f * w / ls.pdf);
 }
 
 // The camera ray's closest hit when the caller has traced it already (camera rays of neighbouring pixels go to
@@ -61,22 +111,90 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
   bool prev_delta = true;  // the camera ray counts as a delta event: emitters it sees are added fully
   float prev_pdf = 0;
   Vec3 prev_p;
-  float eta_scale = 1;     // product of eta^2 across refractions, kept out of Russian roulette
-  MediumTracker medium;    // the medium the path is travelling through
-  bool dispersed = false;  // the throughput carries the wavelength's weight
+  float eta_scale = 1;                         // product of eta^2 across refractions, kept out of Russian roulette
+  MediumTracker medium(scene.medium.get());    // the medium the path is travelling through
+  bool dispersed = false;                      // the throughput carries the wavelength's weight
+  const bool scattering = scene.scattering();  // whether any medium scatters: only then are free flights sampled
+  // Scattering events in media and crossings of index-matched boundaries: they are not bounces (depth), and have
+  // their own limit, settings.max_volume_depth.
+  int volume_depth = 0;
+  bool camera_segment = true;  // the ray is the camera ray, whose hit `primary` may hold
   ++counters.camera;
 
-  for (int depth = 0;; ++depth) {
+  for (int depth = 0;;) {
     arena.reset();
     SurfaceInteraction si;
     bool found;
-    if (depth == 0 && primary) {
+    if (camera_segment && primary) {
       found = primary->found;
       if (found) scene.interaction(ray, primary->hit, &si, &cone);
     } else {
       found = scene.intersect(ray, &si, &cone);
     }
+    camera_segment = false;
+
+    // In a scattering medium the path may interact before the surface (or infinity): free-flight sampling decides
+    // (medium.h), and a scattering event is a path vertex whose phase function is sampled, and light sampled, as a
+    // BSDF's is at a surface. Its numbers follow the free flight's in the same layout as a surface vertex's.
+    const Medium* current = medium.current();
+    const bool in_scattering_medium = scattering && current && current->scatters();
+    if (in_scattering_medium) {
+      const float dir_length = length(ray.dir);
+      const FreeFlight flight =
+          current->sample_free_flight(found ? si.t * dir_length : kInfinity, throughput, sampler.get1d());
+      throughput *= flight.weight;
+      if (is_black(throughput) || !is_finite(throughput)) break;
+      if (flight.scattered) {
+        if (volume_depth >= settings.max_volume_depth) break;
+        ++volume_depth;
+        const Vec3 p = ray.origin + ray.dir * (flight.t / dir_length);
+        const Vec3 wo_world = -ray.dir / dir_length;
+        const HenyeyGreenstein phase = current->phase();
+        const bool sample_light = use_light_sampling && !lights.empty();
+        float u_light_select = 0;
+        Vec2 u_light;
+        if (sample_light) {
+          u_light_select = sampler.get1d();
+          u_light = sampler.get2d();
+        } else {
+          sampler.skip1d();
+          sampler.skip2d();
+        }
+        sampler.skip1d();  // a lobe choice: the phase function has one lobe
+        const PhaseSample ps = phase.sample(wo_world, sampler.get2d());
+        if (sample_light) {
+          radiance += throughput * direct_light_in_medium(scene, p, wo_world, phase, mis, u_light_select, u_light,
+                                                          medium, settings.max_volume_depth, counters);
+        }
+        // Sampled exactly, the phase function's weight p / pdf is 1: the throughput goes on unchanged.
+        if (!(ps.pdf > 0)) break;
+        cone.width = cone.width_at(flight.t);
+        cone.spread = std::max(cone.spread, 2 / std::sqrt(kPi * ps.pdf));
+        prev_delta = false;
+        prev_pdf = ps.pdf;
+        prev_p = p;
+        if (depth + volume_depth >= settings.rr_start_depth) {
+          const float u_rr = sampler.get1d();
+          const float q = std::max(0.05f, 1 - max_component(throughput) * eta_scale);
+          if (u_rr < q) break;
+          throughput /= 1 - q;
+        } else {
+          sampler.skip1d();
+        }
+        ray.origin = p;
+        ray.dir = ps.wi;
+        ray.tmin = 0;
+        ray.tmax = kInfinity;
+        ++counters.bounce;
+        continue;
+      }
+    }
+
     if (!found) {
+      // Escaping through the medium around the objects, the path takes its transmittance to infinity: none in a
+      // channel that interacts at all (a path that escapes from inside an object's medium leaked through its
+      // boundary and is not attenuated).
+      if (!in_scattering_medium && current && current == medium.outside()) medium.attenuate(throughput, ray, kInfinity);
       if (!scene.environment.black()) {
         if (prev_delta) {
           // Seen from the camera, directly or through mirrors and glass.
@@ -91,7 +209,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       }
       break;
     }
-    medium.attenuate(throughput, ray, si.t);
+    if (!in_scattering_medium) medium.attenuate(throughput, ray, si.t);
     const Vec3 wo_world = -ray.dir;
     if (si.material->emissive()) {
       Rgb le = si.material->emitted(si.sp, wo_world);
@@ -103,6 +221,17 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
           radiance += throughput * le * w;
         }
       }
+    }
+    if (si.material->index_matched) {
+      // An index-matched boundary: the path crosses it straight on into the medium beyond, not a bounce.
+      if (volume_depth >= settings.max_volume_depth) break;
+      ++volume_depth;
+      medium.refract(si.sp.front_face, si.material->interior.get());
+      cone.width = cone.width_at(si.t * length(ray.dir));
+      ray.origin = offset_ray_origin(si.sp.p, si.sp.ng, ray.dir);
+      ray.tmin = 0;
+      ray.tmax = kInfinity;
+      continue;
     }
     if (depth >= settings.max_depth) break;
     if (wavelength) {
@@ -144,8 +273,8 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
 
     // Next-event estimation: one light sample, unless every lobe is a delta (a light sample cannot hit it).
     if (sample_light) {
-      radiance +=
-          throughput * direct_light(scene, si, *bsdf, flags, wo_world, wo, mis, u_light_select, u_light, counters);
+      radiance += throughput * direct_light(scene, si, *bsdf, flags, wo_world, wo, mis, u_light_select, u_light, medium,
+                                            settings.max_volume_depth, counters);
     }
 
     // Continue the path along the BSDF sample.
@@ -185,6 +314,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     ray.tmin = 0;
     ray.tmax = kInfinity;
     ++counters.bounce;
+    ++depth;
   }
   return radiance;
 }

@@ -160,7 +160,7 @@ const std::vector<BsdfCase>& bsdf_cases() {
 }
 
 const std::vector<std::string>& delta_only_types() {
-  static const std::vector<std::string> types = {"emission", "thin_dielectric"};
+  static const std::vector<std::string> types = {"emission", "thin_dielectric", "interface"};
   return types;
 }
 

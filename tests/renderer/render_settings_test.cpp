@@ -67,7 +67,13 @@ TEST(RenderSettingsMapping, TheNormalisedFormIsTheSchemasFieldsAndDefaults) {
   std::ifstream in("proto/schemas/render.schema.json");
   ASSERT_TRUE(in) << "run from the source tree";
   const json properties = json::parse(in)["properties"];
-  const json normalised = render_settings_to_json(RenderSettings{});
+  // max_volume_depth is left out at its default (the stored records' text, below), written at any other value.
+  RenderSettings deep;
+  deep.integrator.max_volume_depth = 7;
+  EXPECT_EQ(render_settings_to_json(deep).value("max_volume_depth", 0), 7);
+  json normalised = render_settings_to_json(RenderSettings{});
+  EXPECT_FALSE(normalised.contains("max_volume_depth"));
+  normalised["max_volume_depth"] = RenderSettings{}.integrator.max_volume_depth;
   EXPECT_EQ(normalised.size(), properties.size()) << normalised.dump();
   for (const auto& [key, property] : properties.items()) {
     ASSERT_TRUE(normalised.contains(key)) << key;
@@ -153,6 +159,11 @@ TEST(StoredSettings, TheTextRecordsHoldReadsToTheSameSettingsAndIsWrittenAgainBy
     EXPECT_EQ(render_settings_from_text(c.text), settings) << c.text;
     EXPECT_EQ(render_settings_text(settings), c.text);
   }
+  // A key added since is written only when it is not its default, and then round-trips.
+  const RenderSettings deep = read({{"max_volume_depth", 1000}});
+  EXPECT_EQ(deep.integrator.max_volume_depth, 1000);
+  EXPECT_EQ(render_settings_from_text(render_settings_text(deep)), deep);
+  EXPECT_EQ(render_settings_text(read(json())).find("max_volume_depth"), std::string::npos);
   for (const char* text : {R"(["png","exr"])", R"(["png"])", R"(["exr"])"})
     EXPECT_EQ(output_spec_text(output_spec_from_text(text)), text);
 }
