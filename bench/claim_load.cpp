@@ -11,9 +11,9 @@
 #include <thread>
 #include <vector>
 
-#include "server/job_id.h"
-#include "server/postgres_job_store.h"
-#include "server/time_format.h"
+#include "server/base/job_id.h"
+#include "server/base/time_format.h"
+#include "server/store/postgres_job_store.h"
 
 using namespace tessera::server;
 

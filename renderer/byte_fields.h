@@ -1,4 +1,4 @@
-// The fields of the film files' binary headers (render checkpoints, server/checkpoint.h; partial films, .tfilm,
+// The fields of the film files' binary headers (render checkpoints, server/jobs/checkpoint.h; partial films, .tfilm,
 // clients/cli/partial_film.h) and the hash that checks them and fingerprints settings.
 #pragma once
 

@@ -1,6 +1,6 @@
 // The film codec: one binary file of a Film with every layer and the per-pixel sample counts, and what is needed to
-// resume, merge or check it. Render checkpoints (server/checkpoint.h), the server's work-unit films and the command
-// line's partial films (.tfilm, clients/cli/partial_film.h) are all this file.
+// resume, merge or check it. Render checkpoints (server/jobs/checkpoint.h), the server's work-unit films and the
+// command line's partial films (.tfilm, clients/cli/partial_film.h) are all this file.
 //
 // Layout, version 3 (all fields little-endian, as the machines we run on; offsets in bytes):
 //

@@ -11,8 +11,8 @@
 #include <string_view>
 #include <vector>
 
-#include "server/log.h"
-#include "server/work_units.h"
+#include "server/base/log.h"
+#include "server/store/work_units.h"
 
 namespace tessera::server {
 

@@ -48,7 +48,7 @@ check(len(known_env) >= 5, f"server/config.cpp names the flags and TESSERA_* var
 pending_env = set()
 m = re.search(r'"--grace-s".*?default (\d+)', config_cpp)
 default_grace = int(m.group(1)) if m else 0
-routes = "".join(p.read_text() for p in (repo / "server").glob("*.cpp"))
+routes = "".join(p.read_text() for p in (repo / "server").rglob("*.cpp"))
 for path in ("/livez", "/readyz"):
     check(f'"{path}"' in routes, f"tesserad serves {path}")
 version = re.search(r"project\(tessera VERSION ([0-9.]+)", (repo / "CMakeLists.txt").read_text()).group(1)

@@ -1,4 +1,4 @@
-// Fuzz target: a render checkpoint as the daemon reads one back to resume a job (server/checkpoint.h
+// Fuzz target: a render checkpoint as the daemon reads one back to resume a job (server/jobs/checkpoint.h
 // decode_checkpoint, the film codec of renderer/film_codec.h in any version it reads), for a 3x2 render with the
 // settings hash kSettingsHash (the seeds are checkpoints of such a render; libFuzzer's comparison tracing finds the
 // checksum a mutated payload needs). A checkpoint that decodes must encode to one that decodes to the same film, sample
@@ -10,7 +10,7 @@
 #include <string>
 #include <string_view>
 
-#include "server/checkpoint.h"
+#include "server/jobs/checkpoint.h"
 
 namespace {
 

@@ -1,13 +1,13 @@
 // Fuzz target: the head of an HTTP/1.1 request as tesserad's transport judges it before cpp-httplib parses it
-// (server/request_head.h scan_head, then body_arrived on what follows it). Besides crashes and sanitizer reports, what
-// the scan promises is checked: a refusal is a 400; a whole head ends within the bytes, its parts are views into
+// (server/http/request_head.h scan_head, then body_arrived on what follows it). Besides crashes and sanitizer reports,
+// what the scan promises is checked: a refusal is a 400; a whole head ends within the bytes, its parts are views into
 // them, the bytes up to its end scan as the same head and any shorter prefix as one that has not all arrived.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
 #include <string_view>
 
-#include "server/request_head.h"
+#include "server/http/request_head.h"
 
 namespace {
 

@@ -1,4 +1,4 @@
-// Fuzz target: a job document as the daemon judges a submission (server/submission.h check_submission): the JSON
+// Fuzz target: a job document as the daemon judges a submission (server/jobs/submission.h check_submission): the JSON
 // parser with its nesting limit and error locator, the contract's schema validator (proto/json_schema.h, every error
 // collected), then tessera::load_job without building (scene jobs' objects, materials, lights, camera; material jobs'
 // preview stage), and the Problem a refusal is answered with. The same text is judged as `tessera render` judges a
@@ -9,7 +9,7 @@
 #include <string_view>
 #include <variant>
 
-#include "server/submission.h"
+#include "server/jobs/submission.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   tessera::server::SubmissionLimits limits;

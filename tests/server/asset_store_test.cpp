@@ -7,8 +7,8 @@
 #include <fstream>
 #include <iterator>
 
-#include "server/assets.h"
-#include "server/file_io.h"
+#include "server/base/file_io.h"
+#include "server/files/assets.h"
 #include "tests/renderer/gltf_fixture.h"
 #include "tests/server/test_util.h"
 

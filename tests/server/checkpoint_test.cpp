@@ -9,7 +9,7 @@
 #include <sstream>
 
 #include "renderer/film_codec.h"
-#include "server/checkpoint.h"
+#include "server/jobs/checkpoint.h"
 
 namespace tessera::server {
 namespace {

@@ -7,12 +7,12 @@
 #include <vector>
 
 #include "proto/contract.h"
-#include "server/http_api.h"
-#include "server/job_id.h"
-#include "server/job_json.h"
-#include "server/materials_catalog.h"
-#include "server/problem.h"
-#include "server/web_files.h"
+#include "server/base/job_id.h"
+#include "server/base/problem.h"
+#include "server/http/http_api.h"
+#include "server/http/web_files.h"
+#include "server/jobs/job_json.h"
+#include "server/jobs/materials_catalog.h"
 
 namespace tessera::server {
 namespace {

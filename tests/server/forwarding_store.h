@@ -2,7 +2,7 @@
 // wait or count.
 #pragma once
 
-#include "server/job_store.h"
+#include "server/store/job_store.h"
 
 namespace tessera::server::test {
 

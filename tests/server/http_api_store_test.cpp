@@ -15,14 +15,14 @@
 #include <nlohmann/json.hpp>
 
 #include "renderer/thread_pool.h"
-#include "server/assets.h"
-#include "server/auth.h"
-#include "server/events.h"
-#include "server/http_api.h"
-#include "server/job_files.h"
-#include "server/metrics.h"
-#include "server/scheduler.h"
-#include "server/sqlite_job_store.h"
+#include "server/base/auth.h"
+#include "server/files/assets.h"
+#include "server/files/events.h"
+#include "server/files/job_files.h"
+#include "server/http/http_api.h"
+#include "server/jobs/metrics.h"
+#include "server/jobs/scheduler.h"
+#include "server/store/sqlite_job_store.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {

@@ -6,8 +6,8 @@
 #include <cerrno>
 #include <system_error>
 
-#include "server/job_files.h"
-#include "server/job_id.h"
+#include "server/base/job_id.h"
+#include "server/files/job_files.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {

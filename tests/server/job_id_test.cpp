@@ -2,10 +2,10 @@
 
 #include <set>
 
-#include "server/assets.h"
-#include "server/job_files.h"
-#include "server/job_id.h"
-#include "server/job_state.h"
+#include "server/base/job_id.h"
+#include "server/files/assets.h"
+#include "server/files/job_files.h"
+#include "server/store/job_state.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {

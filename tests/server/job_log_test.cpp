@@ -13,8 +13,8 @@
 #include <string>
 #include <thread>
 
-#include "server/job_id.h"
-#include "server/job_log.h"
+#include "server/base/job_id.h"
+#include "server/files/job_log.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {

@@ -14,14 +14,14 @@
 #include <nlohmann/json.hpp>
 
 #include "renderer/thread_pool.h"
-#include "server/assets.h"
-#include "server/events.h"
-#include "server/job_files.h"
-#include "server/job_service.h"
-#include "server/metrics.h"
-#include "server/scheduler.h"
-#include "server/sqlite_job_store.h"
-#include "server/submission.h"
+#include "server/files/assets.h"
+#include "server/files/events.h"
+#include "server/files/job_files.h"
+#include "server/jobs/job_service.h"
+#include "server/jobs/metrics.h"
+#include "server/jobs/scheduler.h"
+#include "server/jobs/submission.h"
+#include "server/store/sqlite_job_store.h"
 #include "tests/server/forwarding_store.h"
 #include "tests/server/test_util.h"
 

@@ -14,9 +14,9 @@
 #include <set>
 #include <thread>
 
-#include "server/job_state.h"
-#include "server/postgres_job_store.h"
-#include "server/sqlite_job_store.h"
+#include "server/store/job_state.h"
+#include "server/store/postgres_job_store.h"
+#include "server/store/sqlite_job_store.h"
 #include "tests/server/postgres_cluster.h"
 #include "tests/server/test_util.h"
 

@@ -1,6 +1,6 @@
-// The SQLite job store's prepared-statement cache (server/sqlite_job_store.cpp: each SQL text prepared once, reset
-// and unbound after every use, finalized before the connection closes), through the store's public API only. A raw
-// second connection to the same file looks at what the store's connection holds: a statement left unreset keeps a
+// The SQLite job store's prepared-statement cache (server/store/sqlite_job_store.cpp: each SQL text prepared once,
+// reset and unbound after every use, finalized before the connection closes), through the store's public API only. A
+// raw second connection to the same file looks at what the store's connection holds: a statement left unreset keeps a
 // read transaction open (a TRUNCATE checkpoint cannot finish), a statement left unfinalized keeps the connection open
 // after the store is destroyed (the WAL file stays, and the database cannot leave WAL mode).
 #include <gtest/gtest.h>
@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "server/job_id.h"
-#include "server/sqlite_job_store.h"
+#include "server/base/job_id.h"
+#include "server/store/sqlite_job_store.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {

@@ -3,8 +3,8 @@
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 
-#include "server/job_id.h"
-#include "server/sqlite_job_store.h"
+#include "server/base/job_id.h"
+#include "server/store/sqlite_job_store.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {

@@ -9,8 +9,8 @@
 #include <chrono>
 #include <thread>
 
-#include "server/postgres_connection.h"
-#include "server/postgres_job_store.h"
+#include "server/store/postgres_connection.h"
+#include "server/store/postgres_job_store.h"
 #include "tests/server/postgres_cluster.h"
 #include "tests/server/test_util.h"
 

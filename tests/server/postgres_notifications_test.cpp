@@ -7,9 +7,9 @@
 #include <mutex>
 #include <thread>
 
-#include "server/postgres_event_bus.h"
-#include "server/postgres_job_store.h"
-#include "server/postgres_notifications.h"
+#include "server/store/postgres_event_bus.h"
+#include "server/store/postgres_job_store.h"
+#include "server/store/postgres_notifications.h"
 #include "tests/server/postgres_cluster.h"
 #include "tests/server/test_util.h"
 

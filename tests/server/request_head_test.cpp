@@ -1,6 +1,6 @@
-// The request head as the transport judges it before cpp-httplib parses it (server/request_head.h): where it ends,
+// The request head as the transport judges it before cpp-httplib parses it (server/http/request_head.h): where it ends,
 // what is malformed and known to be as soon as its line has arrived, and when a body is already all there.
-#include "server/request_head.h"
+#include "server/http/request_head.h"
 
 #include <gtest/gtest.h>
 

@@ -5,9 +5,9 @@
 #include <chrono>
 #include <set>
 
-#include "server/metrics.h"
-#include "server/retention.h"
-#include "server/sqlite_job_store.h"
+#include "server/jobs/metrics.h"
+#include "server/jobs/retention.h"
+#include "server/store/sqlite_job_store.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {

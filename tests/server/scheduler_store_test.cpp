@@ -12,11 +12,11 @@
 
 #include "renderer/film.h"
 #include "renderer/thread_pool.h"
-#include "server/checkpoint.h"
-#include "server/job_files.h"
-#include "server/scheduler.h"
-#include "server/sqlite_job_store.h"
-#include "server/submission.h"
+#include "server/files/job_files.h"
+#include "server/jobs/checkpoint.h"
+#include "server/jobs/scheduler.h"
+#include "server/jobs/submission.h"
+#include "server/store/sqlite_job_store.h"
 #include "tests/server/forwarding_store.h"
 #include "tests/server/test_util.h"
 

@@ -9,10 +9,10 @@
 #include <mutex>
 
 #include "renderer/thread_pool.h"
-#include "server/job_files.h"
-#include "server/postgres_job_store.h"
-#include "server/scheduler.h"
-#include "server/submission.h"
+#include "server/files/job_files.h"
+#include "server/jobs/scheduler.h"
+#include "server/jobs/submission.h"
+#include "server/store/postgres_job_store.h"
 #include "tests/server/forwarding_store.h"
 #include "tests/server/postgres_cluster.h"
 #include "tests/server/test_util.h"

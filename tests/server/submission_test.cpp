@@ -2,8 +2,8 @@
 #include <gtest/gtest.h>
 
 #include "proto/contract.h"
-#include "server/job_json.h"
-#include "server/submission.h"
+#include "server/jobs/job_json.h"
+#include "server/jobs/submission.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {

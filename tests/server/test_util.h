@@ -18,9 +18,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "server/job_id.h"
-#include "server/job_store.h"
-#include "server/submission.h"
+#include "server/base/job_id.h"
+#include "server/jobs/submission.h"
+#include "server/store/job_store.h"
 
 namespace tessera::server::test {
 

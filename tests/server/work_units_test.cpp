@@ -1,5 +1,5 @@
 // The work-unit rule (work_units.h): how many units a job is split into, and their sample ranges.
-#include "server/work_units.h"
+#include "server/store/work_units.h"
 
 #include <gtest/gtest.h>
 

@@ -1,0 +1,407 @@
+#include "server/jobs/job_service.h"
+
+#include <algorithm>
+#include <filesystem>
+
+#include "proto/contract.h"
+#include "server/base/job_id.h"
+#include "server/base/log.h"
+#include "server/base/time_format.h"
+#include "server/files/assets.h"
+#include "server/files/job_log.h"
+#include "server/jobs/job_json.h"
+#include "server/store/work_units.h"
+
+namespace tessera::server {
+
+using nlohmann::json;
+
+namespace {
+
+Problem priority_needs_admin(int priority, int max_user_priority) {
+  return Problem{403,
+                 "priority " + std::to_string(priority) + " is above " + std::to_string(max_user_priority) +
+                     ", which needs an admin token",
+                 "/priority"};
+}
+
+bool may_see(const Caller& caller, const JobRecord& job) {
+  return caller.admin || job.owner == caller.name;
+}
+
+// At most `max` bytes of `s`, cut before a UTF-8 character rather than inside one.
+std::string utf8_prefix(const std::string& s, size_t max) {
+  if (s.size() <= max) return s;
+  size_t n = max;
+  while (n > 0 && (static_cast<unsigned char>(s[n]) & 0xC0) == 0x80) --n;
+  return s.substr(0, n);
+}
+
+// What a job is called when its document does not say ("name"): the glTF file it renders as it was uploaded, else
+// the types of its materials, else its kind.
+std::string default_job_name(const json& doc, const AssetStore& assets) {
+  constexpr size_t kMaxNameBytes = 200;  // job.schema.json's maxLength for "name"
+  const json scene = doc.value("scene", json::object());
+  if (scene.is_object() && scene.contains("gltf") && scene["gltf"].is_string()) {
+    const std::string ref = scene["gltf"];
+    if (auto info = is_asset_id(ref) ? assets.get(ref) : std::nullopt) return utf8_prefix(info->main, kMaxNameBytes);
+    return utf8_prefix(std::filesystem::path(ref).filename().string(), kMaxNameBytes);
+  }
+  std::string types;
+  const json one = doc.value("material", json::object());
+  for (const json& m : doc.contains("materials") ? doc["materials"] : json::array({one}))
+    if (m.is_object() && m.contains("type") && m["type"].is_string())
+      types += (types.empty() ? "" : ", ") + m["type"].get<std::string>();
+  if (!types.empty()) return utf8_prefix(types, kMaxNameBytes);
+  return doc.value("kind", "scene");
+}
+
+}  // namespace
+
+JobService::JobService(JobStore& store, const JobFiles& files, AssetStore& assets, Scheduler& scheduler,
+                       EventBus& events, Metrics& metrics, JobServiceOptions options)
+    : store_(store),
+      files_(files),
+      assets_(assets),
+      scheduler_(scheduler),
+      events_(events),
+      metrics_(metrics),
+      options_(options) {
+  SchedulerHooks hooks;
+  hooks.state_changed = [this](const std::string& id) { publish_state(id); };
+  hooks.progress = [this](const std::string& id, const JobProgress& p) {
+    auto job = store_.get(id);
+    if (!job) return;
+    json status = job_status_json(*job, p);
+    events_.publish(id, job->owner, "progress", json{{"id", id}, {"progress", status["progress"]}}.dump());
+  };
+  hooks.preview = [this](const std::string& id, uint32_t pass) {
+    auto job = store_.get(id);
+    if (!job) return;
+    events_.publish(
+        id, job->owner, "preview",
+        json{{"id", id}, {"pass", pass}, {"url", "/v1/jobs/" + id + "/preview.png?pass=" + std::to_string(pass)}}
+            .dump());
+  };
+  hooks.samples_rendered = [this](uint64_t n) { metrics_.add_samples(n); };
+  hooks.job_ended = [this](double render_s, const std::function<bool()>& record) {
+    return metrics_.record_job_end(render_s, record);
+  };
+  hooks.store_write_failed = [this] { metrics_.count_job_store_error(); };
+  scheduler_.set_hooks(std::move(hooks));
+}
+
+JobService::~JobService() {
+  // Its render threads call the hooks, which use this service.
+  scheduler_.shutdown();
+}
+
+// ---- submitting -------------------------------------------------------------------------------------------------
+
+std::optional<Problem> JobService::store_uploads(const Caller& caller, json& doc, std::vector<UploadFile> files) {
+  // An asset reference that is no asset id names a file this request should have sent: said so, naming the file,
+  // where the schema would only say that the reference is not an asset id.
+  for (std::string_view at : proto::kAssetRefPointers) {
+    const json::json_pointer pointer{std::string(at)};
+    if (!doc.is_object() || !doc.contains(pointer) || !doc[pointer].is_string()) continue;
+    const std::string name = doc[pointer].get<std::string>();
+    if (is_asset_id(name) ||
+        std::any_of(files.begin(), files.end(), [&](const UploadFile& f) { return f.name == name; }))
+      continue;
+    std::string field(at.substr(1));
+    std::replace(field.begin(), field.end(), '/', '.');
+    return Problem{422,
+                   field + " names " + name +
+                       ", which this request did not send: add it as a file part, or give an uploaded asset's id",
+                   std::string(at)};
+  }
+  if (files.empty()) return std::nullopt;
+  if (!doc.is_object() || !doc.contains("scene") || !doc["scene"].is_object())
+    return Problem{422, "uploaded files need a scene job that names them", "/scene"};
+  json& scene = doc["scene"];
+  // The map the job names becomes an environment asset of its own; the rest is the glTF asset.
+  if (scene.contains("environment") && scene["environment"].is_object() && scene["environment"].contains("map") &&
+      scene["environment"]["map"].is_string()) {
+    const std::string map = scene["environment"]["map"];
+    auto it = std::find_if(files.begin(), files.end(), [&](const UploadFile& f) { return f.name == map; });
+    if (it != files.end()) {
+      std::vector<UploadFile> one;
+      one.push_back(std::move(*it));
+      files.erase(it);
+      auto stored = assets_.store(std::move(one), caller.name);
+      if (auto* p = std::get_if<Problem>(&stored)) return *p;
+      scene["environment"]["map"] = std::get<StoredAsset>(stored).info.id;
+    }
+  }
+  if (files.empty()) return std::nullopt;
+  const bool named = scene.contains("gltf") && scene["gltf"].is_string() &&
+                     std::any_of(files.begin(), files.end(),
+                                 [&](const UploadFile& f) { return f.name == scene["gltf"].get<std::string>(); });
+  auto stored = assets_.store(std::move(files), caller.name);
+  if (auto* p = std::get_if<Problem>(&stored)) return *p;
+  const AssetInfo& info = std::get<StoredAsset>(stored).info;
+  if (named && info.kind == "gltf") scene["gltf"] = info.id;
+  return std::nullopt;
+}
+
+std::variant<Submitted, Problem> JobService::submit(const Caller& caller, SubmitRequest request) {
+  return writing([&]() -> std::variant<Submitted, Problem> {
+    if (!scheduler_.accepting()) return Problem{503, "the daemon is shutting down", std::nullopt};
+    const std::string& key = request.idempotency_key;
+    auto existing = [&](const JobRecord& job) -> std::variant<Submitted, Problem> {
+      if (job.request_hash != request.request_hash)
+        return Problem{422, "this Idempotency-Key was used with another request body", std::nullopt};
+      return Submitted{job, status(job), false};
+    };
+    if (!key.empty())
+      if (auto job = store_.find_by_idempotency_key(caller.name, key)) return existing(*job);
+
+    const AcceptedJob& accepted = request.job;
+    if (accepted.priority > options_.max_user_priority && !caller.admin)
+      return priority_needs_admin(accepted.priority, options_.max_user_priority);
+    if (auto full = queue_full(caller.name)) return *full;
+    JobRecord job;
+    job.id = new_job_id();
+    const json& name = accepted.document.contains("name") ? accepted.document["name"] : json();
+    job.name = name.is_string() ? name.get<std::string>() : default_job_name(accepted.document, assets_);
+    job.kind = accepted.kind;
+    job.priority = accepted.priority;
+    job.created_at_ms = now_ms();
+    job.document = accepted.document.dump();
+    job.settings = render_settings_text(accepted.settings);
+    job.outputs = output_spec_text(accepted.outputs);
+    job.progress.samples_total = accepted.settings.spp;
+    // On a store several nodes share, a large job is split into units they render at once (work_units.h).
+    job.units = store_.splits_jobs() ? unit_count(accepted.settings, options_.unit_pixel_samples) : 1;
+    job.owner = caller.name;
+    job.warnings = json(accepted.warnings).dump();
+    job.idempotency_key = key;
+    job.request_hash = request.request_hash;
+    try {
+      store_.create(job);
+    } catch (const std::exception& e) {
+      // The same key raced in from another connection: that request's job is this one's.
+      if (!key.empty())
+        if (auto raced = store_.find_by_idempotency_key(caller.name, key)) return existing(*raced);
+      // The disk filled after the --min-free-disk check: the insert was rolled back whole, so, as the check's refusal,
+      // nothing of the job exists (assets a multipart submission stored stay: whole, and found again by a retry).
+      if (const auto* se = dynamic_cast<const JobStoreError*>(&e); se && se->out_of_space()) {
+        metrics_.count_job_store_error();
+        log(LogLevel::kWarn, "job refused: the job store ran out of space", {{"error", e.what()}});
+        return insufficient_storage("the data directory's disk ran out of space while the job was stored",
+                                    request.files_stored ? "the job was not stored; the files uploaded with it were, "
+                                                           "whole, and a retry reuses them"
+                                                         : "nothing was stored");
+      }
+      throw;
+    }
+    scheduler_.wake();
+    log(LogLevel::kInfo, "job queued",
+        {{"job", job.id},
+         {"name", job.name},
+         {"kind", job.kind},
+         {"priority", job.priority},
+         {"owner", job.owner},
+         {"render", render_settings_to_json(accepted.settings)}});
+    // The job exists from here on: a store that fails as it is read back costs the answer its queue position (and the
+    // event its watchers), not a failure whose retry, without an Idempotency-Key, would queue the job twice.
+    Submitted out{job, json(), true};
+    try {
+      publish_state(job.id);
+      if (auto stored = store_.get(job.id)) out.job = *stored;
+      out.status = status(out.job);
+    } catch (const JobStoreError& e) {
+      metrics_.count_job_store_error();
+      log(LogLevel::kWarn, "job queued, but the job store failed as it was read back",
+          {{"job", job.id}, {"error", e.what()}});
+      out.status = job_status_json(job);
+    }
+    return out;
+  });
+}
+
+// ---- reading ----------------------------------------------------------------------------------------------------
+
+std::optional<JobRecord> JobService::find(const Caller& caller, const std::string& id) {
+  if (!is_valid_job_id(id)) return std::nullopt;
+  std::optional<JobRecord> job = store_.get(id);
+  if (!job || !may_see(caller, *job)) return std::nullopt;
+  return job;
+}
+
+json JobService::status(const JobRecord& job) {
+  std::optional<int> position;
+  if (job.state == JobState::kQueued) position = store_.queue_position(job.id);
+  // A split job's units (a store that splits jobs; empty for a job rendered whole).
+  std::vector<UnitRecord> units;
+  if (store_.splits_jobs()) units = store_.units(job.id);
+  return job_status_json(job, scheduler_.live_progress(job.id), position, units, now_ms());
+}
+
+JobPage JobService::list(const Caller& caller, JobFilter filter) {
+  if (!caller.admin) filter.owner = caller.name;
+  const int limit = filter.limit;
+  filter.limit = limit + 1;  // one more tells whether another page exists
+  std::vector<JobRecord> jobs = store_.list(filter);
+  JobPage page;
+  if (static_cast<int>(jobs.size()) > limit) {
+    jobs.resize(static_cast<size_t>(limit));
+    page.next_before_seq = jobs.back().seq;
+  }
+  for (const JobRecord& job : jobs) page.jobs.push_back(status(job));
+  return page;
+}
+
+std::map<JobState, int> JobService::counts() {
+  return store_.count_by_state();
+}
+
+std::variant<std::unique_ptr<FileReader>, Problem> JobService::preview(const JobRecord& job) {
+  if (auto file = files_.open(job.id, JobFile::kPreviewPng)) return file;
+  if (!is_terminal(job.state))
+    return Problem{
+        409, std::string("the job is ") + job_state_name(job.state) + "; a preview exists after its first render pass",
+        std::nullopt};
+  return Problem{404, "this job has no preview (it ended before its first pass)", std::nullopt};
+}
+
+std::optional<std::string> JobService::document(const JobRecord& job) {
+  auto stored = store_.get(job.id, true);
+  if (!stored) return std::nullopt;
+  return stored->document;
+}
+
+std::unique_ptr<FileReader> JobService::job_log(const JobRecord& job) {
+  auto text = JobLog::read(files_, job.id);
+  return text ? bytes_reader(std::move(*text)) : nullptr;
+}
+
+std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobRecord& job, JobFile file) {
+  // A cancelled job keeps the image of its last complete pass, if it had one (partial results).
+  if (job.state != JobState::kSucceeded && job.state != JobState::kCancelled)
+    return Problem{409,
+                   std::string("the job is ") + job_state_name(job.state) +
+                       "; results exist once it has succeeded (or, partial, once it was cancelled after a pass)",
+                   std::nullopt};
+  const std::string format = file == JobFile::kResultExr ? "exr" : "png";
+  bool asked = false;
+  try {
+    const OutputSpec outputs = output_spec_from_text(job.outputs);
+    asked = file == JobFile::kResultExr ? outputs.exr : outputs.png;
+  } catch (const std::runtime_error&) {
+    // A record whose outputs cannot be read asked for nothing that can be served.
+  }
+  if (!asked) return Problem{404, "the job did not ask for a " + format + " output", std::nullopt};
+  if (auto reader = files_.open(job.id, file)) return reader;
+  // A run's outputs are published once the store took its end (Scheduler::publish_outputs()); a node that stopped
+  // in between left them staged under the run's epoch, which the succeeded job's record names. (Opened again
+  // whoever renamed it: the run itself may have done so meanwhile.)
+  if (job.state == JobState::kSucceeded) {
+    files_.publish_staged(job.id, file, job.epoch);
+    if (auto reader = files_.open(job.id, file)) return reader;
+  }
+  if (job.state == JobState::kCancelled)
+    return Problem{404, "the job was cancelled before it finished a pass: it has no partial results", std::nullopt};
+  return Problem{404, std::string("the job's ") + job_file_name(file) + " is missing from the data directory",
+                 std::nullopt};
+}
+
+// ---- changing ---------------------------------------------------------------------------------------------------
+
+std::variant<ActionTaken, Problem> JobService::taken(const std::string& id) {
+  auto now = store_.get(id);
+  if (!now) return Problem{404, "no such job", std::nullopt};
+  // A running render winds down within one pass before its state changes.
+  return ActionTaken{*now, status(*now), now->state == JobState::kRunning};
+}
+
+std::optional<Problem> JobService::queue_full(const std::string& owner) {
+  if (options_.max_queued_per_user <= 0) return std::nullopt;
+  const int queued = store_.count_by_state(owner).at(JobState::kQueued);
+  if (queued < options_.max_queued_per_user) return std::nullopt;
+  Problem p{429,
+            "you have " + std::to_string(queued) +
+                " jobs queued, the most this server allows (--max-queued-per-user); retry later",
+            std::nullopt};
+  p.retry_after_s = 30;
+  return p;
+}
+
+std::variant<ActionTaken, Problem> JobService::act(const JobRecord& job, JobAction action) {
+  return writing([&]() -> std::variant<ActionTaken, Problem> {
+    // Resuming a paused job or requeueing an ended one queues it: the owner's cap holds as for a new job (else pausing
+    // at the cap, submitting and resuming would queue one more).
+    if (action_target(action) == JobState::kQueued && action_allowed(action, job.state))
+      if (auto full = queue_full(job.owner)) return *full;
+    Scheduler::Outcome outcome = Scheduler::Outcome::kConflict;
+    switch (action) {
+      case JobAction::kCancel:
+        outcome = scheduler_.cancel(job.id);
+        break;
+      case JobAction::kPause:
+        outcome = scheduler_.pause(job.id);
+        break;
+      case JobAction::kResume:
+        outcome = scheduler_.resume(job.id);
+        break;
+      case JobAction::kRequeue:
+        outcome = scheduler_.requeue(job.id);
+        break;
+      case JobAction::kPriority:
+      case JobAction::kDelete:
+        return Problem{500, std::string(job_action_name(action)) + " is not a state change", std::nullopt};
+    }
+    switch (outcome) {
+      case Scheduler::Outcome::kDone:
+      case Scheduler::Outcome::kInProgress:
+        return taken(job.id);
+      case Scheduler::Outcome::kConflict: {
+        auto now = store_.get(job.id);
+        const JobRecord& latest = now ? *now : job;
+        return Problem{409, action_refusal(action, latest.state, latest.input_refused()), std::nullopt};
+      }
+      case Scheduler::Outcome::kUnknown:
+        break;
+    }
+    return Problem{404, "no such job", std::nullopt};
+  });
+}
+
+std::variant<ActionTaken, Problem> JobService::set_priority(const Caller& caller, const JobRecord& job, int priority) {
+  return writing([&]() -> std::variant<ActionTaken, Problem> {
+    if (priority > options_.max_user_priority && !caller.admin)
+      return priority_needs_admin(priority, options_.max_user_priority);
+    if (!store_.set_priority(job.id, priority)) {
+      auto now = store_.get(job.id);
+      if (!now) return Problem{404, "no such job", std::nullopt};
+      return Problem{409, action_refusal(JobAction::kPriority, now->state), std::nullopt};
+    }
+    log(LogLevel::kInfo, "job priority changed", {{"job", job.id}, {"priority", priority}});
+    publish_state(job.id);
+    return taken(job.id);
+  });
+}
+
+bool JobService::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
+  return writing([&]() -> bool {
+    if (!scheduler_.remove(id, only_finished_before_ms)) return false;
+    events_.forget(id);
+    return true;
+  });
+}
+
+bool JobService::accepting() const {
+  return scheduler_.accepting();
+}
+
+bool JobService::store_failing() const {
+  return scheduler_.store_failing() || writes_failing_.load();
+}
+
+void JobService::publish_state(const std::string& id) {
+  auto job = store_.get(id);
+  if (!job) return;
+  events_.publish(id, job->owner, "state", status(*job).dump(), is_terminal(job->state));
+}
+
+}  // namespace tessera::server

@@ -1,0 +1,1066 @@
+#include "server/jobs/scheduler.h"
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cstdio>
+#include <random>
+#include <system_error>
+
+#include <nlohmann/json.hpp>
+
+#include "renderer/job.h"
+#include "renderer/output.h"
+#include "renderer/scene.h"
+#include "renderer/scene_error.h"
+#include "renderer/session.h"
+#include "server/base/file_io.h"
+#include "server/base/log.h"
+#include "server/base/time_format.h"
+#include "server/jobs/checkpoint.h"
+
+namespace tessera::server {
+
+using nlohmann::json;
+
+// One job rendering here. Guarded by the scheduler's mutex, except `thread`, which only the dispatcher touches.
+class Scheduler::RenderSlot {
+ public:
+  std::string id;
+  int unit = -1;                     // the work unit it renders (JobRecord::unit); -1: the whole job
+  RenderSession* session = nullptr;  // set while the render runs
+  std::stop_source load_stop;        // asked to stop with the render: ends the scene's load (LoadStopped)
+  bool cancel_requested = false;     // by a client: the job ends cancelled
+  bool pause_requested = false;      // by a client: the job ends its pass and is paused
+  bool delete_requested = false;     // by a client: the job is gone, its files go when the render stops
+  std::optional<JobProgress> progress;
+  bool awaiting_store = false;  // its end is rendered but the store failed to record it; retried
+  bool ending = false;          // its end is being recorded: its lease is no longer renewed nor checked
+  int64_t epoch = 0;            // of its lease: every write of the run carries it
+  bool lease_lost = false;      // the store refused the lease: the job was taken over or changed elsewhere
+  // A client's cancel or pause of a split job that the store took first (Scheduler::cancel()): the unit stops and
+  // records nothing.
+  bool settled = false;
+  std::chrono::steady_clock::time_point renewed_at = std::chrono::steady_clock::now();
+  bool done = false;
+  std::thread thread;
+};
+
+namespace {
+
+// printf into a std::string, for the lines of a job's log.
+template <typename... Args>
+std::string printf_string(const char* pattern, Args... args) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf, pattern, args...);
+  return buf;
+}
+
+// Why a render that completed stopped, as its log says it.
+std::string stop_explained(StopReason r) {
+  switch (r) {
+    case StopReason::kSamples:
+      return "its samples-per-pixel budget was reached";
+    case StopReason::kTimeLimit:
+      return "its time limit was reached";
+    case StopReason::kNoiseTarget:
+      return "its noise target was reached";
+    case StopReason::kStopped:
+    case StopReason::kCancelled:
+      break;
+  }
+  return stop_reason_name(r);
+}
+
+// What a unit's checkpoints are checked against: the job's render settings and the unit, so that one unit's film is
+// never read as another's.
+uint64_t unit_settings_hash(const std::string& settings, int unit) {
+  return fnv1a64(std::to_string(unit), fnv1a64(settings));
+}
+
+JobProgress to_job_progress(const RenderProgress& p) {
+  JobProgress jp;
+  jp.passes = p.pass;
+  jp.samples_done = p.samples_done;
+  jp.samples_total = p.samples_total;
+  jp.elapsed_s = p.elapsed_s;
+  jp.eta_s = p.eta_s;
+  jp.samples_per_s = p.samples_per_s;
+  return jp;
+}
+
+}  // namespace
+
+Scheduler::Scheduler(JobStore& store, const JobFiles& files, ThreadPool& pool, SchedulerOptions options)
+    : store_(store), files_(files), log_(files, options.node), pool_(pool), options_(std::move(options)) {}
+
+Scheduler::~Scheduler() {
+  shutdown();
+}
+
+void Scheduler::set_hooks(SchedulerHooks hooks) {
+  std::lock_guard lock(mutex_);
+  hooks_ = std::move(hooks);
+}
+
+void Scheduler::notify_state(const std::string& id) {
+  if (!hooks_.state_changed) return;
+  // On a render thread nothing above catches: a hook that cannot read a failing store costs the event, not the
+  // process.
+  try {
+    hooks_.state_changed(id);
+  } catch (const std::exception& e) {
+    if (dynamic_cast<const JobStoreError*>(&e)) count_store_error();
+    log(LogLevel::kWarn, "cannot publish the state of a job", {{"job", id}, {"error", e.what()}});
+  }
+}
+
+void Scheduler::count_store_error() {
+  if (hooks_.store_write_failed) hooks_.store_write_failed();
+}
+
+void Scheduler::start() {
+  std::lock_guard lock(mutex_);
+  if (started_) return;
+  started_ = true;
+  if (int n = store_.requeue_running(); n > 0)
+    log(LogLevel::kInfo, "requeued jobs left running by a previous process; they resume from their checkpoints",
+        {{"count", n}});
+  dispatcher_ = std::thread([this] { dispatch_loop(); });
+}
+
+void Scheduler::wake() {
+  cv_.notify_all();
+}
+
+bool Scheduler::accepting() const {
+  std::lock_guard lock(mutex_);
+  return started_ && !stopping_;
+}
+
+int Scheduler::running_count() const {
+  std::lock_guard lock(mutex_);
+  return static_cast<int>(running_.size());
+}
+
+bool Scheduler::store_failing() const {
+  std::lock_guard lock(mutex_);
+  return std::any_of(running_.begin(), running_.end(), [](const auto& entry) { return entry.second->awaiting_store; });
+}
+
+void Scheduler::begin_drain() {
+  {
+    std::lock_guard lock(mutex_);
+    if (!started_) return;
+    stopping_ = true;
+    for (auto& [id, slot] : running_) {
+      slot->load_stop.request_stop();  // a load has no pass to end: it stops now, and the job is requeued
+      if (slot->session) slot->session->stop();
+    }
+  }
+  cv_.notify_all();
+}
+
+void Scheduler::shutdown(double grace_s) {
+  {
+    std::lock_guard lock(mutex_);
+    if (!started_ || !dispatcher_.joinable()) return;
+  }
+  begin_drain();
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(grace_s);
+  {
+    std::unique_lock lock(mutex_);
+    while (!running_.empty() && std::chrono::steady_clock::now() < deadline) {
+      bool all_done = true;
+      for (auto& [id, slot] : running_) all_done = all_done && slot->done;
+      if (all_done) break;
+      cv_.wait_for(lock, std::chrono::milliseconds(20));
+    }
+    // Out of time: abandon the passes under way; the last checkpoints stay.
+    for (auto& [id, slot] : running_) {
+      slot->load_stop.request_stop();
+      if (slot->session) slot->session->cancel();
+    }
+  }
+  cv_.notify_all();
+  if (dispatcher_.joinable()) dispatcher_.join();
+}
+
+void Scheduler::reap_finished_locked(std::unique_lock<std::mutex>& lock) {
+  for (auto it = running_.begin(); it != running_.end();) {
+    if (!it->second->done) {
+      ++it;
+      continue;
+    }
+    std::shared_ptr<RenderSlot> slot = it->second;
+    it = running_.erase(it);
+    lock.unlock();  // the thread has finished its work; joining only waits for it to return
+    slot->thread.join();
+    lock.lock();
+    it = running_.begin();
+  }
+}
+
+// Renews the lease of each render under way once per renewal period (lease_renewal_period_ms), or poll interval if
+// that is shorter. A lease the store refuses is lost: the render
+// stops and records nothing (the job ended, was paused or deleted elsewhere, or another daemon took it over after this
+// one failed to renew in time). A store that fails leaves the render going: its lease may still be renewed in time.
+void Scheduler::renew_leases_locked() {
+  const auto now = std::chrono::steady_clock::now();
+  for (auto& [id, slot] : running_)
+    if (now - slot->renewed_at >= renewal_period()) renew_lease_locked(*slot, "its lease renewal");
+}
+
+std::chrono::milliseconds Scheduler::renewal_period() const {
+  return std::min(options_.poll_interval, std::chrono::milliseconds(lease_renewal_period_ms(options_.lease.count())));
+}
+
+void Scheduler::renew_lease_locked(RenderSlot& slot, const char* noticed_by) {
+  // A run recording its end has its outcome fenced by end_run(): the store's own change of state is no loss of lease.
+  if (slot.done || slot.lease_lost || slot.ending || slot.settled) return;
+  try {
+    if (store_.renew_lease(slot.id, slot.epoch, now_ms(), options_.lease.count()))
+      slot.renewed_at = std::chrono::steady_clock::now();
+    else
+      lose_lease_locked(slot, noticed_by);
+  } catch (const JobStoreError& e) {
+    count_store_error();
+    log(LogLevel::kWarn, "cannot renew the lease of a job; the render goes on",
+        {{"job", slot.id}, {"error", e.what()}});
+  }
+}
+
+void Scheduler::job_changed(const std::string& id, bool claimable) {
+  {
+    std::lock_guard lock(mutex_);
+    for (RenderSlot* slot : slots_locked(id)) renew_lease_locked(*slot, "the store's notification");
+  }
+  if (claimable) cv_.notify_all();
+}
+
+void Scheduler::recheck() {
+  {
+    std::lock_guard lock(mutex_);
+    for (auto& [id, slot] : running_) renew_lease_locked(*slot, "a look afresh once notifications were back");
+  }
+  cv_.notify_all();
+}
+
+void Scheduler::lose_lease_locked(RenderSlot& slot, const char* noticed_by) {
+  if (slot.lease_lost) return;
+  slot.lease_lost = true;
+  slot.load_stop.request_stop();
+  if (slot.session) slot.session->cancel();
+  log(LogLevel::kInfo, "the job was changed or taken over elsewhere; its render here stops and records nothing",
+      {{"job", slot.id}, {"epoch", slot.epoch}, {"noticed_by", noticed_by}});
+}
+
+void Scheduler::dispatch_loop() {
+  std::unique_lock lock(mutex_);
+  while (!stopping_) {
+    reap_finished_locked(lock);
+    while (!stopping_ && static_cast<int>(running_.size()) < options_.max_jobs) {
+      std::optional<JobRecord> record;
+      try {
+        record = store_.claim_next(now_ms(), options_.lease.count(), options_.max_running_per_user);
+      } catch (const std::exception& e) {
+        log(LogLevel::kError, "cannot claim a job", {{"error", e.what()}});
+        break;
+      }
+      if (!record) break;
+      auto slot = std::make_shared<RenderSlot>();
+      slot->id = record->id;
+      slot->unit = record->unit;
+      slot->epoch = record->epoch;
+      // A slot per job rendered whole, per unit of a split one (units of one job may render here side by side); a
+      // run claimed again while the last one here winds down (it was paused and resumed) gets a slot of its own.
+      std::string key = slot->unit < 0 ? slot->id : slot->id + "/" + std::to_string(slot->unit);
+      if (running_.contains(key)) (key += '@') += std::to_string(slot->epoch);
+      running_[key] = slot;
+      slot->thread = std::thread([this, slot, rec = std::move(*record)] { run_job(slot, rec); });
+    }
+    renew_leases_locked();
+    cv_.wait_for(lock, running_.empty() ? options_.poll_interval : renewal_period());
+  }
+  // Shutting down: every render has been told to stop; wait for them to put their jobs back.
+  while (!running_.empty()) {
+    cv_.wait_for(lock, std::chrono::milliseconds(20));
+    reap_finished_locked(lock);
+  }
+}
+
+// A run's steps: claimed by dispatch_loop(), it restores (load_run, resume_from_checkpoint), renders (render_passes)
+// and publishes its end (end_interrupted, end_unit, end_job); the merge of a split job's units and the failure of a
+// job lost too often are runs of their own. Whatever the end, finish_run() releases the slot.
+void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record) {
+  // The job's files have their place from here on; writes never make it (JobFiles::prepare), so a render still
+  // winding down cannot bring back the files of a job that was deleted meanwhile.
+  files_.prepare(record.id);
+  notify_state(record.id);
+  if (record.lost_runs > options_.crash_retries) {
+    fail_lost_too_often(*slot, record);
+  } else if (record.unit >= 0 && record.unit >= record.units) {
+    try {
+      merge_units(*slot, record);
+    } catch (const std::exception& e) {
+      record_failure(*slot, std::string("cannot merge its units: ") + e.what(), 0, false);
+    }
+  } else {
+    render_run(*slot, record);
+  }
+  finish_run(*slot);
+}
+
+// The slot's last step, whatever the run's end: the files of a job deleted meanwhile go; the dispatcher, woken, reaps
+// the slot (and may claim what the end made claimable: a split job's merge).
+void Scheduler::finish_run(RenderSlot& slot) {
+  bool deleted;
+  {
+    std::lock_guard lock(mutex_);
+    deleted = slot.delete_requested;
+  }
+  if (deleted)
+    files_.remove(slot.id);
+  else
+    notify_state(slot.id);
+  {
+    std::lock_guard lock(mutex_);
+    slot.done = true;
+  }
+  cv_.notify_all();
+}
+
+// One run of a job here: what it renders, and what it has published so far.
+struct Scheduler::Run {
+  RenderSlot& slot;
+  const JobRecord& record;
+  RenderJob job;
+  OutputPipeline outputs;
+  uint64_t settings_hash = 0;  // what its checkpoints are checked against
+  RenderSession* session = nullptr;
+  uint32_t samples_counted = 0;       // the samples per pixel counted in SchedulerHooks::samples_rendered
+  uint32_t checkpointed_samples = 0;  // of a unit: its last checkpoint written (its film, once it is done)
+
+  Run(RenderSlot& s, const JobRecord& r, RenderJob j)
+      : slot(s), record(r), job(std::move(j)), outputs(job.settings, job.outputs) {}
+  const std::string& id() const { return record.id; }
+  bool is_unit() const { return record.unit >= 0; }
+};
+
+void Scheduler::render_run(RenderSlot& slot, const JobRecord& record) {
+  double render_s = 0;
+  const auto detach = [&] {
+    std::lock_guard lock(mutex_);
+    slot.session = nullptr;
+  };
+  try {
+    Run run(slot, record, load_run(slot, record));
+    record_warnings(record.id, run.job.scene->warnings);
+    RenderSession session(run.job.scene, run.job.settings, pool_);
+    run.session = &session;
+    run.settings_hash = run.is_unit() ? unit_settings_hash(record.settings, record.unit) : fnv1a64(record.settings);
+    resume_from_checkpoint(slot, record, run.job.settings, run.settings_hash, session);
+    log_start(run);
+    const StopReason reason = render_passes(run);
+    detach();
+    render_s = session.progress().elapsed_s;
+    const bool interrupted = reason == StopReason::kStopped || reason == StopReason::kCancelled;
+    if (interrupted || !still_ours_before_outputs(slot))
+      end_interrupted(slot, record, session.progress().samples_done, render_s);
+    else if (run.is_unit())
+      end_unit(run);
+    else
+      end_job(run, reason);
+  } catch (const LoadStopped&) {
+    detach();
+    end_interrupted(slot, record, 0, render_s);
+  } catch (const std::exception& e) {
+    detach();
+    std::string message = e.what();
+    // The renderer refused the scene or an asset it names: the input is at fault, not this run.
+    const auto* se = dynamic_cast<const SceneError*>(&e);
+    if (se && !se->pointer().empty()) message = se->pointer() + ": " + message;
+    record_failure(slot, message, render_s, se != nullptr);
+  } catch (...) {
+    detach();
+    record_failure(slot, "unknown error", render_s, false);
+  }
+}
+
+void Scheduler::record_warnings(const std::string& id, const std::vector<std::string>& warnings) {
+  for (const std::string& w : warnings) log_.add(id, "warning: " + w);
+  if (warnings.empty()) return;
+  try {
+    store_.set_warnings(id, json(warnings).dump());
+  } catch (const JobStoreError& e) {
+    // Only the job's status misses them: not worth the render.
+    count_store_error();
+    log(LogLevel::kWarn, "cannot record the warnings of a job", {{"job", id}, {"error", e.what()}});
+  }
+}
+
+void Scheduler::log_start(const Run& run) {
+  const RenderSettings& s = run.job.settings;
+  const JobRecord& record = run.record;
+  log(LogLevel::kInfo, "job started",
+      {{"job", record.id}, {"samples_done", run.session->progress().samples_done}, {"unit", record.unit}});
+  if (run.is_unit())
+    log_.add(record.id,
+             printf_string("unit %d of %d: rendering samples %u..%u of %dx%d, integrator %s, on %d threads (epoch "
+                           "%lld)",
+                           record.unit + 1, record.units, static_cast<unsigned>(s.first_sample),
+                           static_cast<unsigned>(s.first_sample + s.spp), s.width, s.height, s.integrator.name.c_str(),
+                           pool_.size(), static_cast<long long>(run.slot.epoch)));
+  else
+    log_.add(record.id, printf_string("rendering %dx%d, %u spp, integrator %s, on %d threads", s.width, s.height,
+                                      static_cast<unsigned>(s.spp), s.integrator.name.c_str(), pool_.size()));
+}
+
+StopReason Scheduler::render_passes(Run& run) {
+  RenderSession& session = *run.session;
+  {
+    // Signals that came before the render could take them (RenderSlot).
+    std::lock_guard lock(mutex_);
+    run.slot.session = &session;
+    if (run.slot.cancel_requested || run.slot.delete_requested || run.slot.lease_lost || run.slot.settled)
+      session.cancel();
+    if (run.slot.pause_requested || stopping_) session.stop();
+  }
+  run.samples_counted = session.progress().samples_done;
+  return session.run([&](const RenderProgress& p, const Film& film) { publish_pass(run, p, film); });
+}
+
+void Scheduler::publish_pass(Run& run, const RenderProgress& p, const Film& film) {
+  const std::string& id = run.id();
+  const JobProgress jp = to_job_progress(p);
+  if (hooks_.samples_rendered) {
+    const uint64_t pixels = static_cast<uint64_t>(film.width()) * static_cast<uint64_t>(film.height());
+    hooks_.samples_rendered(pixels * (p.samples_done - run.samples_counted));
+  }
+  run.samples_counted = p.samples_done;
+  try {
+    // Files first, then the news: once the progress says N samples, a crash resumes from N and the preview of that
+    // pass can be fetched. A unit's checkpoint is named by its run's epoch: the store's update below makes it the
+    // unit's. A split job's preview is the merge of its done units (end_unit).
+    const std::string checkpoint = encode_checkpoint(film, p.pass, p.elapsed_s, run.settings_hash, run.job.settings);
+    if (run.is_unit()) {
+      files_.write_unit(id, run.record.unit, run.slot.epoch, checkpoint);
+      run.checkpointed_samples = p.samples_done;
+    } else {
+      files_.write(id, JobFile::kCheckpoint, checkpoint);
+      files_.write(id, JobFile::kPreviewPng, run.outputs.preview_png(film));
+    }
+    {
+      std::lock_guard lock(mutex_);
+      run.slot.progress = jp;
+    }
+    log_.add(id, printf_string("%spass %u: %u/%u spp, %.2f s, %.3g samples/s",
+                               run.is_unit() ? printf_string("unit %d: ", run.record.unit + 1).c_str() : "",
+                               static_cast<unsigned>(p.pass), static_cast<unsigned>(p.samples_done),
+                               static_cast<unsigned>(p.samples_total), p.elapsed_s, p.samples_per_s));
+    if (!store_.update_progress(id, run.slot.epoch, jp)) {
+      std::lock_guard lock(mutex_);
+      lose_lease_locked(run.slot, "its progress refused");
+      return;
+    }
+    if (!run.is_unit()) {
+      if (hooks_.progress) hooks_.progress(id, jp);
+      if (hooks_.preview) hooks_.preview(id, p.pass);
+    } else if (hooks_.progress) {
+      // The job's progress over every unit and node, as the store sums it.
+      if (auto now = store_.get(id)) hooks_.progress(id, now->progress);
+    }
+  } catch (const std::exception& e) {
+    {
+      std::lock_guard lock(mutex_);
+      run.slot.progress = jp;
+    }
+    if (dynamic_cast<const JobStoreError*>(&e)) count_store_error();
+    // A missed checkpoint or preview (a full disk) is not worth the render: the last good checkpoint stays, and the
+    // next pass writes both again.
+    log(LogLevel::kWarn, "cannot publish progress; retried after the next pass", {{"job", id}, {"error", e.what()}});
+  }
+}
+
+// Before the outputs, which land where other daemons may read them (a shared data directory): is the run still this
+// daemon's? A store that fails here changes nothing: the end is recorded, fenced, and retried as ever. False for a
+// job deleted meanwhile too.
+bool Scheduler::still_ours_before_outputs(RenderSlot& slot) {
+  {
+    std::lock_guard lock(mutex_);
+    if (slot.delete_requested) return false;
+  }
+  try {
+    if (!store_.renew_lease(slot.id, slot.epoch, now_ms(), options_.lease.count())) {
+      std::lock_guard lock(mutex_);
+      lose_lease_locked(slot, "its lease checked before its outputs");
+      return false;
+    }
+  } catch (const JobStoreError&) {
+    count_store_error();
+  }
+  return true;
+}
+
+// A render (or a load) that stopped before its end: the job is deleted, cancelled, paused or (the daemon stopping)
+// back in the queue, to resume from its last checkpoint. The end goes to the store through record_end(): retried
+// while the store fails; when the daemon stops first, the job stays running in the store, with its checkpoint, for
+// the next start to resume.
+void Scheduler::end_interrupted(RenderSlot& slot, const JobRecord& record, uint32_t samples_done, double render_s) {
+  const std::string& id = record.id;
+  bool cancelled_by_client, paused, deleted, lease_lost, settled;
+  {
+    std::lock_guard lock(mutex_);
+    cancelled_by_client = slot.cancel_requested;
+    paused = slot.pause_requested;
+    deleted = slot.delete_requested;
+    lease_lost = slot.lease_lost;
+    settled = slot.settled;
+  }
+  const auto spp = static_cast<unsigned>(samples_done);
+  if (deleted) {
+    log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
+  } else if (settled) {
+    // The store has the client's change already, made before this unit was asked to stop.
+    log_.add(id, printf_string("unit %d stopped at %u spp: the job was %s by a client", record.unit + 1, spp,
+                               cancelled_by_client ? "cancelled" : "paused"));
+    log(LogLevel::kInfo, "unit stopped: its job was cancelled or paused",
+        {{"job", id}, {"unit", record.unit}, {"samples_done", samples_done}});
+  } else if (lease_lost) {
+    // Whoever holds the job now owns its end. Its files go only if the job is gone.
+    log_.add(id, printf_string("stopped at %u spp: the job was changed or taken over elsewhere", spp));
+    log(LogLevel::kInfo, "render stopped: the job was changed or taken over elsewhere",
+        {{"job", id}, {"samples_done", samples_done}});
+    try {
+      if (!store_.get(id)) files_.remove(id);
+    } catch (const JobStoreError& e) {
+      count_store_error();
+      log(LogLevel::kWarn, "cannot tell whether a job taken away was deleted; its files stay",
+          {{"job", id}, {"error", e.what()}});
+    }
+  } else if (cancelled_by_client) {
+    log_.add(id, printf_string("cancelled by a client at %u spp", spp));
+    // Staged under this run's epoch: its own outputs are never staged on this path.
+    stage_partial_results(record, slot.epoch);
+    const bool recorded = record_terminal(slot, JobState::kCancelled, render_s, "cancelled");
+    settle_staged(id, slot.epoch, recorded);
+    if (recorded) log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+  } else if (paused) {
+    log_.add(id, printf_string("paused by a client at %u spp; its checkpoint is kept", spp));
+    if (record_end(slot, [&] { return store_.end_run(id, slot.epoch, JobState::kPaused, now_ms()); }))
+      log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", samples_done}});
+  } else {
+    // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
+    log_.add(id,
+             printf_string("the daemon is stopping: back in the queue at %u spp, to resume from its checkpoint", spp));
+    if (record_end(slot, [&] { return store_.end_run(id, slot.epoch, JobState::kQueued, now_ms()); }))
+      log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
+          {{"job", id}, {"samples_done", samples_done}});
+  }
+}
+
+void Scheduler::end_unit(Run& run) {
+  const std::string& id = run.id();
+  const JobRecord& record = run.record;
+  const RenderSettings& s = run.job.settings;
+  // The unit's film is its last checkpoint; written again if the last pass's could not be.
+  const RenderProgress& p = run.session->progress();
+  if (run.checkpointed_samples != p.samples_done)
+    files_.write_unit(id, record.unit, run.slot.epoch,
+                      encode_checkpoint(run.session->film(), p.pass, p.elapsed_s, run.settings_hash, s));
+  log_.add(id, printf_string("unit %d of %d done: samples %u..%u in %.2f s", record.unit + 1, record.units,
+                             static_cast<unsigned>(s.first_sample), static_cast<unsigned>(s.first_sample + s.spp),
+                             p.elapsed_s));
+  if (!record_end(run.slot, [&] { return store_.end_run(id, run.slot.epoch, JobState::kSucceeded, now_ms()); })) return;
+  log(LogLevel::kInfo, "unit done",
+      {{"job", id}, {"unit", record.unit}, {"epoch", run.slot.epoch}, {"elapsed_s", p.elapsed_s}});
+  // The preview refines as units finish: the merge of those done so far, when 1, 2, 4, 8, ... are done, so that the
+  // films all previews read stay under twice those of the job's merge (a merge reads every done unit's film; after
+  // each unit, a job of n units would read n^2 / 2). Best effort.
+  try {
+    const std::vector<UnitRecord> units = store_.units(id);
+    const auto done =
+        static_cast<unsigned>(std::count_if(units.begin(), units.end(), [](const UnitRecord& u) { return u.done; }));
+    std::optional<Film> film;
+    if (std::has_single_bit(done) && done < units.size()) film = merge_unit_films(record, s.width, s.height, false);
+    if (film) {
+      files_.write(id, JobFile::kPreviewPng, run.outputs.preview_png(*film));
+      if (hooks_.preview) hooks_.preview(id, film->samples());
+    }
+  } catch (const std::exception& e) {
+    log(LogLevel::kWarn, "cannot write the preview of a split job", {{"job", id}, {"error", e.what()}});
+  }
+}
+
+void Scheduler::end_job(Run& run, StopReason reason) {
+  const std::string& id = run.id();
+  // The outputs first, staged (publish_outputs()): a file that cannot be written (a full disk) fails the job, as it
+  // should.
+  const std::string written = write_outputs(id, run.outputs, run.session->film(), run.slot.epoch);
+  JobProgress final_progress = to_job_progress(run.session->progress());
+  final_progress.eta_s = 0;
+  log_.add(id, printf_string("succeeded: %s after %.2f s, %u spp in %u passes; wrote%s", stop_explained(reason).c_str(),
+                             final_progress.elapsed_s, static_cast<unsigned>(final_progress.samples_done),
+                             static_cast<unsigned>(final_progress.passes), written.c_str()));
+  const bool recorded =
+      record_terminal(run.slot, JobState::kSucceeded, final_progress.elapsed_s, stop_reason_name(reason), "",
+                      [&] { store_.update_progress(id, run.slot.epoch, final_progress); });
+  publish_outputs(run.slot, recorded);
+  if (recorded)
+    log(LogLevel::kInfo, "job succeeded",
+        {{"job", id},
+         {"elapsed_s", final_progress.elapsed_s},
+         {"samples_per_s", final_progress.samples_per_s},
+         {"stop_reason", stop_reason_name(reason)}});
+}
+
+RenderJob Scheduler::load_run(RenderSlot& slot, const JobRecord& record) {
+  RenderJob job;
+  job.settings = render_settings_from_text(record.settings);
+  job.outputs = output_spec_from_text(record.outputs);
+  if (record.unit >= 0) {
+    // One unit: its range of the job's sample indices (work_units.h).
+    job.settings.first_sample += record.unit_first_sample;
+    job.settings.job_spp = job.settings.spp;  // every unit's rays have the whole job's texture footprints
+    job.settings.spp = record.unit_samples;
+  }
+  SceneLoadOptions options;
+  options.resolve_asset = options_.resolve_asset;
+  options.max_gltf_instances = options_.max_gltf_instances;
+  options.stop = slot.load_stop.get_token();
+  log_.add(record.id, "loading the scene");
+  const auto load_start = std::chrono::steady_clock::now();
+  job.scene = load_job_scene(json::parse(record.document), job.settings, options);
+  log_.add(record.id,
+           printf_string("scene loaded in %.3f s",
+                         std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count()));
+  return job;
+}
+
+// A failing store is no fault of the job: the render's outcome stands and is written again, after 100 ms doubling up
+// to 5 s (SchedulerOptions), until the store takes it; meanwhile the job's slot stays taken (counting against
+// max_jobs, rightly: no other job could record its end either). Logged at the first failure, then at most every 10 s.
+// False when the daemon stops first: the job is then left running in the store, and requeue_running() at the next
+// start puts it back in the queue, to resume from its checkpoint (kept until its end is recorded). False too when
+// `write` returns false: the store's state machine refused the move (the job was deleted, or changed elsewhere), and
+// nothing may be done as if it had been made. Anything else `write` throws goes through.
+bool Scheduler::record_end(RenderSlot& slot, const std::function<bool()>& write) {
+  using Clock = std::chrono::steady_clock;
+  constexpr auto kLogInterval = std::chrono::seconds(10);
+  std::chrono::milliseconds wait = options_.store_retry_first;
+  int failures = 0;
+  Clock::time_point logged_at;
+  bool taken = false;
+  {
+    std::lock_guard lock(mutex_);
+    slot.ending = true;
+  }
+  for (;;) {
+    try {
+      taken = write();
+      break;
+    } catch (const JobStoreError& e) {
+      count_store_error();
+      if (++failures == 1 || Clock::now() - logged_at >= kLogInterval) {
+        logged_at = Clock::now();
+        log(LogLevel::kError, "cannot record the end of a job: the job store failed; retrying",
+            {{"job", slot.id}, {"error", e.what()}, {"failures", failures}});
+      }
+    }
+    std::unique_lock lock(mutex_);
+    slot.awaiting_store = true;
+    if (cv_.wait_for(lock, wait, [this] { return stopping_; })) {
+      slot.awaiting_store = false;
+      log(LogLevel::kWarn,
+          "stopping with the end of a job unrecorded: it stays running in the store, and the next start resumes it "
+          "from its checkpoint",
+          {{"job", slot.id}, {"failures", failures}});
+      return false;
+    }
+    wait = std::min(wait * 2, options_.store_retry_max);
+  }
+  if (failures > 0) {
+    {
+      std::lock_guard lock(mutex_);
+      slot.awaiting_store = false;
+    }
+    log(LogLevel::kInfo, "the job store recovered; the end of the job is written",
+        {{"job", slot.id}, {"failures", failures}});
+  }
+  if (!taken)
+    log(LogLevel::kWarn, "the job store refused the end of a job: it was deleted or changed meanwhile",
+        {{"job", slot.id}});
+  return taken;
+}
+
+// Records that a job ended in `to` (succeeded, failed or cancelled) as record_end() does, its render time counted in
+// the same step (SchedulerHooks::job_ended); `before` runs first in every attempt (the final progress). Its
+// checkpoint goes once the end is recorded. False when it was not.
+bool Scheduler::record_terminal(RenderSlot& slot, JobState to, double render_s, const std::string& stop_reason,
+                                const std::string& error, const std::function<void()>& before) {
+  const bool recorded = record_end(slot, [&] {
+    if (before) before();
+    auto record = [&] { return store_.end_run(slot.id, slot.epoch, to, now_ms(), stop_reason, error); };
+    return hooks_.job_ended ? hooks_.job_ended(render_s, record) : record();
+  });
+  if (recorded) files_.remove(slot.id, JobFile::kCheckpoint);
+  return recorded;
+}
+
+// Logs a job that failed (its scene, its outputs) and records it as record_terminal() does, with the stop reason
+// kInputRefused when its input is at fault; false when it was not recorded.
+// A run resumes from the job's checkpoint (a unit's: the one the store names as its own, of the last run that
+// recorded one), and what it holds is the job's progress from then on: recorded at once, not at the end of the next
+// pass, so that a job resumed after a restart does not read 0 samples done meanwhile.
+void Scheduler::resume_from_checkpoint(RenderSlot& slot, const JobRecord& record, const RenderSettings& settings,
+                                       uint64_t settings_hash, RenderSession& session) {
+  const std::string& id = record.id;
+  // A run taken over from a node that stopped renewing its lease says so, whatever it resumes from: the wait for the
+  // lease to expire is otherwise invisible in the log.
+  const std::string who = record.unit >= 0 ? printf_string("unit %d: ", record.unit + 1) : std::string();
+  const std::string takeover =
+      record.taken_over_from.empty()
+          ? std::string()
+          : who + "node " + record.taken_over_from + " stopped renewing its lease; taken over by this node, ";
+  std::optional<std::string> checkpoint;
+  if (record.unit < 0)
+    checkpoint = files_.read(id, JobFile::kCheckpoint);
+  else if (record.unit_checkpoint_epoch > 0)
+    checkpoint = files_.read_unit(id, record.unit, record.unit_checkpoint_epoch);
+  auto cp = checkpoint ? decode_checkpoint(*checkpoint, settings.width, settings.height, settings_hash) : std::nullopt;
+  if (checkpoint && !cp) {
+    log(LogLevel::kWarn, "checkpoint unusable; the render starts over", {{"job", id}});
+    log_.add(id, "warning: its checkpoint is unusable (damaged, or of other settings); the render starts over");
+  }
+  if (!cp) {
+    if (!takeover.empty()) log_.add(id, takeover + "starting over (it left no checkpoint)");
+    return;
+  }
+  log(LogLevel::kInfo, "job resumed from its checkpoint",
+      {{"job", id}, {"samples_done", cp->film.samples()}, {"passes", cp->passes}});
+  log_.add(id, printf_string("%sresuming from its checkpoint at %u spp (%u passes)",
+                             takeover.empty() ? "" : takeover.c_str(), static_cast<unsigned>(cp->film.samples()),
+                             static_cast<unsigned>(cp->passes)));
+  session.restore(std::move(cp->film), cp->passes, cp->elapsed_s);
+  const JobProgress restored = to_job_progress(session.progress());
+  {
+    std::lock_guard lock(mutex_);
+    slot.progress = restored;
+  }
+  try {
+    if (!store_.update_progress(id, slot.epoch, restored)) return;  // the run is no longer ours: its render finds out
+  } catch (const JobStoreError& e) {
+    count_store_error();
+    log(LogLevel::kWarn, "cannot record a resumed job's progress; the next pass does",
+        {{"job", id}, {"error", e.what()}});
+    return;
+  }
+  if (!hooks_.progress) return;
+  if (record.unit < 0) {
+    hooks_.progress(id, restored);
+  } else if (auto now = store_.get(id)) {  // the job's progress over every unit and node, as the store sums it
+    hooks_.progress(id, now->progress);
+  }
+}
+
+void Scheduler::fail_lost_too_often(RenderSlot& slot, const JobRecord& record) {
+  record_failure(slot,
+                 printf_string("the renderer stopped %d times while rendering this job (its process crashed or was "
+                               "killed: the scene may crash the renderer), more than the %d retries allowed "
+                               "(--crash-retries)",
+                               record.lost_runs, options_.crash_retries),
+                 0, true);
+}
+
+bool Scheduler::record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused) {
+  log(LogLevel::kError, "job failed", {{"job", slot.id}, {"error", message}, {"input_refused", input_refused}});
+  log_.add(slot.id,
+           "failed: " + message + (input_refused ? " (its input is at fault: it would fail the same way again)" : ""));
+  try {
+    return record_terminal(slot, JobState::kFailed, render_s, input_refused ? std::string(kInputRefused) : "", message);
+  } catch (const std::exception& e) {
+    // Not a store failure (those are retried): nothing more can be done for this run.
+    log(LogLevel::kError, "cannot record a failed job", {{"job", slot.id}, {"error", e.what()}});
+    return false;
+  }
+}
+
+// A run's outputs are fenced by its end. They are staged under names of its epoch (JobFiles::stage), its end is
+// recorded (end_run, refused unless the job is still running under that epoch), and only then are they renamed to
+// the names clients read. So a cancel that commits between the run's last lease check and its end keeps the partial
+// results its canceller wrote: the refused run's full image is removed, never published. An end whose outcome is not
+// known (the store failed after taking it, and refused the retry) is read back: the run's outputs are published when
+// the job succeeded under its epoch. A crash between the end and the renames leaves the staged files, which
+// JobService::result() publishes when a client asks for a succeeded job's missing result (the job's epoch is the
+// run's), so a succeeded job is never left without its outputs.
+void Scheduler::publish_outputs(RenderSlot& slot, bool recorded) {
+  bool publish = recorded;
+  if (!recorded) {
+    try {
+      const auto now = store_.get(slot.id);
+      if (now && now->state == JobState::kSucceeded && now->epoch == slot.epoch)
+        publish = true;
+      else if (now)
+        publish = false;
+      else
+        return;  // deleted: its files go with it
+    } catch (const JobStoreError& e) {
+      // Unknown: the staged files stay, published on demand if the run's end was taken (JobService::result()).
+      count_store_error();
+      log(LogLevel::kWarn, "cannot tell whether the end of a job was taken; its outputs stay staged",
+          {{"job", slot.id}, {"error", e.what()}});
+      return;
+    }
+  }
+  if (!publish)
+    log_.add(slot.id, "its outputs are not published: the job was changed elsewhere before its end was recorded");
+  settle_staged(slot.id, slot.epoch, publish);
+}
+
+std::string Scheduler::write_outputs(const std::string& id, const OutputPipeline& outputs, const Film& film,
+                                     int64_t staged_epoch) {
+  std::string written;
+  outputs.run(film, [&](ImageFormat format, std::string_view bytes) {
+    const JobFile f = result_file(format);
+    files_.stage(id, f, staged_epoch, bytes);
+    (written += ' ') += job_file_name(f);
+  });
+  return written;
+}
+
+std::optional<Film> Scheduler::merge_unit_films(const JobRecord& job, int width, int height, bool in_progress) const {
+  std::optional<Film> merged;
+  for (const UnitRecord& u : store_.units(job.id)) {
+    if ((!u.done && !in_progress) || u.checkpoint_epoch == 0) continue;
+    auto bytes = files_.read_unit(job.id, u.index, u.checkpoint_epoch);
+    auto cp =
+        bytes ? decode_checkpoint(*bytes, width, height, unit_settings_hash(job.settings, u.index)) : std::nullopt;
+    if (!cp || (u.done && cp->film.samples() != u.samples)) {
+      if (!u.done) continue;  // a checkpoint being replaced; the next one will do
+      throw std::runtime_error(printf_string("the film of unit %d is missing or damaged", u.index + 1));
+    }
+    // Every layer's integer sums and the per-pixel counts: exact in any order (film.h).
+    if (!merged)
+      merged = std::move(cp->film);
+    else
+      merged->merge(cp->film);
+  }
+  return merged;
+}
+
+void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
+  const std::string& id = record.id;
+  const RenderSettings settings = render_settings_from_text(record.settings);
+  const auto start = std::chrono::steady_clock::now();
+  std::optional<Film> film = merge_unit_films(record, settings.width, settings.height, false);
+  if (!film || film->samples() != record.progress.samples_total)
+    throw std::runtime_error(printf_string("its units' films hold %u of its %u samples per pixel",
+                                           static_cast<unsigned>(film ? film->samples() : 0),
+                                           static_cast<unsigned>(record.progress.samples_total)));
+  // Outputs land where every node reads them: is the merge still this node's? (A merge taken over writes the same
+  // bits: the films it reads are the units' authoritative ones, and a done unit is never rendered again.)
+  if (!store_.renew_lease(id, slot.epoch, now_ms(), options_.lease.count())) {
+    std::lock_guard lock(mutex_);
+    lose_lease_locked(slot, "its lease checked before the merge");
+    return;
+  }
+  const OutputPipeline outputs(settings, output_spec_from_text(record.outputs));
+  const std::string written = write_outputs(id, outputs, *film, slot.epoch);
+  files_.write(id, JobFile::kPreviewPng, outputs.preview_png(*film));
+  const double merge_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  log_.add(id, printf_string("succeeded: its %d units merged in %.3f s, %u spp; wrote%s", record.units, merge_s,
+                             static_cast<unsigned>(film->samples()), written.c_str()));
+  const bool recorded = record_terminal(slot, JobState::kSucceeded, merge_s, stop_reason_name(StopReason::kSamples));
+  publish_outputs(slot, recorded);
+  if (recorded) {
+    files_.remove_units(id);
+    log(LogLevel::kInfo, "job succeeded", {{"job", id}, {"units", record.units}, {"merge_s", merge_s}});
+  }
+}
+
+void Scheduler::stage_partial_results(const JobRecord& job, int64_t key) {
+  try {
+    const RenderSettings settings = render_settings_from_text(job.settings);
+    std::optional<Film> film;
+    uint32_t passes = 0;
+    if (auto bytes = files_.read(job.id, JobFile::kCheckpoint)) {
+      if (auto cp = decode_checkpoint(*bytes, settings.width, settings.height, fnv1a64(job.settings))) {
+        film = std::move(cp->film);
+        passes = cp->passes;
+      }
+    } else {
+      // A split job: what its units rendered.
+      film = merge_unit_films(job, settings.width, settings.height, true);
+    }
+    if (!film || film->samples() == 0) return;
+    const std::string written =
+        write_outputs(job.id, OutputPipeline(settings, output_spec_from_text(job.outputs)), *film, key);
+    log_.add(job.id,
+             printf_string(
+                 "kept what it rendered, %u spp in %u passes, as its partial results (once the cancel is taken):%s",
+                 static_cast<unsigned>(film->samples()), static_cast<unsigned>(passes), written.c_str()));
+  } catch (const std::exception& e) {
+    log(LogLevel::kWarn, "cannot write the partial results of a cancelled job", {{"job", job.id}, {"error", e.what()}});
+    log_.add(job.id, std::string("warning: its partial results cannot be written: ") + e.what());
+  }
+}
+
+void Scheduler::settle_staged(const std::string& id, int64_t key, bool publish) {
+  for (JobFile f : kResultFiles) {
+    try {
+      if (publish)
+        files_.publish_staged(id, f, key);
+      else
+        files_.discard_staged(id, f, key);
+    } catch (const std::exception& e) {
+      log(LogLevel::kWarn, "cannot settle the staged results of a job", {{"job", id}, {"error", e.what()}});
+    }
+  }
+}
+
+void Scheduler::settle_locked(const std::vector<RenderSlot*>& slots, bool cancelled) {
+  for (RenderSlot* slot : slots) {
+    slot->settled = true;
+    (cancelled ? slot->cancel_requested : slot->pause_requested) = true;
+    slot->load_stop.request_stop();
+    if (slot->session) slot->session->cancel();
+  }
+}
+
+std::vector<Scheduler::RenderSlot*> Scheduler::slots_locked(const std::string& id) const {
+  std::vector<RenderSlot*> out;
+  for (const auto& [key, slot] : running_)
+    if (slot->id == id) out.push_back(slot.get());
+  return out;
+}
+
+std::vector<Scheduler::RenderSlot*> Scheduler::rendering_locked(const std::string& id) const {
+  std::vector<RenderSlot*> out = slots_locked(id);
+  std::erase_if(out, [](RenderSlot* slot) { return slot->done; });
+  return out;
+}
+
+std::optional<JobProgress> Scheduler::live_progress(const std::string& id) const {
+  std::lock_guard lock(mutex_);
+  auto it = running_.find(id);  // a job rendered whole; a split job's progress is its units' in the store
+  if (it == running_.end()) return std::nullopt;
+  return it->second->progress;
+}
+
+Scheduler::Outcome Scheduler::cancel(const std::string& id) {
+  {
+    std::lock_guard lock(mutex_);
+    const std::vector<RenderSlot*> slots = rendering_locked(id);
+    if (!slots.empty() && slots.front()->unit < 0) {
+      // A job rendered whole, here: its render records the end once it has wound down.
+      for (RenderSlot* slot : slots) {
+        slot->cancel_requested = true;
+        slot->load_stop.request_stop();
+        if (slot->session) slot->session->cancel();
+      }
+      return Outcome::kInProgress;
+    }
+    // Not rendering here, and claims happen under this lock: a queued job stays queued until we are done. Or units of
+    // a split job render here: the store first, so that the nodes rendering its other units stop at once (its
+    // notification), and then the units here, which record nothing (settle_locked()).
+    auto job = store_.get(id);
+    if (!job) return Outcome::kUnknown;
+    if (!action_allowed(JobAction::kCancel, job->state)) return Outcome::kConflict;
+    log_.add(id, "cancelled by a client");
+    // What a paused (or interrupted) render has done is kept as its partial results, staged before the state says so
+    // and published once the store took the cancel. The key is negative, unlike any run's epoch (a run elsewhere
+    // stages its own outputs under its epoch), and drawn at random, so that two nodes cancelling at once stage
+    // apart.
+    const int64_t key = -static_cast<int64_t>(std::random_device{}() | 1u);
+    stage_partial_results(*job, key);
+    const bool taken = store_.transition(id, JobState::kCancelled, now_ms(), "cancelled");
+    settle_staged(id, key, taken);
+    if (!taken) return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
+    settle_locked(slots, true);
+  }
+  files_.remove(id, JobFile::kCheckpoint);
+  log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+  notify_state(id);
+  return Outcome::kDone;
+}
+
+Scheduler::Outcome Scheduler::pause(const std::string& id) {
+  {
+    std::lock_guard lock(mutex_);
+    const std::vector<RenderSlot*> slots = rendering_locked(id);
+    if (!slots.empty() && slots.front()->unit < 0) {
+      for (RenderSlot* slot : slots)
+        if (slot->cancel_requested || slot->delete_requested) return Outcome::kConflict;
+      // A job rendered whole, here, ends its pass and keeps it; its render records the pause.
+      for (RenderSlot* slot : slots) {
+        slot->pause_requested = true;
+        slot->load_stop.request_stop();
+        if (slot->session) slot->session->stop();
+      }
+      return Outcome::kInProgress;
+    }
+    // Not rendering here (claims happen under this lock): queued, or running in a process that is gone. Or units of a
+    // split job render here: the store first (its running units go back to the queue with their last checkpoints),
+    // then the units here give up their passes under way and record nothing.
+    if (!store_.transition(id, JobState::kPaused, now_ms()))
+      return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
+    settle_locked(slots, false);
+  }
+  log(LogLevel::kInfo, "job paused", {{"job", id}});
+  log_.add(id, "paused by a client");
+  notify_state(id);
+  return Outcome::kDone;
+}
+
+Scheduler::Outcome Scheduler::resume(const std::string& id) {
+  if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", JobState::kPaused))
+    return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
+  log(LogLevel::kInfo, "job resumed", {{"job", id}});
+  log_.add(id, "resumed by a client: back in the queue");
+  notify_state(id);
+  wake();
+  return Outcome::kDone;
+}
+
+Scheduler::Outcome Scheduler::requeue(const std::string& id) {
+  {
+    // The store first: one that fails (JobStoreError) leaves the job as it was, its preview included, for a retry.
+    // Claims happen under this lock, so the job is not claimed before the files of its last run are gone.
+    std::lock_guard lock(mutex_);
+    auto job = store_.get(id);
+    if (!job) return Outcome::kUnknown;
+    if (!action_allowed(JobAction::kRequeue, job->state, job->input_refused())) return Outcome::kConflict;
+    if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", job->state)) return Outcome::kConflict;
+    // From scratch: nothing of the last run survives.
+    for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng}) files_.remove(id, f);
+    for (JobFile f : kResultFiles) files_.remove(id, f);
+    files_.remove_units(id);  // a split job's units start over too (the store forgot their checkpoints)
+  }
+  log(LogLevel::kInfo, "job requeued", {{"job", id}});
+  log_.add(id, "requeued by a client: the render starts over");
+  notify_state(id);
+  wake();
+  return Outcome::kDone;
+}
+
+bool Scheduler::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
+  std::lock_guard lock(mutex_);
+  if (auto slots = slots_locked(id); !slots.empty()) {
+    if (only_finished_before_ms) return false;  // still (or again) rendering, or not yet reaped: not expired
+    // The store first: one that fails (JobStoreError) leaves the render going and the job whole. The other way
+    // round, the render would stop and its files go while the store kept the job running, with no render behind it.
+    store_.remove(id);
+    for (RenderSlot* slot : slots) {
+      slot->delete_requested = true;
+      slot->load_stop.request_stop();
+      if (slot->session) slot->session->cancel();
+    }
+    return true;  // the render's thread removes the files once it has stopped writing them
+  }
+  if (!store_.remove(id, only_finished_before_ms)) return false;
+  files_.remove(id);
+  log(LogLevel::kInfo, "job deleted", {{"job", id}});
+  return true;
+}
+
+}  // namespace tessera::server

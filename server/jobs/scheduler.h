@@ -1,0 +1,212 @@
+// Runs jobs: claims queued jobs from the store up to `max_jobs` at once and renders each on its own thread, every
+// render sharing the process's one ThreadPool. After each pass a render writes its checkpoint (the film, atomically),
+// publishes its progress (in memory for status requests, and to the store) and a preview PNG; at the end it writes
+// the outputs the job asked for. A job claimed with a checkpoint (the daemon stopped or died mid-render, or it was
+// paused) resumes from it; sampling being deterministic, its image is the one an uninterrupted render gives. A job
+// that throws fails alone; the daemon stays up. A store that fails while a job's end is recorded is retried until it
+// takes it (JobStoreError never fails a job): the store, not the job, is at fault. An end the store's state machine
+// refuses (the job was deleted, or changed elsewhere) is not recorded, and nothing is done as if it had been.
+#pragma once
+
+#include <chrono>
+#include <condition_variable>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "renderer/job.h"
+#include "renderer/output.h"
+#include "renderer/scene_loader.h"
+#include "renderer/session.h"
+#include "renderer/thread_pool.h"
+#include "server/files/job_files.h"
+#include "server/files/job_log.h"
+#include "server/store/job_store.h"
+
+namespace tessera::server {
+
+struct SchedulerOptions {
+  int max_jobs = 1;
+  // Runs (jobs rendered whole, work units) one owner's jobs may hold at once across every node of the store; 0: no
+  // limit (JobStore::claim_next).
+  int max_running_per_user = 0;
+  // Runs of a job that may be lost (its node died while rendering it: JobRecord::lost_runs) before it fails instead
+  // of rendering again: a scene that crashes the renderer fails after this many retries, never in a loop.
+  int crash_retries = 2;
+  // This daemon's name among the nodes sharing the store, written on the lines it adds to job logs; empty for a
+  // daemon alone.
+  std::string node;
+  // Maps an asset reference of a job ("gltf", "environment.map") to its file (SceneLoadOptions::resolve_asset).
+  std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
+  uint64_t max_gltf_instances = 1'000'000;  // SceneLoadOptions::max_gltf_instances
+  // How often the queue is looked at without being woken (jobs another process may have added), and the leases of
+  // the renders under way renewed: a render whose job was cancelled, paused or deleted elsewhere (another daemon on
+  // the same store) finds out within this, when job_changed() does not tell it sooner.
+  std::chrono::milliseconds poll_interval{1000};
+  // How long a claim holds a job without being renewed (JobStore::claim_next): past it another daemon may take the
+  // job over, and this one's writes for it are refused.
+  std::chrono::milliseconds lease{kDefaultLeaseMs};
+  // The wait before recording a job's end again after the store failed, doubled after each failure up to the max.
+  std::chrono::milliseconds store_retry_first{100};
+  std::chrono::milliseconds store_retry_max{5000};
+};
+
+// What the scheduler tells the rest of the daemon (events, metrics). Called on render threads; must not block long.
+struct SchedulerHooks {
+  std::function<void(const std::string& id)> state_changed;
+  std::function<void(const std::string& id, const JobProgress& progress)> progress;
+  std::function<void(const std::string& id, uint32_t pass)> preview;
+  std::function<void(uint64_t pixel_samples)> samples_rendered;
+  // Records the end of a job (succeeded, failed or cancelled): runs `record`, the store's state change (true when the
+  // store took it), and counts the render time in the same step (Metrics::record_job_end). Unset: `record` alone.
+  std::function<bool(double render_s, const std::function<bool()>& record)> job_ended;
+  // A write to the job store failed (a job's progress, warnings or end).
+  std::function<void()> store_write_failed;
+};
+
+class Scheduler {
+ public:
+  Scheduler(JobStore& store, const JobFiles& files, ThreadPool& pool, SchedulerOptions options);
+  ~Scheduler();
+  Scheduler(const Scheduler&) = delete;
+  Scheduler& operator=(const Scheduler&) = delete;
+
+  void set_hooks(SchedulerHooks hooks);
+  // Puts jobs a previous process left running back in the queue (they resume from their checkpoints), then starts
+  // claiming.
+  void start();
+  // A job was queued: look at the queue now.
+  void wake();
+  // Stops claiming and asks every render to end its pass (which checkpoints); returns at once.
+  void begin_drain();
+  // Stops claiming, lets running renders end their pass for up to `grace_s` seconds, then cancels the rest; their
+  // jobs go back to the queue with their checkpoints. Waits for the threads.
+  void shutdown(double grace_s = 0);
+  bool accepting() const;
+
+  // A job changed in the store, here or on another daemon (its state, priority or lease; PostgresNotifications): a
+  // render of it here checks its lease now, rather than at its next renewal, and stops within a tile's time if the
+  // job was cancelled, paused, deleted or taken over. `claimable` (it is queued): the queue is looked at now.
+  void job_changed(const std::string& id, bool claimable);
+  // Changes may have been missed (the store's notifications were down): every render checks its lease now, and the
+  // queue is looked at.
+  void recheck();
+
+  // The progress of a job rendering here, fresher than the store's.
+  std::optional<JobProgress> live_progress(const std::string& id) const;
+  int running_count() const;
+  // Whether the end of a job is waiting for the store to take it (its last write failed).
+  bool store_failing() const;
+
+  enum class Outcome { kDone, kInProgress, kConflict, kUnknown };
+  // queued, paused or running -> cancelled (a job rendered whole here winds down within one tile's time:
+  // kInProgress; the units of a split job stop after the store took the change, kDone). A job cancelled after a pass
+  // keeps the image of its last complete pass as its results (partial).
+  Outcome cancel(const std::string& id);
+  // queued or running -> paused (a job rendered whole here ends its pass and keeps its checkpoint: kInProgress; the
+  // units of a split job give up their passes under way after the store took the change, kDone).
+  Outcome pause(const std::string& id);
+  // paused -> queued.
+  Outcome resume(const std::string& id);
+  // failed or cancelled -> queued, from scratch (its checkpoint, preview and outputs are deleted); not a job that
+  // failed on its input.
+  Outcome requeue(const std::string& id);
+  // Deletes a job and its files (cancelling its render first); false for an unknown id. With
+  // `only_finished_before_ms` (retention), only a job that ended before that time and has no render thread left;
+  // anything else is kept (false).
+  bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt);
+
+ private:
+  class RenderSlot;
+  struct Run;
+  void dispatch_loop();
+  // A claimed run, on its own thread: a render (render_run), a split job's merge, or the failure of a job lost too
+  // often; then finish_run().
+  void run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record);
+  void finish_run(RenderSlot& slot);
+  // restore (load_run, resume_from_checkpoint) → render (render_passes, publish_pass after each pass) → the end
+  // (end_interrupted, end_unit or end_job). A scene the renderer refuses fails the job.
+  void render_run(RenderSlot& slot, const JobRecord& record);
+  void record_warnings(const std::string& id, const std::vector<std::string>& warnings);
+  void log_start(const Run& run);
+  StopReason render_passes(Run& run);
+  // A pass ended: its checkpoint, its preview, its progress (in memory, in the store, to the hooks).
+  void publish_pass(Run& run, const RenderProgress& progress, const Film& film);
+  bool still_ours_before_outputs(RenderSlot& slot);
+  void end_interrupted(RenderSlot& slot, const JobRecord& record, uint32_t samples_done, double render_s);
+  // A unit rendered its range: its film kept, its end recorded, the split job's preview refined.
+  void end_unit(Run& run);
+  // A job rendered whole: its outputs staged, its end recorded, its outputs published.
+  void end_job(Run& run, StopReason reason);
+  bool record_end(RenderSlot& slot, const std::function<bool()>& write);
+  bool record_terminal(RenderSlot& slot, JobState to, double render_s, const std::string& stop_reason,
+                       const std::string& error = "", const std::function<void()>& before = nullptr);
+  bool record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused);
+  // What a run renders: the settings and outputs its record stores (render_settings.h), narrowed to a unit's sample
+  // range, and the scene its document describes (load_job_scene). Throws SceneError for a scene the renderer refuses,
+  // LoadStopped when the slot is asked to stop meanwhile.
+  RenderJob load_run(RenderSlot& slot, const JobRecord& record);
+  // Restores `session` from the run's checkpoint, if it has a usable one, and records the progress it holds.
+  void resume_from_checkpoint(RenderSlot& slot, const JobRecord& record, const RenderSettings& settings,
+                              uint64_t settings_hash, RenderSession& session);
+  // Fails a job claimed after more lost runs than options_.crash_retries, naming them; it is not rendered again.
+  void fail_lost_too_often(RenderSlot& slot, const JobRecord& record);
+  void count_store_error();
+  // The outputs of a job cancelled after a pass, from its checkpoint (the film of its last complete pass), so that
+  // what it rendered stays viewable and downloadable. They are staged under `key` (JobFiles::stage) and published by
+  // settle_staged() only once the store took the cancel: a cancel that loses the race with the run's own
+  // end (refused: the job succeeded meanwhile) must not put its older image over the finished one. Best effort:
+  // nothing without a usable checkpoint; a file that cannot be written is logged, and the cancel goes on.
+  void stage_partial_results(const JobRecord& job, int64_t key);
+  // The result files staged under `key` (an epoch, or a cancel's key): published over the final names, or removed.
+  void settle_staged(const std::string& id, int64_t key, bool publish);
+  void reap_finished_locked(std::unique_lock<std::mutex>& lock);
+  void renew_leases_locked();
+  // How often a render's lease is renewed: the store's renewal period for the lease, or the poll interval if shorter.
+  std::chrono::milliseconds renewal_period() const;
+  // `noticed_by`: what found the lease gone, for the log (a notification, a renewal, a refused write).
+  void renew_lease_locked(RenderSlot& slot, const char* noticed_by);
+  void lose_lease_locked(RenderSlot& slot, const char* noticed_by);
+  void notify_state(const std::string& id);
+  // The slots of a job here (several for the units of a split job); those still rendering.
+  std::vector<RenderSlot*> slots_locked(const std::string& id) const;
+  std::vector<RenderSlot*> rendering_locked(const std::string& id) const;
+  // The units of a split job here, once the store took a client's cancel (`cancelled`) or pause: they give up their
+  // passes under way and record nothing.
+  void settle_locked(const std::vector<RenderSlot*>& slots, bool cancelled);
+  // A split job's units rendered: merges their films (each a unit's authoritative checkpoint) into the job's outputs
+  // and records its end (the merge unit's run, fenced by its epoch).
+  void merge_units(RenderSlot& slot, const JobRecord& record);
+  // The film of a split job's units: the done ones, with `in_progress` also the last checkpoints of the others
+  // (samples rendered, not a contiguous range: an unbiased, noisier image). Nothing for a job rendered whole or when
+  // no unit has a film; throws when a done unit's film is missing or damaged.
+  std::optional<Film> merge_unit_films(const JobRecord& job, int width, int height, bool in_progress) const;
+  // The outputs the job asked for (result.png, result.exr), from `film` through its output pipeline, staged
+  // (JobFiles::stage) under `staged_epoch` for publish_outputs(); the names written, for its log.
+  std::string write_outputs(const std::string& id, const OutputPipeline& outputs, const Film& film,
+                            int64_t staged_epoch);
+  // After the end of a run that staged its outputs: published when the store took that end (`recorded`, or read back
+  // when it is unknown), removed when it refused it.
+  void publish_outputs(RenderSlot& slot, bool recorded);
+
+  JobStore& store_;
+  const JobFiles& files_;
+  JobLog log_;  // each job's own log, among its files
+  ThreadPool& pool_;
+  SchedulerOptions options_;
+  SchedulerHooks hooks_;
+
+  mutable std::mutex mutex_;
+  std::condition_variable cv_;
+  bool started_ = false;
+  bool stopping_ = false;
+  std::map<std::string, std::shared_ptr<RenderSlot>> running_;
+  std::thread dispatcher_;
+};
+
+}  // namespace tessera::server
