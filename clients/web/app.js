@@ -3,7 +3,7 @@
 import { api, allowed, ApiError, getBlob, getToken, onConnection, setToken, TERMINAL } from "./api.js";
 import { CLIENT_EXAMPLES, examplesFrom } from "./examples.js";
 import { decodeExr, ExrError } from "./exr.js";
-import { materialForm } from "./materials.js";
+import { materialForm, NOT_ON_PREVIEW_STAGE } from "./materials.js";
 import { ImageViewer } from "./viewer.js";
 
 const $ = (sel) => document.querySelector(sel);
@@ -325,7 +325,7 @@ let currentMaterialForm = null;
 async function loadMaterials() {
   try {
     const catalog = await api.materials();
-    materialModels = catalog.materials || [];
+    materialModels = (catalog.materials || []).filter((m) => !NOT_ON_PREVIEW_STAGE.includes(m.type));
   } catch (e) {
     if (!(e instanceof ApiError && e.status === 401)) showError(e, "Loading the material models");
     return;

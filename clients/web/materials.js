@@ -22,6 +22,10 @@ export const PRIMARY_PARAMETERS = [
   "material", "a", "b", "weight",
 ];
 
+// Models the material tab does not offer: the preview stage would show nothing of them. `interface` is a boundary
+// that is not drawn (it only marks where an object's medium begins, in a scene job).
+export const NOT_ON_PREVIEW_STAGE = ["interface"];
+
 let uid = 0;
 const nextId = (name) => `mat-${name}-${++uid}`;
 
