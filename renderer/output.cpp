@@ -129,14 +129,12 @@ Image OutputPipeline::image(const Film& film) const {
   return image;
 }
 
-void OutputPipeline::run(const Film& film, const Publish& publish) const {
-  if (formats_.empty()) return;
-  const Image resolved = image(film);
-  for (ImageFormat f : formats_) publish(f, encode_image(resolved, f, options_));
+void OutputPipeline::publish(const Image& image, const Publish& publish) const {
+  for (ImageFormat f : formats_) publish(f, encode_image(image, f, options_));
 }
 
-std::string OutputPipeline::preview_png(const Film& film) const {
-  return encode_image(image(film), ImageFormat::kPng, options_);
+std::string OutputPipeline::preview_png(const Image& image) const {
+  return encode_image(image, ImageFormat::kPng, options_);
 }
 
 }  // namespace tessera

@@ -80,10 +80,13 @@ class OutputPipeline {
 
   // resolve → post stages.
   Image image(const Film& film) const;
-  // The whole pipeline: each format encoded from one image and handed to `publish`.
-  void run(const Film& film, const Publish& publish) const;
-  // A render's preview: the same image, as PNG, whatever the formats.
-  std::string preview_png(const Film& film) const;
+  // encode → publish: each format encoded from `image` (what image() gave) and handed to `publish`.
+  void publish(const Image& image, const Publish& publish) const;
+  // The whole pipeline.
+  void run(const Film& film, const Publish& publish) const { this->publish(image(film), publish); }
+  // A render's preview: the image as PNG, whatever the formats.
+  std::string preview_png(const Image& image) const;
+  std::string preview_png(const Film& film) const { return preview_png(image(film)); }
 
  private:
   EncodeOptions options_;

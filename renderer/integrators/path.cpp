@@ -91,6 +91,25 @@ struct PrimaryHit {
   RayHit hit;
 };
 
+// A vertex's light-sample numbers (one to choose the light, two for the point on it), in the fixed layout every
+// vertex has, surface or medium: spent whether or not the light is sampled, so that the numbers the rest of the path
+// draws do not depend on it.
+struct LightNumbers {
+  float select = 0;
+  Vec2 u{};
+};
+LightNumbers light_numbers(PixelSampler& sampler, bool sample_light) {
+  LightNumbers n;
+  if (sample_light) {
+    n.select = sampler.get1d();
+    n.u = sampler.get2d();
+  } else {
+    sampler.skip1d();
+    sampler.skip2d();
+  }
+  return n;
+}
+
 // Radiance arriving at the camera along `ray`. With `primary`, the camera ray's hit is taken from it rather than
 // traced again. `cone` is the camera ray's (Camera::pixel_cone); each bounce carries it on, widened by how much the
 // sampled lobe spreads, and textures are filtered over its footprint. A zero cone reads the finest texels.
@@ -151,15 +170,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         const Vec3 wo_world = -ray.dir / dir_length;
         const HenyeyGreenstein phase = current->phase();
         const bool sample_light = use_light_sampling && !lights.empty();
-        float u_light_select = 0;
-        Vec2 u_light;
-        if (sample_light) {
-          u_light_select = sampler.get1d();
-          u_light = sampler.get2d();
-        } else {
-          sampler.skip1d();
-          sampler.skip2d();
-        }
+        const auto [u_light_select, u_light] = light_numbers(sampler, sample_light);
         sampler.skip1d();  // a lobe choice: the phase function has one lobe
         const PhaseSample ps = phase.sample(wo_world, sampler.get2d());
         if (sample_light) {
@@ -251,15 +262,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     // This vertex's numbers, in a fixed layout whatever the estimator or the material: the light sample's (spent
     // whether or not it is taken, and only computed when used), then the BSDF sample's.
     const bool sample_light = use_light_sampling && has_non_delta(flags) && !lights.empty();
-    float u_light_select = 0;
-    Vec2 u_light;
-    if (sample_light) {
-      u_light_select = sampler.get1d();
-      u_light = sampler.get2d();
-    } else {
-      sampler.skip1d();
-      sampler.skip2d();
-    }
+    const auto [u_light_select, u_light] = light_numbers(sampler, sample_light);
     float u_lobe = 0;
     if (flags & kBsdfOneLobe)
       sampler.skip1d();

@@ -596,7 +596,7 @@ void Scheduler::end_job(Run& run, StopReason reason) {
   const std::string& id = run.id();
   // The outputs first, staged (publish_outputs()): a file that cannot be written (a full disk) fails the job, as it
   // should.
-  const std::string written = write_outputs(id, run.outputs, run.session->film(), run.slot.epoch);
+  const std::string written = write_outputs(id, run.outputs, run.outputs.image(run.session->film()), run.slot.epoch);
   JobProgress final_progress = to_job_progress(run.session->progress());
   final_progress.eta_s = 0;
   log_.add(id, printf_string("succeeded: %s after %.2f s, %u spp in %u passes; wrote%s", stop_explained(reason).c_str(),
@@ -817,10 +817,10 @@ void Scheduler::publish_outputs(RenderSlot& slot, bool recorded) {
   settle_staged(slot.id, slot.epoch, publish);
 }
 
-std::string Scheduler::write_outputs(const std::string& id, const OutputPipeline& outputs, const Film& film,
+std::string Scheduler::write_outputs(const std::string& id, const OutputPipeline& outputs, const Image& image,
                                      int64_t staged_epoch) {
   std::string written;
-  outputs.run(film, [&](ImageFormat format, std::string_view bytes) {
+  outputs.publish(image, [&](ImageFormat format, std::string_view bytes) {
     const JobFile f = result_file(format);
     files_.stage(id, f, staged_epoch, bytes);
     (written += ' ') += job_file_name(f);
@@ -865,8 +865,9 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
     return;
   }
   const OutputPipeline outputs(settings, output_spec_from_text(record.outputs));
-  const std::string written = write_outputs(id, outputs, *film, slot.epoch);
-  files_.write(id, JobFile::kPreviewPng, outputs.preview_png(*film));
+  const Image image = outputs.image(*film);
+  const std::string written = write_outputs(id, outputs, image, slot.epoch);
+  files_.write(id, JobFile::kPreviewPng, outputs.preview_png(image));
   const double merge_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   log_.add(id, printf_string("succeeded: its %d units merged in %.3f s, %u spp; wrote%s", record.units, merge_s,
                              static_cast<unsigned>(film->samples()), written.c_str()));
@@ -893,8 +894,8 @@ void Scheduler::stage_partial_results(const JobRecord& job, int64_t key) {
       film = merge_unit_films(job, settings.width, settings.height, true);
     }
     if (!film || film->samples() == 0) return;
-    const std::string written =
-        write_outputs(job.id, OutputPipeline(settings, output_spec_from_text(job.outputs)), *film, key);
+    const OutputPipeline outputs(settings, output_spec_from_text(job.outputs));
+    const std::string written = write_outputs(job.id, outputs, outputs.image(*film), key);
     log_.add(job.id,
              printf_string(
                  "kept what it rendered, %u spp in %u passes, as its partial results (once the cancel is taken):%s",

@@ -186,9 +186,9 @@ class Scheduler {
   // (samples rendered, not a contiguous range: an unbiased, noisier image). Nothing for a job rendered whole or when
   // no unit has a film; throws when a done unit's film is missing or damaged.
   std::optional<Film> merge_unit_films(const JobRecord& job, int width, int height, bool in_progress) const;
-  // The outputs the job asked for (result.png, result.exr), from `film` through its output pipeline, staged
-  // (JobFiles::stage) under `staged_epoch` for publish_outputs(); the names written, for its log.
-  std::string write_outputs(const std::string& id, const OutputPipeline& outputs, const Film& film,
+  // The outputs the job asked for (result.png, result.exr), encoded from `image` (OutputPipeline::image) and
+  // staged (JobFiles::stage) under `staged_epoch` for publish_outputs(); the names written, for its log.
+  std::string write_outputs(const std::string& id, const OutputPipeline& outputs, const Image& image,
                             int64_t staged_epoch);
   // After the end of a run that staged its outputs: published when the store took that end (`recorded`, or read back
   // when it is unknown), removed when it refused it.

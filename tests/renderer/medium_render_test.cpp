@@ -11,6 +11,7 @@
 #include "renderer/job.h"
 #include "renderer/scene_error.h"
 #include "renderer/session.h"
+#include "tests/renderer/test_util.h"
 
 namespace tessera {
 namespace {
@@ -122,39 +123,10 @@ TEST(Media, SceneMediumAttenuatesAndHidesTheSky) {
 }
 
 // Region means of K independent renders and their standard errors.
-struct Estimate {
-  std::vector<double> mean, se;
-};
-
-Estimate estimate(const json& scene, Estimator e, int size, int regions, int runs, uint32_t spp) {
-  std::vector<std::vector<double>> per_run(runs, std::vector<double>(regions * regions * 3, 0));
-  const int r = size / regions;
-  for (int k = 0; k < runs; ++k) {
-    const std::vector<float> img =
-        render(scene, settings(size, spp, e, 500 + 7919 * k + 104729 * static_cast<uint64_t>(e), 16));
-    for (int y = 0; y < size; ++y)
-      for (int x = 0; x < size; ++x)
-        for (int c = 0; c < 3; ++c)
-          per_run[k][((y / r) * regions + x / r) * 3 + c] += img[(y * size + x) * 3 + c] / double(r * r);
-  }
-  Estimate out;
-  for (size_t i = 0; i < per_run[0].size(); ++i) {
-    double m = 0, v = 0;
-    for (int k = 0; k < runs; ++k) m += per_run[k][i] / runs;
-    for (int k = 0; k < runs; ++k) v += (per_run[k][i] - m) * (per_run[k][i] - m) / (runs - 1);
-    out.mean.push_back(m);
-    out.se.push_back(std::sqrt(v / runs));
-  }
-  return out;
-}
-
-double worst_z(const Estimate& a, const Estimate& b, double scale_b = 1) {
-  double worst = 0;
-  for (size_t i = 0; i < a.mean.size(); ++i) {
-    const double se = std::sqrt(a.se[i] * a.se[i] + b.se[i] * b.se[i] * scale_b * scale_b);
-    worst = std::max(worst, std::abs(a.mean[i] - b.mean[i] * scale_b) / std::max(se, 1e-6 + 1e-4 * a.mean[i]));
-  }
-  return worst;
+test::RegionStats estimate(const json& scene, Estimator e, int size, int regions, int runs, uint32_t spp) {
+  return test::grid_region_stats(runs, size, regions, [&](int k) {
+    return render(scene, settings(size, spp, e, 500 + 7919 * k + 104729 * static_cast<uint64_t>(e), 16));
+  });
 }
 
 // Two independent estimators of a scene with a chromatic, absorbing, anisotropic medium behind an interface and
@@ -192,16 +164,17 @@ TEST(Media, EstimatorsAgreeOnScatteringSpheres) {
   // 3 pairs x 16 regions x 3 channels = 144 comparisons with 23 degrees of freedom each: Bonferroni at a 0.1 %
   // family-wise false alarm rate asks for two-sided p < 7e-6 each, |t_23| < 5.8.
   const double bound = 5.8;
-  const Estimate hemisphere = estimate(scene, Estimator::kHemisphere, size, regions, runs, spp);
-  const Estimate area = estimate(scene, Estimator::kArea, size, regions, runs, spp);
-  const Estimate mis = estimate(scene, Estimator::kMis, size, regions, runs, spp);
-  const double z_ha = worst_z(hemisphere, area), z_hm = worst_z(hemisphere, mis), z_am = worst_z(area, mis);
+  const test::RegionStats hemisphere = estimate(scene, Estimator::kHemisphere, size, regions, runs, spp);
+  const test::RegionStats area = estimate(scene, Estimator::kArea, size, regions, runs, spp);
+  const test::RegionStats mis = estimate(scene, Estimator::kMis, size, regions, runs, spp);
+  const double z_ha = test::worst_z(hemisphere, area), z_hm = test::worst_z(hemisphere, mis),
+               z_am = test::worst_z(area, mis);
   std::printf("worst |z|: hemisphere vs area %.2f, hemisphere vs mis %.2f, area vs mis %.2f\n", z_ha, z_hm, z_am);
   EXPECT_LT(z_ha, bound);
   EXPECT_LT(z_hm, bound);
   EXPECT_LT(z_am, bound);
   // The comparison has the power to see a small bias: the same estimates with 5 % more light in one are rejected.
-  EXPECT_GT(worst_z(area, mis, 1.05), bound);
+  EXPECT_GT(test::worst_z(area, mis, 1.05), bound);
 }
 
 // Bad media are refused naming the field, as a 422 names it.

@@ -9,6 +9,7 @@
 #include "renderer/job.h"
 #include "renderer/scene_error.h"
 #include "renderer/session.h"
+#include "tests/renderer/test_util.h"
 
 namespace tessera {
 namespace {
@@ -171,41 +172,11 @@ TEST(Transport, GreyFurnaceOfConvexObject) {
 // The hemisphere, area and MIS estimators are independent unbiased estimators of the same image: their region means
 // must agree within their statistical error. Each estimator renders K independent images (different seeds); the
 // spread of the region means across them gives the standard error.
-struct RegionStats {
-  std::vector<double> mean, se;
-};
-
-RegionStats region_stats(const json& scene, Estimator e, int size, int regions, int runs, uint32_t spp) {
-  std::vector<std::vector<double>> per_run(runs, std::vector<double>(regions * regions * 3, 0));
-  const int r = size / regions;
-  for (int k = 0; k < runs; ++k) {
+test::RegionStats region_stats(const json& scene, Estimator e, int size, int regions, int runs, uint32_t spp) {
+  return test::grid_region_stats(runs, size, regions, [&](int k) {
     // Seeds differ between estimators too, so that the three estimates are statistically independent.
-    Image img = render(scene, settings(size, size, spp, e, 1000 + 7919 * k + 104729 * static_cast<int>(e), 8));
-    for (int y = 0; y < size; ++y)
-      for (int x = 0; x < size; ++x)
-        for (int c = 0; c < 3; ++c)
-          per_run[k][((y / r) * regions + x / r) * 3 + c] += img.rgb[(y * size + x) * 3 + c] / double(r * r);
-  }
-  RegionStats s;
-  for (size_t i = 0; i < per_run[0].size(); ++i) {
-    double m = 0, v = 0;
-    for (int k = 0; k < runs; ++k) m += per_run[k][i] / runs;
-    for (int k = 0; k < runs; ++k) v += (per_run[k][i] - m) * (per_run[k][i] - m) / (runs - 1);
-    s.mean.push_back(m);
-    s.se.push_back(std::sqrt(v / runs));
-  }
-  return s;
-}
-
-// Largest |z| of the differences between two estimates, region by region and channel by channel.
-double worst_z(const RegionStats& a, const RegionStats& b, double scale_b = 1.0) {
-  double worst = 0;
-  for (size_t i = 0; i < a.mean.size(); ++i) {
-    double se = std::sqrt(sqr(a.se[i]) + sqr(b.se[i] * scale_b));
-    double z = std::abs(a.mean[i] - b.mean[i] * scale_b) / std::max(se, 1e-6 + 1e-4 * a.mean[i]);
-    worst = std::max(worst, z);
-  }
-  return worst;
+    return render(scene, settings(size, size, spp, e, 1000 + 7919 * k + 104729 * static_cast<int>(e), 8)).rgb;
+  });
 }
 
 TEST(Transport, EstimatorsAgreeOnTheCornellBox) {
@@ -215,16 +186,16 @@ TEST(Transport, EstimatorsAgreeOnTheCornellBox) {
   const int size = 48, regions = 4, runs = 32;
   const uint32_t spp = 8;
   const double bound = 5.6;
-  std::vector<RegionStats> stats;
+  std::vector<test::RegionStats> stats;
   for (Estimator e : kEstimators) stats.push_back(region_stats(scene, e, size, regions, runs, spp));
   for (int a = 0; a < 3; ++a)
     for (int b = a + 1; b < 3; ++b) {
-      double z = worst_z(stats[a], stats[b]);
+      double z = test::worst_z(stats[a], stats[b]);
       std::printf("%s vs %s: worst |z| = %.2f\n", estimator_name(kEstimators[a]), estimator_name(kEstimators[b]), z);
       EXPECT_LT(z, bound) << estimator_name(kEstimators[a]) << " vs " << estimator_name(kEstimators[b]);
     }
   // The comparison has the power to see a small bias: the same estimates with 5% more light in one are rejected.
-  EXPECT_GT(worst_z(stats[1], stats[2], 1.05), bound);
+  EXPECT_GT(test::worst_z(stats[1], stats[2], 1.05), bound);
 }
 
 // Films of disjoint sample ranges merge into exactly the film of one render of all samples.

@@ -111,4 +111,45 @@ struct DirectionHistogram {
   }
 };
 
+// Region means of K independent renders and their standard errors: the spread of each region's mean over the runs,
+// for comparing independent unbiased estimators of one image (Student's t on K - 1 degrees of freedom).
+struct RegionStats {
+  std::vector<double> mean, se;
+};
+
+// `image(k)` renders run k, a size x size image of RGB floats (row-major); it is cut into regions x regions squares,
+// each channel kept apart.
+inline RegionStats grid_region_stats(int runs, int size, int regions,
+                                     const std::function<std::vector<float>(int k)>& image) {
+  std::vector<std::vector<double>> per_run(runs, std::vector<double>(regions * regions * 3, 0));
+  const int r = size / regions;
+  for (int k = 0; k < runs; ++k) {
+    const std::vector<float> img = image(k);
+    for (int y = 0; y < size; ++y)
+      for (int x = 0; x < size; ++x)
+        for (int c = 0; c < 3; ++c)
+          per_run[k][((y / r) * regions + x / r) * 3 + c] += img[(y * size + x) * 3 + c] / double(r * r);
+  }
+  RegionStats s;
+  for (size_t i = 0; i < per_run[0].size(); ++i) {
+    double m = 0, v = 0;
+    for (int k = 0; k < runs; ++k) m += per_run[k][i] / runs;
+    for (int k = 0; k < runs; ++k) v += (per_run[k][i] - m) * (per_run[k][i] - m) / (runs - 1);
+    s.mean.push_back(m);
+    s.se.push_back(std::sqrt(v / runs));
+  }
+  return s;
+}
+
+// Largest |z| of the differences between two estimates, region by region and channel by channel; `scale_b` scales
+// the second (a test's check that the comparison would see a bias of that size).
+inline double worst_z(const RegionStats& a, const RegionStats& b, double scale_b = 1.0) {
+  double worst = 0;
+  for (size_t i = 0; i < a.mean.size(); ++i) {
+    const double se = std::sqrt(a.se[i] * a.se[i] + b.se[i] * b.se[i] * scale_b * scale_b);
+    worst = std::max(worst, std::abs(a.mean[i] - b.mean[i] * scale_b) / std::max(se, 1e-6 + 1e-4 * a.mean[i]));
+  }
+  return worst;
+}
+
 }  // namespace tessera::test
