@@ -4,6 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "renderer/aov.h"
 #include "renderer/lights.h"
 #include "renderer/scene.h"
 #include "renderer/thread_pool.h"
@@ -22,6 +23,23 @@ Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls) {
     shadow.tmax = 1 - 1e-5f;
   }
   return shadow;
+}
+
+void note_surface(SurfaceFeatures& f, const ShadingPoint& sp, uint32_t object, uint32_t material_index,
+                  const Bsdf* bsdf, float distance) {
+  f.surface = true;
+  f.depth = distance;
+  f.position = sp.p;
+  f.uv = sp.uv;
+  f.roughness = bsdf ? bsdf->roughness_hint() : 1.0f;
+  f.object = object;
+  f.material = material_index;
+}
+
+void note_shading(SurfaceFeatures& f, const Rgb& throughput, const Bsdf* bsdf, const Vec3& n, const Vec3& wo) {
+  f.shaded = true;
+  f.albedo = bsdf ? throughput * bsdf->albedo_hint() : (is_black(n) ? throughput : Rgb(0));
+  f.normal = dot(n, wo) < 0 ? -n : n;
 }
 
 TileGrid::TileGrid(const PixelRegion& r, int size) : region(r), tile_size(size) {

@@ -15,6 +15,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "renderer/arena.h"
@@ -24,9 +25,12 @@
 
 namespace tessera {
 
+class Bsdf;
 class Scene;
 class ThreadPool;
 struct LightSample;
+struct ShadingPoint;
+struct SurfaceFeatures;
 
 // How the path tracer estimates direct light at each path vertex.
 enum class Estimator {
@@ -98,6 +102,16 @@ struct IntegratorSetup {
 // infinity (ls.dist infinite).
 Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls);
 
+// The render passes' records of a camera sample (SurfaceFeatures, aov.h), written the same way by every integrator
+// that traces from the camera. note_surface: the camera ray's first drawn surface (at `sp`, of the object and material
+// SurfaceInteraction numbers), `distance` along the camera ray from the lens, with its BSDF (null for a surface that
+// does not scatter). note_shading: the first surface whose BSDF is not wholly a delta lobe (albedo times the
+// `throughput` of the delta bounces before it, shading normal `n` turned to face `wo`, the direction back along the
+// path); a null `bsdf` with a zero `n` stands for a scattering event in a medium, whose albedo is the throughput alone.
+void note_surface(SurfaceFeatures& f, const ShadingPoint& sp, uint32_t object, uint32_t material_index,
+                  const Bsdf* bsdf, float distance);
+void note_shading(SurfaceFeatures& f, const Rgb& throughput, const Bsdf* bsdf, const Vec3& n, const Vec3& wo);
+
 class Integrator {
  public:
   explicit Integrator(IntegratorSetup setup);
@@ -159,6 +173,11 @@ std::string integrator_camera_problem(const std::string& name, const Camera& cam
 // yet, so they refuse a medium that scatters and a medium around the objects (the camera and lights sit in vacuum for
 // them); absorbing media inside objects they render.
 std::string integrator_scene_problem(const std::string& name, const Scene& scene);
+
+// What keeps the integrator `name` from making the render pass `aov` (aov.h), or empty: light tracing splats every
+// sample where it lands, so it has no first surface per pixel nor a pixel's own samples for a variance; BDPT's pixels
+// take splats from other pixels' light subpaths, so their samples do not give their variance either.
+std::string integrator_aov_problem(const std::string& name, std::string_view aov);
 
 // Adds every integrator the renderer ships to `registry` (one line per integrator in integrators/registry.cpp).
 void register_builtin_integrators(IntegratorRegistry& registry);

@@ -7,6 +7,8 @@
 #include <cctype>
 #include <stdexcept>
 
+#include "renderer/aov.h"
+
 namespace tessera {
 
 namespace {
@@ -29,9 +31,10 @@ std::string write_in_memory(const char* name, const OIIO::ImageSpec& spec, OIIO:
   return std::string(buffer.begin(), buffer.end());
 }
 
-std::string encode_png(const Image& image, const DisplaySettings& display) {
-  const std::vector<uint8_t> pixels = to_display(image.beauty().pixels, image.width, image.height, display);
-  OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
+// Linear RGB as an 8-bit sRGB PNG through `display`.
+std::string encode_png(const std::vector<float>& rgb, int width, int height, const DisplaySettings& display) {
+  const std::vector<uint8_t> pixels = to_display(rgb, width, height, display);
+  OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::UINT8);
   spec.attribute("oiio:ColorSpace", "sRGB");
   spec.attribute("Software", "tessera");
   // zlib level 3 of 9: a preview is encoded after every pass, where level 6 (libpng's default) costs several times
@@ -97,24 +100,38 @@ std::optional<ImageFormat> image_format_of(std::string_view path) {
   return std::nullopt;
 }
 
-Image resolve_image(const Film& film) {
+Image resolve_image(const Film& film, const std::vector<std::string>& aovs) {
   Image image;
   image.width = film.width();
   image.height = film.height();
   image.layers.push_back(ImageLayer{"", {"R", "G", "B"}, film.resolve(), false});
+  for (const AovInfo& aov : aov_table()) {
+    if (std::find(aovs.begin(), aovs.end(), aov.name) == aovs.end()) continue;
+    ImageLayer layer{std::string(aov.name), {}, resolve_aov(film, aov), aov.always_float};
+    for (int c = 0; c < aov.channels; ++c) layer.channels.emplace_back(aov.channel_names[static_cast<size_t>(c)]);
+    image.layers.push_back(std::move(layer));
+  }
   return image;
 }
 
 std::string encode_image(const Image& image, ImageFormat format, const EncodeOptions& options) {
   if (image.layers.empty()) throw std::invalid_argument("an image without a beauty layer");
-  return format == ImageFormat::kPng ? encode_png(image, options.display) : encode_exr(image, options.exr_half);
+  return format == ImageFormat::kPng ? encode_png(image.beauty().pixels, image.width, image.height, options.display)
+                                     : encode_exr(image, options.exr_half);
 }
 
-OutputPipeline::OutputPipeline(EncodeOptions options, std::vector<ImageFormat> formats)
-    : options_(options), formats_(std::move(formats)) {}
+std::string encode_pass_png(const Image& image, std::string_view pass) {
+  const AovInfo* aov = find_aov(pass);
+  for (const ImageLayer& layer : image.layers)
+    if (aov && layer.name == pass) return encode_png(aov_look(*aov, layer.pixels), image.width, image.height, {});
+  throw std::invalid_argument("the image has no pass " + std::string(pass));
+}
+
+OutputPipeline::OutputPipeline(EncodeOptions options, std::vector<ImageFormat> formats, std::vector<std::string> aovs)
+    : options_(options), formats_(std::move(formats)), aovs_(std::move(aovs)) {}
 
 OutputPipeline::OutputPipeline(const RenderSettings& settings, const OutputSpec& outputs)
-    : options_{settings.display, settings.exr_half} {
+    : options_{settings.display, settings.exr_half}, aovs_(settings.aovs) {
   if (outputs.png) formats_.push_back(ImageFormat::kPng);
   if (outputs.exr) formats_.push_back(ImageFormat::kExr);
 }
@@ -124,13 +141,19 @@ void OutputPipeline::add_post_stage(std::shared_ptr<const PostStage> stage) {
 }
 
 Image OutputPipeline::image(const Film& film) const {
-  Image image = resolve_image(film);
+  Image image = resolve_image(film, aovs_);
   for (const auto& stage : post_) stage->apply(image);
   return image;
 }
 
 void OutputPipeline::publish(const Image& image, const Publish& publish) const {
   for (ImageFormat f : formats_) publish(f, encode_image(image, f, options_));
+}
+
+void OutputPipeline::publish_passes(const Image& image,
+                                    const std::function<void(std::string_view, std::string_view)>& publish) const {
+  for (size_t i = 1; i < image.layers.size(); ++i)
+    publish(image.layers[i].name, encode_pass_png(image, image.layers[i].name));
 }
 
 std::string OutputPipeline::preview_png(const Image& image) const {

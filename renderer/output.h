@@ -50,8 +50,9 @@ struct EncodeOptions {
   bool exr_half = true;     // EXR channel precision, where a layer does not ask for float
 };
 
-// resolve: the beauty (Film::resolve) as the layer every image has.
-Image resolve_image(const Film& film);
+// resolve: the beauty (Film::resolve) as the layer every image has, then the passes `aovs` (aov.h, in the table's
+// order) as layers of their names.
+Image resolve_image(const Film& film, const std::vector<std::string>& aovs = {});
 
 // encode: the image in `format`. PNG holds the beauty alone; EXR every layer, the beauty as R, G, B and each other
 // layer's channels as <layer>.<channel>, zip-compressed. Throws std::runtime_error with OpenImageIO's message.
@@ -66,13 +67,18 @@ class PostStage {
   virtual void apply(Image& image) const = 0;
 };
 
+// A pass of `image` (a layer of that name, aov.h) as PNG, for a look at it (aov_look): throws std::invalid_argument
+// when the image has no such layer.
+std::string encode_pass_png(const Image& image, std::string_view pass);
+
 class OutputPipeline {
  public:
   // Receives each format's encoded bytes, in the order of formats().
   using Publish = std::function<void(ImageFormat format, std::string_view bytes)>;
 
-  OutputPipeline(EncodeOptions options, std::vector<ImageFormat> formats);
-  // A job's: its display settings and EXR precision, the formats its outputs ask for (PNG, then EXR).
+  // `aovs`: the passes the images hold beside the beauty (aov.h).
+  OutputPipeline(EncodeOptions options, std::vector<ImageFormat> formats, std::vector<std::string> aovs = {});
+  // A job's: its display settings, EXR precision and passes, the formats its outputs ask for (PNG, then EXR).
   OutputPipeline(const RenderSettings& settings, const OutputSpec& outputs);
 
   void add_post_stage(std::shared_ptr<const PostStage> stage);
@@ -84,6 +90,9 @@ class OutputPipeline {
   void publish(const Image& image, const Publish& publish) const;
   // The whole pipeline.
   void run(const Film& film, const Publish& publish) const { this->publish(image(film), publish); }
+  // Each pass of `image` (the layers after the beauty) as PNG (encode_pass_png), to `publish` with its name.
+  void publish_passes(const Image& image,
+                      const std::function<void(std::string_view pass, std::string_view png)>& publish) const;
   // A render's preview: the image as PNG, whatever the formats.
   std::string preview_png(const Image& image) const;
   std::string preview_png(const Film& film) const { return preview_png(image(film)); }
@@ -91,6 +100,7 @@ class OutputPipeline {
  private:
   EncodeOptions options_;
   std::vector<ImageFormat> formats_;
+  std::vector<std::string> aovs_;
   std::vector<std::shared_ptr<const PostStage>> post_;
 };
 

@@ -1,9 +1,11 @@
 #include "renderer/render_settings.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <vector>
 
+#include "renderer/aov.h"
 #include "renderer/json_fields.h"
 #include "renderer/scene_error.h"
 
@@ -80,6 +82,32 @@ const char* tonemap_name(ToneMap tonemap) {
   return name_of(kTonemaps, tonemap);
 }
 
+namespace {
+
+// A document's "aovs": pass names aov.h knows, each once, that the integrator can make; held in the table's order.
+std::vector<std::string> aovs_key(const json& render, const std::string& pointer, const std::string& integrator) {
+  auto it = render.find("aovs");
+  if (it == render.end()) return {};
+  if (!it->is_array()) throw SceneError(at(pointer, "aovs"), "must be an array of pass names");
+  const std::string list = at(pointer, "aovs");
+  for (size_t i = 0; i < it->size(); ++i) {
+    const json& name = (*it)[i];
+    if (!name.is_string()) throw SceneError(at(list, i), "must be a pass name");
+    const std::string text = name.get<std::string>();
+    if (!find_aov(text)) throw SceneError(at(list, i), unknown_aov_message(text));
+    for (size_t j = 0; j < i; ++j)
+      if ((*it)[j] == name) throw SceneError(at(list, i), "the pass \"" + text + "\" is asked for twice");
+    if (std::string problem = integrator_aov_problem(integrator, text); !problem.empty())
+      throw SceneError(at(list, i), problem);
+  }
+  std::vector<std::string> aovs;
+  for (const AovInfo& a : aov_table())
+    if (std::find(it->begin(), it->end(), json(a.name)) != it->end()) aovs.emplace_back(a.name);
+  return aovs;
+}
+
+}  // namespace
+
 RenderSettings render_settings_from_json(const json& render, const std::string& pointer, const RenderLimits& limits) {
   RenderSettings s;
   if (render.is_null()) return s;
@@ -126,6 +154,7 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
   s.display.exposure_ev = number_key(render, "exposure_ev", pointer, 0, -20, 20);
   s.display.tonemap = named_key(render, "tonemap", pointer, kTonemaps, defaults.display.tonemap);
   s.exr_half = named_key(render, "exr_precision", pointer, kExrPrecisions, defaults.exr_half);
+  s.aovs = aovs_key(render, pointer, s.integrator.name);
   return s;
 }
 
@@ -142,11 +171,16 @@ json render_settings_to_json(const RenderSettings& s) {
               {"noise_target", s.noise_target},
               {"exposure_ev", s.display.exposure_ev},
               {"tonemap", tonemap_name(s.display.tonemap)},
-              {"exr_precision", name_of(kExrPrecisions, s.exr_half)}};
-  // Written only when it is not the default: records (and their checkpoints' fingerprints, FNV-1a of this text) of
-  // jobs stored before the key existed keep their text byte for byte.
-  if (s.integrator.max_volume_depth != IntegratorSettings{}.max_volume_depth)
-    out["max_volume_depth"] = s.integrator.max_volume_depth;
+              {"exr_precision", name_of(kExrPrecisions, s.exr_half)},
+              {"max_volume_depth", s.integrator.max_volume_depth},
+              {"aovs", s.aovs}};
+  // Keys the mapping gained after jobs were first stored are written only where they differ from their defaults:
+  // records (and their checkpoints' fingerprints, FNV-1a of this text) of jobs stored before a key existed keep their
+  // text byte for byte.
+  static const json kLaterKeysDefaults = {{"max_volume_depth", IntegratorSettings{}.max_volume_depth},
+                                          {"aovs", json::array()}};
+  for (const auto& [key, fallback] : kLaterKeysDefaults.items())
+    if (out[key] == fallback) out.erase(key);
   return out;
 }
 

@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -35,6 +36,8 @@ struct RenderSettings {
   double noise_target = 0;        // stop when Film::relative_error() falls below; 0: none
   DisplaySettings display;        // for PNG outputs and previews
   bool exr_half = true;           // EXR channel precision
+  // The render passes beside the beauty (aov.h), by name, in the order of aov_table(): each once.
+  std::vector<std::string> aovs;
 
   // Set by whoever renders a part of a job, never by a document (not in the JSON mapping); integrator.rr_start_depth
   // neither.
@@ -74,8 +77,8 @@ struct RenderLimits {
 // for none at all. Throws SceneError naming the field.
 RenderSettings render_settings_from_json(const nlohmann::json& render, const std::string& pointer,
                                          const RenderLimits& limits);
-// The normalised form: every field a document can set, defaults filled in (but max_volume_depth only when it is not
-// its default, so that records written before it existed keep their text).
+// The normalised form: every field a document can set, defaults filled in (but max_volume_depth and aovs only where
+// they are not their defaults, so that records written before they existed keep their text).
 nlohmann::json render_settings_to_json(const RenderSettings& settings);
 // The same as the job status shows it: a stopping rule that is off (time_limit_s, noise_target at 0, the documents'
 // default) is left out, as a document leaves it out, so that it reads as "none" rather than as a limit of zero.

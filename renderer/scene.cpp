@@ -148,6 +148,8 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     sp.uv1 = sp.uv;
     // u spans 2 pi r and v spans pi r of length.
     si->material = materials[s.material].get();
+    si->material_index = s.material;
+    si->object = static_cast<uint32_t>(meshes.size()) + hit.object;
     if (si->material->reads_textures) uv_per_world = 1 / (std::sqrt(2.0f) * kPi * s.radius);
     sp.vertex_color = Rgb(1);
     si->light = si->material->emissive() ? s.light : kNoLight;
@@ -191,6 +193,8 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     const Vec2 d1 = uv1 - uv0, d2 = uv2 - uv0;
     const float uv_det = d1.x * d2.y - d1.y * d2.x;
     const Material* material = materials[mesh.material].get();
+    si->material_index = mesh.material;
+    si->object = inst ? static_cast<uint32_t>(meshes.size() + spheres.size()) + hit.instance : hit.object;
     if (cone && ng_len > 0 && material->reads_textures) uv_per_world = std::sqrt(std::abs(uv_det) / ng_len);
     sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
     // Tangent: from the mesh when given, else along dp/du (with the handedness of dp/dv); none is needed for an

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <optional>
 
+#include "renderer/aov.h"
 #include "renderer/scene.h"
 
 namespace tessera {
@@ -51,10 +52,15 @@ RenderSession::RenderSession(std::shared_ptr<const Scene> scene, const RenderSet
   setup.tile_size = settings.tile_size;
   setup.pool = &pool;
   integrator_ = IntegratorRegistry::builtin().create(setup);
+  for (const std::string& aov : settings.aovs)
+    if (std::string problem = integrator_aov_problem(settings.integrator.name, aov); !problem.empty())
+      throw std::invalid_argument(problem);
+  add_aov_layers(film_, settings.aovs);
   progress_.samples_total = settings.spp;
 }
 
 void RenderSession::restore(Film film, uint32_t passes, double elapsed_s) {
+  if (!film.same_layout(film_)) throw std::invalid_argument("the film to resume has other layers than the render's");
   film_ = std::move(film);
   progress_.pass = passes;
   progress_.samples_done = film_.samples();

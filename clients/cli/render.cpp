@@ -17,6 +17,7 @@
 #include "clients/cli/fingerprint.h"
 #include "clients/cli/partial_film.h"
 #include "proto/contract.h"
+#include "renderer/aov.h"
 #include "renderer/job.h"
 #include "renderer/output.h"
 #include "renderer/scene_error.h"
@@ -47,6 +48,9 @@ const char* kRenderUsage =
     "  --estimator NAME       mis | area | hemisphere (the path tracer's)\n"
     "  --seed N               random seed\n"
     "  --max-depth N          maximum bounces\n"
+    "  --aov NAME             a render pass beside the beauty, in the EXR as NAME.<channel> (repeatable;\n"
+    "                         render.aovs): albedo normal depth position uv roughness object_id material_id\n"
+    "                         sample_count variance\n"
     "  --variant NAME         the glTF asset's KHR_materials_variants variant (scene.gltf_variant)\n"
     "  -q, --quiet            print nothing but errors and the scene's warnings (no progress bar, no summary)\n"
     "\n"
@@ -97,7 +101,8 @@ void write_outputs(const std::vector<std::string>& outputs, const PartialFilm& p
       formats.push_back(*f);
     }
   }
-  const tessera::OutputPipeline pipeline(tessera::EncodeOptions{part.display, part.exr_half}, formats);
+  const tessera::OutputPipeline pipeline(tessera::EncodeOptions{part.display, part.exr_half}, formats,
+                                         tessera::aovs_of(part.film, part.sample_count_pass));
   try {
     pipeline.run(part.film, [&](tessera::ImageFormat format, std::string_view bytes) {
       for (const std::string& out : outputs)
@@ -172,14 +177,19 @@ int cmd_render(int argc, char** argv) {
       set("seed", parse_integer(a, value()));
     else if (a == "--max-depth")
       set("max_depth", parse_integer(a, value()));
-    else if (a == "--variant")
+    else if (a == "--aov") {
+      json aovs = overrides.value("aovs", json::array());
+      aovs.push_back(value());
+      option_of["aovs/" + std::to_string(aovs.size() - 1)] = a + " " + aovs.back().get<std::string>();
+      overrides["aovs"] = std::move(aovs);
+    } else if (a == "--variant")
       variant = value();
     else if (a == "-q" || a == "--quiet")
       quiet = true;
     else if (!a.empty() && a[0] == '-')
-      unknown_option(a,
-                     {"--output", "--spp", "--samples", "--region", "--width", "--height", "--time-limit", "--threads",
-                      "--integrator", "--estimator", "--seed", "--max-depth", "--variant", "--quiet", "--help"});
+      unknown_option(
+          a, {"--output", "--spp", "--samples", "--region", "--width", "--height", "--time-limit", "--threads",
+              "--integrator", "--estimator", "--seed", "--max-depth", "--aov", "--variant", "--quiet", "--help"});
     else if (input.empty())
       input = a;
     else
@@ -233,6 +243,15 @@ int cmd_render(int argc, char** argv) {
   // refused, not rendered with the default), then the renderer's checks in load_job.
   // Asset references name files here, not asset ids: judged as the daemon judges them once a multipart submission
   // has stored their files (whether the file opens is load_job's to say).
+  // The option that gave the render setting at `pointer` (/render/KEY, or /render/aovs/I for the I-th --aov), or null:
+  // a value an option gave that the job refuses is a usage error naming the option (--integrator bpdt), not an error
+  // of the file.
+  auto option_at = [&](const std::string& pointer) -> const std::string* {
+    const std::string prefix = "/render/";
+    if (pointer.rfind(prefix, 0) != 0) return nullptr;
+    const auto it = option_of.find(pointer.substr(prefix.size()));
+    return it == option_of.end() ? nullptr : &it->second;
+  };
   json checked = doc;
   for (std::string_view p : tessera::proto::kAssetRefPointers) {
     const json::json_pointer pointer{std::string(p)};
@@ -243,13 +262,9 @@ int cmd_render(int argc, char** argv) {
       !errors.empty()) {
     // A value an option gave is a usage error naming the option (--integrator bpdt), not an error of the file.
     std::string usage;
-    for (const tessera::proto::SchemaError& e : errors) {
-      const std::string prefix = "/render/";
-      if (e.pointer.rfind(prefix, 0) != 0) continue;
-      const auto option = option_of.find(e.pointer.substr(prefix.size()));
-      if (option == option_of.end()) continue;
-      usage += (usage.empty() ? "" : "\ntessera: ") + option->second + ": " + e.message;
-    }
+    for (const tessera::proto::SchemaError& e : errors)
+      if (const std::string* option = option_at(e.pointer))
+        usage += (usage.empty() ? "" : "\ntessera: ") + *option + ": " + e.message;
     if (!usage.empty()) throw std::invalid_argument(usage);
     std::string message;
     for (const tessera::proto::SchemaError& e : errors)
@@ -286,6 +301,7 @@ int cmd_render(int argc, char** argv) {
   try {
     job = tessera::load_job(doc, options);
   } catch (const tessera::SceneError& e) {
+    if (const std::string* option = option_at(e.pointer())) throw std::invalid_argument(*option + ": " + e.what());
     fatal(where(e.pointer()) + e.what());
   }
   double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -334,6 +350,8 @@ int cmd_render(int argc, char** argv) {
   part.region = session.settings().region;
   if (part.region.width <= 0 || part.region.height <= 0) part.region = {0, 0, part.width, part.height};
   part.exr_half = job.settings.exr_half;
+  part.sample_count_pass =
+      std::find(job.settings.aovs.begin(), job.settings.aovs.end(), "sample_count") != job.settings.aovs.end();
   part.display = job.settings.display;
   part.fingerprint = film_fingerprint(doc, job.settings, options.scene.asset_root);
   part.film = session.film();
@@ -458,6 +476,7 @@ int cmd_merge(int argc, char** argv) {
   merged.job_spp = first.job_spp;
   merged.region = {0, 0, first.width, first.height};
   merged.exr_half = first.exr_half;
+  merged.sample_count_pass = first.sample_count_pass;
   merged.display = first.display;
   merged.fingerprint = first.fingerprint;
   // Every layer's integer sums, hit counts and per-pixel sample counts: exact in any order.

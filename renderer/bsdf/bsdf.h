@@ -79,6 +79,9 @@ class Bsdf {
   virtual uint32_t flags() const = 0;
   // Albedo-like colour for the first-hit albedo AOV and for Russian roulette heuristics.
   virtual Rgb albedo_hint() const { return Rgb(0.5f); }
+  // The perceptual roughness of the main lobe, for the roughness pass: sqrt(alpha) of a microfacet lobe (glTF's
+  // roughness, whose square is alpha), 0 for a perfectly smooth mirror or glass, 1 for a diffuse surface.
+  virtual float roughness_hint() const { return 1; }
 
  protected:
   ~Bsdf() = default;  // BSDFs live in a ScratchArena and are never destroyed through a base pointer.

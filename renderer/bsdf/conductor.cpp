@@ -69,6 +69,7 @@ class ConductorBsdf final : public Bsdf {
     return kBsdfReflection | (dist_.effectively_smooth() ? kBsdfSpecular : kBsdfGlossy);
   }
   Rgb albedo_hint() const override { return tint_ * fresnel_conductor(1, eta_, k_); }
+  float roughness_hint() const override { return dist_.roughness(); }
 
  private:
   MicrofacetDistribution dist_;

@@ -80,6 +80,7 @@ class CookTorranceBsdf final : public Bsdf {
     return f;
   }
   Rgb albedo_hint() const override { return kd_ + ks_ * fresnel_.eval(1); }
+  float roughness_hint() const override { return dist_.roughness(); }
 
  private:
   Rgb specular(const Vec3& wo, const Vec3& wi) const {

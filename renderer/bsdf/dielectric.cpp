@@ -148,6 +148,7 @@ class DielectricBsdf final : public Bsdf {
     return kBsdfReflection | kBsdfTransmission | (smooth() ? kBsdfSpecular : kBsdfGlossy);
   }
   Rgb albedo_hint() const override { return kt_; }
+  float roughness_hint() const override { return lobe_.dist.roughness(); }
 
  private:
   bool smooth() const { return lobe_.dist.effectively_smooth(); }
@@ -182,6 +183,7 @@ class ThinDielectricBsdf final : public Bsdf {
   }
   uint32_t flags() const override { return kBsdfReflection | kBsdfTransmission | kBsdfSpecular; }
   Rgb albedo_hint() const override { return kt_; }
+  float roughness_hint() const override { return 0; }
 
  private:
   float eta_;

@@ -335,6 +335,7 @@ class GltfPbrBsdf final : public Bsdf {
     return f;
   }
   Rgb albedo_hint() const override { return l_.base_color; }
+  float roughness_hint() const override { return dist_.roughness(); }
 
  private:
   // The shading frame turned about the normal so that +x is the anisotropy direction, and back.

@@ -19,6 +19,7 @@ class PassThroughBsdf final : public Bsdf {
   float pdf(const Vec3&, const Vec3&) const override { return 0; }
   uint32_t flags() const override { return kBsdfTransmission | kBsdfSpecular | kBsdfOneLobe; }
   Rgb albedo_hint() const override { return Rgb(1); }
+  float roughness_hint() const override { return 0; }
 };
 
 class InterfaceMaterial final : public Material {

@@ -26,6 +26,8 @@ struct MicrofacetDistribution {
 
   // Below this roughness the surface is treated as smooth (a delta lobe), as pbrt-v4 does.
   bool effectively_smooth() const { return std::max(alpha_x, alpha_y) < 1e-3f; }
+  // The perceptual roughness sqrt(alpha), alpha the geometric mean of the two, at most 1 (Bsdf::roughness_hint).
+  float roughness() const { return std::min(1.0f, std::sqrt(std::sqrt(alpha_x * alpha_y))); }
 
   // D(m): the distribution of normals (m in the upper hemisphere).
   float d(const Vec3& m) const;

@@ -41,6 +41,7 @@ class MixBsdf final : public Bsdf {
     return (a_->flags() | b_->flags()) & ~static_cast<uint32_t>(kBsdfOneLobe);
   }
   Rgb albedo_hint() const override { return a_->albedo_hint() * (1 - w_) + b_->albedo_hint() * w_; }
+  float roughness_hint() const override { return a_->roughness_hint() * (1 - w_) + b_->roughness_hint() * w_; }
 
  private:
   std::optional<BsdfSample> sample_mixed(TransportMode mode, const Vec3& wo, float uc, Vec2 u) const {

@@ -89,6 +89,9 @@ class PhongBsdf final : public Bsdf {
 
   uint32_t flags() const override { return kBsdfReflection | kBsdfGlossy | kBsdfDiffuse; }
   Rgb albedo_hint() const override { return kd_ + ks_; }
+  // The Beckmann roughness of the same highlight, alpha = sqrt(2 / (n + 2)) (Walter et al. 2007, "Microfacet Models
+  // for Refraction through Rough Surfaces", §5.2).
+  float roughness_hint() const override { return std::sqrt(std::sqrt(2 / (n_ + 2))); }
 
  private:
   static Vec3 reflect_z(const Vec3& w) { return {-w.x, -w.y, w.z}; }

@@ -90,6 +90,7 @@ class PlasticBsdf final : public Bsdf {
     return kBsdfReflection | kBsdfDiffuse | (dist_.effectively_smooth() ? kBsdfSpecular : kBsdfGlossy);
   }
   Rgb albedo_hint() const override { return rho_; }
+  float roughness_hint() const override { return dist_.roughness(); }
 
  private:
   Rgb diffuse(const Vec3& wo, const Vec3& wi) const {

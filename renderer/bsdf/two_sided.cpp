@@ -27,6 +27,7 @@ class TwoSidedBsdf final : public Bsdf {
   }
   uint32_t flags() const override { return inner_->flags(); }
   Rgb albedo_hint() const override { return inner_->albedo_hint(); }
+  float roughness_hint() const override { return inner_->roughness_hint(); }
 
  private:
   static Vec3 flip(const Vec3& w) { return {w.x, w.y, -w.z}; }

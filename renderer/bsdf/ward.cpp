@@ -66,6 +66,7 @@ class WardBsdf final : public Bsdf {
 
   uint32_t flags() const override { return kBsdfReflection | kBsdfGlossy | kBsdfDiffuse; }
   Rgb albedo_hint() const override { return rd_ + rs_; }
+  float roughness_hint() const override { return dist_.roughness(); }
 
  private:
   float specular(const Vec3& wo, const Vec3& wi) const {

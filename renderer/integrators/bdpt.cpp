@@ -24,6 +24,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "renderer/aov.h"
 #include "renderer/integrator.h"
 #include "renderer/scene.h"
 #include "renderer/spectrum.h"
@@ -45,11 +46,12 @@ struct Vertex {
   const Bsdf* bsdf = nullptr;
   ShadingPoint sp;  // the surface point, for its emission
   const Material* material = nullptr;
-  uint32_t light = kNoLight;  // the light this vertex is on (light vertices, emitting surfaces)
-  bool delta = false;         // scattered by a delta lobe
-  bool dispersed = false;     // a dispersive material among its subpath's surface vertices up to this one
-  bool delta_light = false;   // a point, spot or directional light
-  bool infinite = false;      // a light at infinity: `dir` is the direction its light travels
+  uint32_t object = 0, material_index = 0;  // SurfaceInteraction's (surfaces)
+  uint32_t light = kNoLight;                // the light this vertex is on (light vertices, emitting surfaces)
+  bool delta = false;                       // scattered by a delta lobe
+  bool dispersed = false;                   // a dispersive material among its subpath's surface vertices up to this one
+  bool delta_light = false;                 // a point, spot or directional light
+  bool infinite = false;                    // a light at infinity: `dir` is the direction its light travels
   Vec3 dir;
   // Densities of sampling this vertex from the previous one on its own subpath (fwd) and from the next one in the
   // reverse direction (rev), by area (by solid angle for a vertex at infinity).
@@ -162,6 +164,26 @@ float vertex_pdf(const Context& c, const Vertex& v, const Vertex* prev, const Ve
   return to_area(pdf, v, next);
 }
 
+// What the render passes record of a camera subpath of n vertices (note_surface, note_shading): its first drawn
+// surface, reached along the camera ray past index-matched boundaries, and its first surface whose BSDF is not wholly
+// a delta lobe.
+void camera_features(const Vertex* camera, int n, SurfaceFeatures* f) {
+  bool straight = true;
+  for (int i = 1; i < n; ++i) {
+    const Vertex& v = camera[i];
+    if (v.kind != VertexKind::kSurface) return;
+    const bool crossing = v.material->index_matched;
+    if (straight && !crossing) {
+      note_surface(*f, v.sp, v.object, v.material_index, v.bsdf, length(v.p - camera[0].p));
+      straight = false;
+    }
+    if (!v.bsdf || has_non_delta(v.bsdf->flags())) {
+      note_shading(*f, v.beta, v.bsdf, v.frame.n, v.wo);
+      return;
+    }
+  }
+}
+
 // Whether the segment between two finite vertices is unobstructed, each end offset off its surface.
 bool visible(const Scene& scene, const Vertex& a, const Vertex& b, RayCounters& counters) {
   ++counters.shadow;
@@ -216,6 +238,8 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
     v.wo = -ray.dir;
     v.sp = si.sp;
     v.material = si.material;
+    v.object = si.object;
+    v.material_index = si.material_index;
     v.light = si.light;
     v.beta = beta;
     v.pdf_fwd = to_area(pdf_fwd, prev, v);
@@ -350,18 +374,22 @@ class BidirectionalIntegrator final : public Integrator {
   bool measures_noise() const override { return !light_only_; }
 
   void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel) override {
+    const AovWriter aovs(film);
     setup_.pool->parallel_for(tiles_.count(), [&](size_t tile, int w) {
       if (cancel.load(std::memory_order_relaxed)) return;
-      render_tile(tiles_.tile(tile), w, first_sample, count, film);
+      render_tile(tiles_.tile(tile), w, first_sample, count, film, aovs);
     });
   }
 
  private:
-  void render_tile(const PixelRegion& tile, int w, uint32_t first_sample, uint32_t count, Film& film);
+  void render_tile(const PixelRegion& tile, int w, uint32_t first_sample, uint32_t count, Film& film,
+                   const AovWriter& aovs);
   // The pixel sample's contribution to its own pixel; splats land on the film directly. `wavelength`, in a scene with
   // dispersive materials, is the sample's (spectrum.h).
+  // `features`, when given, receives what the render passes record of the camera subpath.
   Rgb sample(const Context& c, Vec2 film_pos, PixelSampler& sampler, ScratchArena& arena, Vertex* camera, Vertex* light,
-             Film& film, RayCounters& counters, const spectrum::WavelengthSample* wavelength);
+             Film& film, RayCounters& counters, const spectrum::WavelengthSample* wavelength,
+             SurfaceFeatures* features);
   // The unweighted contribution of strategy (s, t), and through `sampled` and `splat_at` the vertex it sampled
   // afresh and, for t = 1, the film position.
   Rgb connect(const Context& c, const LightEmission& le, Vertex* light, Vertex* camera, int s, int t,
@@ -381,7 +409,7 @@ class BidirectionalIntegrator final : public Integrator {
 };
 
 void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32_t first_sample, uint32_t count,
-                                          Film& film) {
+                                          Film& film, const AovWriter& aovs) {
   Worker& worker = this->worker(w);
   RayCounters counters;
   uint64_t nonfinite = 0;
@@ -400,14 +428,18 @@ void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32
         const Vec2 jitter = sampler.get2d();
         spectrum::WavelengthSample wavelength;
         if (dispersive) wavelength = spectrum::sample_wavelength(sampler.get1d_dimension0());
+        SurfaceFeatures features;
         Rgb l = sample(c, Vec2(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y), sampler,
-                       worker.arena, camera, light, film, counters, dispersive ? &wavelength : nullptr);
+                       worker.arena, camera, light, film, counters, dispersive ? &wavelength : nullptr,
+                       aovs.wants_features() ? &features : nullptr);
         if (light_only_) continue;
         if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
           ++nonfinite;
           l = Rgb(0);
         }
         film.add_sample_shared(x, y, l);
+        // Only this thread adds this pixel's passes (splats land on the beauty alone).
+        if (!aovs.empty()) aovs.add(film, x, y, s, features, l);
       }
     }
   }
@@ -417,7 +449,7 @@ void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32
 
 Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSampler& sampler, ScratchArena& arena,
                                     Vertex* camera, Vertex* light, Film& film, RayCounters& counters,
-                                    const spectrum::WavelengthSample* wavelength) {
+                                    const spectrum::WavelengthSample* wavelength, SurfaceFeatures* features) {
   arena.reset();
   const Scene& scene = c.scene;
   const int max_depth = c.settings.max_depth;
@@ -436,6 +468,7 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
     c.camera.importance_pdf(ray, &pdf_pos, &pdf_dir);
     n_camera = 1 + random_walk(c, ray, Rgb(1), pdf_dir, max_depth + 1, TransportMode::kRadiance, wavelength_nm, sampler,
                                arena, camera, counters);
+    if (features) camera_features(camera, n_camera, features);
   }
   // The light subpath.
   int n_light = 0;
@@ -601,6 +634,17 @@ std::string integrator_scene_problem(const std::string& name, const Scene& scene
   if (scene.has_scattering_media()) return "integrator " + name + " does not render scattering media yet; use path";
   if (scene.medium) return "integrator " + name + " does not render a medium around the objects yet; use path";
   return {};
+}
+
+std::string integrator_aov_problem(const std::string& name, std::string_view aov) {
+  const AovInfo* info = find_aov(aov);
+  if (!info || (name != "light" && name != "bdpt") || info->source == AovSource::kSampleCount) return {};
+  const std::string refusal = "the " + name + " integrator cannot make the pass \"" + std::string(aov) + "\"";
+  if (info->source == AovSource::kSquares)
+    return refusal + ": its pixels take splats of light paths started elsewhere, so their own samples do not measure " +
+           "their variance; use path";
+  if (name == "bdpt") return {};
+  return refusal + ": light tracing has no first surface per pixel; use path or bdpt";
 }
 
 void register_bidirectional(IntegratorRegistry& registry) {

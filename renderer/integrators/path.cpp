@@ -4,6 +4,7 @@
 // Russian roulette. In participating media the path samples free flights and scatters by the phase function, with
 // next-event estimation through the media to the lights (the volumetric path tracer of Pharr, Jakob and Humphreys,
 // Physically Based Rendering, 4th ed., §14.2, with the transmittance of homogeneous media in closed form).
+#include "renderer/aov.h"
 #include "renderer/integrator.h"
 #include "renderer/phase.h"
 #include "renderer/scene.h"
@@ -115,9 +116,10 @@ LightNumbers light_numbers(PixelSampler& sampler, bool sample_light) {
 // sampled lobe spreads, and textures are filtered over its footprint. A zero cone reads the finest texels.
 // `wavelength`, in a scene with dispersive materials, is the pixel sample's (spectrum.h): every BSDF sees it, and the
 // throughput takes its weight at the path's first dispersive vertex, before anything is added through that vertex.
+// `features`, when given, receives what the render passes record of the path (note_surface, note_shading).
 Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* primary, PixelSampler& sampler,
                const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters, RayCone cone,
-               const spectrum::WavelengthSample* wavelength) {
+               const spectrum::WavelengthSample* wavelength, SurfaceFeatures* features) {
   const LightSet& lights = scene.lights();
   const bool use_light_sampling = settings.estimator != Estimator::kHemisphere;
   const bool use_bsdf_hits = settings.estimator != Estimator::kArea;
@@ -138,6 +140,10 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
   // their own limit, settings.max_volume_depth.
   int volume_depth = 0;
   bool camera_segment = true;  // the ray is the camera ray, whose hit `primary` may hold
+  // For `features`: whether the path still runs along the camera ray (only index-matched boundaries crossed), and
+  // how far it has come along it.
+  bool straight = true;
+  float travelled = 0;
   ++counters.camera;
 
   for (int depth = 0;;) {
@@ -168,6 +174,8 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         ++volume_depth;
         const Vec3 p = ray.origin + ray.dir * (flight.t / dir_length);
         const Vec3 wo_world = -ray.dir / dir_length;
+        if (features && !features->shaded) note_shading(*features, throughput, nullptr, Vec3(0), wo_world);
+        straight = false;
         const HenyeyGreenstein phase = current->phase();
         const bool sample_light = use_light_sampling && !lights.empty();
         const auto [u_light_select, u_light] = light_numbers(sampler, sample_light);
@@ -237,6 +245,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       // An index-matched boundary: the path crosses it straight on into the medium beyond, not a bounce.
       if (volume_depth >= settings.max_volume_depth) break;
       ++volume_depth;
+      if (features && straight) travelled += si.t * length(ray.dir);
       medium.refract(si.sp.front_face, si.material->interior.get());
       cone.width = cone.width_at(si.t * length(ray.dir));
       ray.origin = offset_ray_origin(si.sp.p, si.sp.ng, ray.dir);
@@ -253,6 +262,13 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       }
     }
     const Bsdf* bsdf = si.material->bsdf(si.sp, arena);
+    if (features) {
+      if (straight)
+        note_surface(*features, si.sp, si.object, si.material_index, bsdf, travelled + si.t * length(ray.dir));
+      if (!features->shaded && (!bsdf || has_non_delta(bsdf->flags())))
+        note_shading(*features, throughput, bsdf, si.sp.frame.n, wo_world);
+      straight = false;
+    }
     if (!bsdf) break;
     const uint32_t flags = bsdf->flags();
     const Frame& frame = si.sp.frame;
@@ -327,18 +343,20 @@ class PathIntegrator final : public Integrator {
   explicit PathIntegrator(const IntegratorSetup& setup) : Integrator(setup) {}
 
   void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel) override {
+    const AovWriter aovs(film);
     setup_.pool->parallel_for(tiles_.count(), [&](size_t tile, int w) {
       if (cancel.load(std::memory_order_relaxed)) return;
-      render_tile(tiles_.tile(tile), worker(w), first_sample, count, film);
+      render_tile(tiles_.tile(tile), worker(w), first_sample, count, film, aovs);
     });
   }
 
  private:
-  void render_tile(const PixelRegion& tile, Worker& worker, uint32_t first_sample, uint32_t sample_count, Film& film);
+  void render_tile(const PixelRegion& tile, Worker& worker, uint32_t first_sample, uint32_t sample_count, Film& film,
+                   const AovWriter& aovs);
 };
 
 void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32_t first_sample, uint32_t sample_count,
-                                 Film& film) {
+                                 Film& film, const AovWriter& aovs) {
   const int x0 = tile.x, y0 = tile.y, x1 = tile.x + tile.width, y1 = tile.y + tile.height;
   ScratchArena& arena = worker.arena;
   // Counted on the stack and added once per tile (Integrator::Worker).
@@ -381,13 +399,15 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
           const PrimaryHit primary{found[i], hits[i]};
           spectrum::WavelengthSample wavelength;
           if (dispersive) wavelength = spectrum::sample_wavelength(samplers[i].get1d_dimension0());
+          SurfaceFeatures features;
           Rgb l = trace_path(scene, rays[i], &primary, samplers[i], setup_.settings, arena, counters, cone,
-                             dispersive ? &wavelength : nullptr);
+                             dispersive ? &wavelength : nullptr, aovs.wants_features() ? &features : nullptr);
           if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
             ++nonfinite;
             l = Rgb(0);
           }
           film.add_sample(gx + i, y, l);
+          if (!aovs.empty()) aovs.add(film, gx + i, y, s, features, l);
         }
       }
     }

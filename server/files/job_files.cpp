@@ -14,6 +14,7 @@
 #include <stdexcept>
 #include <system_error>
 
+#include "renderer/aov.h"
 #include "renderer/byte_fields.h"
 #include "server/base/file_io.h"
 #include "server/base/job_id.h"
@@ -97,7 +98,32 @@ std::unique_ptr<FileReader> bytes_reader(std::string bytes) {
   return std::make_unique<BytesReader>(std::move(bytes));
 }
 
+namespace {
+
+// aov.<name>.png for each pass of the table, aov.<index>.png for the room beyond it: fixed names, never a client's.
+const std::array<std::string, kMaxPassFiles>& pass_file_names() {
+  static const std::array<std::string, kMaxPassFiles> names = [] {
+    std::array<std::string, kMaxPassFiles> n;
+    const std::vector<AovInfo>& table = aov_table();
+    for (size_t i = 0; i < n.size(); ++i)
+      n[i] = "aov." + (i < table.size() ? std::string(table[i].name) : std::to_string(i)) + ".png";
+    return n;
+  }();
+  return names;
+}
+
+}  // namespace
+
+std::optional<JobFile> pass_file(std::string_view name) {
+  const std::vector<AovInfo>& table = aov_table();
+  for (size_t i = 0; i < table.size() && i < static_cast<size_t>(kMaxPassFiles); ++i)
+    if (table[i].name == name) return pass_file(static_cast<int>(i));
+  return std::nullopt;
+}
+
 const char* job_file_name(JobFile f) {
+  const int pass = static_cast<int>(f) - static_cast<int>(JobFile::kFirstPassPng);
+  if (pass >= 0 && pass < kMaxPassFiles) return pass_file_names()[static_cast<size_t>(pass)].c_str();
   switch (f) {
     case JobFile::kPreviewPng:
       return "preview.png";
@@ -109,6 +135,8 @@ const char* job_file_name(JobFile f) {
       return "checkpoint.bin";
     case JobFile::kLog:
       return "log.txt";
+    case JobFile::kFirstPassPng:
+      break;
   }
   return "preview.png";
 }

@@ -5,6 +5,7 @@
 // reader (or a crash) never sees half a file.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -18,12 +19,25 @@
 
 namespace tessera::server {
 
-enum class JobFile { kPreviewPng, kResultPng, kResultExr, kCheckpoint, kLog };
+// The render passes' PNGs (OutputPipeline::publish_passes) follow the fixed files: pass i of aov.h's table is
+// pass_file(i), aov.<name>.png, with room for kMaxPassFiles passes.
+enum class JobFile : int { kPreviewPng, kResultPng, kResultExr, kCheckpoint, kLog, kFirstPassPng };
+inline constexpr int kMaxPassFiles = 16;
+constexpr JobFile pass_file(int index) {
+  return static_cast<JobFile>(static_cast<int>(JobFile::kFirstPassPng) + index);
+}
+// The PNG of the pass named `name`, or nothing for a name that is not a pass.
+std::optional<JobFile> pass_file(std::string_view name);
 const char* job_file_name(JobFile f);
 const char* job_file_media_type(JobFile f);
-// The file each output format is published as (OutputPipeline), and all of them.
+// The file each output format is published as (OutputPipeline), and all the files a run's end publishes: the
+// results and the passes' PNGs.
 JobFile result_file(ImageFormat format);
-inline constexpr JobFile kResultFiles[] = {JobFile::kResultPng, JobFile::kResultExr};
+inline constexpr auto kResultFiles = [] {
+  std::array<JobFile, 2 + kMaxPassFiles> files{JobFile::kResultPng, JobFile::kResultExr};
+  for (int i = 0; i < kMaxPassFiles; ++i) files[static_cast<size_t>(2 + i)] = pass_file(i);
+  return files;
+}();
 
 // One version of a stored file, opened for reading in pieces (an HTTP answer streams it): a version written
 // meanwhile does not mix into it.

@@ -333,6 +333,13 @@ void get_result(ApiContext& ctx, JobFile file, const Request& req, Response& res
   send_file_or_problem(req, res, ctx.jobs.result(*job, file), job_file_media_type(file));
 }
 
+// A render pass of a finished job as PNG (render.aovs): a look at it; its numbers are in result.exr.
+void get_pass(ApiContext& ctx, const Request& req, Response& res) {
+  auto job = find_job(ctx, req, res);
+  if (!job) return;
+  send_file_or_problem(req, res, ctx.jobs.pass(*job, req.matches[2].str()), "image/png");
+}
+
 // The document the job was accepted with, as JSON: what a client needs to submit it again.
 void get_document(ApiContext& ctx, const Request& req, Response& res) {
   auto job = find_job(ctx, req, res);
@@ -582,6 +589,8 @@ std::vector<Route> routes(ApiContext* ctx) {
        [ctx](const Request& q, Response& r) { get_result(*ctx, JobFile::kResultPng, q, r); }},
       {"GET", "/v1/jobs/{id}/result.exr", job + "/result\\.exr",
        [ctx](const Request& q, Response& r) { get_result(*ctx, JobFile::kResultExr, q, r); }},
+      {"GET", "/v1/jobs/{id}/aovs/{name}.png", job + "/aovs/([^/]{1,64})\\.png",
+       [ctx](const Request& q, Response& r) { get_pass(*ctx, q, r); }},
       {"GET", "/v1/events", "/v1/events",
        [ctx](const Request& q, Response& r) { stream_events(*ctx, q, r, std::nullopt); }},
       {"POST", "/v1/assets", "/v1/assets", [ctx](const Request& q, Response& r) { post_asset(*ctx, q, r); }},

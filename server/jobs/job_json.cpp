@@ -117,6 +117,13 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
   if (job.state == JobState::kSucceeded || (job.state == JobState::kCancelled && p.samples_done > 0)) {
     if (spec.png) links["result_png"] = self + "/result.png";
     if (spec.exr) links["result_exr"] = self + "/result.exr";
+    // Each render pass's PNG, by the pass's name.
+    if (render.contains("aovs")) {
+      json passes = json::object();
+      for (const json& name : render["aovs"])
+        passes[name.get<std::string>()] = self + "/aovs/" + name.get<std::string>() + ".png";
+      links["aovs"] = std::move(passes);
+    }
   }
   json warnings = json::parse(job.warnings.empty() ? "[]" : job.warnings, nullptr, false);
   if (!warnings.is_array()) warnings = json::array();

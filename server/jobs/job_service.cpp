@@ -276,13 +276,22 @@ std::unique_ptr<FileReader> JobService::job_log(const JobRecord& job) {
   return text ? bytes_reader(std::move(*text)) : nullptr;
 }
 
+namespace {
+
+// Why a job has no results yet, or nothing: a cancelled job keeps the image of its last complete pass, if it had one
+// (partial results).
+std::optional<Problem> results_not_ready(const JobRecord& job) {
+  if (job.state == JobState::kSucceeded || job.state == JobState::kCancelled) return std::nullopt;
+  return Problem{409,
+                 std::string("the job is ") + job_state_name(job.state) +
+                     "; results exist once it has succeeded (or, partial, once it was cancelled after a pass)",
+                 std::nullopt};
+}
+
+}  // namespace
+
 std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobRecord& job, JobFile file) {
-  // A cancelled job keeps the image of its last complete pass, if it had one (partial results).
-  if (job.state != JobState::kSucceeded && job.state != JobState::kCancelled)
-    return Problem{409,
-                   std::string("the job is ") + job_state_name(job.state) +
-                       "; results exist once it has succeeded (or, partial, once it was cancelled after a pass)",
-                   std::nullopt};
+  if (auto problem = results_not_ready(job)) return *problem;
   const std::string format = file == JobFile::kResultExr ? "exr" : "png";
   bool asked = false;
   try {
@@ -292,6 +301,30 @@ std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobR
     // A record whose outputs cannot be read asked for nothing that can be served.
   }
   if (!asked) return Problem{404, "the job did not ask for a " + format + " output", std::nullopt};
+  return published_result(job, file);
+}
+
+std::variant<std::unique_ptr<FileReader>, Problem> JobService::pass(const JobRecord& job, std::string_view name) {
+  std::vector<std::string> aovs;
+  try {
+    aovs = render_settings_from_text(job.settings).aovs;
+  } catch (const std::runtime_error&) {
+    // A record whose settings cannot be read asked for no pass that can be served.
+  }
+  const auto f = pass_file(name);
+  if (!f || std::find(aovs.begin(), aovs.end(), name) == aovs.end()) {
+    std::string asked;
+    for (const std::string& a : aovs) asked += (asked.empty() ? "" : ", ") + a;
+    return Problem{404,
+                   "the job did not ask for the pass \"" + std::string(name) +
+                       "\" (render.aovs: " + (asked.empty() ? "none" : asked) + ")",
+                   std::nullopt};
+  }
+  if (auto problem = results_not_ready(job)) return *problem;
+  return published_result(job, *f);
+}
+
+std::variant<std::unique_ptr<FileReader>, Problem> JobService::published_result(const JobRecord& job, JobFile file) {
   if (auto reader = files_.open(job.id, file)) return reader;
   // A run's outputs are published once the store took its end (Scheduler::publish_outputs()); a node that stopped
   // in between left them staged under the run's epoch, which the succeeded job's record names. (Opened again

@@ -94,6 +94,9 @@ class JobService {
   std::unique_ptr<FileReader> job_log(const JobRecord& job);
   // A finished output (kResultPng or kResultExr), or why there is none.
   std::variant<std::unique_ptr<FileReader>, Problem> result(const JobRecord& job, JobFile file);
+  // A finished job's render pass `name` (render.aovs) as PNG, or why there is none (404 naming the job's passes for
+  // a pass it did not ask for).
+  std::variant<std::unique_ptr<FileReader>, Problem> pass(const JobRecord& job, std::string_view name);
 
   // Cancel, pause, resume or requeue (409 with the state table's reason when the job's state does not allow it; 429
   // when resuming or requeueing would queue more of the owner's jobs than --max-queued-per-user).
@@ -110,6 +113,9 @@ class JobService {
   bool store_failing() const;
 
  private:
+  // A result file of a succeeded or cancelled job, published by its run's end (or by this call, where the node that
+  // ended the run stopped before publishing it), or why there is none.
+  std::variant<std::unique_ptr<FileReader>, Problem> published_result(const JobRecord& job, JobFile file);
   // Runs a client's change (submit, act, set_priority, remove) and notes whether the store took it: a store that
   // answers reads but refuses writes is failing all the same (/readyz, tessera_job_store_up), until a change goes
   // through again. A JobStoreError goes on to the caller.

@@ -820,10 +820,13 @@ void Scheduler::publish_outputs(RenderSlot& slot, bool recorded) {
 std::string Scheduler::write_outputs(const std::string& id, const OutputPipeline& outputs, const Image& image,
                                      int64_t staged_epoch) {
   std::string written;
-  outputs.publish(image, [&](ImageFormat format, std::string_view bytes) {
-    const JobFile f = result_file(format);
+  auto stage = [&](JobFile f, std::string_view bytes) {
     files_.stage(id, f, staged_epoch, bytes);
     (written += ' ') += job_file_name(f);
+  };
+  outputs.publish(image, [&](ImageFormat format, std::string_view bytes) { stage(result_file(format), bytes); });
+  outputs.publish_passes(image, [&](std::string_view pass, std::string_view png) {
+    if (const auto f = pass_file(pass)) stage(*f, png);
   });
   return written;
 }

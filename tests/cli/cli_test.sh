@@ -72,6 +72,27 @@ if same_sums two.tfilm all.tfilm; then ok "two ranges merge into the single rend
 expect 0 "a merged film merges again (nothing to add: one part)" "$TESSERA" merge two.tfilm -o again.tfilm
 if same_sums again.tfilm all.tfilm; then ok "a merge of one part is that part"; else not_ok "re-merge differs"; fi
 
+# --- render passes: layers of the EXR, every one of a merge bit for bit the single render's ---------------------------
+aovs=(--aov variance --aov albedo --aov depth --aov object_id --aov sample_count)
+expect 0 "render all 12 samples with passes" "$TESSERA" render "$job" "${r[@]}" --spp 12 "${aovs[@]}" -o aovs.exr
+channels=$(oiiotool --info -v aovs.exr 2>/dev/null | grep 'channel list')
+missing=""
+for c in R G B albedo.R albedo.G albedo.B depth.Z object_id.X sample_count.X variance.R variance.B; do
+  grep -qE "(^|[ ,:])$c \(" <<<"$channels" || missing+=" $c"
+done
+if [[ -z $missing ]]; then ok "the EXR names the beauty R, G, B and each pass <pass>.<channel>"; else
+  not_ok "the EXR lacks$missing: $channels"
+fi
+expect 0 "render samples 0:5 with passes" "$TESSERA" render "$job12" "${r[@]}" --samples 0:5 "${aovs[@]}" -o p1.tfilm
+expect 0 "render samples 5:7 with passes" "$TESSERA" render "$job12" "${r[@]}" --samples 5:7 "${aovs[@]}" -o p2.tfilm
+expect 0 "merge the parts with passes" "$TESSERA" merge p2.tfilm p1.tfilm -o aovs_merged.exr
+if cmp -s aovs_merged.exr aovs.exr; then ok "the merged EXR with passes is the single render's, byte for byte"; else not_ok "merged passes differ"; fi
+expect 1 "parts with and without passes do not merge" "$TESSERA" merge p1.tfilm b.tfilm -o x.exr
+expect 2 "a misspelt --aov is usage" "$TESSERA" render "$job" "${r[@]}" --spp 1 --aov depth --aov albdo -o x.exr
+grep -qF -- '--aov albdo: must be one of' "$tmp/err" && grep -qF 'did you mean "albedo"' "$tmp/err" \
+  && ok "render names the misspelt --aov and suggests albedo" || not_ok "render --aov albdo said: $(cat "$tmp/err")"
+expect 2 "a pass the integrator cannot make is usage" "$TESSERA" render "$job" "${r[@]}" --spp 1 --integrator light --aov normal -o x.exr
+
 # --- assets resolve beside the job file, also when it is named relative to the current directory -------------------
 mkdir -p assets
 cp all.exr assets/sky.exr

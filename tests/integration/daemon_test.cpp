@@ -154,6 +154,54 @@ TEST_F(DaemonTest, RendersTheCornellBox) {
   expect_problem(client_->Post("/v1/jobs/" + id + "/cancel"), 409, std::nullopt, "cancel finished");
 }
 
+// Render passes: layers of result.exr, and each alone as PNG with the results' caching; only those the job asked for.
+TEST_F(DaemonTest, RendersPassesIntoTheExrAndEachAsPng) {
+  json doc = cornell_job(48, 8);
+  doc["render"]["aovs"] = {"object_id", "albedo", "depth"};
+  const std::string id = submit(*client_, doc);
+  ASSERT_FALSE(id.empty());
+  const json done =
+      wait_for(*client_, id, [](const json& s) { return in_state(s, "succeeded") || in_state(s, "failed"); });
+  ASSERT_TRUE(in_state(done, "succeeded")) << done.dump();
+  EXPECT_FALSE(proto::contract_schemas().validate(done, "job-status.schema.json"));
+  EXPECT_EQ(done["render"]["aovs"], json({"albedo", "depth", "object_id"}));  // the table's order
+  EXPECT_EQ(done["links"]["aovs"]["depth"], "/v1/jobs/" + id + "/aovs/depth.png");
+
+  // The beauty and the passes' 3 + 1 + 1 channels.
+  const ImageData exr = decode(fetch(*client_, "/v1/jobs/" + id + "/result.exr"), dir_.path() / "r.exr");
+  EXPECT_EQ(exr.channels, 8);
+
+  auto albedo = client_->Get("/v1/jobs/" + id + "/aovs/albedo.png");
+  ASSERT_TRUE(albedo);
+  ASSERT_EQ(albedo->status, 200) << albedo->body;
+  EXPECT_EQ(albedo->get_header_value("Content-Type"), "image/png");
+  const ImageData look = decode(albedo->body, dir_.path() / "a.png");
+  EXPECT_EQ(look.width, 48);
+  EXPECT_GT(mean(look), 0.1);
+  const std::string etag = albedo->get_header_value("ETag");
+  ASSERT_FALSE(etag.empty());
+  auto again = client_->Get("/v1/jobs/" + id + "/aovs/albedo.png", {{"If-None-Match", etag}});
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->status, 304);
+  // Each pass its own picture.
+  EXPECT_NE(fetch(*client_, "/v1/jobs/" + id + "/aovs/object_id.png"), albedo->body);
+
+  auto not_asked = client_->Get("/v1/jobs/" + id + "/aovs/normal.png");
+  expect_problem(not_asked, 404, std::nullopt, "a pass not asked for");
+  EXPECT_NE(not_asked->body.find("albedo, depth, object_id"), std::string::npos) << not_asked->body;
+  expect_problem(client_->Get("/v1/jobs/" + id + "/aovs/..%2fresult.png"), 404, std::nullopt, "not a pass");
+  expect_problem(client_->Get("/v1/jobs/" + id + "/aovs/preview.png"), 404, std::nullopt, "not a pass either");
+
+  // A job without passes has none to fetch, and keeps its plain EXR.
+  const std::string plain = submit(*client_, cornell_job(48, 8));
+  ASSERT_TRUE(in_state(wait_for(*client_, plain, [](const json& s) { return in_state(s, "succeeded"); }), "succeeded"));
+  EXPECT_EQ(decode(fetch(*client_, "/v1/jobs/" + plain + "/result.exr"), dir_.path() / "p.exr").channels, 3);
+  expect_problem(client_->Get("/v1/jobs/" + plain + "/aovs/albedo.png"), 404, std::nullopt, "no passes");
+  // And the files on disk are the data directory's: aov.<pass>.png beside the results.
+  EXPECT_TRUE(fs::exists(data_ / "jobs" / id / "aov.depth.png"));
+  EXPECT_FALSE(fs::exists(data_ / "jobs" / plain / "aov.depth.png"));
+}
+
 TEST_F(DaemonTest, PreviewWhileRunningThenCancel) {
   const std::string id = submit(*client_, long_cornell_job());
   ASSERT_FALSE(id.empty());
@@ -271,6 +319,15 @@ std::vector<BadRequest> bad_requests() {
       {"negative radiance", json_type,
        patched(R"([{"op":"replace","path":"/scene/materials/light/radiance/2","value":-4}])").dump(), 422,
        "/scene/materials/light/radiance/2"},
+      {"misspelt pass", json_type, patched(R"([{"op":"add","path":"/render/aovs","value":["depth","albdo"]}])").dump(),
+       422, "/render/aovs/1"},
+      {"pass asked twice", json_type,
+       patched(R"([{"op":"add","path":"/render/aovs","value":["depth","depth"]}])").dump(), 422, "/render/aovs/1"},
+      {"pass the integrator cannot make", json_type,
+       patched(R"([{"op":"add","path":"/render/integrator","value":"light"},
+                   {"op":"add","path":"/render/aovs","value":["albedo"]}])")
+           .dump(),
+       422, "/render/aovs/0"},
       {"unknown kind", json_type, patched(R"([{"op":"replace","path":"/kind","value":"video"}])").dump(), 422, "/kind"},
       {"not JSON at all", json_type, "this is not JSON", 400, ""},
       {"truncated JSON", json_type, cornell_job(64, 16).dump().substr(0, 100), 400, std::nullopt},

@@ -174,7 +174,7 @@ TEST(FilmCodec, RefusesMalformedFiles) {
       {"region past the edge", with_field<int32_t>(good, 36, 4)},
       {"region near 2^31", with_field<int32_t>(good, 28, 0x7fffffff)},
       {"empty region", with_field<int32_t>(good, 40, 0)},
-      {"unknown flags", with_field<uint32_t>(good, 44, 2)},
+      {"unknown flags", with_field<uint32_t>(good, 44, 4)},
       {"unknown tone map", with_field<uint32_t>(good, 52, 2)},
       {"NaN elapsed time", with_field<double>(good, 72, NAN)},
       {"negative elapsed time", with_field<double>(good, 72, -1)},

@@ -1,0 +1,227 @@
+#include "renderer/aov.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <utility>
+
+#include "proto/did_you_mean.h"
+
+namespace tessera {
+
+namespace {
+
+// The squares of the variance pass live in a layer of this name: the pass's own name, its resolved values being
+// derived from the layer and the beauty.
+constexpr std::string_view kVariance = "variance";
+
+}  // namespace
+
+const std::vector<AovInfo>& aov_table() {
+  using K = LayerKind;
+  using S = AovSource;
+  static const std::vector<AovInfo> table = {
+      {"albedo", 3, {"R", "G", "B"}, K::kRadiance, S::kShading, false},
+      {"normal", 3, {"X", "Y", "Z"}, K::kSigned, S::kShading, false},
+      {"depth", 1, {"Z"}, K::kDistance, S::kDistance, true},
+      {"position", 3, {"X", "Y", "Z"}, K::kSigned, S::kFirstSample, true},
+      {"uv", 2, {"U", "V"}, K::kSigned, S::kSurface, false},
+      {"roughness", 1, {"X"}, K::kRadiance, S::kSurface, false},
+      {"object_id", 1, {"X"}, K::kSigned, S::kFirstSample, true},
+      {"material_id", 1, {"X"}, K::kSigned, S::kFirstSample, true},
+      {"sample_count", 1, {"X"}, K::kRadiance, S::kSampleCount, true},
+      {kVariance, 3, {"R", "G", "B"}, K::kRadiance, S::kSquares, true},
+  };
+  return table;
+}
+
+const AovInfo* find_aov(std::string_view name) {
+  for (const AovInfo& a : aov_table())
+    if (a.name == name) return &a;
+  return nullptr;
+}
+
+std::string unknown_aov_message(std::string_view name) {
+  std::vector<std::string_view> names;
+  for (const AovInfo& a : aov_table()) names.push_back(a.name);
+  std::string message =
+      "unknown pass \"" + std::string(name) + "\"" + proto::did_you_mean(name, names) + "; the passes are";
+  for (std::string_view n : names) message.append(" ").append(n);
+  return message;
+}
+
+void add_aov_layers(Film& film, const std::vector<std::string>& aovs) {
+  for (const AovInfo& a : aov_table()) {
+    if (a.source == AovSource::kSampleCount) continue;
+    if (std::find(aovs.begin(), aovs.end(), a.name) != aovs.end())
+      film.add_layer(std::string(a.name), a.channels, a.kind);
+  }
+}
+
+std::vector<std::string> aovs_of(const Film& film, bool sample_count) {
+  std::vector<std::string> aovs;
+  for (const AovInfo& a : aov_table())
+    if (a.source == AovSource::kSampleCount ? sample_count : film.layer(a.name) >= 0) aovs.emplace_back(a.name);
+  return aovs;
+}
+
+bool aovs_read_surfaces(const std::vector<std::string>& aovs) {
+  for (const std::string& name : aovs) {
+    const AovInfo* a = find_aov(name);
+    if (a && a->source != AovSource::kSampleCount && a->source != AovSource::kSquares) return true;
+  }
+  return false;
+}
+
+AovWriter::AovWriter(const Film& film)
+    : albedo_(film.layer("albedo")),
+      normal_(film.layer("normal")),
+      depth_(film.layer("depth")),
+      uv_(film.layer("uv")),
+      roughness_(film.layer("roughness")),
+      position_(film.layer("position")),
+      object_(film.layer("object_id")),
+      material_(film.layer("material_id")),
+      squares_(film.layer(kVariance)) {
+  for (int layer : {albedo_, normal_, depth_, uv_, roughness_, position_, object_, material_})
+    wants_features_ = wants_features_ || layer >= 0;
+}
+
+void AovWriter::add(Film& film, int x, int y, uint32_t sample_index, const SurfaceFeatures& f, const Rgb& l) const {
+  if (squares_ >= 0) {
+    const float sq[3] = {l.x * l.x, l.y * l.y, l.z * l.z};
+    film.add_layer_sample(squares_, x, y, sq);
+  }
+  if (!wants_features_) return;
+  if (f.shaded) {
+    if (albedo_ >= 0) film.add_layer_sample(albedo_, x, y, &f.albedo.x);
+    if (normal_ >= 0) film.add_layer_sample(normal_, x, y, &f.normal.x);
+  }
+  if (!f.surface) {
+    // Escaped: depth counts the sample out (an infinite distance is not summed); the first sample's ids are 0.
+    if (depth_ >= 0) {
+      const float inf = INFINITY;
+      film.add_layer_sample(depth_, x, y, &inf);
+    }
+    return;
+  }
+  if (depth_ >= 0) film.add_layer_sample(depth_, x, y, &f.depth);
+  if (uv_ >= 0) film.add_layer_sample(uv_, x, y, &f.uv.x);
+  if (roughness_ >= 0) film.add_layer_sample(roughness_, x, y, &f.roughness);
+  if (sample_index != 0) return;
+  if (position_ >= 0) film.add_layer_sample(position_, x, y, &f.position.x);
+  const float object = static_cast<float>(f.object) + 1, material = static_cast<float>(f.material) + 1;
+  if (object_ >= 0) film.add_layer_sample(object_, x, y, &object);
+  if (material_ >= 0) film.add_layer_sample(material_, x, y, &material);
+}
+
+namespace {
+
+// The smallest and largest finite values of channel c of n-channel pixels; {0, 0} when none is finite.
+std::pair<float, float> finite_range(const std::vector<float>& v, size_t n, size_t c) {
+  float lo = INFINITY, hi = -INFINITY;
+  for (size_t i = c; i < v.size(); i += n)
+    if (std::isfinite(v[i])) lo = std::min(lo, v[i]), hi = std::max(hi, v[i]);
+  return lo <= hi ? std::pair{lo, hi} : std::pair{0.0f, 0.0f};
+}
+
+float stretch(float v, std::pair<float, float> range) {
+  if (!std::isfinite(v)) return 0;
+  return range.second > range.first ? (v - range.first) / (range.second - range.first) : 1.0f;
+}
+
+// A colour of its own for each id: the bits of the id mixed by MurmurHash3's 32-bit finaliser (Appleby 2011), three
+// of its bytes as the channels, kept away from black.
+Rgb id_colour(float id) {
+  if (!(id > 0)) return Rgb(0);
+  uint32_t h = static_cast<uint32_t>(id);
+  h ^= h >> 16;
+  h *= 0x85ebca6bu;
+  h ^= h >> 13;
+  h *= 0xc2b2ae35u;
+  h ^= h >> 16;
+  auto channel = [&](int shift) { return 0.15f + 0.85f * static_cast<float>((h >> shift) & 0xffu) / 255.0f; };
+  return Rgb(channel(0), channel(8), channel(16));
+}
+
+}  // namespace
+
+std::vector<float> aov_look(const AovInfo& aov, const std::vector<float>& values) {
+  const size_t n = static_cast<size_t>(aov.channels), pixels = values.size() / n;
+  std::vector<float> rgb(3 * pixels, 0.0f);
+  auto set = [&](size_t i, Rgb c) {
+    rgb[3 * i] = c.x;
+    rgb[3 * i + 1] = c.y;
+    rgb[3 * i + 2] = c.z;
+  };
+  if (aov.name == "albedo") return values;
+  if (aov.name == "normal") {
+    for (size_t i = 0; i < pixels; ++i)
+      set(i, Rgb(values[3 * i] + 1, values[3 * i + 1] + 1, values[3 * i + 2] + 1) * 0.5f);
+  } else if (aov.name == "depth") {
+    const auto range = finite_range(values, 1, 0);
+    for (size_t i = 0; i < pixels; ++i)
+      set(i, Rgb(std::isfinite(values[i]) ? 1 - 0.9f * stretch(values[i], range) : 0));
+  } else if (aov.name == "position") {
+    const std::pair<float, float> ranges[3] = {finite_range(values, 3, 0), finite_range(values, 3, 1),
+                                               finite_range(values, 3, 2)};
+    for (size_t i = 0; i < pixels; ++i)
+      set(i, Rgb(stretch(values[3 * i], ranges[0]), stretch(values[3 * i + 1], ranges[1]),
+                 stretch(values[3 * i + 2], ranges[2])));
+  } else if (aov.name == "uv") {
+    for (size_t i = 0; i < pixels; ++i)
+      set(i, Rgb(values[2 * i] - std::floor(values[2 * i]), values[2 * i + 1] - std::floor(values[2 * i + 1]), 0));
+  } else if (aov.name == "object_id" || aov.name == "material_id") {
+    for (size_t i = 0; i < pixels; ++i) set(i, id_colour(values[i]));
+  } else if (aov.name == "variance") {
+    std::vector<float> deviation(pixels);
+    for (size_t i = 0; i < pixels; ++i)
+      deviation[i] = std::sqrt(std::max(0.0f, luminance(Rgb(values[3 * i], values[3 * i + 1], values[3 * i + 2]))));
+    const float top = finite_range(deviation, 1, 0).second;
+    for (size_t i = 0; i < pixels; ++i)
+      set(i, Rgb(!std::isfinite(deviation[i]) ? 1.0f : top > 0 ? deviation[i] / top : 0.0f));
+  } else {
+    // One channel shown grey: roughness as it is, sample_count over the image's largest.
+    const float top = aov.name == "sample_count" ? std::max(1.0f, finite_range(values, 1, 0).second) : 1.0f;
+    for (size_t i = 0; i < pixels; ++i) set(i, Rgb(values[i * n] / top));
+  }
+  return rgb;
+}
+
+std::vector<float> resolve_aov(const Film& film, const AovInfo& aov) {
+  const size_t n = film.pixel_count();
+  if (aov.source == AovSource::kSampleCount) {
+    std::vector<float> out(n);
+    for (size_t i = 0; i < n; ++i) out[i] = static_cast<float>(film.pixel_sample_counts()[i]);
+    return out;
+  }
+  const int index = film.layer(aov.name);
+  if (index < 0) throw std::invalid_argument("the film has no layer for the pass " + std::string(aov.name));
+  const FilmLayer& layer = film.layer_at(index);
+  if (aov.source == AovSource::kFirstSample) {
+    // One sample's value: the sum itself.
+    std::vector<float> out(layer.sums.size());
+    for (size_t i = 0; i < out.size(); ++i)
+      out[i] = static_cast<float>(static_cast<double>(layer.sums[i]) / kFixedScale);
+    return out;
+  }
+  if (aov.source != AovSource::kSquares) return film.resolve_layer(index);
+  // The variance of the pixel's mean, per channel, from the sums of the samples and of their squares.
+  std::vector<float> out(3 * n);
+  const std::vector<FixedSum>& sums = film.sums();
+  for (size_t i = 0; i < n; ++i) {
+    const double count = film.pixel_sample_counts()[i];
+    for (size_t c = 0; c < 3; ++c) {
+      if (count < 2) {
+        out[3 * i + c] = INFINITY;
+        continue;
+      }
+      const double mean = static_cast<double>(sums[3 * i + c]) / (kFixedScale * count);
+      const double mean_sq = static_cast<double>(layer.sums[3 * i + c]) / (kFixedScale * count);
+      out[3 * i + c] = static_cast<float>(std::max(0.0, mean_sq - mean * mean) / (count - 1));
+    }
+  }
+  return out;
+}
+
+}  // namespace tessera
