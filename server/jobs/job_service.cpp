@@ -66,7 +66,9 @@ JobService::JobService(JobStore& store, const JobFiles& files, AssetStore& asset
       scheduler_(scheduler),
       events_(events),
       metrics_(metrics),
-      options_(options) {
+      options_(options),
+      log_(files, options.node),
+      results_(store, files, options.node) {
   SchedulerHooks hooks;
   hooks.state_changed = [this](const std::string& id) { publish_state(id); };
   hooks.progress = [this](const std::string& id, const JobProgress& p) {
@@ -336,10 +338,10 @@ std::variant<ActionTaken, Problem> JobService::act(const JobRecord& job, JobActi
     Scheduler::Outcome outcome = Scheduler::Outcome::kConflict;
     switch (action) {
       case JobAction::kCancel:
-        outcome = scheduler_.cancel(job.id);
+        outcome = cancel(job.id);
         break;
       case JobAction::kPause:
-        outcome = scheduler_.pause(job.id);
+        outcome = pause(job.id);
         break;
       case JobAction::kResume:
         outcome = scheduler_.resume(job.id);
@@ -353,7 +355,6 @@ std::variant<ActionTaken, Problem> JobService::act(const JobRecord& job, JobActi
     }
     switch (outcome) {
       case Scheduler::Outcome::kDone:
-      case Scheduler::Outcome::kInProgress:
         return taken(job.id);
       case Scheduler::Outcome::kConflict: {
         auto now = store_.get(job.id);
@@ -365,6 +366,41 @@ std::variant<ActionTaken, Problem> JobService::act(const JobRecord& job, JobActi
     }
     return Problem{404, "no such job", std::nullopt};
   });
+}
+
+// The store first, no claim here meanwhile (a queued job stays queued until the change is made): the nodes rendering
+// the job, this one included, stop at once (the store's notification; here, Scheduler::stop), and record nothing.
+Scheduler::Outcome JobService::cancel(const std::string& id) {
+  {
+    const Scheduler::ClaimHold hold = scheduler_.hold_claims();
+    auto job = store_.get(id);
+    if (!job) return Scheduler::Outcome::kUnknown;
+    if (!action_allowed(JobAction::kCancel, job->state)) return Scheduler::Outcome::kConflict;
+    log_.add(id, "cancelled by a client");
+    if (!results_.record_cancel(*job))
+      return store_.get(id) ? Scheduler::Outcome::kConflict : Scheduler::Outcome::kUnknown;
+    scheduler_.stop(id, Scheduler::StopSignal::kCancel);
+  }
+  files_.remove(id, JobFile::kCheckpoint);
+  log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+  publish_state(id);
+  return Scheduler::Outcome::kDone;
+}
+
+// As cancel(): the store first (a split job's running units go back to the queue with their last checkpoints), then
+// the renders here stop (Scheduler::stop: a job rendered whole ends its pass first); the job's checkpoint stays, for
+// its resume.
+Scheduler::Outcome JobService::pause(const std::string& id) {
+  {
+    const Scheduler::ClaimHold hold = scheduler_.hold_claims();
+    if (!store_.transition(id, JobState::kPaused, now_ms()))
+      return store_.get(id) ? Scheduler::Outcome::kConflict : Scheduler::Outcome::kUnknown;
+    scheduler_.stop(id, Scheduler::StopSignal::kPause);
+  }
+  log(LogLevel::kInfo, "job paused", {{"job", id}});
+  log_.add(id, "paused by a client");
+  publish_state(id);
+  return Scheduler::Outcome::kDone;
 }
 
 std::variant<ActionTaken, Problem> JobService::set_priority(const Caller& caller, const JobRecord& job, int priority) {
