@@ -2,9 +2,10 @@
 // visibility (a user sees only their own jobs; an admin every job), the actions of the state table (job_state.h), the
 // files a job shows, deletion. The HTTP routes, the scheduler's hooks (events and metrics of a render) and the
 // retention sweep all go through it; it goes to the job store, the job files and the scheduler. It knows nothing of
-// HTTP: a refusal is a Problem for the caller to answer. A client's cancel or pause is its to decide and record: the
-// store's change first (with a cancelled job's partial results, JobResults), then a stop signal to the renders of the
-// job here (Scheduler::stop), which end within a tile's time and record nothing.
+// HTTP: a refusal is a Problem for the caller to answer. A client's change of a job's state is its to decide and
+// record, no claim of this daemon's scheduler meanwhile: the store's change first (with a cancelled job's partial
+// results, JobResults), then, for a cancel or pause, a stop signal to the renders of the job here (Scheduler::stop),
+// which end within a tile's time and record nothing.
 #pragma once
 
 #include <atomic>
@@ -134,11 +135,19 @@ class JobService {
   // 429 when `owner` has --max-queued-per-user jobs queued already.
   std::optional<Problem> queue_full(const std::string& owner);
   std::variant<ActionTaken, Problem> taken(const std::string& id);
+  // A client's change of a job's state, as act() answers it.
+  enum class Outcome { kDone, kConflict, kUnknown };
+  Outcome change_state(const std::string& id, JobAction action);
   // queued, paused or running -> cancelled: a job cancelled after a pass keeps the image of its last complete pass
   // (or its units' films) as its results (partial); its renders here stop.
-  Scheduler::Outcome cancel(const std::string& id);
+  Outcome cancel(const std::string& id);
   // queued or running -> paused: its renders here stop, and the job keeps its checkpoint for its resume.
-  Scheduler::Outcome pause(const std::string& id);
+  Outcome pause(const std::string& id);
+  // paused -> queued.
+  Outcome resume(const std::string& id);
+  // failed or cancelled -> queued, from scratch (its checkpoint, preview and outputs are deleted); not a job that
+  // failed on its input.
+  Outcome requeue(const std::string& id);
 
   JobStore& store_;
   const JobFiles& files_;

@@ -907,37 +907,6 @@ int Scheduler::stop(const std::string& id, StopSignal signal) {
   return static_cast<int>(slots.size());
 }
 
-Scheduler::Outcome Scheduler::resume(const std::string& id) {
-  if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", JobState::kPaused))
-    return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
-  log(LogLevel::kInfo, "job resumed", {{"job", id}});
-  log_.add(id, "resumed by a client: back in the queue");
-  notify_state(id);
-  wake();
-  return Outcome::kDone;
-}
-
-Scheduler::Outcome Scheduler::requeue(const std::string& id) {
-  {
-    // The store first: one that fails (JobStoreError) leaves the job as it was, its preview included, for a retry.
-    // Claims happen under this lock, so the job is not claimed before the files of its last run are gone.
-    std::lock_guard lock(mutex_);
-    auto job = store_.get(id);
-    if (!job) return Outcome::kUnknown;
-    if (!action_allowed(JobAction::kRequeue, job->state, job->input_refused())) return Outcome::kConflict;
-    if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", job->state)) return Outcome::kConflict;
-    // From scratch: nothing of the last run survives.
-    for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng}) files_.remove(id, f);
-    for (JobFile f : kResultFiles) files_.remove(id, f);
-    files_.remove_units(id);  // a split job's units start over too (the store forgot their checkpoints)
-  }
-  log(LogLevel::kInfo, "job requeued", {{"job", id}});
-  log_.add(id, "requeued by a client: the render starts over");
-  notify_state(id);
-  wake();
-  return Outcome::kDone;
-}
-
 bool Scheduler::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
   std::unique_lock lock(mutex_);
   std::vector<std::shared_ptr<RenderSlot>> slots;

@@ -7,9 +7,10 @@
 // takes it (JobStoreError never fails a job): the store, not the job, is at fault. An end the store's state machine
 // refuses (the job was deleted, or changed elsewhere) is not recorded, and nothing is done as if it had been.
 //
-// A client's cancel or pause is the job service's to decide and record (JobService::act): the store first, then a
-// stop signal to the renders of the job here (stop()), which end within a tile's time and record nothing. A change
-// made through another daemon on the same store reaches the renders here the same way, as a lease the store refuses.
+// A client's change of a job's state (cancel, pause, resume, requeue) is the job service's to decide and record
+// (JobService::act): the store first, then, for a cancel or pause, a stop signal to the renders of the job here
+// (stop()), which end within a tile's time and record nothing. A change made through another daemon on the same store
+// reaches the renders here the same way, as a lease the store refuses.
 #pragma once
 
 #include <chrono>
@@ -130,12 +131,6 @@ class Scheduler {
   // renders were signalled.
   int stop(const std::string& id, StopSignal signal);
 
-  enum class Outcome { kDone, kConflict, kUnknown };
-  // paused -> queued.
-  Outcome resume(const std::string& id);
-  // failed or cancelled -> queued, from scratch (its checkpoint, preview and outputs are deleted); not a job that
-  // failed on its input.
-  Outcome requeue(const std::string& id);
   // Deletes a job and its files (cancelling its render first); false for an unknown id. With
   // `only_finished_before_ms` (retention), only a job that ended before that time and has no render thread left;
   // anything else is kept (false).

@@ -254,12 +254,13 @@ TEST_F(SchedulerStoreFailure, ARequeueTheStoreRefusesKeepsTheLastRun) {
   fs::create_directories(files_.dir(id));
   files_.write(id, JobFile::kPreviewPng, "a preview");
 
+  auto service = make_service(*scheduler);
   store_.failures_left = 1;
-  EXPECT_THROW(scheduler->requeue(id), JobStoreError);
+  EXPECT_THROW(act(*service, id, JobAction::kRequeue), JobStoreError);
   EXPECT_EQ(state_of(id), JobState::kCancelled);
   EXPECT_TRUE(fs::is_regular_file(files_.path(id, JobFile::kPreviewPng)));
 
-  EXPECT_EQ(scheduler->requeue(id), Scheduler::Outcome::kDone);
+  EXPECT_TRUE(std::holds_alternative<ActionTaken>(act(*service, id, JobAction::kRequeue)));
   EXPECT_EQ(state_of(id), JobState::kQueued);
   EXPECT_FALSE(fs::exists(files_.path(id, JobFile::kPreviewPng)));  // from scratch
 }

@@ -123,7 +123,7 @@ TEST_F(SchedulerUnits, APauseThroughTheRenderingNodeIsInTheStoreWhenItReturns) {
   // Its units wait with their checkpoints, and it resumes: back in the queue, where this node's scheduler (free again)
   // may claim it at once, so the state read after the call is queued or already running again.
   for (const UnitRecord& u : postgres_.units(id)) EXPECT_FALSE(u.done);
-  EXPECT_EQ(scheduler_.resume(id), Scheduler::Outcome::kDone);
+  EXPECT_TRUE(act(id, JobAction::kResume));
   const JobState after = state_of(id);
   EXPECT_TRUE(after == JobState::kQueued || after == JobState::kRunning) << job_state_name(after);
   EXPECT_TRUE(test::eventually([&] { return scheduler_.running_count() == 1; }, 60));
