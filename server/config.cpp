@@ -244,7 +244,9 @@ const std::vector<Option>& options() {
        "times a job is rendered again after its renderer died while rendering it (a crash, a kill, a node lost); "
        "past that it fails naming the crashes, never resumed at a start again (default 2)",
        integer(&Config::crash_retries, 0, 1000)},
-      {"--max-work", "TESSERA_MAX_WORK", "N", "largest width*height*spp*max_depth of a job, 422 above (0: no limit)",
+      {"--max-work", "TESSERA_MAX_WORK", "N",
+       "largest width*height*spp*max_depth of a job (max_depth + max_volume_depth where its media scatter), 422 above "
+       "(0: no limit)",
        real(&Config::max_work, 0, 1e30)},
       {"--max-gltf-instances", "TESSERA_MAX_GLTF_INSTANCES", "N",
        "node instances of a glTF asset, counted per path through its hierarchy; more is 422 (default 1000000)",

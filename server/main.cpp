@@ -132,6 +132,7 @@ int run(const Config& config) {
   service_options.max_user_priority = config.max_user_priority;
   service_options.max_queued_per_user = config.max_queued_per_user;
   service_options.unit_pixel_samples = config.unit_pixel_samples;
+  service_options.node = scheduler_options.node;
   JobService jobs(*store, *files, *assets, scheduler, *events, metrics, service_options);
   // The notifications' handlers call the scheduler and the event bus: they stop first, however run() ends.
   struct StopListening {

@@ -590,8 +590,8 @@ int cmd_list(std::vector<std::string> args) {
 
 const char* kCancelUsage =
     "usage: tessera cancel ID [--url URL] [--token T]\n"
-    "Cancels a queued or running job and prints its state: cancelled, or cancelling while a running job stops at\n"
-    "the end of its sample pass (exit 1 when it had already ended).\n";
+    "Cancels a queued, paused or running job and prints its state, cancelled (a running render stops within a\n"
+    "tile's time; exit 1 when the job had already ended).\n";
 
 int cmd_cancel(std::vector<std::string> args) {
   Remote remote = remote_options(&args);
@@ -600,11 +600,7 @@ int cmd_cancel(std::vector<std::string> args) {
   auto client = remote.client();
   const httplib::Result res = client->Post((job_path(id) + "/cancel").c_str());
   const json job = expect_json(remote, res, "cancel");
-  // 202: the job is rendering and stops at its next sample pass; it reads "cancelled" once it has.
-  if (res->status == 202)
-    std::printf("cancelling (the render stops within a pass; `tessera watch %s` follows it)\n", args[0].c_str());
-  else
-    std::printf("%s\n", job.value("state", "").c_str());
+  std::printf("%s\n", job.value("state", "").c_str());
   return kExitOk;
 }
 

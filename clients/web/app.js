@@ -670,10 +670,7 @@ async function runAction(id, action) {
     } else {
       const job = await api.action(id, action);
       showNotice(`Job ${shortId(id)}: ${job?.state ?? action}.`);
-      // A render still winding down (202: cancel or pause of a running job) is shown by the events or the next poll,
-      // which may have brought its new state already: the answer's "running" is older than that.
-      const pending = (action === "cancel" || action === "pause") && job?.state === "running";
-      if (job && id === selectedId && !pending) showJob(job);
+      if (job && id === selectedId) showJob(job);
     }
   } catch (e) {
     showError(e, `${action[0].toUpperCase()}${action.slice(1)} refused`);

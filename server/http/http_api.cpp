@@ -361,16 +361,16 @@ void get_log(ApiContext& ctx, const Request& req, Response& res) {
   res.set_content("", type);
 }
 
-// A job after an action: 202 while a running render winds down (within one pass), 200 once the state has changed.
-void send_taken(Response& res, const std::variant<ActionTaken, Problem>& taken, bool may_pend) {
+// A job after an action: 200 with its status, the change recorded.
+void send_taken(Response& res, const std::variant<ActionTaken, Problem>& taken) {
   if (auto* p = std::get_if<Problem>(&taken)) return send_problem(res, *p);
   const ActionTaken& t = std::get<ActionTaken>(taken);
   set_retry_after(res, t.job);
-  send_json(res, may_pend && t.pending ? 202 : 200, t.status);
+  send_json(res, 200, t.status);
 }
 
 void job_action(ApiContext& ctx, const Request& req, Response& res, JobAction action) {
-  if (auto job = find_job(ctx, req, res)) send_taken(res, ctx.jobs.act(*job, action), true);
+  if (auto job = find_job(ctx, req, res)) send_taken(res, ctx.jobs.act(*job, action));
 }
 
 void patch_job(ApiContext& ctx, const Request& req, Response& res) {
@@ -390,7 +390,7 @@ void patch_job(ApiContext& ctx, const Request& req, Response& res) {
   const json& p = body["priority"];
   if (!p.is_number_integer() || p.get<int64_t>() < -100 || p.get<int64_t>() > 100)
     return send_problem(res, Problem{422, "must be an integer from -100 to 100", "/priority"});
-  send_taken(res, ctx.jobs.set_priority(caller_of(ctx, req), *job, p.get<int>()), false);
+  send_taken(res, ctx.jobs.set_priority(caller_of(ctx, req), *job, p.get<int>()));
 }
 
 // ---- Server-Sent Events --------------------------------------------------------------------------------------

@@ -66,7 +66,9 @@ JobService::JobService(JobStore& store, const JobFiles& files, AssetStore& asset
       scheduler_(scheduler),
       events_(events),
       metrics_(metrics),
-      options_(options) {
+      options_(options),
+      log_(files, options.node),
+      results_(store, files, options.node) {
   SchedulerHooks hooks;
   hooks.state_changed = [this](const std::string& id) { publish_state(id); };
   hooks.progress = [this](const std::string& id, const JobProgress& p) {
@@ -344,8 +346,7 @@ std::variant<std::unique_ptr<FileReader>, Problem> JobService::published_result(
 std::variant<ActionTaken, Problem> JobService::taken(const std::string& id) {
   auto now = store_.get(id);
   if (!now) return Problem{404, "no such job", std::nullopt};
-  // A running render winds down within one pass before its state changes.
-  return ActionTaken{*now, status(*now), now->state == JobState::kRunning};
+  return ActionTaken{*now, status(*now)};
 }
 
 std::optional<Problem> JobService::queue_full(const std::string& owner) {
@@ -362,42 +363,107 @@ std::optional<Problem> JobService::queue_full(const std::string& owner) {
 
 std::variant<ActionTaken, Problem> JobService::act(const JobRecord& job, JobAction action) {
   return writing([&]() -> std::variant<ActionTaken, Problem> {
+    if (!action_target(action))
+      return Problem{500, std::string(job_action_name(action)) + " is not a state change", std::nullopt};
     // Resuming a paused job or requeueing an ended one queues it: the owner's cap holds as for a new job (else pausing
     // at the cap, submitting and resuming would queue one more).
     if (action_target(action) == JobState::kQueued && action_allowed(action, job.state))
       if (auto full = queue_full(job.owner)) return *full;
-    Scheduler::Outcome outcome = Scheduler::Outcome::kConflict;
-    switch (action) {
-      case JobAction::kCancel:
-        outcome = scheduler_.cancel(job.id);
-        break;
-      case JobAction::kPause:
-        outcome = scheduler_.pause(job.id);
-        break;
-      case JobAction::kResume:
-        outcome = scheduler_.resume(job.id);
-        break;
-      case JobAction::kRequeue:
-        outcome = scheduler_.requeue(job.id);
-        break;
-      case JobAction::kPriority:
-      case JobAction::kDelete:
-        return Problem{500, std::string(job_action_name(action)) + " is not a state change", std::nullopt};
-    }
-    switch (outcome) {
-      case Scheduler::Outcome::kDone:
-      case Scheduler::Outcome::kInProgress:
+    switch (change_state(job.id, action)) {
+      case Outcome::kDone:
         return taken(job.id);
-      case Scheduler::Outcome::kConflict: {
+      case Outcome::kConflict: {
         auto now = store_.get(job.id);
         const JobRecord& latest = now ? *now : job;
         return Problem{409, action_refusal(action, latest.state, latest.input_refused()), std::nullopt};
       }
-      case Scheduler::Outcome::kUnknown:
+      case Outcome::kUnknown:
         break;
     }
     return Problem{404, "no such job", std::nullopt};
   });
+}
+
+JobService::Outcome JobService::change_state(const std::string& id, JobAction action) {
+  switch (action) {
+    case JobAction::kCancel:
+      return cancel(id);
+    case JobAction::kPause:
+      return pause(id);
+    case JobAction::kResume:
+      return resume(id);
+    case JobAction::kRequeue:
+      return requeue(id);
+    case JobAction::kPriority:
+    case JobAction::kDelete:
+      break;
+  }
+  return Outcome::kConflict;
+}
+
+// The store first, no claim here meanwhile (a queued job stays queued until the change is made): the nodes rendering
+// the job, this one included, stop at once (the store's notification; here, Scheduler::stop), and record nothing.
+JobService::Outcome JobService::cancel(const std::string& id) {
+  {
+    const Scheduler::ClaimHold hold = scheduler_.hold_claims();
+    auto job = store_.get(id);
+    if (!job) return Outcome::kUnknown;
+    if (!action_allowed(JobAction::kCancel, job->state)) return Outcome::kConflict;
+    log_.add(id, "cancelled by a client");
+    if (!results_.record_cancel(*job)) return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
+    scheduler_.stop(id, Scheduler::StopSignal::kCancel);
+  }
+  files_.remove(id, JobFile::kCheckpoint);
+  log(LogLevel::kInfo, "job cancelled", {{"job", id}});
+  publish_state(id);
+  return Outcome::kDone;
+}
+
+// As cancel(): the store first (a split job's running units go back to the queue with their last checkpoints), then
+// the renders here stop (Scheduler::stop: a job rendered whole ends its pass first); the job's checkpoint stays, for
+// its resume.
+JobService::Outcome JobService::pause(const std::string& id) {
+  {
+    const Scheduler::ClaimHold hold = scheduler_.hold_claims();
+    if (!store_.transition(id, JobState::kPaused, now_ms()))
+      return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
+    scheduler_.stop(id, Scheduler::StopSignal::kPause);
+  }
+  log(LogLevel::kInfo, "job paused", {{"job", id}});
+  log_.add(id, "paused by a client");
+  publish_state(id);
+  return Outcome::kDone;
+}
+
+JobService::Outcome JobService::resume(const std::string& id) {
+  if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", JobState::kPaused))
+    return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
+  log(LogLevel::kInfo, "job resumed", {{"job", id}});
+  log_.add(id, "resumed by a client: back in the queue");
+  publish_state(id);
+  scheduler_.wake();
+  return Outcome::kDone;
+}
+
+// The store first: one that fails (JobStoreError) leaves the job as it was, its preview included, for a retry. No
+// claim here meanwhile, so the job is not claimed before the files of its last run are gone.
+JobService::Outcome JobService::requeue(const std::string& id) {
+  {
+    const Scheduler::ClaimHold hold = scheduler_.hold_claims();
+    auto job = store_.get(id);
+    if (!job) return Outcome::kUnknown;
+    if (!action_allowed(JobAction::kRequeue, job->state, job->input_refused())) return Outcome::kConflict;
+    if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", job->state)) return Outcome::kConflict;
+    // From scratch: nothing of the last run survives.
+    for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng}) files_.remove(id, f);
+    for (JobFile f : kResultFiles) files_.remove(id, f);
+    files_.remove_units(id);  // a split job's units start over too (the store forgot their checkpoints)
+  }
+  log(LogLevel::kInfo, "job requeued", {{"job", id}});
+  log_.add(id, "requeued by a client: the render starts over");
+  publish_state(id);
+  scheduler_.wake();
+  return Outcome::kDone;
 }
 
 std::variant<ActionTaken, Problem> JobService::set_priority(const Caller& caller, const JobRecord& job, int priority) {

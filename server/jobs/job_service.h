@@ -2,7 +2,10 @@
 // visibility (a user sees only their own jobs; an admin every job), the actions of the state table (job_state.h), the
 // files a job shows, deletion. The HTTP routes, the scheduler's hooks (events and metrics of a render) and the
 // retention sweep all go through it; it goes to the job store, the job files and the scheduler. It knows nothing of
-// HTTP: a refusal is a Problem for the caller to answer.
+// HTTP: a refusal is a Problem for the caller to answer. A client's change of a job's state is its to decide and
+// record, no claim of this daemon's scheduler meanwhile: the store's change first (with a cancelled job's partial
+// results, JobResults), then, for a cancel or pause, a stop signal to the renders of the job here (Scheduler::stop),
+// which end within a tile's time and record nothing.
 #pragma once
 
 #include <atomic>
@@ -21,6 +24,8 @@
 #include "server/files/assets.h"
 #include "server/files/events.h"
 #include "server/files/job_files.h"
+#include "server/files/job_log.h"
+#include "server/jobs/job_results.h"
 #include "server/jobs/metrics.h"
 #include "server/jobs/scheduler.h"
 #include "server/jobs/submission.h"
@@ -34,6 +39,8 @@ struct JobServiceOptions {
   int max_queued_per_user = 0;  // queued jobs a user may have; 0: no cap
   // Work units (work_units.h): about this many pixel samples each, on a store that splits jobs; 0: never split.
   uint64_t unit_pixel_samples = 0;
+  // This daemon's name among the nodes sharing the store, for the lines it adds to job logs (JobLog).
+  std::string node;
 };
 
 struct SubmitRequest {
@@ -53,7 +60,6 @@ struct Submitted {
 struct ActionTaken {
   JobRecord job;
   nlohmann::json status;
-  bool pending = false;  // its render is winding down: the state changes within one pass
 };
 
 struct JobPage {
@@ -134,6 +140,19 @@ class JobService {
   // 429 when `owner` has --max-queued-per-user jobs queued already.
   std::optional<Problem> queue_full(const std::string& owner);
   std::variant<ActionTaken, Problem> taken(const std::string& id);
+  // A client's change of a job's state, as act() answers it.
+  enum class Outcome { kDone, kConflict, kUnknown };
+  Outcome change_state(const std::string& id, JobAction action);
+  // queued, paused or running -> cancelled: a job cancelled after a pass keeps the image of its last complete pass
+  // (or its units' films) as its results (partial); its renders here stop.
+  Outcome cancel(const std::string& id);
+  // queued or running -> paused: its renders here stop, and the job keeps its checkpoint for its resume.
+  Outcome pause(const std::string& id);
+  // paused -> queued.
+  Outcome resume(const std::string& id);
+  // failed or cancelled -> queued, from scratch (its checkpoint, preview and outputs are deleted); not a job that
+  // failed on its input.
+  Outcome requeue(const std::string& id);
 
   JobStore& store_;
   const JobFiles& files_;
@@ -142,6 +161,8 @@ class JobService {
   EventBus& events_;
   Metrics& metrics_;
   const JobServiceOptions options_;
+  JobLog log_;  // each job's own log, among its files
+  JobResults results_;
   std::atomic<bool> writes_failing_{false};
 };
 

@@ -4,7 +4,6 @@
 #include <bit>
 #include <chrono>
 #include <cstdio>
-#include <random>
 #include <system_error>
 
 #include <nlohmann/json.hpp>
@@ -30,20 +29,34 @@ class Scheduler::RenderSlot {
   int unit = -1;                     // the work unit it renders (JobRecord::unit); -1: the whole job
   RenderSession* session = nullptr;  // set while the render runs
   std::stop_source load_stop;        // asked to stop with the render: ends the scene's load (LoadStopped)
-  bool cancel_requested = false;     // by a client: the job ends cancelled
-  bool pause_requested = false;      // by a client: the job ends its pass and is paused
   bool delete_requested = false;     // by a client: the job is gone, its files go when the render stops
   std::optional<JobProgress> progress;
   bool awaiting_store = false;  // its end is rendered but the store failed to record it; retried
   bool ending = false;          // its end is being recorded: its lease is no longer renewed nor checked
   int64_t epoch = 0;            // of its lease: every write of the run carries it
   bool lease_lost = false;      // the store refused the lease: the job was taken over or changed elsewhere
-  // A client's cancel or pause of a split job that the store took first (Scheduler::cancel()): the unit stops and
-  // records nothing.
-  bool settled = false;
+  // A client's cancel or pause that the store took first (Scheduler::stop()): the render stops and records nothing.
+  std::optional<StopSignal> settled;
   std::chrono::steady_clock::time_point renewed_at = std::chrono::steady_clock::now();
   bool done = false;
   std::thread thread;
+
+  // Ends the scene's load, or the render's pass under way, within a tile's time; the last checkpoint stays.
+  void abandon() {
+    load_stop.request_stop();
+    if (session) session->cancel();
+  }
+  // A client's change, recorded in the store, stops the render (Scheduler::stop()). A paused job rendered whole ends
+  // its pass and keeps it as its checkpoint; anything else gives up its pass under way (a unit's would not count:
+  // the store takes a unit's checkpoint only from a run still running).
+  void signal(StopSignal s) {
+    settled = s;
+    load_stop.request_stop();
+    if (session && s == StopSignal::kPause && unit < 0)
+      session->stop();
+    else if (session)
+      session->cancel();
+  }
 };
 
 namespace {
@@ -72,12 +85,6 @@ std::string stop_explained(StopReason r) {
   return stop_reason_name(r);
 }
 
-// What a unit's checkpoints are checked against: the job's render settings and the unit, so that one unit's film is
-// never read as another's.
-uint64_t unit_settings_hash(const std::string& settings, int unit) {
-  return fnv1a64(std::to_string(unit), fnv1a64(settings));
-}
-
 JobProgress to_job_progress(const RenderProgress& p) {
   JobProgress jp;
   jp.passes = p.pass;
@@ -92,7 +99,26 @@ JobProgress to_job_progress(const RenderProgress& p) {
 }  // namespace
 
 Scheduler::Scheduler(JobStore& store, const JobFiles& files, ThreadPool& pool, SchedulerOptions options)
-    : store_(store), files_(files), log_(files, options.node), pool_(pool), options_(std::move(options)) {}
+    : store_(store),
+      files_(files),
+      log_(files, options.node),
+      results_(store, files, options.node),
+      pool_(pool),
+      options_(std::move(options)) {}
+
+Scheduler::ClaimHold::ClaimHold(Scheduler& scheduler) : scheduler_(scheduler) {
+  // Claims happen under the mutex: once it is held, none is under way.
+  std::lock_guard lock(scheduler_.mutex_);
+  ++scheduler_.claims_held_;
+}
+
+Scheduler::ClaimHold::~ClaimHold() {
+  {
+    std::lock_guard lock(scheduler_.mutex_);
+    --scheduler_.claims_held_;
+  }
+  scheduler_.cv_.notify_all();
+}
 
 Scheduler::~Scheduler() {
   shutdown();
@@ -177,10 +203,7 @@ void Scheduler::shutdown(double grace_s) {
       cv_.wait_for(lock, std::chrono::milliseconds(20));
     }
     // Out of time: abandon the passes under way; the last checkpoints stay.
-    for (auto& [id, slot] : running_) {
-      slot->load_stop.request_stop();
-      if (slot->session) slot->session->cancel();
-    }
+    for (auto& [id, slot] : running_) slot->abandon();
   }
   cv_.notify_all();
   if (dispatcher_.joinable()) dispatcher_.join();
@@ -247,10 +270,10 @@ void Scheduler::recheck() {
 }
 
 void Scheduler::lose_lease_locked(RenderSlot& slot, const char* noticed_by) {
-  if (slot.lease_lost) return;
+  // A render stopped by a client's change knows why its writes are refused: nothing more to stop or say.
+  if (slot.lease_lost || slot.settled) return;
   slot.lease_lost = true;
-  slot.load_stop.request_stop();
-  if (slot.session) slot.session->cancel();
+  slot.abandon();
   log(LogLevel::kInfo, "the job was changed or taken over elsewhere; its render here stops and records nothing",
       {{"job", slot.id}, {"epoch", slot.epoch}, {"noticed_by", noticed_by}});
 }
@@ -259,7 +282,7 @@ void Scheduler::dispatch_loop() {
   std::unique_lock lock(mutex_);
   while (!stopping_) {
     reap_finished_locked(lock);
-    while (!stopping_ && static_cast<int>(running_.size()) < options_.max_jobs) {
+    while (!stopping_ && claims_held_ == 0 && static_cast<int>(running_.size()) < options_.max_jobs) {
       std::optional<JobRecord> record;
       try {
         record = store_.claim_next(now_ms(), options_.lease.count(), options_.max_running_per_user);
@@ -366,14 +389,14 @@ void Scheduler::render_run(RenderSlot& slot, const JobRecord& record) {
     render_s = session.progress().elapsed_s;
     const bool interrupted = reason == StopReason::kStopped || reason == StopReason::kCancelled;
     if (interrupted || !still_ours_before_outputs(slot))
-      end_interrupted(slot, record, session.progress().samples_done, render_s);
+      end_interrupted(slot, record, session.progress().samples_done);
     else if (run.is_unit())
       end_unit(run);
     else
       end_job(run, reason);
   } catch (const LoadStopped&) {
     detach();
-    end_interrupted(slot, record, 0, render_s);
+    end_interrupted(slot, record, 0);
   } catch (const std::exception& e) {
     detach();
     std::string message = e.what();
@@ -422,9 +445,9 @@ StopReason Scheduler::render_passes(Run& run) {
     // Signals that came before the render could take them (RenderSlot).
     std::lock_guard lock(mutex_);
     run.slot.session = &session;
-    if (run.slot.cancel_requested || run.slot.delete_requested || run.slot.lease_lost || run.slot.settled)
-      session.cancel();
-    if (run.slot.pause_requested || stopping_) session.stop();
+    if (run.slot.delete_requested || run.slot.lease_lost) session.cancel();
+    if (run.slot.settled) run.slot.signal(*run.slot.settled);
+    if (stopping_) session.stop();
   }
   run.samples_counted = session.progress().samples_done;
   return session.run([&](const RenderProgress& p, const Film& film) { publish_pass(run, p, film); });
@@ -502,61 +525,66 @@ bool Scheduler::still_ours_before_outputs(RenderSlot& slot) {
   return true;
 }
 
-// A render (or a load) that stopped before its end: the job is deleted, cancelled, paused or (the daemon stopping)
-// back in the queue, to resume from its last checkpoint. The end goes to the store through record_end(): retried
-// while the store fails; when the daemon stops first, the job stays running in the store, with its checkpoint, for
-// the next start to resume.
-void Scheduler::end_interrupted(RenderSlot& slot, const JobRecord& record, uint32_t samples_done, double render_s) {
-  const std::string& id = record.id;
-  bool cancelled_by_client, paused, deleted, lease_lost, settled;
+// A render (or a load) that stopped before its end: the job was deleted, cancelled or paused by a client (the store
+// has the change already), changed or taken over elsewhere, or (the daemon stopping) goes back to the queue, to
+// resume from its last checkpoint. Only that last end is the run's to record.
+void Scheduler::end_interrupted(RenderSlot& slot, const JobRecord& record, uint32_t samples_done) {
+  bool deleted, lease_lost;
+  std::optional<StopSignal> settled;
   {
     std::lock_guard lock(mutex_);
-    cancelled_by_client = slot.cancel_requested;
-    paused = slot.pause_requested;
     deleted = slot.delete_requested;
     lease_lost = slot.lease_lost;
     settled = slot.settled;
   }
+  if (deleted)
+    log(LogLevel::kInfo, "job deleted while rendering", {{"job", record.id}});
+  else if (settled)
+    log_settled(record, *settled, samples_done);
+  else if (lease_lost)
+    end_taken_away(record.id, samples_done);
+  else
+    end_stopping(slot, record.id, samples_done);
+}
+
+void Scheduler::log_settled(const JobRecord& record, StopSignal signal, uint32_t samples_done) {
   const auto spp = static_cast<unsigned>(samples_done);
-  if (deleted) {
-    log(LogLevel::kInfo, "job deleted while rendering", {{"job", id}});
-  } else if (settled) {
-    // The store has the client's change already, made before this unit was asked to stop.
-    log_.add(id, printf_string("unit %d stopped at %u spp: the job was %s by a client", record.unit + 1, spp,
-                               cancelled_by_client ? "cancelled" : "paused"));
-    log(LogLevel::kInfo, "unit stopped: its job was cancelled or paused",
-        {{"job", id}, {"unit", record.unit}, {"samples_done", samples_done}});
-  } else if (lease_lost) {
-    // Whoever holds the job now owns its end. Its files go only if the job is gone.
-    log_.add(id, printf_string("stopped at %u spp: the job was changed or taken over elsewhere", spp));
-    log(LogLevel::kInfo, "render stopped: the job was changed or taken over elsewhere",
-        {{"job", id}, {"samples_done", samples_done}});
-    try {
-      if (!store_.get(id)) files_.remove(id);
-    } catch (const JobStoreError& e) {
-      count_store_error();
-      log(LogLevel::kWarn, "cannot tell whether a job taken away was deleted; its files stay",
-          {{"job", id}, {"error", e.what()}});
-    }
-  } else if (cancelled_by_client) {
-    log_.add(id, printf_string("cancelled by a client at %u spp", spp));
-    // Staged under this run's epoch: its own outputs are never staged on this path.
-    stage_partial_results(record, slot.epoch);
-    const bool recorded = record_terminal(slot, JobState::kCancelled, render_s, "cancelled");
-    settle_staged(id, slot.epoch, recorded);
-    if (recorded) log(LogLevel::kInfo, "job cancelled", {{"job", id}});
-  } else if (paused) {
-    log_.add(id, printf_string("paused by a client at %u spp; its checkpoint is kept", spp));
-    if (record_end(slot, [&] { return store_.end_run(id, slot.epoch, JobState::kPaused, now_ms()); }))
-      log(LogLevel::kInfo, "job paused", {{"job", id}, {"samples_done", samples_done}});
-  } else {
-    // The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it.
-    log_.add(id,
-             printf_string("the daemon is stopping: back in the queue at %u spp, to resume from its checkpoint", spp));
-    if (record_end(slot, [&] { return store_.end_run(id, slot.epoch, JobState::kQueued, now_ms()); }))
-      log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
-          {{"job", id}, {"samples_done", samples_done}});
+  const bool cancelled = signal == StopSignal::kCancel;
+  if (record.unit >= 0)
+    log_.add(record.id, printf_string("unit %d stopped at %u spp: the job was %s by a client", record.unit + 1, spp,
+                                      cancelled ? "cancelled" : "paused"));
+  else if (cancelled)
+    log_.add(record.id, printf_string("cancelled by a client at %u spp", spp));
+  else
+    log_.add(record.id, printf_string("paused by a client at %u spp; its checkpoint is kept", spp));
+  log(LogLevel::kInfo, cancelled ? "render stopped: its job was cancelled" : "render stopped: its job was paused",
+      {{"job", record.id}, {"unit", record.unit}, {"samples_done", samples_done}});
+}
+
+void Scheduler::end_taken_away(const std::string& id, uint32_t samples_done) {
+  // Whoever holds the job now owns its end. Its files go only if the job is gone.
+  log_.add(id, printf_string("stopped at %u spp: the job was changed or taken over elsewhere",
+                             static_cast<unsigned>(samples_done)));
+  log(LogLevel::kInfo, "render stopped: the job was changed or taken over elsewhere",
+      {{"job", id}, {"samples_done", samples_done}});
+  try {
+    if (!store_.get(id)) files_.remove(id);
+  } catch (const JobStoreError& e) {
+    count_store_error();
+    log(LogLevel::kWarn, "cannot tell whether a job taken away was deleted; its files stay",
+        {{"job", id}, {"error", e.what()}});
   }
+}
+
+// The daemon is stopping (or an unexpected stop): back to the queue; the last checkpoint resumes it. The end goes to
+// the store through record_end(): retried while the store fails; when the daemon stops first, the job stays running
+// in the store, with its checkpoint, for the next start to resume.
+void Scheduler::end_stopping(RenderSlot& slot, const std::string& id, uint32_t samples_done) {
+  log_.add(id, printf_string("the daemon is stopping: back in the queue at %u spp, to resume from its checkpoint",
+                             static_cast<unsigned>(samples_done)));
+  if (record_end(slot, [&] { return store_.end_run(id, slot.epoch, JobState::kQueued, now_ms()); }))
+    log(LogLevel::kInfo, "job put back in the queue; it resumes from its checkpoint",
+        {{"job", id}, {"samples_done", samples_done}});
 }
 
 void Scheduler::end_unit(Run& run) {
@@ -582,7 +610,8 @@ void Scheduler::end_unit(Run& run) {
     const auto done =
         static_cast<unsigned>(std::count_if(units.begin(), units.end(), [](const UnitRecord& u) { return u.done; }));
     std::optional<Film> film;
-    if (std::has_single_bit(done) && done < units.size()) film = merge_unit_films(record, s.width, s.height, false);
+    if (std::has_single_bit(done) && done < units.size())
+      film = results_.merge_unit_films(record, s.width, s.height, false);
     if (film) {
       files_.write(id, JobFile::kPreviewPng, run.outputs.preview_png(*film));
       if (hooks_.preview) hooks_.preview(id, film->samples());
@@ -596,7 +625,8 @@ void Scheduler::end_job(Run& run, StopReason reason) {
   const std::string& id = run.id();
   // The outputs first, staged (publish_outputs()): a file that cannot be written (a full disk) fails the job, as it
   // should.
-  const std::string written = write_outputs(id, run.outputs, run.outputs.image(run.session->film()), run.slot.epoch);
+  const std::string written =
+      results_.write_outputs(id, run.outputs, run.outputs.image(run.session->film()), run.slot.epoch);
   JobProgress final_progress = to_job_progress(run.session->progress());
   final_progress.eta_s = 0;
   log_.add(id, printf_string("succeeded: %s after %.2f s, %u spp in %u passes; wrote%s", stop_explained(reason).c_str(),
@@ -814,48 +844,14 @@ void Scheduler::publish_outputs(RenderSlot& slot, bool recorded) {
   }
   if (!publish)
     log_.add(slot.id, "its outputs are not published: the job was changed elsewhere before its end was recorded");
-  settle_staged(slot.id, slot.epoch, publish);
-}
-
-std::string Scheduler::write_outputs(const std::string& id, const OutputPipeline& outputs, const Image& image,
-                                     int64_t staged_epoch) {
-  std::string written;
-  auto stage = [&](JobFile f, std::string_view bytes) {
-    files_.stage(id, f, staged_epoch, bytes);
-    (written += ' ') += job_file_name(f);
-  };
-  outputs.publish(image, [&](ImageFormat format, std::string_view bytes) { stage(result_file(format), bytes); });
-  outputs.publish_passes(image, [&](std::string_view pass, std::string_view png) {
-    if (const auto f = pass_file(pass)) stage(*f, png);
-  });
-  return written;
-}
-
-std::optional<Film> Scheduler::merge_unit_films(const JobRecord& job, int width, int height, bool in_progress) const {
-  std::optional<Film> merged;
-  for (const UnitRecord& u : store_.units(job.id)) {
-    if ((!u.done && !in_progress) || u.checkpoint_epoch == 0) continue;
-    auto bytes = files_.read_unit(job.id, u.index, u.checkpoint_epoch);
-    auto cp =
-        bytes ? decode_checkpoint(*bytes, width, height, unit_settings_hash(job.settings, u.index)) : std::nullopt;
-    if (!cp || (u.done && cp->film.samples() != u.samples)) {
-      if (!u.done) continue;  // a checkpoint being replaced; the next one will do
-      throw std::runtime_error(printf_string("the film of unit %d is missing or damaged", u.index + 1));
-    }
-    // Every layer's integer sums and the per-pixel counts: exact in any order (film.h).
-    if (!merged)
-      merged = std::move(cp->film);
-    else
-      merged->merge(cp->film);
-  }
-  return merged;
+  results_.settle_staged(slot.id, slot.epoch, publish);
 }
 
 void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
   const std::string& id = record.id;
   const RenderSettings settings = render_settings_from_text(record.settings);
   const auto start = std::chrono::steady_clock::now();
-  std::optional<Film> film = merge_unit_films(record, settings.width, settings.height, false);
+  std::optional<Film> film = results_.merge_unit_films(record, settings.width, settings.height, false);
   if (!film || film->samples() != record.progress.samples_total)
     throw std::runtime_error(printf_string("its units' films hold %u of its %u samples per pixel",
                                            static_cast<unsigned>(film ? film->samples() : 0),
@@ -869,7 +865,7 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
   }
   const OutputPipeline outputs(settings, output_spec_from_text(record.outputs));
   const Image image = outputs.image(*film);
-  const std::string written = write_outputs(id, outputs, image, slot.epoch);
+  const std::string written = results_.write_outputs(id, outputs, image, slot.epoch);
   files_.write(id, JobFile::kPreviewPng, outputs.preview_png(image));
   const double merge_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   log_.add(id, printf_string("succeeded: its %d units merged in %.3f s, %u spp; wrote%s", record.units, merge_s,
@@ -879,55 +875,6 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
   if (recorded) {
     files_.remove_units(id);
     log(LogLevel::kInfo, "job succeeded", {{"job", id}, {"units", record.units}, {"merge_s", merge_s}});
-  }
-}
-
-void Scheduler::stage_partial_results(const JobRecord& job, int64_t key) {
-  try {
-    const RenderSettings settings = render_settings_from_text(job.settings);
-    std::optional<Film> film;
-    uint32_t passes = 0;
-    if (auto bytes = files_.read(job.id, JobFile::kCheckpoint)) {
-      if (auto cp = decode_checkpoint(*bytes, settings.width, settings.height, fnv1a64(job.settings))) {
-        film = std::move(cp->film);
-        passes = cp->passes;
-      }
-    } else {
-      // A split job: what its units rendered.
-      film = merge_unit_films(job, settings.width, settings.height, true);
-    }
-    if (!film || film->samples() == 0) return;
-    const OutputPipeline outputs(settings, output_spec_from_text(job.outputs));
-    const std::string written = write_outputs(job.id, outputs, outputs.image(*film), key);
-    log_.add(job.id,
-             printf_string(
-                 "kept what it rendered, %u spp in %u passes, as its partial results (once the cancel is taken):%s",
-                 static_cast<unsigned>(film->samples()), static_cast<unsigned>(passes), written.c_str()));
-  } catch (const std::exception& e) {
-    log(LogLevel::kWarn, "cannot write the partial results of a cancelled job", {{"job", job.id}, {"error", e.what()}});
-    log_.add(job.id, std::string("warning: its partial results cannot be written: ") + e.what());
-  }
-}
-
-void Scheduler::settle_staged(const std::string& id, int64_t key, bool publish) {
-  for (JobFile f : kResultFiles) {
-    try {
-      if (publish)
-        files_.publish_staged(id, f, key);
-      else
-        files_.discard_staged(id, f, key);
-    } catch (const std::exception& e) {
-      log(LogLevel::kWarn, "cannot settle the staged results of a job", {{"job", id}, {"error", e.what()}});
-    }
-  }
-}
-
-void Scheduler::settle_locked(const std::vector<RenderSlot*>& slots, bool cancelled) {
-  for (RenderSlot* slot : slots) {
-    slot->settled = true;
-    (cancelled ? slot->cancel_requested : slot->pause_requested) = true;
-    slot->load_stop.request_stop();
-    if (slot->session) slot->session->cancel();
   }
 }
 
@@ -951,117 +898,41 @@ std::optional<JobProgress> Scheduler::live_progress(const std::string& id) const
   return it->second->progress;
 }
 
-Scheduler::Outcome Scheduler::cancel(const std::string& id) {
-  {
-    std::lock_guard lock(mutex_);
-    const std::vector<RenderSlot*> slots = rendering_locked(id);
-    if (!slots.empty() && slots.front()->unit < 0) {
-      // A job rendered whole, here: its render records the end once it has wound down.
-      for (RenderSlot* slot : slots) {
-        slot->cancel_requested = true;
-        slot->load_stop.request_stop();
-        if (slot->session) slot->session->cancel();
-      }
-      return Outcome::kInProgress;
-    }
-    // Not rendering here, and claims happen under this lock: a queued job stays queued until we are done. Or units of
-    // a split job render here: the store first, so that the nodes rendering its other units stop at once (its
-    // notification), and then the units here, which record nothing (settle_locked()).
-    auto job = store_.get(id);
-    if (!job) return Outcome::kUnknown;
-    if (!action_allowed(JobAction::kCancel, job->state)) return Outcome::kConflict;
-    log_.add(id, "cancelled by a client");
-    // What a paused (or interrupted) render has done is kept as its partial results, staged before the state says so
-    // and published once the store took the cancel. The key is negative, unlike any run's epoch (a run elsewhere
-    // stages its own outputs under its epoch), and drawn at random, so that two nodes cancelling at once stage
-    // apart.
-    const int64_t key = -static_cast<int64_t>(std::random_device{}() | 1u);
-    stage_partial_results(*job, key);
-    const bool taken = store_.transition(id, JobState::kCancelled, now_ms(), "cancelled");
-    settle_staged(id, key, taken);
-    if (!taken) return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
-    settle_locked(slots, true);
+int Scheduler::stop(const std::string& id, StopSignal signal) {
+  std::lock_guard lock(mutex_);
+  const std::vector<RenderSlot*> slots = rendering_locked(id);
+  for (RenderSlot* slot : slots) {
+    slot->signal(signal);
   }
-  files_.remove(id, JobFile::kCheckpoint);
-  log(LogLevel::kInfo, "job cancelled", {{"job", id}});
-  notify_state(id);
-  return Outcome::kDone;
-}
-
-Scheduler::Outcome Scheduler::pause(const std::string& id) {
-  {
-    std::lock_guard lock(mutex_);
-    const std::vector<RenderSlot*> slots = rendering_locked(id);
-    if (!slots.empty() && slots.front()->unit < 0) {
-      for (RenderSlot* slot : slots)
-        if (slot->cancel_requested || slot->delete_requested) return Outcome::kConflict;
-      // A job rendered whole, here, ends its pass and keeps it; its render records the pause.
-      for (RenderSlot* slot : slots) {
-        slot->pause_requested = true;
-        slot->load_stop.request_stop();
-        if (slot->session) slot->session->stop();
-      }
-      return Outcome::kInProgress;
-    }
-    // Not rendering here (claims happen under this lock): queued, or running in a process that is gone. Or units of a
-    // split job render here: the store first (its running units go back to the queue with their last checkpoints),
-    // then the units here give up their passes under way and record nothing.
-    if (!store_.transition(id, JobState::kPaused, now_ms()))
-      return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
-    settle_locked(slots, false);
-  }
-  log(LogLevel::kInfo, "job paused", {{"job", id}});
-  log_.add(id, "paused by a client");
-  notify_state(id);
-  return Outcome::kDone;
-}
-
-Scheduler::Outcome Scheduler::resume(const std::string& id) {
-  if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", JobState::kPaused))
-    return store_.get(id) ? Outcome::kConflict : Outcome::kUnknown;
-  log(LogLevel::kInfo, "job resumed", {{"job", id}});
-  log_.add(id, "resumed by a client: back in the queue");
-  notify_state(id);
-  wake();
-  return Outcome::kDone;
-}
-
-Scheduler::Outcome Scheduler::requeue(const std::string& id) {
-  {
-    // The store first: one that fails (JobStoreError) leaves the job as it was, its preview included, for a retry.
-    // Claims happen under this lock, so the job is not claimed before the files of its last run are gone.
-    std::lock_guard lock(mutex_);
-    auto job = store_.get(id);
-    if (!job) return Outcome::kUnknown;
-    if (!action_allowed(JobAction::kRequeue, job->state, job->input_refused())) return Outcome::kConflict;
-    if (!store_.transition(id, JobState::kQueued, now_ms(), "", "", job->state)) return Outcome::kConflict;
-    // From scratch: nothing of the last run survives.
-    for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng}) files_.remove(id, f);
-    for (JobFile f : kResultFiles) files_.remove(id, f);
-    files_.remove_units(id);  // a split job's units start over too (the store forgot their checkpoints)
-  }
-  log(LogLevel::kInfo, "job requeued", {{"job", id}});
-  log_.add(id, "requeued by a client: the render starts over");
-  notify_state(id);
-  wake();
-  return Outcome::kDone;
+  return static_cast<int>(slots.size());
 }
 
 bool Scheduler::remove(const std::string& id, std::optional<int64_t> only_finished_before_ms) {
-  std::lock_guard lock(mutex_);
-  if (auto slots = slots_locked(id); !slots.empty()) {
-    if (only_finished_before_ms) return false;  // still (or again) rendering, or not yet reaped: not expired
-    // The store first: one that fails (JobStoreError) leaves the render going and the job whole. The other way
-    // round, the render would stop and its files go while the store kept the job running, with no render behind it.
-    store_.remove(id);
-    for (RenderSlot* slot : slots) {
-      slot->delete_requested = true;
-      slot->load_stop.request_stop();
-      if (slot->session) slot->session->cancel();
-    }
-    return true;  // the render's thread removes the files once it has stopped writing them
+  std::unique_lock lock(mutex_);
+  std::vector<std::shared_ptr<RenderSlot>> slots;
+  for (const auto& [key, slot] : running_)
+    if (slot->id == id) slots.push_back(slot);
+  if (slots.empty()) {
+    if (!store_.remove(id, only_finished_before_ms)) return false;
+    files_.remove(id);
+    log(LogLevel::kInfo, "job deleted", {{"job", id}});
+    return true;
   }
-  if (!store_.remove(id, only_finished_before_ms)) return false;
+  if (only_finished_before_ms) return false;  // still (or again) rendering, or not yet reaped: not expired
+  // The store first: one that fails (JobStoreError) leaves the render going and the job whole. The other way round,
+  // the render would stop and its files go while the store kept the job running, with no render behind it.
+  store_.remove(id);
+  const bool winding_down =
+      std::all_of(slots.begin(), slots.end(), [](const auto& s) { return s->settled || s->done; });
+  for (const auto& slot : slots) {
+    slot->delete_requested = true;
+    slot->abandon();
+  }
+  if (!winding_down) return true;  // the render's thread removes the files once it has stopped writing them
+  // Only renders winding down after a client's change (the job is cancelled or paused in the store), which the
+  // delete ends within a tile's time: waited for, so that the files are gone when the delete returns, as they are for
+  // a job no render holds.
+  cv_.wait(lock, [&] { return std::all_of(slots.begin(), slots.end(), [](const auto& s) { return s->done; }); });
   files_.remove(id);
   log(LogLevel::kInfo, "job deleted", {{"job", id}});
   return true;

@@ -6,6 +6,11 @@
 // that throws fails alone; the daemon stays up. A store that fails while a job's end is recorded is retried until it
 // takes it (JobStoreError never fails a job): the store, not the job, is at fault. An end the store's state machine
 // refuses (the job was deleted, or changed elsewhere) is not recorded, and nothing is done as if it had been.
+//
+// A client's change of a job's state (cancel, pause, resume, requeue) is the job service's to decide and record
+// (JobService::act): the store first, then, for a cancel or pause, a stop signal to the renders of the job here
+// (stop()), which end within a tile's time and record nothing. A change made through another daemon on the same store
+// reaches the renders here the same way, as a lease the store refuses.
 #pragma once
 
 #include <chrono>
@@ -26,6 +31,7 @@
 #include "renderer/thread_pool.h"
 #include "server/files/job_files.h"
 #include "server/files/job_log.h"
+#include "server/jobs/job_results.h"
 #include "server/store/job_store.h"
 
 namespace tessera::server {
@@ -103,19 +109,28 @@ class Scheduler {
   // Whether the end of a job is waiting for the store to take it (its last write failed).
   bool store_failing() const;
 
-  enum class Outcome { kDone, kInProgress, kConflict, kUnknown };
-  // queued, paused or running -> cancelled (a job rendered whole here winds down within one tile's time:
-  // kInProgress; the units of a split job stop after the store took the change, kDone). A job cancelled after a pass
-  // keeps the image of its last complete pass as its results (partial).
-  Outcome cancel(const std::string& id);
-  // queued or running -> paused (a job rendered whole here ends its pass and keeps its checkpoint: kInProgress; the
-  // units of a split job give up their passes under way after the store took the change, kDone).
-  Outcome pause(const std::string& id);
-  // paused -> queued.
-  Outcome resume(const std::string& id);
-  // failed or cancelled -> queued, from scratch (its checkpoint, preview and outputs are deleted); not a job that
-  // failed on its input.
-  Outcome requeue(const std::string& id);
+  // Holds off this daemon's claims while it lives: a job a client is changing (a queued job being cancelled, say) is
+  // not claimed here between the change's read of the job and its write.
+  class ClaimHold {
+   public:
+    explicit ClaimHold(Scheduler& scheduler);
+    ~ClaimHold();
+    ClaimHold(const ClaimHold&) = delete;
+    ClaimHold& operator=(const ClaimHold&) = delete;
+
+   private:
+    Scheduler& scheduler_;
+  };
+  [[nodiscard]] ClaimHold hold_claims() { return ClaimHold(*this); }
+
+  // What a client's change, recorded in the store already, asks of the renders of its job here.
+  enum class StopSignal { kCancel, kPause };
+  // Signals every render of `id` here (a job rendered whole, or units of a split job) to end within a tile's time,
+  // recording nothing: a cancelled one gives up its pass under way; a paused job rendered whole ends its pass and
+  // keeps it as its checkpoint (its units give theirs up). Nothing for a job not rendering here. Returns how many
+  // renders were signalled.
+  int stop(const std::string& id, StopSignal signal);
+
   // Deletes a job and its files (cancelling its render first); false for an unknown id. With
   // `only_finished_before_ms` (retention), only a job that ended before that time and has no render thread left;
   // anything else is kept (false).
@@ -138,7 +153,12 @@ class Scheduler {
   // A pass ended: its checkpoint, its preview, its progress (in memory, in the store, to the hooks).
   void publish_pass(Run& run, const RenderProgress& progress, const Film& film);
   bool still_ours_before_outputs(RenderSlot& slot);
-  void end_interrupted(RenderSlot& slot, const JobRecord& record, uint32_t samples_done, double render_s);
+  void end_interrupted(RenderSlot& slot, const JobRecord& record, uint32_t samples_done);
+  // The lines a render stopped by a client's change (stop()) adds to the logs; it records nothing.
+  void log_settled(const JobRecord& record, StopSignal signal, uint32_t samples_done);
+  // A render whose lease the store refused: it records nothing, and the job's files go if the job is gone.
+  void end_taken_away(const std::string& id, uint32_t samples_done);
+  void end_stopping(RenderSlot& slot, const std::string& id, uint32_t samples_done);
   // A unit rendered its range: its film kept, its end recorded, the split job's preview refined.
   void end_unit(Run& run);
   // A job rendered whole: its outputs staged, its end recorded, its outputs published.
@@ -157,14 +177,6 @@ class Scheduler {
   // Fails a job claimed after more lost runs than options_.crash_retries, naming them; it is not rendered again.
   void fail_lost_too_often(RenderSlot& slot, const JobRecord& record);
   void count_store_error();
-  // The outputs of a job cancelled after a pass, from its checkpoint (the film of its last complete pass), so that
-  // what it rendered stays viewable and downloadable. They are staged under `key` (JobFiles::stage) and published by
-  // settle_staged() only once the store took the cancel: a cancel that loses the race with the run's own
-  // end (refused: the job succeeded meanwhile) must not put its older image over the finished one. Best effort:
-  // nothing without a usable checkpoint; a file that cannot be written is logged, and the cancel goes on.
-  void stage_partial_results(const JobRecord& job, int64_t key);
-  // The result files staged under `key` (an epoch, or a cancel's key): published over the final names, or removed.
-  void settle_staged(const std::string& id, int64_t key, bool publish);
   void reap_finished_locked(std::unique_lock<std::mutex>& lock);
   void renew_leases_locked();
   // How often a render's lease is renewed: the store's renewal period for the lease, or the poll interval if shorter.
@@ -176,20 +188,9 @@ class Scheduler {
   // The slots of a job here (several for the units of a split job); those still rendering.
   std::vector<RenderSlot*> slots_locked(const std::string& id) const;
   std::vector<RenderSlot*> rendering_locked(const std::string& id) const;
-  // The units of a split job here, once the store took a client's cancel (`cancelled`) or pause: they give up their
-  // passes under way and record nothing.
-  void settle_locked(const std::vector<RenderSlot*>& slots, bool cancelled);
   // A split job's units rendered: merges their films (each a unit's authoritative checkpoint) into the job's outputs
   // and records its end (the merge unit's run, fenced by its epoch).
   void merge_units(RenderSlot& slot, const JobRecord& record);
-  // The film of a split job's units: the done ones, with `in_progress` also the last checkpoints of the others
-  // (samples rendered, not a contiguous range: an unbiased, noisier image). Nothing for a job rendered whole or when
-  // no unit has a film; throws when a done unit's film is missing or damaged.
-  std::optional<Film> merge_unit_films(const JobRecord& job, int width, int height, bool in_progress) const;
-  // The outputs the job asked for (result.png, result.exr), encoded from `image` (OutputPipeline::image) and
-  // staged (JobFiles::stage) under `staged_epoch` for publish_outputs(); the names written, for its log.
-  std::string write_outputs(const std::string& id, const OutputPipeline& outputs, const Image& image,
-                            int64_t staged_epoch);
   // After the end of a run that staged its outputs: published when the store took that end (`recorded`, or read back
   // when it is unknown), removed when it refused it.
   void publish_outputs(RenderSlot& slot, bool recorded);
@@ -197,6 +198,7 @@ class Scheduler {
   JobStore& store_;
   const JobFiles& files_;
   JobLog log_;  // each job's own log, among its files
+  JobResults results_;
   ThreadPool& pool_;
   SchedulerOptions options_;
   SchedulerHooks hooks_;
@@ -205,6 +207,7 @@ class Scheduler {
   std::condition_variable cv_;
   bool started_ = false;
   bool stopping_ = false;
+  int claims_held_ = 0;  // ClaimHolds alive: no claim while above 0
   std::map<std::string, std::shared_ptr<RenderSlot>> running_;
   std::thread dispatcher_;
 };

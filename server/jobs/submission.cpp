@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <optional>
 #include <vector>
 
 #include "proto/contract.h"
@@ -84,6 +85,25 @@ class ErrorLocator final : public nlohmann::json_sax<json> {
 };
 
 struct KeyTooLong {};
+
+// Refuses a job whose work is above `max_work` (0: no limit). The work is width x height x spp x the events one path
+// may have: max_depth bounces off surfaces, and in a scene whose media scatter, up to max_volume_depth scattering
+// events and boundary crossings besides (they do not count towards max_depth).
+std::optional<Problem> check_work(const RenderJob& job, double max_work) {
+  const RenderSettings& s = job.settings;
+  const bool scatters = job.scene && job.scene->has_scattering_media();
+  const int path_events = std::max(1, s.integrator.max_depth) + (scatters ? s.integrator.max_volume_depth : 0);
+  const double work = static_cast<double>(s.width) * s.height * s.spp * path_events;
+  if (max_work <= 0 || work <= max_work) return std::nullopt;
+  const std::string formula =
+      scatters ? "width x height x spp x (max_depth + max_volume_depth), in a scene whose media scatter,"
+               : "width x height x spp x max_depth";
+  return Problem{422,
+                 formula + " is " + std::to_string(static_cast<long long>(work)) + ", above this server's limit of " +
+                     std::to_string(static_cast<long long>(max_work)) + " (--max-work); lower the resolution, spp or " +
+                     (scatters ? "max_depth or max_volume_depth" : "max_depth"),
+                 "/render"};
+}
 
 }  // namespace
 
@@ -169,14 +189,7 @@ std::variant<AcceptedJob, Problem> check_job_document(json document, const Submi
   } catch (const LoadStopped&) {
     return stopping_problem();
   }
-  const RenderSettings& s = render_job.settings;
-  const double work = static_cast<double>(s.width) * s.height * s.spp * std::max(1, s.integrator.max_depth);
-  if (limits.max_work > 0 && work > limits.max_work)
-    return Problem{422,
-                   "width x height x spp x max_depth is " + std::to_string(static_cast<long long>(work)) +
-                       ", above this server's limit of " + std::to_string(static_cast<long long>(limits.max_work)) +
-                       " (--max-work); lower the resolution, spp or max_depth",
-                   "/render"};
+  if (auto problem = check_work(render_job, limits.max_work)) return *problem;
   if (render_job.scene) job.warnings = render_job.scene->warnings;
   job.kind = job.document.value("kind", "scene");
   job.priority = job.document.value("priority", 0);

@@ -9,11 +9,16 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <variant>
 
 #include "renderer/film.h"
 #include "renderer/thread_pool.h"
+#include "server/files/assets.h"
+#include "server/files/events.h"
 #include "server/files/job_files.h"
 #include "server/jobs/checkpoint.h"
+#include "server/jobs/job_service.h"
+#include "server/jobs/metrics.h"
 #include "server/jobs/scheduler.h"
 #include "server/jobs/submission.h"
 #include "server/store/sqlite_job_store.h"
@@ -50,8 +55,10 @@ class FailingEndStore final : public test::ForwardingStore {
     if (taken && after_renewal) after_renewal(id);
     return taken;
   }
+  std::atomic<int> ends{0};  // ends of runs asked for (end_run), taken or not
   bool end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms, const std::string& stop_reason,
                const std::string& error) override {
+    ends.fetch_add(1);
     fail();
     return inner_.end_run(id, epoch, to, now_ms, stop_reason, error);
   }
@@ -103,6 +110,17 @@ class SchedulerStoreFailure : public ::testing::Test {
     return job.id;
   }
 
+  // The job service over this store and `scheduler`, as the daemon has it: a client's actions go through it. It
+  // installs its own hooks on the scheduler.
+  std::unique_ptr<JobService> make_service(Scheduler& scheduler) {
+    return std::make_unique<JobService>(store_, files_, assets_, scheduler, events_, metrics_, JobServiceOptions{});
+  }
+
+  // A client's action on job `id`, through `service`.
+  std::variant<ActionTaken, Problem> act(JobService& service, const std::string& id, JobAction action) {
+    return service.act(sqlite_.get(id, false).value(), action);
+  }
+
   JobState state_of(const std::string& id) { return sqlite_.get(id, false).value().state; }
 
   bool has_ended(const std::string& id) {
@@ -115,6 +133,9 @@ class SchedulerStoreFailure : public ::testing::Test {
   FailingEndStore store_{sqlite_};
   DirectoryJobFiles files_{dir_.path()};
   ThreadPool pool_{2};
+  DirectoryAssetStore assets_{dir_.path()};
+  EventHub events_;
+  Metrics metrics_;
   std::atomic<int> store_errors_{0};
 };
 
@@ -146,7 +167,7 @@ TEST_F(SchedulerStoreFailure, ACancelAfterTheLastLeaseCheckKeepsThePartialResult
   store_.after_renewal = [&](const std::string& id) {
     // The render's check before its outputs: its one pass is done (the dispatcher renews only hourly here).
     if (sqlite_.get(id, false).value().progress.samples_done != 1 || cancels.fetch_add(1) > 0) return;
-    files_.write(id, JobFile::kResultPng, partial);  // as Scheduler::cancel() does, then the store's change
+    files_.write(id, JobFile::kResultPng, partial);  // what a cancel publishes, then its change of state
     EXPECT_TRUE(sqlite_.transition(id, JobState::kCancelled, 2, "cancelled", "", std::nullopt));
   };
   auto scheduler = make_scheduler(1ms, std::chrono::hours(1));
@@ -233,12 +254,13 @@ TEST_F(SchedulerStoreFailure, ARequeueTheStoreRefusesKeepsTheLastRun) {
   fs::create_directories(files_.dir(id));
   files_.write(id, JobFile::kPreviewPng, "a preview");
 
+  auto service = make_service(*scheduler);
   store_.failures_left = 1;
-  EXPECT_THROW(scheduler->requeue(id), JobStoreError);
+  EXPECT_THROW(act(*service, id, JobAction::kRequeue), JobStoreError);
   EXPECT_EQ(state_of(id), JobState::kCancelled);
   EXPECT_TRUE(fs::is_regular_file(files_.path(id, JobFile::kPreviewPng)));
 
-  EXPECT_EQ(scheduler->requeue(id), Scheduler::Outcome::kDone);
+  EXPECT_TRUE(std::holds_alternative<ActionTaken>(act(*service, id, JobAction::kRequeue)));
   EXPECT_EQ(state_of(id), JobState::kQueued);
   EXPECT_FALSE(fs::exists(files_.path(id, JobFile::kPreviewPng)));  // from scratch
 }
@@ -269,8 +291,11 @@ TEST_F(SchedulerStoreFailure, ACancelRefusedBecauseTheJobSucceededLeavesItsFinis
     files_.write(id, JobFile::kResultPng, finished);  // its checkpoint, removed next, is still there to read
   };
   auto scheduler = make_scheduler(1ms);  // not started: it renders nothing of this job
+  auto service = make_service(*scheduler);
 
-  EXPECT_EQ(scheduler->cancel(id), Scheduler::Outcome::kConflict);
+  const auto answer = service->act(run, JobAction::kCancel);
+  ASSERT_TRUE(std::holds_alternative<Problem>(answer));
+  EXPECT_EQ(std::get<Problem>(answer).status, 409);
   EXPECT_FALSE(armed.load());  // the other node did end the run in between
   EXPECT_EQ(state_of(id), JobState::kSucceeded);
   EXPECT_EQ(files_.read(id, JobFile::kResultPng).value_or("(none)"), finished);
@@ -364,6 +389,7 @@ TEST_F(SchedulerStoreFailure, AJobStoredWithTheEarlierSettingsTextRunsAndResumes
   const JobProgress checkpointed = *last;
 
   auto second = make_scheduler(1ms, 20ms);
+  auto service = make_service(*second);  // for the cancel below; the test's own hooks replace the service's
   SchedulerHooks resumed_hooks;
   resumed_hooks.progress = [&](const std::string&, const JobProgress& p) {
     std::lock_guard lock(mutex);
@@ -378,13 +404,73 @@ TEST_F(SchedulerStoreFailure, AJobStoredWithTheEarlierSettingsTextRunsAndResumes
       },
       120));
   EXPECT_EQ(first_resumed->samples_done, checkpointed.samples_done);  // its checkpoint matched its settings
-  ASSERT_EQ(second->cancel(job.id), Scheduler::Outcome::kInProgress);
+  ASSERT_TRUE(std::holds_alternative<ActionTaken>(act(*service, job.id, JobAction::kCancel)));
   ASSERT_TRUE(test::eventually([&] { return has_ended(job.id); }, 120));
   second->shutdown();
   EXPECT_EQ(state_of(job.id), JobState::kCancelled);
   // Its partial results: the formats the stored outputs name.
   EXPECT_TRUE(files_.read(job.id, JobFile::kResultExr));
   EXPECT_FALSE(files_.read(job.id, JobFile::kResultPng));
+}
+
+// A client's cancel of a job rendering here is the job service's to decide and record: the job is cancelled, with its
+// partial results and without its checkpoint, when the call returns, and the render only receives the stop signal:
+// it winds down and records no end of its own.
+TEST_F(SchedulerStoreFailure, TheServiceRecordsACancelAndTheRenderOnlyStops) {
+  auto scheduler = make_scheduler(1ms);
+  auto service = make_service(*scheduler);
+  const std::string id = queue_job(test::long_cornell_job());
+  scheduler->start();
+  ASSERT_TRUE(test::eventually(
+      [&] {
+        auto p = scheduler->live_progress(id);
+        return p && p->passes >= 1;
+      },
+      120));
+
+  const auto answer = act(*service, id, JobAction::kCancel);
+  ASSERT_TRUE(std::holds_alternative<ActionTaken>(answer)) << std::get<Problem>(answer).detail;
+  const ActionTaken& taken = std::get<ActionTaken>(answer);
+  EXPECT_EQ(taken.job.state, JobState::kCancelled);
+  EXPECT_TRUE(files_.read(id, JobFile::kResultPng));  // the image of its last complete pass
+  EXPECT_FALSE(fs::exists(files_.path(id, JobFile::kCheckpoint)));
+
+  ASSERT_TRUE(test::eventually([&] { return scheduler->running_count() == 0; }, 120));
+  EXPECT_EQ(store_.ends.load(), 0);  // the render recorded nothing
+  EXPECT_EQ(state_of(id), JobState::kCancelled);
+  EXPECT_EQ(sqlite_.get(id, false)->stop_reason, "cancelled");
+  scheduler->shutdown();
+}
+
+// As a cancel: the job is paused when the call returns, the render stops recording nothing, and the checkpoint of its
+// last complete pass stays for its resume.
+TEST_F(SchedulerStoreFailure, TheServiceRecordsAPauseAndTheRenderKeepsItsCheckpoint) {
+  auto scheduler = make_scheduler(1ms);
+  auto service = make_service(*scheduler);
+  const std::string id = queue_job(test::long_cornell_job());
+  scheduler->start();
+  ASSERT_TRUE(test::eventually([&] { return sqlite_.get(id, false)->progress.passes >= 1; }, 120));
+
+  const auto answer = act(*service, id, JobAction::kPause);
+  ASSERT_TRUE(std::holds_alternative<ActionTaken>(answer)) << std::get<Problem>(answer).detail;
+  EXPECT_EQ(std::get<ActionTaken>(answer).job.state, JobState::kPaused);
+  ASSERT_TRUE(test::eventually([&] { return scheduler->running_count() == 0; }, 120));
+  EXPECT_EQ(store_.ends.load(), 0);
+  EXPECT_EQ(state_of(id), JobState::kPaused);
+  EXPECT_GT(sqlite_.get(id, false)->progress.samples_done, 0u);
+  EXPECT_TRUE(fs::is_regular_file(files_.path(id, JobFile::kCheckpoint)));
+  scheduler->shutdown();
+}
+
+// The scheduler's stop is a signal to the renders here, nothing more: for a job it does not render, the store and the
+// job's files stay as they were.
+TEST_F(SchedulerStoreFailure, AStopForAJobNotRenderingHereChangesNothing) {
+  auto scheduler = make_scheduler(1ms);  // not started: nothing renders
+  const std::string id = queue_tiny_job();
+  EXPECT_EQ(scheduler->stop(id, Scheduler::StopSignal::kCancel), 0);
+  EXPECT_EQ(scheduler->stop(id, Scheduler::StopSignal::kPause), 0);
+  EXPECT_EQ(state_of(id), JobState::kQueued);
+  EXPECT_FALSE(fs::exists(files_.dir(id)));
 }
 
 }  // namespace

@@ -1,15 +1,20 @@
 // A client's cancel or pause of a split job (work_units.h) made through a node that renders one of its units: the
-// store takes the change before the call returns, so the nodes rendering its other units hear of it at once (the
-// store's notification), and the unit here then stops and records nothing. Over the throw-away PostgreSQL server (the
-// only store that splits jobs).
+// job service has the store take the change before the call returns, so the nodes rendering its other units hear of
+// it at once (the store's notification), and the unit here then stops (Scheduler::stop) and records nothing. Over the
+// throw-away PostgreSQL server (the only store that splits jobs).
 #include <gtest/gtest.h>
 
 #include <chrono>
 #include <condition_variable>
 #include <mutex>
+#include <variant>
 
 #include "renderer/thread_pool.h"
+#include "server/files/assets.h"
+#include "server/files/events.h"
 #include "server/files/job_files.h"
+#include "server/jobs/job_service.h"
+#include "server/jobs/metrics.h"
 #include "server/jobs/scheduler.h"
 #include "server/jobs/submission.h"
 #include "server/store/postgres_job_store.h"
@@ -77,6 +82,11 @@ class SchedulerUnits : public ::testing::Test {
 
   JobState state_of(const std::string& id) { return postgres_.get(id, false).value().state; }
 
+  // A client's action through the job service.
+  bool act(const std::string& id, JobAction action) {
+    return std::holds_alternative<ActionTaken>(jobs_.act(postgres_.get(id, false).value(), action));
+  }
+
   void TearDown() override {
     store_.release();
     scheduler_.shutdown();
@@ -88,11 +98,15 @@ class SchedulerUnits : public ::testing::Test {
   DirectoryJobFiles files_{dir_.path()};
   ThreadPool pool_{1};
   Scheduler scheduler_{store_, files_, pool_, SchedulerOptions{}};
+  DirectoryAssetStore assets_{dir_.path()};
+  EventHub events_;
+  Metrics metrics_;
+  JobService jobs_{store_, files_, assets_, scheduler_, events_, metrics_, JobServiceOptions{}};
 };
 
 TEST_F(SchedulerUnits, ACancelThroughTheRenderingNodeIsInTheStoreWhenItReturns) {
   const std::string id = start_split_job();
-  EXPECT_EQ(scheduler_.cancel(id), Scheduler::Outcome::kDone);
+  EXPECT_TRUE(act(id, JobAction::kCancel));
   EXPECT_EQ(state_of(id), JobState::kCancelled);
   // The unit here stops without recording an end of its own.
   EXPECT_TRUE(test::eventually([&] { return scheduler_.running_count() == 0; }, 60));
@@ -102,14 +116,14 @@ TEST_F(SchedulerUnits, ACancelThroughTheRenderingNodeIsInTheStoreWhenItReturns) 
 
 TEST_F(SchedulerUnits, APauseThroughTheRenderingNodeIsInTheStoreWhenItReturns) {
   const std::string id = start_split_job();
-  EXPECT_EQ(scheduler_.pause(id), Scheduler::Outcome::kDone);
+  EXPECT_TRUE(act(id, JobAction::kPause));
   EXPECT_EQ(state_of(id), JobState::kPaused);
   EXPECT_TRUE(test::eventually([&] { return scheduler_.running_count() == 0; }, 60));
   EXPECT_EQ(store_.ends(), 0);
   // Its units wait with their checkpoints, and it resumes: back in the queue, where this node's scheduler (free again)
   // may claim it at once, so the state read after the call is queued or already running again.
   for (const UnitRecord& u : postgres_.units(id)) EXPECT_FALSE(u.done);
-  EXPECT_EQ(scheduler_.resume(id), Scheduler::Outcome::kDone);
+  EXPECT_TRUE(act(id, JobAction::kResume));
   const JobState after = state_of(id);
   EXPECT_TRUE(after == JobState::kQueued || after == JobState::kRunning) << job_state_name(after);
   EXPECT_TRUE(test::eventually([&] { return scheduler_.running_count() == 1; }, 60));
