@@ -21,16 +21,29 @@ const std::vector<AovInfo>& aov_table() {
   using K = LayerKind;
   using S = AovSource;
   static const std::vector<AovInfo> table = {
-      {"albedo", 3, {"R", "G", "B"}, K::kRadiance, S::kShading, false},
-      {"normal", 3, {"X", "Y", "Z"}, K::kSigned, S::kShading, false},
-      {"depth", 1, {"Z"}, K::kDistance, S::kDistance, true},
-      {"position", 3, {"X", "Y", "Z"}, K::kSigned, S::kFirstSample, true},
-      {"uv", 2, {"U", "V"}, K::kSigned, S::kSurface, false},
-      {"roughness", 1, {"X"}, K::kRadiance, S::kSurface, false},
-      {"object_id", 1, {"X"}, K::kSigned, S::kFirstSample, true},
-      {"material_id", 1, {"X"}, K::kSigned, S::kFirstSample, true},
-      {"sample_count", 1, {"X"}, K::kRadiance, S::kSampleCount, true},
-      {kVariance, 3, {"R", "G", "B"}, K::kRadiance, S::kSquares, true},
+      {"albedo", 3, {"R", "G", "B"}, K::kRadiance, S::kShading, false, {}},
+      {"normal", 3, {"X", "Y", "Z"}, K::kSigned, S::kShading, false, {}},
+      {"depth", 1, {"Z"}, K::kDistance, S::kDistance, true, {}},
+      {"position", 3, {"X", "Y", "Z"}, K::kSigned, S::kFirstSample, true, {}},
+      {"uv", 2, {"U", "V"}, K::kSigned, S::kSurface, false, {}},
+      {"roughness", 1, {"X"}, K::kRadiance, S::kSurface, false, {}},
+      {"object_id", 1, {"X"}, K::kSigned, S::kFirstSample, true, {}},
+      {"material_id", 1, {"X"}, K::kSigned, S::kFirstSample, true, {}},
+      {"sample_count", 1, {"X"}, K::kRadiance, S::kSampleCount, true, {}},
+      {kVariance, 3, {"R", "G", "B"}, K::kRadiance, S::kSquares, true, {}},
+      {"emission", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
+      {"background", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
+      {"volume_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
+      {"volume_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
+      {"diffuse_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "diffuse_color"},
+      {"diffuse_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "diffuse_color"},
+      {"diffuse_color", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
+      {"glossy_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "glossy_color"},
+      {"glossy_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "glossy_color"},
+      {"glossy_color", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
+      {"transmission_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "transmission_color"},
+      {"transmission_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "transmission_color"},
+      {"transmission_color", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
   };
   return table;
 }
@@ -51,10 +64,12 @@ std::string unknown_aov_message(std::string_view name) {
 }
 
 void add_aov_layers(Film& film, const std::vector<std::string>& aovs) {
+  auto asked = [&](const AovInfo& a) { return std::find(aovs.begin(), aovs.end(), a.name) != aovs.end(); };
+  bool light = false;
+  for (const AovInfo& a : aov_table()) light = light || (a.source == AovSource::kLight && asked(a));
   for (const AovInfo& a : aov_table()) {
     if (a.source == AovSource::kSampleCount) continue;
-    if (std::find(aovs.begin(), aovs.end(), a.name) != aovs.end())
-      film.add_layer(std::string(a.name), a.channels, a.kind);
+    if (asked(a) || (light && a.source == AovSource::kLight)) film.add_layer(std::string(a.name), a.channels, a.kind);
   }
 }
 
@@ -62,6 +77,7 @@ std::vector<std::string> aovs_of(const Film& film, bool sample_count) {
   std::vector<std::string> aovs;
   for (const AovInfo& a : aov_table())
     if (a.source == AovSource::kSampleCount ? sample_count : film.layer(a.name) >= 0) aovs.emplace_back(a.name);
+  // (A film with light passes holds all their layers, whichever of them the job asked for: a merge writes them all.)
   return aovs;
 }
 
@@ -85,6 +101,20 @@ AovWriter::AovWriter(const Film& film)
       squares_(film.layer(kVariance)) {
   for (int layer : {albedo_, normal_, depth_, uv_, roughness_, position_, object_, material_})
     wants_features_ = wants_features_ || layer >= 0;
+  static constexpr std::string_view kLightLayers[13] = {
+      "emission",      "background",          "volume_direct",     "volume_indirect", "diffuse_direct",
+      "glossy_direct", "transmission_direct", "diffuse_indirect",  "glossy_indirect", "transmission_indirect",
+      "diffuse_color", "glossy_color",        "transmission_color"};
+  for (int i = 0; i < 13; ++i) light_[i] = film.layer(kLightLayers[i]);
+  for (int i = 0; i < 13; ++i)
+    if (light_[i] < 0) light_[0] = -1;  // all of them or none
+}
+
+void AovWriter::add_light(Film& film, int x, int y, const LightPassSample& l) const {
+  const Rgb* values[13] = {&l.emission,  &l.background, &l.volume_direct, &l.volume_indirect, &l.direct[0],
+                           &l.direct[1], &l.direct[2],  &l.indirect[0],   &l.indirect[1],     &l.indirect[2],
+                           &l.color[0],  &l.color[1],   &l.color[2]};
+  for (int i = 0; i < 13; ++i) film.add_layer_sample(light_[i], x, y, &values[i]->x);
 }
 
 void AovWriter::add(Film& film, int x, int y, uint32_t sample_index, const SurfaceFeatures& f, const Rgb& l) const {
@@ -154,7 +184,7 @@ std::vector<float> aov_look(const AovInfo& aov, const std::vector<float>& values
     rgb[3 * i + 1] = c.y;
     rgb[3 * i + 2] = c.z;
   };
-  if (aov.name == "albedo") return values;
+  if (aov.name == "albedo" || aov.source == AovSource::kLight) return values;
   if (aov.name == "normal") {
     for (size_t i = 0; i < pixels; ++i)
       set(i, Rgb(values[3 * i] + 1, values[3 * i + 1] + 1, values[3 * i + 2] + 1) * 0.5f);
@@ -203,6 +233,17 @@ std::vector<float> resolve_aov(const Film& film, const AovInfo& aov) {
     std::vector<float> out(layer.sums.size());
     for (size_t i = 0; i < out.size(); ++i)
       out[i] = static_cast<float>(static_cast<double>(layer.sums[i]) / kFixedScale);
+    return out;
+  }
+  if (aov.source == AovSource::kLight && !aov.divisor.empty()) {
+    // The light's whole sum over its class's colour's, per channel (0 where the colour is 0).
+    const int divisor = film.layer(aov.divisor);
+    if (divisor < 0) throw std::invalid_argument("the film has no layer for the pass " + std::string(aov.divisor));
+    const std::vector<FixedSum>& colors = film.layer_at(divisor).sums;
+    std::vector<float> out(layer.sums.size());
+    for (size_t i = 0; i < out.size(); ++i)
+      out[i] = colors[i] > 0 ? static_cast<float>(static_cast<double>(layer.sums[i]) / static_cast<double>(colors[i]))
+                             : 0.0f;
     return out;
   }
   if (aov.source != AovSource::kSquares) return film.resolve_layer(index);

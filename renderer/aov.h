@@ -21,6 +21,15 @@
 //   sample_count          the samples the pixel received
 //   variance              per channel, the variance of the pixel's mean, from the sum of its samples' squares:
 //                         (E[L^2] - E[L]^2) / (n - 1), infinite below 2 samples
+// and the light passes, which split the beauty by where its light came from, as Cycles' do (Blender manual, "Render
+// Passes"): emission (emitters seen from the camera, directly or across index-matched boundaries), background (the
+// environment seen so), and by the first bounce of the path: diffuse, glossy and transmission (the lobe class that
+// scattered it, Bsdf::lobe_colors) or volume (a scattering event in a medium), each _direct (light arriving at that
+// first bounce: its light sample and the emitter its scattered ray hits) and _indirect (everything after). The
+// surface classes also have a _color, the first bounce's lobe colour; their _direct and _indirect are summed whole
+// and divided by the pixel's _color when resolved (0 where the colour is), so that per pixel
+//   beauty = emission + background + volume_direct + volume_indirect + sum over X of (X_direct + X_indirect) * X_color
+// to float rounding.
 #pragma once
 
 #include <array>
@@ -41,6 +50,7 @@ enum class AovSource : uint8_t {
   kFirstSample,  // position, ids: the pixel's sample 0
   kSampleCount,  // the film's per-pixel sample counts (no layer of its own)
   kSquares,      // variance: the beauty's squares
+  kLight,        // the light passes: summed per sample; a _direct or _indirect pass divided by its _color when resolved
 };
 
 struct AovInfo {
@@ -50,6 +60,7 @@ struct AovInfo {
   LayerKind kind = LayerKind::kRadiance;          // of its film layer
   AovSource source = AovSource::kSurface;
   bool always_float = false;  // stored as 32-bit float whatever the EXR precision
+  std::string_view divisor;   // kLight: the pass this one is divided by when resolved (X_color), or empty
 };
 
 // Every pass, in the order images list them.
@@ -59,12 +70,20 @@ const AovInfo* find_aov(std::string_view name);
 // What is wrong with a pass name that find_aov does not know: unknown pass "albdo" (did you mean "albedo"?) ...
 std::string unknown_aov_message(std::string_view name);
 
-// Adds the film layers the passes `aovs` (names find_aov knows) accumulate into, in the table's order.
+// Adds the film layers the passes `aovs` (names find_aov knows) accumulate into, in the table's order. Any light pass
+// brings the layers of all of them: they are recorded together, and a _direct or _indirect pass needs its _color.
 void add_aov_layers(Film& film, const std::vector<std::string>& aovs);
 // The passes a film holds (in the table's order): those with a layer in it, and sample_count when `sample_count`.
 std::vector<std::string> aovs_of(const Film& film, bool sample_count);
 // Whether `aovs` holds a pass that reads the camera ray's surfaces (SurfaceFeatures).
 bool aovs_read_surfaces(const std::vector<std::string>& aovs);
+
+// What a camera sample's light adds to the light passes (kLight), filled in by the integrators. The classes are
+// Bsdf's lobe classes: 0 diffuse, 1 glossy, 2 transmission.
+struct LightPassSample {
+  Rgb emission, background, volume_direct, volume_indirect;
+  Rgb direct[3], indirect[3], color[3];
+};
 
 // What a camera sample found for the passes, filled in by the integrators.
 struct SurfaceFeatures {
@@ -87,14 +106,21 @@ class AovWriter {
   explicit AovWriter(const Film& film);
   // Whether the film has a layer that SurfaceFeatures feed (the integrator records them only then).
   bool wants_features() const { return wants_features_; }
+  // Whether the film has the light passes' layers (LightPassSample).
+  bool wants_light() const { return light_[0] >= 0; }
+  // Adds a sample's light passes to pixel (x, y).
+  void add_light(Film& film, int x, int y, const LightPassSample& l) const;
   // Adds sample `sample_index` of pixel (x, y): its features and its beauty value `l` (for the variance's squares).
   void add(Film& film, int x, int y, uint32_t sample_index, const SurfaceFeatures& f, const Rgb& l) const;
-  bool empty() const { return !wants_features_ && squares_ < 0; }
+  bool empty() const { return !wants_features_ && squares_ < 0 && !wants_light(); }
 
  private:
   int albedo_ = -1, normal_ = -1, depth_ = -1, uv_ = -1, roughness_ = -1, position_ = -1, object_ = -1, material_ = -1,
       squares_ = -1;
   bool wants_features_ = false;
+  // The light passes' layers, in LightPassSample's order: emission, background, volume_direct, volume_indirect, then
+  // the direct of diffuse, glossy and transmission, their indirect, their color.
+  int light_[13];
 };
 
 // A resolved pass (`values`, aov.channels per pixel) as linear RGB to look at on a display (to_display, display.h):

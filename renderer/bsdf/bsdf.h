@@ -83,9 +83,41 @@ class Bsdf {
   // roughness, whose square is alpha), 0 for a perfectly smooth mirror or glass, 1 for a diffuse surface.
   virtual float roughness_hint() const { return 1; }
 
+  // The light passes (aov.h) sort light by the lobe that scattered it at the path's first bounce, as Blender Cycles
+  // sorts its passes: diffuse (diffuse reflection and diffuse transmission), glossy (every other reflection, sheen
+  // and clearcoat among them) and transmission (every other refraction).
+  // The diffuse lobes' share of eval(wo, wi); the rest of eval is glossy where wi is on wo's side, transmission
+  // where it is not. A model with diffuse lobes beside others says which part is theirs; one of diffuse lobes only
+  // is all diffuse, one without any has none.
+  virtual Rgb eval_diffuse(const Vec3& wo, const Vec3& wi) const {
+    return (flags() & kBsdfDiffuse) && !(flags() & (kBsdfGlossy | kBsdfSpecular)) ? eval(wo, wi) : Rgb(0);
+  }
+  // The colour of each lobe class (the light passes' diffuse_color, glossy_color, transmission_color): what the
+  // class's lobes tint the light they scatter by. A model of one class gives its albedo_hint to that class.
+  struct LobeColors {
+    Rgb diffuse, glossy, transmission;
+  };
+  virtual LobeColors lobe_colors() const {
+    const uint32_t f = flags();
+    LobeColors c;
+    if (f & kBsdfDiffuse)
+      c.diffuse = albedo_hint();
+    else if (f & kBsdfTransmission)
+      c.transmission = albedo_hint();
+    else if (f & (kBsdfGlossy | kBsdfSpecular))
+      c.glossy = albedo_hint();
+    return c;
+  }
+
  protected:
   ~Bsdf() = default;  // BSDFs live in a ScratchArena and are never destroyed through a base pointer.
 };
+
+// The lobe class (Bsdf::lobe_colors) of a sampled lobe's flags: 0 diffuse, 1 glossy, 2 transmission.
+inline int lobe_class(uint32_t sampled) {
+  if (sampled & kBsdfDiffuse) return 0;
+  return (sampled & kBsdfTransmission) ? 2 : 1;
+}
 
 inline float cos_theta(const Vec3& w) {
   return w.z;

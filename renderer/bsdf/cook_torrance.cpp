@@ -81,6 +81,11 @@ class CookTorranceBsdf final : public Bsdf {
   }
   Rgb albedo_hint() const override { return kd_ + ks_ * fresnel_.eval(1); }
   float roughness_hint() const override { return dist_.roughness(); }
+  Rgb eval_diffuse(const Vec3& wo_in, const Vec3& wi_in) const override {
+    Vec3 wo = wo_in, wi = wi_in;
+    return mirror_to_front(wo, wi) ? kd_ * kInvPi : Rgb(0);
+  }
+  LobeColors lobe_colors() const override { return {kd_, ks_ * fresnel_.eval(1), Rgb(0)}; }
 
  private:
   Rgb specular(const Vec3& wo, const Vec3& wi) const {

@@ -149,6 +149,7 @@ class DielectricBsdf final : public Bsdf {
   }
   Rgb albedo_hint() const override { return kt_; }
   float roughness_hint() const override { return lobe_.dist.roughness(); }
+  LobeColors lobe_colors() const override { return {Rgb(0), kr_, kt_}; }
 
  private:
   bool smooth() const { return lobe_.dist.effectively_smooth(); }
@@ -184,6 +185,7 @@ class ThinDielectricBsdf final : public Bsdf {
   uint32_t flags() const override { return kBsdfReflection | kBsdfTransmission | kBsdfSpecular; }
   Rgb albedo_hint() const override { return kt_; }
   float roughness_hint() const override { return 0; }
+  LobeColors lobe_colors() const override { return {Rgb(0), kr_, kt_}; }
 
  private:
   float eta_;

@@ -336,6 +336,20 @@ class GltfPbrBsdf final : public Bsdf {
   }
   Rgb albedo_hint() const override { return l_.base_color; }
   float roughness_hint() const override { return dist_.roughness(); }
+  Rgb eval_diffuse(const Vec3& wo, const Vec3& wi) const override {
+    Rgb d;
+    evaluate(to_aniso(wo), to_aniso(wi), nullptr, &d);
+    return d;
+  }
+  // Diffuse: the base colour under the metal and the transmission, with the diffuse transmission's colour; glossy:
+  // the specular colour at normal incidence, the dielectric's F0 blended to the base colour by metallic (glTF 2.0
+  // Appendix B); transmission: the base colour of the transmitting share.
+  LobeColors lobe_colors() const override {
+    const float m = l_.metallic;
+    const Rgb diffuse = l_.base_color * ((1 - m) * (1 - l_.transmission) * (1 - l_.diffuse_transmission)) +
+                        l_.diffuse_transmission_color * ((1 - m) * (1 - l_.transmission) * l_.diffuse_transmission);
+    return {diffuse, lerp_rgb(f0_albedo_, l_.base_color, m), l_.base_color * ((1 - m) * l_.transmission)};
+  }
 
  private:
   // The shading frame turned about the normal so that +x is the anisotropy direction, and back.
@@ -395,8 +409,12 @@ class GltfPbrBsdf final : public Bsdf {
 
   // f(wo, wi), and with `pdf_out` also the density with which `sample` picks wi: one pass shares the half vector,
   // D, Lambda and the lobe weights between the two.
-  Rgb evaluate(const Vec3& wo_in, const Vec3& wi_in, float* pdf_out) const {
+  // `diffuse_out`, when given, receives the diffuse lobes' share of the value (Bsdf::eval_diffuse): the diffuse
+  // reflection and the diffuse transmission, under the sheen and the coat as the rest.
+  Rgb evaluate(const Vec3& wo_in, const Vec3& wi_in, float* pdf_out, Rgb* diffuse_out = nullptr) const {
     if (pdf_out) *pdf_out = 0;
+    if (diffuse_out) *diffuse_out = Rgb(0);
+    Rgb d(0);
     Vec3 wo = wo_in, wi = wi_in;
     if (wo.z == 0 || wi.z == 0) return Rgb(0);
     if (wo.z < 0) {
@@ -445,8 +463,8 @@ class GltfPbrBsdf final : public Bsdf {
         const float w = (1 - cache_.albedo_o) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
         // With solid transmission the interface reflects for its share of the surface.
         const float specular_share = solid() ? (1 - m) * (1 - l_.transmission) : 1 - m;
-        f += l_.base_color * ((1 - m) * (1 - l_.transmission) * (1 - l_.diffuse_transmission) * w * kInvPi) +
-             fd * (specular_share * dv);
+        d = l_.base_color * ((1 - m) * (1 - l_.transmission) * (1 - l_.diffuse_transmission) * w * kInvPi);
+        f += d + fd * (specular_share * dv);
         if (m > 0) {
           Rgb fm = fresnel_schlick(l_.base_color, Rgb(1), vh);
           if (l_.iridescence > 0) fm = lerp_rgb(fm, film_fresnel(l_.base_color, vh), l_.iridescence);
@@ -461,12 +479,17 @@ class GltfPbrBsdf final : public Bsdf {
       // reflection is.
       const float* p = lobes_at(wo, wo_in.z < 0);
       const float w = (1 - cache_.albedo_o) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
-      f += l_.diffuse_transmission_color * ((1 - m) * (1 - l_.transmission) * l_.diffuse_transmission * w * kInvPi);
+      const Rgb dt =
+          l_.diffuse_transmission_color * ((1 - m) * (1 - l_.transmission) * l_.diffuse_transmission * w * kInvPi);
+      f += dt;
+      d += dt;
       if (pdf_out) *pdf_out += p[0] * diffuse_t_share_ * cosine_hemisphere_pdf(wr.z);
     }
     if (sheen_max_ > 0) {
       const float eo = sheen_albedo(wo.z), ei = sheen_albedo(wr.z);
-      f = f * std::min(1 - sheen_max_ * std::min(eo, 1.0f), 1 - sheen_max_ * std::min(ei, 1.0f));
+      const float below = std::min(1 - sheen_max_ * std::min(eo, 1.0f), 1 - sheen_max_ * std::min(ei, 1.0f));
+      f = f * below;
+      d = d * below;
       // The Charlie lobe's albedo exceeds 1 near grazing angles; dividing by max(1, E_sh(mu_o), E_sh(mu_i)) bounds
       // it by 1 and stays symmetric.
       if (!transmit) f += l_.sheen_color * (sheen_eval(wo, wr, l_.alpha_sheen) / std::max(1.0f, std::max(eo, ei)));
@@ -474,7 +497,9 @@ class GltfPbrBsdf final : public Bsdf {
     if (l_.clearcoat > 0) {
       const Frame& cf = coat_frame(wo_in.z < 0);
       const Vec3 wo_c = to_coat(cf, wo), wr_c = to_coat(cf, wr);
-      f = f * std::min(1 - l_.clearcoat * coat_albedo(wo_c.z), 1 - l_.clearcoat * coat_albedo(wr_c.z));
+      const float below = std::min(1 - l_.clearcoat * coat_albedo(wo_c.z), 1 - l_.clearcoat * coat_albedo(wr_c.z));
+      f = f * below;
+      d = d * below;
       if (!transmit) {
         // V.H: the half vector of the pair is the same in either frame.
         Vec3 hc;
@@ -482,6 +507,7 @@ class GltfPbrBsdf final : public Bsdf {
         f += Rgb(fc * microfacet_reflection_eval(dist_c_, wo_c, wr_c));
       }
     }
+    if (diffuse_out) *diffuse_out = d;
     return f;
   }
 

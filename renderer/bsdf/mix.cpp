@@ -42,6 +42,14 @@ class MixBsdf final : public Bsdf {
   }
   Rgb albedo_hint() const override { return a_->albedo_hint() * (1 - w_) + b_->albedo_hint() * w_; }
   float roughness_hint() const override { return a_->roughness_hint() * (1 - w_) + b_->roughness_hint() * w_; }
+  Rgb eval_diffuse(const Vec3& wo, const Vec3& wi) const override {
+    return a_->eval_diffuse(wo, wi) * (1 - w_) + b_->eval_diffuse(wo, wi) * w_;
+  }
+  LobeColors lobe_colors() const override {
+    const LobeColors a = a_->lobe_colors(), b = b_->lobe_colors();
+    return {a.diffuse * (1 - w_) + b.diffuse * w_, a.glossy * (1 - w_) + b.glossy * w_,
+            a.transmission * (1 - w_) + b.transmission * w_};
+  }
 
  private:
   std::optional<BsdfSample> sample_mixed(TransportMode mode, const Vec3& wo, float uc, Vec2 u) const {

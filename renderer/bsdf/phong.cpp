@@ -92,6 +92,11 @@ class PhongBsdf final : public Bsdf {
   // The Beckmann roughness of the same highlight, alpha = sqrt(2 / (n + 2)) (Walter et al. 2007, "Microfacet Models
   // for Refraction through Rough Surfaces", §5.2).
   float roughness_hint() const override { return std::sqrt(std::sqrt(2 / (n_ + 2))); }
+  Rgb eval_diffuse(const Vec3& wo_in, const Vec3& wi_in) const override {
+    Vec3 wo = wo_in, wi = wi_in;
+    return mirror_to_front(wo, wi) ? kd_ * kInvPi : Rgb(0);
+  }
+  LobeColors lobe_colors() const override { return {kd_, ks_, Rgb(0)}; }
 
  private:
   static Vec3 reflect_z(const Vec3& w) { return {-w.x, -w.y, w.z}; }

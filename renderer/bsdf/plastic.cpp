@@ -91,6 +91,11 @@ class PlasticBsdf final : public Bsdf {
   }
   Rgb albedo_hint() const override { return rho_; }
   float roughness_hint() const override { return dist_.roughness(); }
+  Rgb eval_diffuse(const Vec3& wo_in, const Vec3& wi_in) const override {
+    Vec3 wo = wo_in, wi = wi_in;
+    return mirror_to_front(wo, wi) ? diffuse(wo, wi) : Rgb(0);
+  }
+  LobeColors lobe_colors() const override { return {rho_, Rgb(1), Rgb(0)}; }
 
  private:
   Rgb diffuse(const Vec3& wo, const Vec3& wi) const {

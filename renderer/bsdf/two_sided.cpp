@@ -28,6 +28,10 @@ class TwoSidedBsdf final : public Bsdf {
   uint32_t flags() const override { return inner_->flags(); }
   Rgb albedo_hint() const override { return inner_->albedo_hint(); }
   float roughness_hint() const override { return inner_->roughness_hint(); }
+  Rgb eval_diffuse(const Vec3& wo, const Vec3& wi) const override {
+    return wo.z < 0 ? inner_->eval_diffuse(flip(wo), flip(wi)) : inner_->eval_diffuse(wo, wi);
+  }
+  LobeColors lobe_colors() const override { return inner_->lobe_colors(); }
 
  private:
   static Vec3 flip(const Vec3& w) { return {w.x, w.y, -w.z}; }

@@ -67,6 +67,11 @@ class WardBsdf final : public Bsdf {
   uint32_t flags() const override { return kBsdfReflection | kBsdfGlossy | kBsdfDiffuse; }
   Rgb albedo_hint() const override { return rd_ + rs_; }
   float roughness_hint() const override { return dist_.roughness(); }
+  Rgb eval_diffuse(const Vec3& wo_in, const Vec3& wi_in) const override {
+    Vec3 wo = wo_in, wi = wi_in;
+    return mirror_to_front(wo, wi) ? rd_ * kInvPi : Rgb(0);
+  }
+  LobeColors lobe_colors() const override { return {rd_, rs_, Rgb(0)}; }
 
  private:
   float specular(const Vec3& wo, const Vec3& wi) const {

@@ -640,6 +640,7 @@ std::string integrator_aov_problem(const std::string& name, std::string_view aov
   const AovInfo* info = find_aov(aov);
   if (!info || (name != "light" && name != "bdpt") || info->source == AovSource::kSampleCount) return {};
   const std::string refusal = "the " + name + " integrator cannot make the pass \"" + std::string(aov) + "\"";
+  if (info->source == AovSource::kLight) return refusal + ": the light passes are made by path tracing alone; use path";
   if (info->source == AovSource::kSquares)
     return refusal + ": its pixels take splats of light paths started elsewhere, so their own samples do not measure " +
            "their variance; use path";

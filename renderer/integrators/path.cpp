@@ -42,11 +42,18 @@ Rgb shadow_transmittance(const Scene& scene, Ray shadow, MediumTracker medium, i
   }
 }
 
+// How a light sample's contribution splits between the lobe classes (Bsdf::eval_diffuse), for the light passes.
+struct LightSplit {
+  Rgb diffuse;             // the diffuse lobes' part
+  bool transmits = false;  // the rest is transmission (the light is beyond the surface), else glossy
+};
+
 // Next-event estimation at a path vertex: one light sample's contribution, before the path's throughput, weighed
-// against BSDF sampling by the power heuristic with `mis`. `medium` is the medium the path arrived in.
+// against BSDF sampling by the power heuristic with `mis`. `medium` is the medium the path arrived in. `split`, when
+// given, receives how the contribution splits between the lobe classes.
 Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& bsdf, uint32_t flags,
                  const Vec3& wo_world, const Vec3& wo, bool mis, float u_select, Vec2 u, const MediumTracker& medium,
-                 int max_crossings, RayCounters& counters) {
+                 int max_crossings, RayCounters& counters, LightSplit* split = nullptr) {
   LightSample ls;
   if (!scene.lights().sample(scene, si.sp.p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
   const Vec3 wi = si.sp.frame.to_local(ls.wi);
@@ -66,6 +73,10 @@ Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& b
   const Rgb tr = shadow_transmittance(scene, shadow, beyond, max_crossings, counters);
   if (is_black(tr)) return {};
   const float w = weigh ? power_heuristic(ls.pdf, bsdf_pdf) : 1.0f;
+  if (split) {
+    split->diffuse = bsdf.eval_diffuse(wo, wi) * std::abs(wi.z) * ls.radiance * (w / ls.pdf) * tr;
+    split->transmits = light_transmits;
+  }
   return f * ls.radiance * (w / ls.pdf) * tr;
 }
 
@@ -116,10 +127,11 @@ LightNumbers light_numbers(PixelSampler& sampler, bool sample_light) {
 // sampled lobe spreads, and textures are filtered over its footprint. A zero cone reads the finest texels.
 // `wavelength`, in a scene with dispersive materials, is the pixel sample's (spectrum.h): every BSDF sees it, and the
 // throughput takes its weight at the path's first dispersive vertex, before anything is added through that vertex.
-// `features`, when given, receives what the render passes record of the path (note_surface, note_shading).
+// `features`, when given, receives what the render passes record of the path (note_surface, note_shading), and `light`
+// the light passes' split of its radiance (aov.h).
 Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* primary, PixelSampler& sampler,
                const IntegratorSettings& settings, ScratchArena& arena, RayCounters& counters, RayCone cone,
-               const spectrum::WavelengthSample* wavelength, SurfaceFeatures* features) {
+               const spectrum::WavelengthSample* wavelength, SurfaceFeatures* features, LightPassSample* light) {
   const LightSet& lights = scene.lights();
   const bool use_light_sampling = settings.estimator != Estimator::kHemisphere;
   const bool use_bsdf_hits = settings.estimator != Estimator::kArea;
@@ -144,6 +156,19 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
   // how far it has come along it.
   bool straight = true;
   float travelled = 0;
+  // For `light`: the scattering events (surface bounces, medium scatterings) before the current ray, and the class of
+  // the first (Bsdf's lobe classes 0 diffuse, 1 glossy, 2 transmission; 3 a medium). Light that reached the camera
+  // after k of them is emission or background for k = 0, the first class's direct for k = 1, its indirect after.
+  int bounces = 0, first = -1;
+  auto record = [&](const Rgb& c, int k, bool background) {
+    if (!light) return;
+    if (k == 0)
+      (background ? light->background : light->emission) += c;
+    else if (first == 3)
+      (k == 1 ? light->volume_direct : light->volume_indirect) += c;
+    else if (first >= 0)
+      (k == 1 ? light->direct[first] : light->indirect[first]) += c;
+  };
   ++counters.camera;
 
   for (int depth = 0;;) {
@@ -181,9 +206,12 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         const auto [u_light_select, u_light] = light_numbers(sampler, sample_light);
         sampler.skip1d();  // a lobe choice: the phase function has one lobe
         const PhaseSample ps = phase.sample(wo_world, sampler.get2d());
+        if (bounces == 0) first = 3;
         if (sample_light) {
-          radiance += throughput * direct_light_in_medium(scene, p, wo_world, phase, mis, u_light_select, u_light,
-                                                          medium, settings.max_volume_depth, counters);
+          const Rgb c = throughput * direct_light_in_medium(scene, p, wo_world, phase, mis, u_light_select, u_light,
+                                                            medium, settings.max_volume_depth, counters);
+          radiance += c;
+          record(c, bounces + 1, false);
         }
         // Sampled exactly, the phase function's weight p / pdf is 1: the throughput goes on unchanged.
         if (!(ps.pdf > 0)) break;
@@ -205,6 +233,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         ray.tmin = 0;
         ray.tmax = kInfinity;
         ++counters.bounce;
+        ++bounces;
         continue;
       }
     }
@@ -217,13 +246,17 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       if (!scene.environment.black()) {
         if (prev_delta) {
           // Seen from the camera, directly or through mirrors and glass.
-          radiance += throughput * scene.environment.radiance(ray.dir);
+          const Rgb c = throughput * scene.environment.radiance(ray.dir);
+          radiance += c;
+          record(c, bounces, true);
         } else if (use_bsdf_hits) {
           // Light onto the last surface: the radiance light sampling estimates too, weighed against it (its density
           // from the same lookup).
           float pdf_dir = 0;
           const Rgb le = scene.environment.lighting(ray.dir, &pdf_dir);
-          radiance += throughput * le * (mis ? power_heuristic(prev_pdf, lights.environment_pmf() * pdf_dir) : 1.0f);
+          const Rgb c = throughput * le * (mis ? power_heuristic(prev_pdf, lights.environment_pmf() * pdf_dir) : 1.0f);
+          radiance += c;
+          record(c, bounces, true);
         }
       }
       break;
@@ -234,10 +267,14 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       Rgb le = si.material->emitted(si.sp, wo_world);
       if (!is_black(le)) {
         if (prev_delta) {
-          radiance += throughput * le;
+          const Rgb c = throughput * le;
+          radiance += c;
+          record(c, bounces, false);
         } else if (use_bsdf_hits) {
           float w = mis ? power_heuristic(prev_pdf, lights.pdf_hit(scene, prev_p, si)) : 1.0f;
-          radiance += throughput * le * w;
+          const Rgb c = throughput * le * w;
+          radiance += c;
+          record(c, bounces, false);
         }
       }
     }
@@ -291,14 +328,33 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     const std::optional<BsdfSample> bs = bsdf->sample(wo, u_lobe, u_dir);
 
     // Next-event estimation: one light sample, unless every lobe is a delta (a light sample cannot hit it).
+    const bool first_bounce = light && bounces == 0;
+    if (first_bounce) {
+      const Bsdf::LobeColors colors = bsdf->lobe_colors();
+      light->color[0] += colors.diffuse;
+      light->color[1] += colors.glossy;
+      light->color[2] += colors.transmission;
+    }
     if (sample_light) {
-      radiance += throughput * direct_light(scene, si, *bsdf, flags, wo_world, wo, mis, u_light_select, u_light, medium,
-                                            settings.max_volume_depth, counters);
+      LightSplit split;
+      const Rgb c =
+          throughput * direct_light(scene, si, *bsdf, flags, wo_world, wo, mis, u_light_select, u_light, medium,
+                                    settings.max_volume_depth, counters, first_bounce ? &split : nullptr);
+      radiance += c;
+      if (first_bounce) {
+        // The first bounce's own light sample: direct light of each class its lobes give.
+        const Rgb diffuse = throughput * split.diffuse;
+        light->direct[0] += diffuse;
+        light->direct[split.transmits ? 2 : 1] += c - diffuse;
+      } else {
+        record(c, bounces + 1, false);
+      }
     }
 
     // Continue the path along the BSDF sample.
     if (!bs || !(bs->pdf > 0) || is_black(bs->f)) break;
     const Vec3 wi_world = frame.to_world(bs->wi);
+    if (bounces == 0) first = lobe_class(bs->flags);
     // Reject directions whose shading and geometric sides disagree (shading normals can make these).
     const bool transmit = (bs->flags & kBsdfTransmission) != 0;
     if ((dot(wi_world, si.sp.ng) * dot(wo_world, si.sp.ng) > 0) == transmit) break;
@@ -333,6 +389,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     ray.tmin = 0;
     ray.tmax = kInfinity;
     ++counters.bounce;
+    ++bounces;
     ++depth;
   }
   return radiance;
@@ -400,14 +457,20 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
           spectrum::WavelengthSample wavelength;
           if (dispersive) wavelength = spectrum::sample_wavelength(samplers[i].get1d_dimension0());
           SurfaceFeatures features;
+          LightPassSample light;
           Rgb l = trace_path(scene, rays[i], &primary, samplers[i], setup_.settings, arena, counters, cone,
-                             dispersive ? &wavelength : nullptr, aovs.wants_features() ? &features : nullptr);
+                             dispersive ? &wavelength : nullptr, aovs.wants_features() ? &features : nullptr,
+                             aovs.wants_light() ? &light : nullptr);
           if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
             ++nonfinite;
             l = Rgb(0);
+            light = LightPassSample();  // dropped whole, as the beauty's sample is
           }
           film.add_sample(gx + i, y, l);
-          if (!aovs.empty()) aovs.add(film, gx + i, y, s, features, l);
+          if (!aovs.empty()) {
+            aovs.add(film, gx + i, y, s, features, l);
+            if (aovs.wants_light()) aovs.add_light(film, gx + i, y, light);
+          }
         }
       }
     }

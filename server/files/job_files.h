@@ -22,7 +22,7 @@ namespace tessera::server {
 // The render passes' PNGs (OutputPipeline::publish_passes) follow the fixed files: pass i of aov.h's table is
 // pass_file(i), aov.<name>.png, with room for kMaxPassFiles passes.
 enum class JobFile : int { kPreviewPng, kResultPng, kResultExr, kCheckpoint, kLog, kFirstPassPng };
-inline constexpr int kMaxPassFiles = 16;
+inline constexpr int kMaxPassFiles = 32;
 constexpr JobFile pass_file(int index) {
   return static_cast<JobFile>(static_cast<int>(JobFile::kFirstPassPng) + index);
 }

@@ -257,6 +257,99 @@ TEST(AovBits, EveryPassIsTheSameOnAnyThreadCountSampleSplitAndResume) {
   EXPECT_EQ(c.film().layer_count(), 1);
 }
 
+const std::vector<std::string> kLightPasses = {"emission",          "background",          "volume_direct",
+                                               "volume_indirect",   "diffuse_direct",      "diffuse_indirect",
+                                               "diffuse_color",     "glossy_direct",       "glossy_indirect",
+                                               "glossy_color",      "transmission_direct", "transmission_indirect",
+                                               "transmission_color"};
+
+// The largest difference, over pixels and channels, between the beauty and the light passes recomposed as Cycles
+// recomposes them, relative to the beauty (plus a floor for black pixels); and each pass's image mean.
+double recomposition_error(const Passes& p, std::map<std::string, double>* means) {
+  double worst = 0;
+  const std::vector<float>& beauty = p.layers.at("");
+  for (size_t i = 0; i < beauty.size(); ++i) {
+    double sum = 0;
+    for (const char* pass : {"emission", "background", "volume_direct", "volume_indirect"}) sum += p.layers.at(pass)[i];
+    for (const char* lobe : {"diffuse", "glossy", "transmission"}) {
+      const std::string x = lobe;
+      sum += (static_cast<double>(p.layers.at(x + "_direct")[i]) + p.layers.at(x + "_indirect")[i]) *
+             p.layers.at(x + "_color")[i];
+    }
+    worst = std::max(worst, std::abs(sum - beauty[i]) / (std::abs(beauty[i]) + 1e-3));
+  }
+  for (const std::string& pass : kLightPasses) {
+    double m = 0;
+    for (float v : p.layers.at(pass)) m += v;
+    (*means)[pass] = m / static_cast<double>(p.layers.at(pass).size());
+  }
+  return worst;
+}
+
+// The light passes split the beauty without losing or adding anything: recomposed, they are the beauty to float
+// rounding on every pixel, and the light goes where it came from.
+TEST(LightPasses, TheCornellBoxRecomposesAndItsLightIsDiffuse) {
+  const json doc = cornell_scene();
+  const Passes p = render_passes(doc, settings(32, 32, 16, "path", kLightPasses));
+  std::map<std::string, double> mean;
+  EXPECT_LT(recomposition_error(p, &mean), 1e-5);
+  EXPECT_GT(mean["emission"], 0);           // the lamp, seen
+  EXPECT_GT(mean["diffuse_direct"], 0.05);  // Lambertian walls lit by the lamp
+  EXPECT_GT(mean["diffuse_indirect"], 0.01);
+  for (const char* none : {"background", "volume_direct", "volume_indirect", "glossy_direct", "glossy_indirect",
+                           "glossy_color", "transmission_direct", "transmission_indirect", "transmission_color"})
+    EXPECT_EQ(mean[none], 0) << none;
+  // The colour of a wall is its albedo: the interior of the red wall's image.
+  const Passes ids = render_passes(doc, settings(32, 32, 16, "path", {"diffuse_color", "material_id"}));
+  int red = 0;
+  for (int i = 0; i < 32 * 32; ++i)
+    if (ids.layers.at("diffuse_color")[3 * i] == 0.63f && ids.layers.at("diffuse_color")[3 * i + 1] == 0.065f) ++red;
+  EXPECT_GT(red, 30);
+}
+
+TEST(LightPasses, GlossGlassAndFogRecomposeAndLandInTheirPasses) {
+  // A glossy plastic ball, a glass ball and a ball of fog on a Lambertian floor, under a sky and a lamp.
+  const json doc = {{"camera", {{"from", {0, 1, -4}}, {"to", {0, 0.5, 0}}, {"up", {0, 1, 0}}, {"fov_deg", 40}}},
+                    {"environment", {{"color", {0.6, 0.7, 1.0}}}},
+                    {"materials",
+                     {{"floor", {{"type", "lambert"}, {"albedo", {0.5, 0.5, 0.5}}}},
+                      {"plastic", {{"type", "plastic"}, {"diffuse", {0.7, 0.2, 0.1}}, {"roughness", 0.2}}},
+                      {"glass", {{"type", "dielectric"}, {"ior", 1.5}}},
+                      {"boundary", {{"type", "interface"}}},
+                      {"sun", {{"type", "emission"}, {"radiance", {20, 18, 15}}}}}},
+                    {"objects",
+                     {{{"shape", "rectangle"},
+                       {"material", "floor"},
+                       {"corner", {-5, 0, -5}},
+                       {"edge1", {0, 0, 10}},
+                       {"edge2", {10, 0, 0}}},
+                      {{"shape", "sphere"}, {"material", "plastic"}, {"center", {-0.7, 0.5, 0}}, {"radius", 0.5}},
+                      {{"shape", "sphere"}, {"material", "glass"}, {"center", {0.7, 0.5, 0}}, {"radius", 0.5}},
+                      {{"shape", "sphere"},
+                       {"material", "boundary"},
+                       {"center", {0, 0.4, -1.2}},
+                       {"radius", 0.4},
+                       {"medium", {{"sigma_a", {0.1, 0.1, 0.1}}, {"sigma_s", {3, 3, 3}}, {"g", 0}}}},
+                      {{"shape", "sphere"}, {"material", "sun"}, {"center", {1.6, 1.5, 1.5}}, {"radius", 0.3}}}}};
+  const Passes p = render_passes(doc, settings(40, 30, 16, "path", kLightPasses));
+  std::map<std::string, double> mean;
+  EXPECT_LT(recomposition_error(p, &mean), 1e-5);
+  for (const char* some :
+       {"emission", "background", "volume_direct", "volume_indirect", "diffuse_direct", "diffuse_indirect",
+        "glossy_direct", "glossy_indirect", "glossy_color", "transmission_indirect", "transmission_color"})
+    EXPECT_GT(mean[some], 0) << some;
+}
+
+TEST(AovSettings, TheContractListsEveryPassOfTheTable) {
+  std::ifstream in("proto/schemas/render.schema.json");
+  ASSERT_TRUE(in) << "run from the source tree";
+  const json aovs = json::parse(in)["properties"]["aovs"];
+  std::vector<std::string> names;
+  for (const AovInfo& a : aov_table()) names.emplace_back(a.name);
+  EXPECT_EQ(aovs["items"]["enum"].get<std::vector<std::string>>(), names);
+  EXPECT_EQ(aovs["maxItems"].get<size_t>(), names.size());
+}
+
 TEST(AovSettings, NamesAreCheckedAndKeptInOneOrder) {
   const RenderLimits limits;
   const RenderSettings s =
@@ -284,6 +377,8 @@ TEST(AovSettings, NamesAreCheckedAndKeptInOneOrder) {
   EXPECT_NE(light.find("light"), std::string::npos) << light;
   EXPECT_NE(refusal(json{{"integrator", "bdpt"}, {"aovs", {"variance"}}}).find("variance"), std::string::npos);
   EXPECT_EQ(refusal(json{{"integrator", "bdpt"}, {"aovs", {"albedo", "depth"}}}), "accepted");
+  EXPECT_NE(refusal(json{{"integrator", "bdpt"}, {"aovs", {"depth", "glossy_direct"}}}).find("/render/aovs/1"),
+            std::string::npos);
 }
 
 TEST(AovImage, TheExrNamesEveryPassChannelAndKeepsIdsAndDepthInFloat) {
