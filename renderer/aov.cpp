@@ -110,11 +110,18 @@ AovWriter::AovWriter(const Film& film)
     if (light_[i] < 0) light_[0] = -1;  // all of them or none
 }
 
-void AovWriter::add_light(Film& film, int x, int y, const LightPassSample& l) const {
+void AovWriter::add_light(Film& film, int x, int y, const LightPassSample& l, bool shared) const {
   const Rgb* values[13] = {&l.emission,  &l.background, &l.volume_direct, &l.volume_indirect, &l.direct[0],
                            &l.direct[1], &l.direct[2],  &l.indirect[0],   &l.indirect[1],     &l.indirect[2],
                            &l.color[0],  &l.color[1],   &l.color[2]};
-  for (int i = 0; i < 13; ++i) film.add_layer_sample(light_[i], x, y, &values[i]->x);
+  for (int i = 0; i < 13; ++i) {
+    // Most of a sample's light lands in a few passes: adding zero to the others would change no sum.
+    if (is_black(*values[i])) continue;
+    if (shared)
+      film.add_layer_sample_shared(light_[i], x, y, &values[i]->x);
+    else
+      film.add_layer_sample(light_[i], x, y, &values[i]->x);
+  }
 }
 
 void AovWriter::add(Film& film, int x, int y, uint32_t sample_index, const SurfaceFeatures& f, const Rgb& l) const {

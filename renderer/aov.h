@@ -108,8 +108,8 @@ class AovWriter {
   bool wants_features() const { return wants_features_; }
   // Whether the film has the light passes' layers (LightPassSample).
   bool wants_light() const { return light_[0] >= 0; }
-  // Adds a sample's light passes to pixel (x, y).
-  void add_light(Film& film, int x, int y, const LightPassSample& l) const;
+  // Adds a sample's light passes to pixel (x, y); `shared`: while other threads may add to the same pixel (splats).
+  void add_light(Film& film, int x, int y, const LightPassSample& l, bool shared = false) const;
   // Adds sample `sample_index` of pixel (x, y): its features and its beauty value `l` (for the variance's squares).
   void add(Film& film, int x, int y, uint32_t sample_index, const SurfaceFeatures& f, const Rgb& l) const;
   bool empty() const { return !wants_features_ && squares_ < 0 && !wants_light(); }

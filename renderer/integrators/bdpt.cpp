@@ -49,9 +49,10 @@ struct Vertex {
   uint32_t object = 0, material_index = 0;  // SurfaceInteraction's (surfaces)
   uint32_t light = kNoLight;                // the light this vertex is on (light vertices, emitting surfaces)
   bool delta = false;                       // scattered by a delta lobe
-  bool dispersed = false;                   // a dispersive material among its subpath's surface vertices up to this one
-  bool delta_light = false;                 // a point, spot or directional light
-  bool infinite = false;                    // a light at infinity: `dir` is the direction its light travels
+  int8_t lobe = -1;          // the lobe class it scattered by (lobe_class), for the light passes; -1 none
+  bool dispersed = false;    // a dispersive material among its subpath's surface vertices up to this one
+  bool delta_light = false;  // a point, spot or directional light
+  bool infinite = false;     // a light at infinity: `dir` is the direction its light travels
   Vec3 dir;
   // Densities of sampling this vertex from the previous one on its own subpath (fwd) and from the next one in the
   // reverse direction (rev), by area (by solid angle for a vertex at infinity).
@@ -184,6 +185,28 @@ void camera_features(const Vertex* camera, int n, SurfaceFeatures* f) {
   }
 }
 
+// The light passes' share of a strategy's contribution `c` (aov.h): its scattering vertices k = s + t - 2 and its
+// first bounce (camera[1], or for t = 1 the light subpath's vertex the lens sees) say where it goes: emission or
+// background for k = 0; the first bounce's class, direct for k = 1 and indirect after. Where the first bounce is the
+// vertex that joins the strategy's two ends (`joined`), its BSDF's diffuse part goes to diffuse and the rest to
+// glossy or transmission (Bsdf::eval_diffuse), as the path tracer splits its first light sample: light arrives at
+// `first` from direction `toward_light` and leaves towards `toward_eye`. Otherwise the class is the lobe `first`
+// sampled.
+void record_light(LightPassSample& lp, const Vertex& first, const Vec3& toward_light, const Vec3& toward_eye,
+                  bool joined, int k, const Rgb& c) {
+  Rgb* direct_or_indirect = k == 1 ? lp.direct : lp.indirect;
+  if (!joined) {
+    if (first.lobe >= 0) direct_or_indirect[first.lobe] += c;
+    return;
+  }
+  const Vec3 wo = first.frame.to_local(toward_eye), wi = first.frame.to_local(toward_light);
+  const Rgb f = first.bsdf->eval(wo, wi), d = first.bsdf->eval_diffuse(wo, wi);
+  const Rgb diffuse(f.x > 0 ? c.x * (d.x / f.x) : 0, f.y > 0 ? c.y * (d.y / f.y) : 0, f.z > 0 ? c.z * (d.z / f.z) : 0);
+  const bool transmits = dot(toward_light, first.ng) * dot(toward_eye, first.ng) < 0;
+  direct_or_indirect[0] += diffuse;
+  direct_or_indirect[transmits ? 2 : 1] += c - diffuse;
+}
+
 // Whether the segment between two finite vertices is unobstructed, each end offset off its surface.
 bool visible(const Scene& scene, const Vertex& a, const Vertex& b, RayCounters& counters) {
   ++counters.shadow;
@@ -254,6 +277,7 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
     const std::optional<BsdfSample> bs = v.bsdf->sample_for(mode, wo, u_lobe, u_dir);
     if (!bs || !(bs->pdf > 0) || is_black(bs->f)) break;
     const Vec3 wi = v.frame.to_world(bs->wi);
+    v.lobe = static_cast<int8_t>(lobe_class(bs->flags));
     const bool transmit = (bs->flags & kBsdfTransmission) != 0;
     if ((dot(wi, v.ng) * dot(v.wo, v.ng) > 0) == transmit) break;
     beta *= bs->f * (std::abs(bs->wi.z) / bs->pdf);
@@ -386,14 +410,43 @@ class BidirectionalIntegrator final : public Integrator {
                    const AovWriter& aovs);
   // The pixel sample's contribution to its own pixel; splats land on the film directly. `wavelength`, in a scene with
   // dispersive materials, is the sample's (spectrum.h).
-  // `features`, when given, receives what the render passes record of the camera subpath.
+  // `features`, when given, receives what the render passes record of the camera subpath, and `lp` the light
+  // passes' split of the pixel's own contributions (splats go to the film at once, through `aovs`).
   Rgb sample(const Context& c, Vec2 film_pos, PixelSampler& sampler, ScratchArena& arena, Vertex* camera, Vertex* light,
-             Film& film, RayCounters& counters, const spectrum::WavelengthSample* wavelength,
-             SurfaceFeatures* features);
+             Film& film, RayCounters& counters, const spectrum::WavelengthSample* wavelength, SurfaceFeatures* features,
+             LightPassSample* lp, const AovWriter& aovs);
   // The unweighted contribution of strategy (s, t), and through `sampled` and `splat_at` the vertex it sampled
   // afresh and, for t = 1, the film position.
   Rgb connect(const Context& c, const LightEmission& le, Vertex* light, Vertex* camera, int s, int t,
               PixelSampler& sampler, Vertex* sampled, Vec2* splat_at, RayCounters& counters);
+  // The light passes' share of strategy (s, t)'s contribution (record_light): into the pixel's own `lp` (t >= 2), or
+  // splatted where it lands, as the beauty's share is (t = 1).
+  void record_strategy(Film& film, const Vertex* light, const Vertex* camera, const Vertex& sampled, int s, int t,
+                       const Rgb& contribution, Vec2 splat_at, const AovWriter& aovs, LightPassSample& lp) const {
+    const int k = s + t - 2;
+    if (t >= 2) {
+      if (k == 0) {
+        (camera[1].kind == VertexKind::kLight && camera[1].infinite ? lp.background : lp.emission) += contribution;
+      } else if (t >= 3) {
+        record_light(lp, camera[1], Vec3(), Vec3(), false, k, contribution);
+      } else {
+        const Vertex& other = s == 1 ? sampled : light[s - 1];
+        const Vec3 toward = other.infinite ? -other.dir : normalize(other.p - camera[1].p);
+        record_light(lp, camera[1], toward, camera[1].wo, true, k, contribution);
+      }
+      return;
+    }
+    if (s < 2) return;  // light tracing's emitter seen by the lens: light tracing makes no light passes
+    const int x = static_cast<int>(splat_at.x), y = static_cast<int>(splat_at.y);
+    const PixelRegion& r = setup_.region;
+    if (x < r.x || y < r.y || x >= r.x + r.width || y >= r.y + r.height) return;
+    if (!is_finite(contribution) || contribution.x < 0 || contribution.y < 0 || contribution.z < 0) return;
+    const Vertex& first = light[s - 1];
+    LightPassSample one;
+    record_light(one, first, first.wo, normalize(sampled.p - first.p), true, k, contribution * splat_scale_);
+    aovs.add_light(film, x, y, one, true);
+  }
+
   void splat(Film& film, Vec2 at, const Rgb& value) const {
     const int x = static_cast<int>(at.x), y = static_cast<int>(at.y);
     const PixelRegion& r = setup_.region;
@@ -429,17 +482,22 @@ void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32
         spectrum::WavelengthSample wavelength;
         if (dispersive) wavelength = spectrum::sample_wavelength(sampler.get1d_dimension0());
         SurfaceFeatures features;
+        LightPassSample lp;
         Rgb l = sample(c, Vec2(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y), sampler,
                        worker.arena, camera, light, film, counters, dispersive ? &wavelength : nullptr,
-                       aovs.wants_features() ? &features : nullptr);
+                       aovs.wants_features() ? &features : nullptr, aovs.wants_light() ? &lp : nullptr, aovs);
         if (light_only_) continue;
         if (!is_finite(l) || l.x < 0 || l.y < 0 || l.z < 0) {
           ++nonfinite;
           l = Rgb(0);
+          lp = LightPassSample();  // dropped whole, as the beauty's sample is
         }
         film.add_sample_shared(x, y, l);
-        // Only this thread adds this pixel's passes (splats land on the beauty alone).
-        if (!aovs.empty()) aovs.add(film, x, y, s, features, l);
+        if (!aovs.empty()) {
+          // Only this thread adds this pixel's features; the light passes take splats from other threads too.
+          aovs.add(film, x, y, s, features, l);
+          if (aovs.wants_light()) aovs.add_light(film, x, y, lp, true);
+        }
       }
     }
   }
@@ -449,7 +507,8 @@ void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32
 
 Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSampler& sampler, ScratchArena& arena,
                                     Vertex* camera, Vertex* light, Film& film, RayCounters& counters,
-                                    const spectrum::WavelengthSample* wavelength, SurfaceFeatures* features) {
+                                    const spectrum::WavelengthSample* wavelength, SurfaceFeatures* features,
+                                    LightPassSample* lp, const AovWriter& aovs) {
   arena.reset();
   const Scene& scene = c.scene;
   const int max_depth = c.settings.max_depth;
@@ -469,6 +528,12 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
     n_camera = 1 + random_walk(c, ray, Rgb(1), pdf_dir, max_depth + 1, TransportMode::kRadiance, wavelength_nm, sampler,
                                arena, camera, counters);
     if (features) camera_features(camera, n_camera, features);
+    if (lp && n_camera >= 2 && camera[1].kind == VertexKind::kSurface && camera[1].bsdf) {
+      const Bsdf::LobeColors colors = camera[1].bsdf->lobe_colors();
+      lp->color[0] += colors.diffuse;
+      lp->color[1] += colors.glossy;
+      lp->color[2] += colors.transmission;
+    }
   }
   // The light subpath.
   int n_light = 0;
@@ -527,6 +592,7 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
         splat(film, splat_at, contribution);
       else
         l += contribution;
+      if (lp) record_strategy(film, light, camera, sampled, s, t, contribution, splat_at, aovs, *lp);
     }
   }
   return l;
@@ -640,7 +706,8 @@ std::string integrator_aov_problem(const std::string& name, std::string_view aov
   const AovInfo* info = find_aov(aov);
   if (!info || (name != "light" && name != "bdpt") || info->source == AovSource::kSampleCount) return {};
   const std::string refusal = "the " + name + " integrator cannot make the pass \"" + std::string(aov) + "\"";
-  if (info->source == AovSource::kLight) return refusal + ": the light passes are made by path tracing alone; use path";
+  if (info->source == AovSource::kLight && name == "light")
+    return refusal + ": light tracing has no first bounce per pixel to sort its light by; use path or bdpt";
   if (info->source == AovSource::kSquares)
     return refusal + ": its pixels take splats of light paths started elsewhere, so their own samples do not measure " +
            "their variance; use path";

@@ -287,10 +287,12 @@ double recomposition_error(const Passes& p, std::map<std::string, double>* means
 }
 
 // The light passes split the beauty without losing or adding anything: recomposed, they are the beauty to float
-// rounding on every pixel, and the light goes where it came from.
-TEST(LightPasses, TheCornellBoxRecomposesAndItsLightIsDiffuse) {
+// rounding on every pixel, and the light goes where it came from; for path tracing and BDPT alike.
+class LightPasses : public testing::TestWithParam<const char*> {};
+
+TEST_P(LightPasses, TheCornellBoxRecomposesAndItsLightIsDiffuse) {
   const json doc = cornell_scene();
-  const Passes p = render_passes(doc, settings(32, 32, 16, "path", kLightPasses));
+  const Passes p = render_passes(doc, settings(32, 32, 16, GetParam(), kLightPasses));
   std::map<std::string, double> mean;
   EXPECT_LT(recomposition_error(p, &mean), 1e-5);
   EXPECT_GT(mean["emission"], 0);           // the lamp, seen
@@ -300,45 +302,50 @@ TEST(LightPasses, TheCornellBoxRecomposesAndItsLightIsDiffuse) {
                            "glossy_color", "transmission_direct", "transmission_indirect", "transmission_color"})
     EXPECT_EQ(mean[none], 0) << none;
   // The colour of a wall is its albedo: the interior of the red wall's image.
-  const Passes ids = render_passes(doc, settings(32, 32, 16, "path", {"diffuse_color", "material_id"}));
+  const Passes ids = render_passes(doc, settings(32, 32, 16, GetParam(), {"diffuse_color", "material_id"}));
   int red = 0;
   for (int i = 0; i < 32 * 32; ++i)
     if (ids.layers.at("diffuse_color")[3 * i] == 0.63f && ids.layers.at("diffuse_color")[3 * i + 1] == 0.065f) ++red;
   EXPECT_GT(red, 30);
 }
 
-TEST(LightPasses, GlossGlassAndFogRecomposeAndLandInTheirPasses) {
-  // A glossy plastic ball, a glass ball and a ball of fog on a Lambertian floor, under a sky and a lamp.
-  const json doc = {{"camera", {{"from", {0, 1, -4}}, {"to", {0, 0.5, 0}}, {"up", {0, 1, 0}}, {"fov_deg", 40}}},
-                    {"environment", {{"color", {0.6, 0.7, 1.0}}}},
-                    {"materials",
-                     {{"floor", {{"type", "lambert"}, {"albedo", {0.5, 0.5, 0.5}}}},
-                      {"plastic", {{"type", "plastic"}, {"diffuse", {0.7, 0.2, 0.1}}, {"roughness", 0.2}}},
-                      {"glass", {{"type", "dielectric"}, {"ior", 1.5}}},
-                      {"boundary", {{"type", "interface"}}},
-                      {"sun", {{"type", "emission"}, {"radiance", {20, 18, 15}}}}}},
-                    {"objects",
-                     {{{"shape", "rectangle"},
-                       {"material", "floor"},
-                       {"corner", {-5, 0, -5}},
-                       {"edge1", {0, 0, 10}},
-                       {"edge2", {10, 0, 0}}},
-                      {{"shape", "sphere"}, {"material", "plastic"}, {"center", {-0.7, 0.5, 0}}, {"radius", 0.5}},
-                      {{"shape", "sphere"}, {"material", "glass"}, {"center", {0.7, 0.5, 0}}, {"radius", 0.5}},
-                      {{"shape", "sphere"},
-                       {"material", "boundary"},
-                       {"center", {0, 0.4, -1.2}},
-                       {"radius", 0.4},
-                       {"medium", {{"sigma_a", {0.1, 0.1, 0.1}}, {"sigma_s", {3, 3, 3}}, {"g", 0}}}},
-                      {{"shape", "sphere"}, {"material", "sun"}, {"center", {1.6, 1.5, 1.5}}, {"radius", 0.3}}}}};
-  const Passes p = render_passes(doc, settings(40, 30, 16, "path", kLightPasses));
+TEST_P(LightPasses, GlossGlassAndFogRecomposeAndLandInTheirPasses) {
+  // A glossy plastic ball, a glass ball and a ball of fog on a Lambertian floor, under a sky and a lamp (BDPT renders
+  // no scattering media: the fog ball is left out for it).
+  const bool fog = std::string(GetParam()) == "path";
+  json doc = {{"camera", {{"from", {0, 1, -4}}, {"to", {0, 0.5, 0}}, {"up", {0, 1, 0}}, {"fov_deg", 40}}},
+              {"environment", {{"color", {0.6, 0.7, 1.0}}}},
+              {"materials",
+               {{"floor", {{"type", "lambert"}, {"albedo", {0.5, 0.5, 0.5}}}},
+                {"plastic", {{"type", "plastic"}, {"diffuse", {0.7, 0.2, 0.1}}, {"roughness", 0.2}}},
+                {"glass", {{"type", "dielectric"}, {"ior", 1.5}}},
+                {"boundary", {{"type", "interface"}}},
+                {"sun", {{"type", "emission"}, {"radiance", {20, 18, 15}}}}}},
+              {"objects",
+               {{{"shape", "rectangle"},
+                 {"material", "floor"},
+                 {"corner", {-5, 0, -5}},
+                 {"edge1", {0, 0, 10}},
+                 {"edge2", {10, 0, 0}}},
+                {{"shape", "sphere"}, {"material", "plastic"}, {"center", {-0.7, 0.5, 0}}, {"radius", 0.5}},
+                {{"shape", "sphere"}, {"material", "glass"}, {"center", {0.7, 0.5, 0}}, {"radius", 0.5}},
+                {{"shape", "sphere"},
+                 {"material", "boundary"},
+                 {"center", {0, 0.4, -1.2}},
+                 {"radius", 0.4},
+                 {"medium", {{"sigma_a", {0.1, 0.1, 0.1}}, {"sigma_s", {3, 3, 3}}, {"g", 0}}}},
+                {{"shape", "sphere"}, {"material", "sun"}, {"center", {1.6, 1.5, 1.5}}, {"radius", 0.3}}}}};
+  if (!fog) doc["objects"].erase(3);
+  const Passes p = render_passes(doc, settings(40, 30, 16, GetParam(), kLightPasses));
   std::map<std::string, double> mean;
   EXPECT_LT(recomposition_error(p, &mean), 1e-5);
-  for (const char* some :
-       {"emission", "background", "volume_direct", "volume_indirect", "diffuse_direct", "diffuse_indirect",
-        "glossy_direct", "glossy_indirect", "glossy_color", "transmission_indirect", "transmission_color"})
+  for (const char* some : {"emission", "background", "diffuse_direct", "diffuse_indirect", "glossy_direct",
+                           "glossy_indirect", "glossy_color", "transmission_indirect", "transmission_color"})
     EXPECT_GT(mean[some], 0) << some;
+  for (const char* volume : {"volume_direct", "volume_indirect"}) EXPECT_EQ(mean[volume] > 0, fog) << volume;
 }
+
+INSTANTIATE_TEST_SUITE_P(Integrators, LightPasses, testing::Values("path", "bdpt"));
 
 TEST(AovSettings, TheContractListsEveryPassOfTheTable) {
   std::ifstream in("proto/schemas/render.schema.json");
@@ -377,8 +384,9 @@ TEST(AovSettings, NamesAreCheckedAndKeptInOneOrder) {
   EXPECT_NE(light.find("light"), std::string::npos) << light;
   EXPECT_NE(refusal(json{{"integrator", "bdpt"}, {"aovs", {"variance"}}}).find("variance"), std::string::npos);
   EXPECT_EQ(refusal(json{{"integrator", "bdpt"}, {"aovs", {"albedo", "depth"}}}), "accepted");
-  EXPECT_NE(refusal(json{{"integrator", "bdpt"}, {"aovs", {"depth", "glossy_direct"}}}).find("/render/aovs/1"),
+  EXPECT_NE(refusal(json{{"integrator", "light"}, {"aovs", {"sample_count", "glossy_direct"}}}).find("/render/aovs/1"),
             std::string::npos);
+  EXPECT_EQ(refusal(json{{"integrator", "bdpt"}, {"aovs", {"glossy_direct"}}}), "accepted");
 }
 
 TEST(AovImage, TheExrNamesEveryPassChannelAndKeepsIdsAndDepthInFloat) {
