@@ -95,7 +95,10 @@ class OutputPipeline {
                       const std::function<void(std::string_view pass, std::string_view png)>& publish) const;
   // A render's preview: the image as PNG, whatever the formats.
   std::string preview_png(const Image& image) const;
-  std::string preview_png(const Film& film) const { return preview_png(image(film)); }
+  // A preview shows the beauty alone: without post stages, the passes are not resolved for it.
+  std::string preview_png(const Film& film) const {
+    return preview_png(post_.empty() ? resolve_image(film) : image(film));
+  }
 
  private:
   EncodeOptions options_;

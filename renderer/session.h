@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <utility>
 
 #include "renderer/camera.h"
 #include "renderer/film.h"
@@ -52,6 +53,8 @@ class RenderSession {
   void cancel() { cancel_.store(true); }
 
   const Film& film() const { return film_; }
+  // The film, moved out of a session that is done (a film of many passes is gigabytes: not copied).
+  Film take_film() { return std::move(film_); }
   const RenderSettings& settings() const { return settings_; }
   const RenderProgress& progress() const { return progress_; }
 

@@ -354,7 +354,7 @@ int cmd_render(int argc, char** argv) {
       std::find(job.settings.aovs.begin(), job.settings.aovs.end(), "sample_count") != job.settings.aovs.end();
   part.display = job.settings.display;
   part.fingerprint = film_fingerprint(doc, job.settings, options.scene.asset_root);
-  part.film = session.film();
+  part.film = session.take_film();
   write_outputs(outputs, part);
   return kExitOk;
 }
