@@ -9,8 +9,9 @@
 #include <stdexcept>
 #include <string>
 
+#include "renderer/geometry.h"
+#include "renderer/material.h"
 #include "renderer/sampler.h"
-#include "renderer/scene.h"
 
 namespace tessera {
 

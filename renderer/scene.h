@@ -8,63 +8,11 @@
 #include "renderer/accel.h"
 #include "renderer/camera.h"
 #include "renderer/environment.h"
+#include "renderer/geometry.h"
 #include "renderer/lights.h"
 #include "renderer/material.h"
 
 namespace tessera {
-
-struct Mesh {
-  std::vector<Vec3> positions;
-  std::vector<uint32_t> indices;     // 3 per triangle
-  std::vector<Vec3> normals;         // per vertex, optional
-  std::vector<Vec2> uvs;             // per vertex, optional
-  std::vector<Vec2> uvs1;            // per vertex, optional second set
-  std::vector<Rgb> colors;           // per vertex, optional
-  std::vector<Vec3> tangents;        // per vertex, optional (with normals)
-  std::vector<float> tangent_signs;  // per vertex bitangent sign, optional
-  uint32_t material = 0;
-  uint32_t first_light = 0;  // index of its first triangle's light when the material emits
-  bool prototype = false;    // object-space geometry of a MeshGroup, traced only through its instances
-  size_t triangle_count() const { return indices.size() / 3; }
-};
-
-// Meshes that several instances share (Embree instancing): traced once per instance through a transform.
-// Emissive meshes are never instanced (lights are sampled in world space).
-struct MeshGroup {
-  std::vector<uint32_t> meshes;  // indices into Scene::meshes, each marked `prototype`
-};
-
-struct Instance {
-  uint32_t group = 0;
-  Transform to_world;
-  Transform normal_to_world;  // inverse transpose of to_world's linear part
-  bool mirrored = false;      // negative determinant: the front face is the clockwise one
-};
-
-struct Sphere {
-  Vec3 center;
-  float radius = 1;
-  uint32_t material = 0;
-  uint32_t light = 0;  // its light index when the material emits
-};
-
-// How far from the origin, in scene units, geometry may lie. Embree 3 aborts the process on a ray whose origin or
-// direction has a component beyond 1.844e18 (FLT_LARGE in its RayK::valid assertion); 1e12 (a million kilometres in
-// metres) leaves room for every distance a path computes from such coordinates, and a scene beyond it is a corrupt
-// or mis-scaled asset, refused when it is loaded.
-constexpr float kMaxSceneCoordinate = 1e12f;
-
-struct Bounds {
-  Vec3 lo{kInfinity, kInfinity, kInfinity};
-  Vec3 hi{-kInfinity, -kInfinity, -kInfinity};
-  void extend(const Vec3& p) {
-    lo = vmin(lo, p);
-    hi = vmax(hi, p);
-  }
-  bool empty() const { return lo.x > hi.x; }
-  Vec3 center() const { return (lo + hi) * 0.5f; }
-  float radius() const { return empty() ? 0 : 0.5f * length(hi - lo); }
-};
 
 // A surface point found by a ray, with what shading needs.
 struct SurfaceInteraction {
