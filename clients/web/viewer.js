@@ -40,8 +40,8 @@ export function toDisplay(rgb, exposureEv, tonemap) {
   return out;
 }
 
-// One image: its size, its linear values (or null), and a canvas holding what is drawn; for a render pass, its
-// values ({ name, channels, values }: a layer of exr.js's decodeExr) or null when there is no EXR to read them from.
+// One image: its size, its linear values (or null), and a canvas holding what is drawn; for a render pass, pass:
+// { name, channels, values } (a layer of exr.js's decodeExr; values null when the job wrote no EXR).
 class Layer {
   constructor(image) {
     this.width = image.width;
