@@ -229,8 +229,39 @@ const RENDER_DEFAULTS = {
   width: 512, height: 512, spp: 64, max_depth: 8, integrator: "path", estimator: "mis", seed: 0,
   sampler: "sobol", exposure_ev: 0, tonemap: "clamp", exr_precision: "half",
 };
+// The render passes picked (render.aovs): one checkbox per pass the contract lists (render.schema.json, aovs.items),
+// built when it has been read; the choice a document brings before then is kept for it.
+const aovChoice = new Set();
+const aovBoxes = () => [...document.querySelectorAll("#aovs input[type=checkbox]")];
+function showAovChoice() {
+  for (const box of aovBoxes()) box.checked = aovChoice.has(box.value);
+  $("#aovs-count").textContent = aovChoice.size ? `(${aovChoice.size})` : "";
+  if (aovChoice.size) $("#aovs-details").open = true;
+}
+function buildAovPicker(names) {
+  $("#aovs-details").hidden = !names?.length;
+  const labels = (names || []).map((name) => {
+    const box = document.createElement("input");
+    box.type = "checkbox";
+    box.id = `aov-${name}`;
+    box.value = name;
+    box.addEventListener("change", () => {
+      if (box.checked) aovChoice.add(name);
+      else aovChoice.delete(name);
+      $("#aovs-count").textContent = aovChoice.size ? `(${aovChoice.size})` : "";
+    });
+    const label = document.createElement("label");
+    label.append(box, ` ${name}`);
+    return label;
+  });
+  $("#aovs").replaceChildren($("#aovs legend"), ...labels);
+  showAovChoice();
+}
 function fillRenderFields(render = {}, outputs = ["png", "exr"]) {
   const r = { ...RENDER_DEFAULTS, ...render };
+  aovChoice.clear();
+  for (const name of Array.isArray(r.aovs) ? r.aovs : []) aovChoice.add(name);
+  showAovChoice();
   $("#width").value = r.width;
   $("#height").value = r.height;
   $("#spp").value = r.spp;
@@ -297,6 +328,13 @@ function renderSettings(base = {}) {
   optional("#noise-target", "noise_target");
   render.exposure_ev = number("#exposure-ev");
   for (const [sel, key] of SELECT_SETTINGS) render[key] = $(sel).value;
+  // The passes in the contract's order; none picked sends none.
+  const boxes = aovBoxes();
+  if (boxes.length) {
+    const aovs = boxes.filter((b) => b.checked).map((b) => b.value);
+    if (aovs.length) render.aovs = aovs;
+    else delete render.aovs;
+  }
   return render;
 }
 // The outputs ticked: at least one.
@@ -873,12 +911,55 @@ async function loadResult(job) {
     if (seq !== previewSeq || job.id !== selectedId) return;
     viewer.show(image, { keepView: true });
     $("#viewer").dataset.pass = job.state === "succeeded" ? "final" : "partial";
+    $("#viewer").dataset.aov = "beauty";
+    $("#aov-view").value = "";
     $("#preview-placeholder").hidden = true;
   } catch (e) {
     if (job.id === selectedId) resultShown = null;
     showError(e, "Result image");
   }
 }
+
+// The render passes of a job with results, in the order the job asked for them: the viewer's Pass choices, beside
+// the beauty. A pass shows as the daemon's PNG of it (links.aovs), its readout the values of its layer in the EXR.
+function jobPasses(job) {
+  const links = job.links?.aovs || {};
+  const asked = Array.isArray(job.render?.aovs) ? job.render.aovs : Object.keys(links);
+  return asked.filter((name) => links[name]);
+}
+function updatePassChoices(job) {
+  const select = $("#aov-view");
+  const passes = jobPasses(job);
+  // Rebuilt only when the choices change: rebuilding closes a list the user has open.
+  const signature = `${job.id} ${passes.join(" ")}`;
+  if (select.dataset.signature === signature) return;
+  select.dataset.signature = signature;
+  const keep = select.value;
+  select.replaceChildren(new Option("beauty", ""), ...passes.map((name) => new Option(name, name)));
+  select.value = passes.includes(keep) ? keep : "";
+  $("#aov-view-group").hidden = !passes.length;
+}
+async function showPass(job, pass) {
+  if (!job || !allowed(job, "result")) return;
+  const seq = ++previewSeq;
+  try {
+    const result = await resultImage(job);
+    let image = result;
+    if (pass) {
+      const look = await bitmapImage(await getBlob(job.links.aovs[pass]));
+      const layer = result.layers?.[pass];
+      image = { ...look, pass: { name: pass, channels: layer?.channels ?? [], values: layer?.values ?? null } };
+    }
+    if (seq !== previewSeq || job.id !== selectedId) return;
+    resultShown = job.id;
+    viewer.show(image, { keepView: true });
+    $("#viewer").dataset.aov = pass || "beauty";
+    $("#preview-placeholder").hidden = true;
+  } catch (e) {
+    showError(e, pass ? `Pass ${pass}` : "Result image");
+  }
+}
+$("#aov-view").addEventListener("change", (e) => showPass(currentJob, e.target.value));
 
 // The comparison (B) image: another finished job's result.
 function updateCompareChoices() {
@@ -916,7 +997,11 @@ function select(id) {
   resultShown = null;
   viewer.clear();
   delete $("#viewer").dataset.pass;
+  delete $("#viewer").dataset.aov;
   $("#compare").value = "";
+  $("#aov-view").value = "";
+  delete $("#aov-view").dataset.signature;
+  $("#aov-view-group").hidden = true;
   $("#preview-placeholder").hidden = false;
   currentJob = null;
   for (const [rid, r] of rows) {
@@ -993,6 +1078,7 @@ function showJob(job) {
   }
   if (job.id !== previous?.id) viewer.settings(r.exposure_ev ?? 0, r.tonemap ?? "clamp");
   if (allowed(job, "result")) loadResult(job);
+  updatePassChoices(job);
   refreshLog(job);
   const dl = $("#job-stats");
   dl.replaceChildren();
@@ -1254,6 +1340,7 @@ async function loadRenderSchema() {
   const keep = select.value;
   select.replaceChildren(...tones.map((t) => new Option(t, t)));
   select.value = tones.includes(keep) ? keep : tones[0];
+  buildAovPicker(renderSchema.properties?.aovs?.items?.enum);
   // The form's choices are the contract's (an integrator added to the daemon appears here), with the labels the
   // page has for those it knows.
   for (const [sel, key] of SELECT_SETTINGS) {

@@ -117,8 +117,14 @@ function unPredict(t) {
   return out;
 }
 
+// The order a layer's channels are read out in: R, G, B (as the beauty), then the others by name (X, Y, Z; U, V).
+const channelRank = (c) => ("RGB".includes(c) && c.length === 1 ? "RGB".indexOf(c) : 3);
+const byChannel = (a, b) => channelRank(a) - channelRank(b) || (a < b ? -1 : a > b ? 1 : 0);
+
 // Decodes an EXR (an ArrayBuffer). Returns { width, height, rgb: Float32Array of width * height * 3 linear values,
-// channels: the names found }. A grey image (Y, or R alone) fills all three; other channels (A, Z...) are ignored.
+// channels: the names found, layers }. A grey image (Y, or R alone) fills all three; other channels (A, Z...) are
+// not in rgb. layers: each layer of channels named <layer>.<channel> (a render pass, "depth.Z"), by its name:
+// { channels: ["Z"], values: Float32Array of width * height * channels.length, pixel by pixel }.
 export async function decodeExr(buffer) {
   const view = new DataView(buffer);
   const h = readHeader(view);
@@ -139,6 +145,20 @@ export async function decodeExr(buffer) {
   const lineBytes = channels.reduce((n, c) => n + BYTES[c.type] * width, 0);
   const rgb = new Float32Array(width * height * 3);
   const slot = { R: 0, G: 1, B: 2, Y: 0 }; // Y: a luminance-only (grey) image
+  // Each layered channel's place: its layer's array and its index in a pixel there.
+  const layers = {};
+  const place = new Map();
+  for (const c of channels) {
+    const dot = c.name.lastIndexOf(".");
+    if (dot <= 0) continue;
+    const name = c.name.slice(0, dot);
+    (layers[name] ??= { channels: [] }).channels.push(c.name.slice(dot + 1));
+  }
+  for (const [name, layer] of Object.entries(layers)) {
+    layer.channels.sort(byChannel);
+    layer.values = new Float32Array(width * height * layer.channels.length);
+    layer.channels.forEach((ch, i) => place.set(`${name}.${ch}`, { layer, i, n: layer.channels.length }));
+  }
   const chunks = Math.ceil(height / lines);
   const tableEnd = h.end + 8 * chunks;
   if (tableEnd > buffer.byteLength) throw new ExrError("the file ends inside its offset table");
@@ -171,10 +191,15 @@ export async function decodeExr(buffer) {
       const row = (y + line) * width * 3;
       for (const c of channels) {
         const s = slot[c.name];
-        if (s !== undefined) {
+        const p = place.get(c.name);
+        if (s !== undefined || p) {
           const read = c.type === 1 ? (o) => HALF[d.getUint16(o, true)] : c.type === 2 ? (o) => d.getFloat32(o, true)
             : (o) => d.getUint32(o, true);
-          for (let x = 0; x < width; ++x) rgb[row + 3 * x + s] = read(at + x * BYTES[c.type]);
+          if (s !== undefined) for (let x = 0; x < width; ++x) rgb[row + 3 * x + s] = read(at + x * BYTES[c.type]);
+          else {
+            const start = (y + line) * width * p.n + p.i;
+            for (let x = 0; x < width; ++x) p.layer.values[start + p.n * x] = read(at + x * BYTES[c.type]);
+          }
         }
         at += width * BYTES[c.type];
       }
@@ -187,5 +212,5 @@ export async function decodeExr(buffer) {
       if (!names.includes("B")) rgb[i + 2] = rgb[i];
     }
   }
-  return { width, height, rgb, channels: names };
+  return { width, height, rgb, channels: names, layers };
 }

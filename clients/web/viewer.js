@@ -6,6 +6,9 @@
 // transform is the daemon's (renderer/image_io.cpp, to_display): scale by 2^exposure, the tone curve ("clamp", or
 // Narkowicz's 2015 fit of the ACES filmic curve), the sRGB encoding of IEC 61966-2-1, rounding to 8 bits. The
 // browser test checks that the viewer at the job's own settings reproduces the daemon's PNG.
+//
+// A render pass is shown as the daemon's PNG of it (its look, made in one place: renderer/aov.cpp, aov_look) with
+// the pass's own numbers from the EXR beside it: the readout gives those (a depth, an id, a normal), not the look's.
 
 const MIN_ZOOM = 1 / 64;
 const MAX_ZOOM = 64;
@@ -37,12 +40,14 @@ export function toDisplay(rgb, exposureEv, tonemap) {
   return out;
 }
 
-// One image: its size, its linear values (or null), and a canvas holding what is drawn.
+// One image: its size, its linear values (or null), and a canvas holding what is drawn; for a render pass, pass:
+// { name, channels, values } (a layer of exr.js's decodeExr; values null when the job wrote no EXR).
 class Layer {
   constructor(image) {
     this.width = image.width;
     this.height = image.height;
     this.rgb = image.rgb || null;
+    this.pass = image.pass || null;
     this.canvas = document.createElement("canvas");
     this.canvas.width = this.width;
     this.canvas.height = this.height;
@@ -64,6 +69,19 @@ class Layer {
     const i = y * this.width + x;
     return this.rgb ? [...this.rgb.subarray(3 * i, 3 * i + 3)] : [...this.pixels.subarray(4 * i, 4 * i + 3)];
   }
+  // What the readout says of pixel (x, y), which is inside: a pass's channels by name, else R, G and B.
+  describe(x, y) {
+    const values = this.pass?.values;
+    if (values) {
+      const n = this.pass.channels.length;
+      const at = n * (y * this.width + x);
+      const v = this.pass.channels.map((c, k) => `${c} ${fmtPassValue(values[at + k])}`);
+      return `${this.pass.name} ${v.join(" ")}`;
+    }
+    const v = this.at(x, y);
+    const kind = this.linear ? "" : this.pass ? ` (${this.pass.name}: its look, sRGB 8-bit)` : " (sRGB 8-bit)";
+    return `R ${fmtValue(v[0], this.linear)} G ${fmtValue(v[1], this.linear)} B ${fmtValue(v[2], this.linear)}${kind}`;
+  }
 }
 
 function fmtValue(v, linear) {
@@ -71,6 +89,8 @@ function fmtValue(v, linear) {
   if (!Number.isFinite(v)) return String(v);
   return Math.abs(v) >= 1000 ? v.toExponential(2) : v.toPrecision(4);
 }
+// A pass's value: whole numbers (ids, sample counts) as they are.
+const fmtPassValue = (v) => (Number.isInteger(v) ? String(v) : fmtValue(v, true));
 
 export class ImageViewer {
   // root: the viewer's element, holding a <canvas>, [data-view] buttons (fit, actual, in, out, expand), an exposure
@@ -312,17 +332,16 @@ export class ImageViewer {
   readout() {
     const out = this.role("readout");
     if (!this.a || !this.hover) {
-      out.textContent = this.a ? (this.a.linear ? "Linear EXR" : "PNG (sRGB, 8 bits)") : "";
+      const pass = this.a?.pass;
+      const what = pass ? `Pass ${pass.name}: the daemon's look${pass.values ? ", the EXR's values" : ""}` : null;
+      out.textContent = this.a ? what || (this.a.linear ? "Linear EXR" : "PNG (sRGB, 8 bits)") : "";
       return;
     }
     const [x, y] = this.pixelAt(...this.hover);
     const parts = [];
     for (const [name, layer] of this.b ? [["A", this.a], ["B", this.b]] : [["", this.a]]) {
-      const v = layer.at(x, y);
-      if (!v) continue;
-      const kind = layer.linear ? "" : " (sRGB 8-bit)";
-      parts.push(`${name ? `${name} ` : ""}R ${fmtValue(v[0], layer.linear)} G ${fmtValue(v[1], layer.linear)} ` +
-        `B ${fmtValue(v[2], layer.linear)}${kind}`);
+      if (!layer.at(x, y)) continue;
+      parts.push(`${name ? `${name} ` : ""}${layer.describe(x, y)}`);
     }
     out.textContent = parts.length ? `x ${x}, y ${y}: ${parts.join(" · ")}` : `x ${x}, y ${y}: outside the image`;
     out.dataset.x = String(x);

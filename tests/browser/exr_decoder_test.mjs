@@ -1,7 +1,8 @@
 // The web client's EXR reader (clients/web/exr.js) against OpenImageIO: files written by oiiotool in every layout
 // the reader takes (HALF and FLOAT; none, RLE, ZIPS and ZIP, compressible and not, so that both the inflated and the
-// stored-as-is chunks are read; a grey image) and by tessera-render itself decode to exactly the values
-// `oiiotool --dumpdata` prints; a cut or garbled file and a compression it does not take are refused with an ExrError.
+// stored-as-is chunks are read; a grey image) and by tessera-render itself (its render passes' layers too) decode to
+// exactly the values `oiiotool --dumpdata` prints; a cut or garbled file and a compression it does not take are
+// refused with an ExrError.
 //
 // node --test tests/browser/exr_decoder_test.mjs   with   TESSERA_RENDER=path/to/tessera-render   (CTest passes it)
 import assert from "node:assert/strict";
@@ -25,11 +26,13 @@ const arrayBuffer = (file) => {
   return b.buffer.slice(b.byteOffset, b.byteOffset + b.length);
 };
 
+// A value as --dumpdata prints it ("inf" where a depth pass found no surface).
+const value = (t) => (/^[-+]?inf/i.test(t) ? (t[0] === "-" ? -Infinity : Infinity) : Number(t));
 // Every pixel as OpenImageIO reads it: "Pixel (x, y): r g b" lines, a grey image's one value repeated.
 function reference(file) {
   const values = [];
   for (const m of oiiotool("--dumpdata", file).matchAll(/Pixel \((\d+), (\d+)\):((?: \S+)+)/g)) {
-    const v = m[3].trim().split(/\s+/).map(Number);
+    const v = m[3].trim().split(/\s+/).map(value);
     values.push(...(v.length === 1 ? [v[0], v[0], v[0]] : v.slice(0, 3)));
   }
   return values;
@@ -87,6 +90,44 @@ test("tessera-render's EXR, half and float", async () => {
     execFileSync(RENDER, ["render", job, "-o", out, "-q"]);
     const img = await agrees(out);
     assert.ok(img.rgb.some((v) => v > 0), "the render is not black");
+  }
+});
+
+// Render passes are layers <pass>.<channel> (half or float beside each other): each decodes to OpenImageIO's values,
+// its channels R, G, B first and the rest by name, and the beauty stays R, G, B.
+test("tessera-render's EXR with render passes: every layer", async () => {
+  const job = path.join(tmp, "job-aovs.json");
+  const aovs = ["albedo", "normal", "depth", "uv", "object_id", "variance"];
+  fs.writeFileSync(
+    job,
+    JSON.stringify({
+      kind: "material",
+      material: { type: "conductor", metal: "copper", roughness: 0.2 },
+      render: { width: 24, height: 18, spp: 4, aovs },
+    }),
+  );
+  const out = path.join(tmp, "render-aovs.exr");
+  execFileSync(RENDER, ["render", job, "-o", out, "-q"]);
+  const img = await decodeExr(arrayBuffer(out));
+  assert.deepEqual(Object.keys(img.layers).sort(), [...aovs].sort());
+  const order = { albedo: ["R", "G", "B"], normal: ["X", "Y", "Z"], depth: ["Z"], uv: ["U", "V"],
+    object_id: ["X"], variance: ["R", "G", "B"] };
+  const beauty = { channels: ["R", "G", "B"], values: img.rgb };
+  for (const [name, layer] of [["", beauty], ...Object.entries(img.layers)]) {
+    if (name) assert.deepEqual(layer.channels, order[name], `${name}'s channels`);
+    const n = layer.channels.length;
+    layer.channels.forEach((c, k) => {
+      const channel = name ? `${name}.${c}` : c;
+      const one = path.join(tmp, `aov-${channel}.exr`);
+      oiiotool(out, "--ch", channel, "-o", one);
+      const want = reference(one);
+      for (let i = 0; i < img.width * img.height; ++i) {
+        const got = layer.values[n * i + k];
+        const w = want[3 * i];
+        if (!(got === w || Math.abs(got - w) <= 1e-9 + 1e-7 * Math.abs(w)))
+          assert.fail(`${channel} of pixel ${i} is ${got}, not ${w}`);
+      }
+    });
   }
 });
 

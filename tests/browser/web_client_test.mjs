@@ -6,7 +6,7 @@
 // the glTF tab and a cancelled job's partial image; what users reported: the Name cleared after a submit and on a
 // change of tab, one error banner, the material form's common parameters first and the rest under Advanced, Fit at
 // most 1:1, the delete confirmation naming the job, the icon, every example of proto/examples, and the title (and a
-// notification) when a job ends while the tab is hidden. Any failed step fails the test.
+// notification) when a job ends while the tab is hidden; render passes picked in the form and shown in the viewer. Any failed step fails the test.
 //
 // node --test tests/browser/web_client_test.mjs   with   TESSERAD=path/to/tesserad  ARTIFACTS=dir
 //   (CTest passes both; CHROMIUM overrides /usr/bin/chromium)
@@ -549,6 +549,98 @@ test("the viewer draws the EXR as the daemon's PNG, reads out, zooms, pans and c
     assert.match(await page.locator("#viewer .readout").textContent(), /A R \S+ G \S+ B \S+ · B R /);
     await page.locator("#compare").selectOption("");
     await page.locator('#viewer[data-compare="off"]').waitFor();
+  });
+  assert.deepEqual(pageErrors, []);
+});
+
+// One channel of an EXR as OpenImageIO reads it ("depth.Z"), by pixel: "x y" -> value.
+function exrChannel(bytes, channel) {
+  const file = path.join(tmp, `ch-${createHash("sha256").update(bytes).digest("hex").slice(0, 12)}.exr`);
+  const one = `${file}.${channel}.exr`;
+  fs.writeFileSync(file, bytes);
+  execFileSync("oiiotool", [file, "--ch", channel, "-o", one]);
+  const text = execFileSync("oiiotool", ["--dumpdata", one], { encoding: "utf8", maxBuffer: 64 << 20 });
+  return new Map([...text.matchAll(/Pixel \((\d+), (\d+)\): (\S+)/g)].map((m) => [`${m[1]} ${m[2]}`, Number(m[3])]));
+}
+const canvasHash = async () => createHash("sha256").update(JSON.stringify((await canvasPixels()).data)).digest("hex");
+
+// Render passes: the form offers the contract's passes (render.schema.json) and sends those picked as render.aovs;
+// the job view offers the beauty and exactly those passes; a pass shows as the daemon's PNG of it, and the readout
+// gives the pass's own values from the EXR (a depth, an object id); a job without passes offers no choice.
+test("render passes are picked in the form and shown in the viewer with their values", async (t) => {
+  await page.setViewportSize({ width: 1440, height: 1000 });
+  await page.goto(`${baseUrl}/`);
+  await page.locator('#connection[data-state="online"]').waitFor();
+  const schema = await (await page.request.get(`${baseUrl}/v1/schemas/render.schema.json`)).json();
+  let job;
+  let exr;
+
+  await t.test("the form offers the contract's passes and sends the two picked", async () => {
+    await page.locator("#aov-depth").waitFor({ state: "attached" });
+    const offered = await page.locator("#aovs input[type=checkbox]").evaluateAll((bs) => bs.map((b) => b.value));
+    assert.deepEqual(offered, schema.properties.aovs.items.enum);
+    await page.getByRole("tab", { name: "Example" }).click();
+    await page.getByLabel("Example scene").selectOption("material");
+    await page.getByLabel("Width").fill("48");
+    await page.getByLabel("Height").fill("40");
+    await page.getByLabel("Samples per pixel").fill("8");
+    await page.getByLabel("Integrator").selectOption("path");
+    await page.locator("#aovs-details > summary").click();
+    await page.getByRole("checkbox", { name: "object_id", exact: true }).check();
+    await page.getByRole("checkbox", { name: "depth", exact: true }).check();
+    job = await submitFromForm();
+    assert.equal(job.status.state, "succeeded", job.status.error);
+    assert.deepEqual(job.sent.render.aovs, ["depth", "object_id"]);
+    assert.deepEqual(job.status.render.aovs, ["depth", "object_id"]);
+    assert.deepEqual(Object.keys(job.status.links.aovs).sort(), ["depth", "object_id"]);
+    exr = await (await page.request.get(`${baseUrl}/v1/jobs/${job.status.id}/result.exr`)).body();
+  });
+
+  await t.test("the job view offers the beauty and exactly those passes", async () => {
+    await page.locator(`#job-title[title="${job.status.id}"]`).waitFor();
+    await page.locator('#viewer[data-pass="final"][data-aov="beauty"][data-source="linear"]').waitFor();
+    await page.locator("#aov-view").waitFor();
+    const options = await page.locator("#aov-view option").evaluateAll((os) => os.map((o) => o.textContent));
+    assert.deepEqual(options, ["beauty", "depth", "object_id"]);
+  });
+
+  await t.test("a pass shows the daemon's look of it and reads out its own values", async () => {
+    await page.getByRole("button", { name: "1:1" }).click();
+    const beauty = await canvasHash();
+    const box = await page.locator("#viewer canvas").boundingBox();
+    for (const [pass, channel] of [["depth", "Z"], ["object_id", "X"]]) {
+      await page.locator("#aov-view").selectOption(pass);
+      await page.locator(`#viewer[data-aov="${pass}"][data-source="display"]`).waitFor();
+      const view = await viewState();
+      assert.equal(view.zoom, 1);
+      assert.notEqual(await canvasHash(), beauty, `${pass}: the shown image changed`);
+      const look = await pngPixels(`${baseUrl}/v1/jobs/${job.status.id}/aovs/${pass}.png`);
+      const d = largestDifference(await canvasPixels(), look, view);
+      assert.ok(d <= 1, `${pass}: the viewer differs from the daemon's PNG of it by ${d} of 255`);
+      // The look is the daemon's: exposure and tone curve do not apply to it.
+      assert.ok(await page.getByLabel("Exposure in stops").isDisabled());
+      await page.mouse.move(box.x + view.x + 24.5, box.y + view.y + 20.5);
+      const text = await page.locator("#viewer .readout").textContent();
+      const m = text.match(new RegExp(`^x 24, y 20: ${pass} ${channel} (\\S+)$`));
+      assert.ok(m, `readout "${text}"`);
+      const want = exrChannel(exr, `${pass}.${channel}`).get("24 20");
+      assert.ok(Number.isFinite(want) && want > 0, `${pass} at the centre: ${want}`);
+      if (pass === "object_id") assert.equal(Number(m[1]), want, "an object id reads out whole");
+      else assert.ok(Math.abs(Number(m[1]) - want) <= 1e-3 * want, `${pass} ${m[1]}, not ${want}`);
+    }
+    await page.locator("#aov-view").selectOption("beauty");
+    await page.locator('#viewer[data-aov="beauty"][data-source="linear"]').waitFor();
+    assert.equal(await canvasHash(), beauty, "the beauty is shown again as it was");
+    assert.ok(await page.getByLabel("Exposure in stops").isEnabled());
+  });
+
+  await t.test("a job without passes offers no choice of pass", async () => {
+    const plain = await renderThroughApi({ kind: "material", material: { type: "lambert" },
+      render: { width: 16, height: 16, spp: 2 } });
+    assert.equal(plain.status.state, "succeeded");
+    await page.locator(`#jobs tr[data-id="${plain.status.id}"] button.link`).click();
+    await page.locator('#viewer[data-pass="final"][data-aov="beauty"][data-source="linear"]').waitFor();
+    assert.ok(await page.locator("#aov-view-group").isHidden());
   });
   assert.deepEqual(pageErrors, []);
 });

@@ -1,10 +1,12 @@
 // Material jobs over HTTP: every model the daemon lists renders on the preview stage; a row of materials renders;
-// a parameter out of range is a 422 naming the field.
+// a parameter out of range is a 422 naming the field; a material job's render passes are layers of its EXR and PNGs.
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <fstream>
 #include <thread>
 
+#include "renderer/image_io.h"
 #include "tests/integration/daemon.h"
 #include "tests/server/test_util.h"
 
@@ -102,6 +104,40 @@ TEST_F(MaterialJobs, ARowOfMaterialsRendersAndBadParametersAreNamed) {
   auto live = client_->Get("/livez");
   ASSERT_TRUE(live);
   EXPECT_EQ(live->status, 200);
+}
+
+// Material jobs take render passes as scene jobs do (the same render settings): albedo and normal are 3 + 3 channels
+// beside the beauty's 3, and each pass shows alone as PNG.
+TEST_F(MaterialJobs, RenderPassesAreLayersOfTheExrAndPngs) {
+  json job = {{"kind", "material"},
+              {"material", {{"type", "conductor"}, {"metal", "gold"}, {"roughness", 0.3}}},
+              {"render", {{"width", 32}, {"height", 24}, {"spp", 4}, {"aovs", {"albedo", "normal"}}}}};
+  auto r = client_->Post("/v1/jobs", job.dump(), "application/json");
+  ASSERT_TRUE(r);
+  ASSERT_EQ(r->status, 202) << r->body;
+  const std::string id = json::parse(r->body)["id"];
+  const json status = wait_until_done(*client_, id);
+  ASSERT_EQ(status.value("state", ""), "succeeded") << status.dump();
+  EXPECT_EQ(status["render"]["aovs"], json({"albedo", "normal"}));
+
+  auto exr = client_->Get("/v1/jobs/" + id + "/result.exr");
+  ASSERT_TRUE(exr);
+  ASSERT_EQ(exr->status, 200);
+  const std::string file = (dir_.path() / "result.exr").string();
+  {
+    std::ofstream out(file, std::ios::binary);
+    out.write(exr->body.data(), static_cast<std::streamsize>(exr->body.size()));
+  }
+  const ImageData image = read_image(file);
+  EXPECT_EQ(image.width, 32);
+  EXPECT_EQ(image.channels, 9);
+
+  for (const std::string pass : {"albedo", "normal"}) {
+    auto png = client_->Get("/v1/jobs/" + id + "/aovs/" + pass + ".png");
+    ASSERT_TRUE(png);
+    EXPECT_EQ(png->status, 200) << pass << ": " << png->body;
+    EXPECT_EQ(png->body.substr(1, 3), "PNG") << pass;
+  }
 }
 
 }  // namespace
