@@ -236,7 +236,7 @@ RayBatch collect_rays(const Scene& scene, const RenderSettings& s) {
       batch.bounce.push_back(bounce);
       LightSample ls;
       float u_sel = sampler.get1d();
-      if (scene.lights().sample(scene, si.sp.p, u_sel, sampler.get2d(), &ls)) {
+      if (scene.lights().sample(si.sp.p, u_sel, sampler.get2d(), &ls)) {
         Ray shadow;
         shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, ls.wi);
         shadow.dir = ls.wi;

@@ -1,6 +1,9 @@
 #include "renderer/lights.h"
 
-#include "renderer/scene.h"
+#include "renderer/environment.h"
+#include "renderer/geometry.h"
+#include "renderer/interaction.h"
+#include "renderer/material.h"
 
 namespace tessera {
 
@@ -28,17 +31,23 @@ float emitted_power(const Rgb& average_radiance, float area, bool one_sided) {
 
 }  // namespace
 
-void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punctual) {
+void LightSet::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& spheres,
+                     const std::vector<std::unique_ptr<Material>>& materials, const Environment& environment,
+                     const Bounds& bounds, const std::vector<PunctualLight>& punctual) {
+  meshes_ = &meshes;
+  spheres_ = &spheres;
+  materials_ = &materials;
+  env_ = &environment;
   entries_.clear();
   triangles_.clear();
   punctual_ = punctual;
   environment_ = kNoLight;
-  scene_radius_ = std::max(scene.bounds().radius(), 1e-3f);
-  scene_center_ = scene.bounds().empty() ? Vec3(0) : scene.bounds().center();
+  scene_radius_ = std::max(bounds.radius(), 1e-3f);
+  scene_center_ = bounds.empty() ? Vec3(0) : bounds.center();
   std::vector<float> power;
-  for (uint32_t m = 0; m < scene.meshes.size(); ++m) {
-    const Mesh& mesh = scene.meshes[m];
-    const Material& mat = *scene.materials[mesh.material];
+  for (uint32_t m = 0; m < (*meshes_).size(); ++m) {
+    const Mesh& mesh = (*meshes_)[m];
+    const Material& mat = *(*materials_)[mesh.material];
     if (mesh.prototype || !mat.emissive()) continue;
     for (uint32_t t = 0; t < mesh.triangle_count(); ++t) {
       TrianglePoints tp = triangle(mesh, t);
@@ -51,9 +60,9 @@ void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punct
       power.push_back(area > 0 ? emitted_power(mat.emission.average(), area, mat.emission_one_sided) : -1.0f);
     }
   }
-  for (uint32_t s = 0; s < scene.spheres.size(); ++s) {
-    const Sphere& sphere = scene.spheres[s];
-    const Material& mat = *scene.materials[sphere.material];
+  for (uint32_t s = 0; s < (*spheres_).size(); ++s) {
+    const Sphere& sphere = (*spheres_)[s];
+    const Material& mat = *(*materials_)[sphere.material];
     if (!mat.emissive()) continue;
     entries_.push_back({Kind::kSphere, s, 0});
     power.push_back(emitted_power(mat.emission.average(), 4 * kPi * sqr(sphere.radius), mat.emission_one_sided));
@@ -65,11 +74,11 @@ void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punct
                                                             : 4 * kPi * luminance(l.intensity);
     power.push_back(phi);
   }
-  if (!scene.environment.black()) {
+  if (!(*env_).black()) {
     environment_ = static_cast<uint32_t>(entries_.size());
     entries_.push_back({Kind::kEnvironment, 0, 0});
     // Power the environment delivers into the scene's bounding sphere.
-    power.push_back(kPi * kPi * sqr(scene_radius_) * luminance(scene.environment.average()));
+    power.push_back(kPi * kPi * sqr(scene_radius_) * luminance((*env_).average()));
   }
   // A light whose power estimate is zero (e.g. a pure blue light has nonzero luminance, but guard anyway) keeps a
   // small share so that it is never impossible to sample.
@@ -79,7 +88,7 @@ void LightSet::build(const Scene& scene, const std::vector<PunctualLight>& punct
   distribution_ = power.empty() ? Distribution1D() : Distribution1D(power.data(), power.size());
 }
 
-bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u, LightSample* out) const {
+bool LightSet::sample(const Vec3& p, float u_select, Vec2 u, LightSample* out) const {
   if (entries_.empty()) return false;
   float pmf = 0;
   const uint32_t index = distribution_.sample(u_select, &pmf);
@@ -96,7 +105,7 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       sp.p = tri.p0 + tri.e1 * b.x + tri.e2 * b.y;
       sp.ng = tri.n;
       sp.frame = Frame(Vec3(1, 0, 0), Vec3(0, 1, 0), tri.n);  // emission reads ng and uv only
-      if (mat.emission.texture) triangle_uv(scene.meshes[e.object], e.prim, b.x, b.y, &sp);
+      if (mat.emission.texture) triangle_uv((*meshes_)[e.object], e.prim, b.x, b.y, &sp);
       Vec3 d = sp.p - p;
       float dist2 = length_squared(d);
       if (!(dist2 > 0)) return false;
@@ -114,7 +123,7 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       return true;
     }
     case Kind::kSphere: {
-      const Sphere& s = scene.spheres[e.object];
+      const Sphere& s = (*spheres_)[e.object];
       Vec3 to_center = s.center - p;
       float dc2 = length_squared(to_center);
       float r2 = sqr(s.radius);
@@ -151,7 +160,7 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
         out->pdf = pmf * dist2 / (cos_light * 4 * kPi * r2);
       }
       sp.frame = Frame::from_normal(sp.ng);
-      out->radiance = scene.materials[s.material]->emitted(sp, -out->wi);
+      out->radiance = (*materials_)[s.material]->emitted(sp, -out->wi);
       out->p_light = sp.p;
       out->n_light = sp.ng;
       out->delta = false;
@@ -181,7 +190,7 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
       return true;
     }
     case Kind::kEnvironment: {
-      const Environment& env = scene.environment;
+      const Environment& env = (*env_);
       Vec3 wi;
       float pdf_dir;
       if (env.map) {
@@ -205,7 +214,7 @@ bool LightSet::sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u,
   return false;
 }
 
-float LightSet::pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteraction& si) const {
+float LightSet::pdf_hit(const Vec3& p, const SurfaceInteraction& si) const {
   if (si.light == kNoLight || si.light >= entries_.size()) return 0;
   const Entry& e = entries_[si.light];
   float pmf = distribution_.pmf(si.light);
@@ -219,7 +228,7 @@ float LightSet::pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteract
     return pmf * dist2 / (cos_light * area);
   }
   if (e.kind == Kind::kSphere) {
-    const Sphere& s = scene.spheres[e.object];
+    const Sphere& s = (*spheres_)[e.object];
     Vec3 to_center = s.center - p;
     float dc2 = length_squared(to_center);
     float r2 = sqr(s.radius);
@@ -281,7 +290,7 @@ Vec3 LightSet::disc_origin(const Vec3& dir, Vec2 u) const {
   return scene_center_ - dir * scene_radius_ + f.s * d.x + f.t * d.y;
 }
 
-bool LightSet::sample_emission(const Scene& scene, float u_select, Vec2 u_pos, Vec2 u_dir, LightEmission* out) const {
+bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, LightEmission* out) const {
   if (entries_.empty()) return false;
   float pmf = 0;
   const uint32_t index = distribution_.sample(u_select, &pmf);
@@ -298,7 +307,7 @@ bool LightSet::sample_emission(const Scene& scene, float u_select, Vec2 u_pos, V
       sp.p = tri.p0 + tri.e1 * b.x + tri.e2 * b.y;
       sp.ng = tri.n;
       sp.frame = Frame(Vec3(1, 0, 0), Vec3(0, 1, 0), tri.n);  // emission reads ng and uv only
-      if (mat.emission.texture) triangle_uv(scene.meshes[e.object], e.prim, b.x, b.y, &sp);
+      if (mat.emission.texture) triangle_uv((*meshes_)[e.object], e.prim, b.x, b.y, &sp);
       const Vec3 dir = sample_emitted_direction(tri.n, mat.emission_one_sided, u_dir, &out->pdf_dir);
       out->ray.origin = sp.p;
       out->ray.dir = dir;
@@ -310,8 +319,8 @@ bool LightSet::sample_emission(const Scene& scene, float u_select, Vec2 u_pos, V
       break;
     }
     case Kind::kSphere: {
-      const Sphere& s = scene.spheres[e.object];
-      const Material& mat = *scene.materials[s.material];
+      const Sphere& s = (*spheres_)[e.object];
+      const Material& mat = *(*materials_)[s.material];
       const Vec3 n = sample_uniform_sphere(u_pos);
       ShadingPoint sp;
       sp.p = s.center + n * s.radius;
@@ -359,7 +368,7 @@ bool LightSet::sample_emission(const Scene& scene, float u_select, Vec2 u_pos, V
       break;
     }
     case Kind::kEnvironment: {
-      const Environment& env = scene.environment;
+      const Environment& env = (*env_);
       Vec3 wi;  // towards the environment
       float pdf_dir = 0;
       if (env.map) {
@@ -383,8 +392,7 @@ bool LightSet::sample_emission(const Scene& scene, float u_select, Vec2 u_pos, V
   return out->pdf_pos > 0 && out->pdf_dir > 0 && !is_black(out->radiance);
 }
 
-void LightSet::emission_pdf(const Scene& scene, uint32_t light, const Vec3& n, const Vec3& dir, float* pdf_pos,
-                            float* pdf_dir) const {
+void LightSet::emission_pdf(uint32_t light, const Vec3& n, const Vec3& dir, float* pdf_pos, float* pdf_dir) const {
   *pdf_pos = *pdf_dir = 0;
   if (light >= entries_.size()) return;
   const Entry& e = entries_[light];
@@ -398,9 +406,9 @@ void LightSet::emission_pdf(const Scene& scene, uint32_t light, const Vec3& n, c
       return;
     }
     case Kind::kSphere: {
-      const Sphere& s = scene.spheres[e.object];
+      const Sphere& s = (*spheres_)[e.object];
       *pdf_pos = pmf / (4 * kPi * sqr(s.radius));
-      *pdf_dir = emitted_direction_pdf(n, scene.materials[s.material]->emission_one_sided, dir);
+      *pdf_dir = emitted_direction_pdf(n, (*materials_)[s.material]->emission_one_sided, dir);
       return;
     }
     case Kind::kPunctual: {
@@ -418,7 +426,7 @@ void LightSet::emission_pdf(const Scene& scene, uint32_t light, const Vec3& n, c
       return;
     }
     case Kind::kEnvironment: {
-      const Environment& env = scene.environment;
+      const Environment& env = (*env_);
       *pdf_pos = pmf * disc_pdf();
       *pdf_dir = env.map ? env.map->pdf(env.to_map(-dir)) : uniform_sphere_pdf();
       return;

@@ -4,18 +4,21 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
+#include "renderer/interaction.h"
 #include "renderer/math.h"
 #include "renderer/sampling.h"
 
 namespace tessera {
 
 class Material;
-class Scene;
-struct SurfaceInteraction;
-
-inline constexpr uint32_t kNoLight = ~0u;
+class Environment;
+class Material;
+struct Bounds;
+struct Mesh;
+struct Sphere;
 
 struct PunctualLight {
   enum class Kind { kPoint, kSpot, kDirectional };
@@ -70,14 +73,19 @@ struct LightEmission {
 
 class LightSet {
  public:
-  void build(const Scene& scene, const std::vector<PunctualLight>& punctual);
+  // The lights of a scene: its emissive meshes and spheres (by their materials), its environment and its punctual
+  // lights; the set keeps the addresses of the shapes, materials and environment (their owner, the scene, outlives
+  // it and never moves them) and reads them when sampling.
+  void build(const std::vector<Mesh>& meshes, const std::vector<Sphere>& spheres,
+             const std::vector<std::unique_ptr<Material>>& materials, const Environment& environment,
+             const Bounds& bounds, const std::vector<PunctualLight>& punctual);
   bool empty() const { return entries_.empty(); }
   size_t size() const { return entries_.size(); }
 
   // Samples one light as seen from `p`; false if nothing could be sampled.
-  bool sample(const Scene& scene, const Vec3& p, float u_select, Vec2 u, LightSample* out) const;
+  bool sample(const Vec3& p, float u_select, Vec2 u, LightSample* out) const;
   // Solid-angle density with which `sample` from `p` would have produced the emitting point of `si`.
-  float pdf_hit(const Scene& scene, const Vec3& p, const SurfaceInteraction& si) const;
+  float pdf_hit(const Vec3& p, const SurfaceInteraction& si) const;
   // The probability of choosing the environment: times the environment's own density of a direction
   // (Environment::radiance(dir, &pdf)), the density with which `sample` produces that direction.
   float environment_pmf() const { return environment_ == kNoLight ? 0.0f : distribution_.pmf(environment_); }
@@ -85,12 +93,11 @@ class LightSet {
 
   // Samples a ray leaving a light chosen in proportion to its power: u_select chooses the light, u_pos the origin,
   // u_dir the direction. False when nothing could be sampled.
-  bool sample_emission(const Scene& scene, float u_select, Vec2 u_pos, Vec2 u_dir, LightEmission* out) const;
+  bool sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, LightEmission* out) const;
   // The densities sample_emission gives (choice of light included in pdf_pos) to a ray of direction `dir` leaving
   // light `light` at a point with surface normal `n` (area lights; ignored by the others). For the environment and
   // directional lights `dir` is the direction light travels.
-  void emission_pdf(const Scene& scene, uint32_t light, const Vec3& n, const Vec3& dir, float* pdf_pos,
-                    float* pdf_dir) const;
+  void emission_pdf(uint32_t light, const Vec3& n, const Vec3& dir, float* pdf_pos, float* pdf_dir) const;
   // Whether light `light` is a point or spot light (its position a delta) or a directional one (its direction).
   bool delta_position(uint32_t light) const;
   bool delta_direction(uint32_t light) const;
@@ -112,6 +119,10 @@ class LightSet {
   };
   std::vector<TriangleGeometry> triangles_;
   std::vector<PunctualLight> punctual_;
+  const std::vector<Mesh>* meshes_ = nullptr;
+  const std::vector<Sphere>* spheres_ = nullptr;
+  const std::vector<std::unique_ptr<Material>>* materials_ = nullptr;
+  const Environment* env_ = nullptr;
   Distribution1D distribution_;
   uint32_t environment_ = kNoLight;
   float scene_radius_ = 1;

@@ -42,7 +42,7 @@ void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
   }
   scattering_ = has_scattering_media();
   accel_.build(meshes, spheres, groups, instances, material_ptrs);
-  lights_.build(*this, punctual);
+  lights_.build(meshes, spheres, materials, environment, bounds_, punctual);
   // Record each emitter's light index on its geometry, in the order LightSet::build enumerates them.
   uint32_t next = 0;
   for (Mesh& mesh : meshes) {

@@ -9,23 +9,11 @@
 #include "renderer/camera.h"
 #include "renderer/environment.h"
 #include "renderer/geometry.h"
+#include "renderer/interaction.h"
 #include "renderer/lights.h"
 #include "renderer/material.h"
 
 namespace tessera {
-
-// A surface point found by a ray, with what shading needs.
-struct SurfaceInteraction {
-  ShadingPoint sp;
-  const Material* material = nullptr;
-  uint32_t light = kNoLight;  // its light index if the surface emits
-  float t = 0;
-  // Which object and material were hit, for the id passes: the object is the mesh, the sphere or the instance
-  // (numbered meshes first, then spheres, then instances: every traced shape has its own number), the material its
-  // index in Scene::materials.
-  uint32_t object = 0;
-  uint32_t material_index = 0;
-};
 
 class Scene {
  public:

@@ -126,7 +126,7 @@ float pdf_light(const Context& c, const Vertex& v, const Vertex& next) {
   if (!(d2 > 0)) return 0;
   const Vec3 w = d / std::sqrt(d2);
   float pdf_pos, pdf_dir;
-  c.scene.lights().emission_pdf(c.scene, v.light, v.ng, w, &pdf_pos, &pdf_dir);
+  c.scene.lights().emission_pdf(v.light, v.ng, w, &pdf_pos, &pdf_dir);
   float pdf = pdf_dir / d2;
   if (next.on_surface()) pdf *= std::abs(dot(next.ng, w));
   return pdf;
@@ -139,11 +139,11 @@ float pdf_light_origin(const Context& c, const Vertex& v, const Vertex& next) {
   if (v.infinite) {
     if (v.delta_light || lights.environment_light() == kNoLight) return 0;
     float pdf_pos, pdf_dir;
-    lights.emission_pdf(c.scene, lights.environment_light(), Vec3(0), v.dir, &pdf_pos, &pdf_dir);
+    lights.emission_pdf(lights.environment_light(), Vec3(0), v.dir, &pdf_pos, &pdf_dir);
     return lights.environment_pmf() * pdf_dir;
   }
   float pdf_pos, pdf_dir;
-  lights.emission_pdf(c.scene, v.light, v.ng, direction_to(v, next), &pdf_pos, &pdf_dir);
+  lights.emission_pdf(v.light, v.ng, direction_to(v, next), &pdf_pos, &pdf_dir);
   return pdf_pos;
 }
 
@@ -540,7 +540,7 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
   const float u_select = sampler.get1d();
   const Vec2 u_pos = sampler.get2d(), u_dir = sampler.get2d();
   LightEmission le;
-  if (scene.lights().sample_emission(scene, u_select, u_pos, u_dir, &le)) {
+  if (scene.lights().sample_emission(u_select, u_pos, u_dir, &le)) {
     Vertex& l0 = light[0];
     l0 = Vertex();
     l0.kind = VertexKind::kLight;
@@ -650,7 +650,7 @@ Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, 
     LightSample ls;
     const float u_select = sampler.get1d();
     const Vec2 u = sampler.get2d();
-    if (!scene.lights().sample(scene, pt.p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return Rgb(0);
+    if (!scene.lights().sample(pt.p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return Rgb(0);
     *sampled = Vertex();
     sampled->kind = VertexKind::kLight;
     sampled->light = ls.light;

@@ -55,7 +55,7 @@ Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& b
                  const Vec3& wo_world, const Vec3& wo, bool mis, float u_select, Vec2 u, const MediumTracker& medium,
                  int max_crossings, RayCounters& counters, LightSplit* split = nullptr) {
   LightSample ls;
-  if (!scene.lights().sample(scene, si.sp.p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
+  if (!scene.lights().sample(si.sp.p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
   const Vec3 wi = si.sp.frame.to_local(ls.wi);
   // Which side of the geometric surface the light is on decides reflection or transmission, whatever the shading
   // normal says (otherwise light leaks through surfaces with interpolated normals).
@@ -85,7 +85,7 @@ Rgb direct_light_in_medium(const Scene& scene, const Vec3& p, const Vec3& wo_wor
                            bool mis, float u_select, Vec2 u, const MediumTracker& medium, int max_crossings,
                            RayCounters& counters) {
   LightSample ls;
-  if (!scene.lights().sample(scene, p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
+  if (!scene.lights().sample(p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
   const float f = phase.p(wo_world, ls.wi);
   if (!(f > 0)) return {};
   // A point in a medium has no surface to leave: the shadow ray starts at it.
@@ -271,7 +271,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
           radiance += c;
           record(c, bounces, false);
         } else if (use_bsdf_hits) {
-          float w = mis ? power_heuristic(prev_pdf, lights.pdf_hit(scene, prev_p, si)) : 1.0f;
+          float w = mis ? power_heuristic(prev_pdf, lights.pdf_hit(prev_p, si)) : 1.0f;
           const Rgb c = throughput * le * w;
           radiance += c;
           record(c, bounces, false);

@@ -47,7 +47,7 @@ PowerEstimate emitted_power(const Scene& scene, int n = 200000) {
     const Vec2 u_pos = s.get2d(), u_dir = s.get2d();
     LightEmission le;
     double w = 0;
-    if (scene.lights().sample_emission(scene, u_select, u_pos, u_dir, &le)) w = le.weight().x;
+    if (scene.lights().sample_emission(u_select, u_pos, u_dir, &le)) w = le.weight().x;
     sum += w;
     sum2 += w * w;
   }
@@ -159,7 +159,7 @@ TEST(LightEmission, EmittedTowardsOtherDirections) {
     const float u_select = s.get1d();
     const Vec2 u_pos = s.get2d(), u_dir = s.get2d();
     LightEmission le;
-    if (!scene.lights().sample_emission(scene, u_select, u_pos, u_dir, &le)) continue;
+    if (!scene.lights().sample_emission(u_select, u_pos, u_dir, &le)) continue;
     if (le.spot) {
       saw_spot = true;
       EXPECT_EQ(le.emitted(Vec3(0, -1, 0)), Rgb(2));             // inside the inner cone
@@ -198,9 +198,9 @@ TEST(LightEmission, ReportedDensitiesAreThoseSampled) {
     const float u_select = s.get1d();
     const Vec2 u_pos = s.get2d(), u_dir = s.get2d();
     LightEmission le;
-    if (!scene.lights().sample_emission(scene, u_select, u_pos, u_dir, &le)) continue;
+    if (!scene.lights().sample_emission(u_select, u_pos, u_dir, &le)) continue;
     float pdf_pos, pdf_dir;
-    scene.lights().emission_pdf(scene, le.light, le.n, le.ray.dir, &pdf_pos, &pdf_dir);
+    scene.lights().emission_pdf(le.light, le.n, le.ray.dir, &pdf_pos, &pdf_dir);
     EXPECT_NEAR(pdf_pos, le.pdf_pos, 1e-4f * le.pdf_pos);
     EXPECT_NEAR(pdf_dir, le.pdf_dir, 2e-3f * le.pdf_dir);
     EXPECT_EQ(le.delta_pos, scene.lights().delta_position(le.light));
