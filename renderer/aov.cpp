@@ -63,14 +63,27 @@ std::string unknown_aov_message(std::string_view name) {
   return message;
 }
 
-void add_aov_layers(Film& film, const std::vector<std::string>& aovs) {
+std::vector<const AovInfo*> aov_layers(const std::vector<std::string>& aovs) {
   auto asked = [&](const AovInfo& a) { return std::find(aovs.begin(), aovs.end(), a.name) != aovs.end(); };
   bool light = false;
   for (const AovInfo& a : aov_table()) light = light || (a.source == AovSource::kLight && asked(a));
+  std::vector<const AovInfo*> layers;
   for (const AovInfo& a : aov_table()) {
     if (a.source == AovSource::kSampleCount) continue;
-    if (asked(a) || (light && a.source == AovSource::kLight)) film.add_layer(std::string(a.name), a.channels, a.kind);
+    if (asked(a) || (light && a.source == AovSource::kLight)) layers.push_back(&a);
   }
+  return layers;
+}
+
+void add_aov_layers(Film& film, const std::vector<std::string>& aovs) {
+  for (const AovInfo* a : aov_layers(aovs)) film.add_layer(std::string(a->name), a->channels, a->kind);
+}
+
+uint64_t film_bytes(int width, int height, const std::vector<std::string>& aovs) {
+  uint64_t per_pixel = 3 * sizeof(FixedSum) + sizeof(float) + sizeof(uint32_t);
+  for (const AovInfo* a : aov_layers(aovs))
+    per_pixel += static_cast<uint64_t>(a->channels) * sizeof(FixedSum) + (a->kind == LayerKind::kDistance ? 4 : 0);
+  return per_pixel * static_cast<uint64_t>(width) * static_cast<uint64_t>(height);
 }
 
 std::vector<std::string> aovs_of(const Film& film, bool sample_count) {

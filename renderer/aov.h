@@ -70,9 +70,14 @@ const AovInfo* find_aov(std::string_view name);
 // What is wrong with a pass name that find_aov does not know: unknown pass "albdo" (did you mean "albedo"?) ...
 std::string unknown_aov_message(std::string_view name);
 
-// Adds the film layers the passes `aovs` (names find_aov knows) accumulate into, in the table's order. Any light pass
+// The film layers the passes `aovs` (names find_aov knows) accumulate into, in the table's order. Any light pass
 // brings the layers of all of them: they are recorded together, and a _direct or _indirect pass needs its _color.
+std::vector<const AovInfo*> aov_layers(const std::vector<std::string>& aovs);
+// Adds those layers to `film`.
 void add_aov_layers(Film& film, const std::vector<std::string>& aovs);
+// The bytes a width x height film with the passes `aovs` holds: 56 a pixel for the beauty (three 128-bit sums, its
+// squared luminance and its sample count), 16 a channel for each layer and 4 more for a distance layer's hit counts.
+uint64_t film_bytes(int width, int height, const std::vector<std::string>& aovs);
 // The passes a film holds (in the table's order): those with a layer in it, and sample_count when `sample_count`.
 std::vector<std::string> aovs_of(const Film& film, bool sample_count);
 // Whether `aovs` holds a pass that reads the camera ray's surfaces (SurfaceFeatures).

@@ -248,6 +248,10 @@ const std::vector<Option>& options() {
        "largest width*height*spp*max_depth of a job (max_depth + max_volume_depth where its media scatter), 422 above "
        "(0: no limit)",
        real(&Config::max_work, 0, 1e30)},
+      {"--max-film-bytes", "TESSERA_MAX_FILM_BYTES", "N",
+       "largest film a job may hold, its beauty and render passes (width x height x 56 bytes, and 16 a pass channel); "
+       "422 above (default 8589934592; 0: no limit)",
+       integer(&Config::max_film_bytes, 0, 1ll << 50)},
       {"--max-gltf-instances", "TESSERA_MAX_GLTF_INSTANCES", "N",
        "node instances of a glTF asset, counted per path through its hierarchy; more is 422 (default 1000000)",
        integer(&Config::max_gltf_instances, 1, 1ll << 50)},

@@ -42,6 +42,7 @@ struct Config {
   int max_running_per_user = 0;             // runs one owner holds at once across the store's nodes; 0: no limit
   int crash_retries = 2;                    // lost runs of a job (its renderer died while rendering it) before it fails
   double max_work = 0;                      // width x height x spp x max_depth; 0: no limit; above it 422
+  size_t max_film_bytes = size_t{8} << 30;  // a job's film with its passes; 0: no limit; above it 422
   uint64_t max_gltf_instances = 1'000'000;  // node instances of a glTF (paths through its hierarchy); above: 422
   double grace_s = 20;                      // SIGTERM: running jobs end their pass and checkpoint within this
   int http_threads = 64;                    // workers for ordinary requests (not event streams, not idle connections)

@@ -148,6 +148,7 @@ int run(const Config& config) {
   limits.render.max_height = config.max_height;
   limits.render.max_spp = config.max_spp;
   limits.max_work = config.max_work;
+  limits.max_film_bytes = static_cast<uint64_t>(config.max_film_bytes);
   limits.resolve_asset = scheduler_options.resolve_asset;
   limits.max_gltf_instances = config.max_gltf_instances;
   limits.stop = stopping.get_token();

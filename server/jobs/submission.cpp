@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "proto/contract.h"
+#include "renderer/aov.h"
 #include "renderer/job.h"
 #include "renderer/scene.h"
 #include "renderer/scene_error.h"
@@ -105,6 +106,20 @@ std::optional<Problem> check_work(const RenderJob& job, double max_work) {
                  "/render"};
 }
 
+// Refuses a job whose film (its beauty and passes' sums, renderer/aov.h film_bytes) is above `max_film_bytes` (0: no
+// limit): a render holds it, and its checkpoint and outputs are of its size.
+std::optional<Problem> check_film(const RenderSettings& s, uint64_t max_film_bytes) {
+  const uint64_t bytes = film_bytes(s.width, s.height, s.aovs);
+  if (max_film_bytes == 0 || bytes <= max_film_bytes) return std::nullopt;
+  const uint64_t per_pixel = bytes / (static_cast<uint64_t>(s.width) * static_cast<uint64_t>(s.height));
+  return Problem{
+      422,
+      "the film of this job takes " + std::to_string(bytes) + " bytes (width x height x " + std::to_string(per_pixel) +
+          " a pixel for the beauty and its passes), above this server's limit of " + std::to_string(max_film_bytes) +
+          " (--max-film-bytes); lower the resolution or ask for fewer passes",
+      s.aovs.empty() ? "/render" : "/render/aovs"};
+}
+
 }  // namespace
 
 std::variant<json, Problem> parse_document(std::string_view text, int max_depth) {
@@ -190,6 +205,7 @@ std::variant<AcceptedJob, Problem> check_job_document(json document, const Submi
     return stopping_problem();
   }
   if (auto problem = check_work(render_job, limits.max_work)) return *problem;
+  if (auto problem = check_film(render_job.settings, limits.max_film_bytes)) return *problem;
   if (render_job.scene) job.warnings = render_job.scene->warnings;
   job.kind = job.document.value("kind", "scene");
   job.priority = job.document.value("priority", 0);

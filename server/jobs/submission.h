@@ -21,7 +21,8 @@ namespace tessera::server {
 struct SubmissionLimits {
   int max_depth = 64;  // nesting of arrays and objects
   RenderLimits render;
-  double max_work = 0;  // width x height x spp x max_depth; 0: no limit
+  double max_work = 0;          // width x height x spp x max_depth; 0: no limit
+  uint64_t max_film_bytes = 0;  // a job's film with its passes (renderer/aov.h film_bytes); 0: no limit
   // Maps asset references (scene.gltf, scene.environment.map) to files; unset: none allowed.
   std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
   uint64_t max_gltf_instances = 1'000'000;  // SceneLoadOptions::max_gltf_instances

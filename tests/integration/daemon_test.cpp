@@ -20,9 +20,9 @@ namespace {
 using nlohmann::json;
 namespace fs = std::filesystem;
 
-const std::vector<std::string> kDaemonArgs = {"--threads",   "2",     "--max-jobs",       "2",
-                                              "--max-width", "2048",  "--max-height",     "2048",
-                                              "--log-level", "debug", "--max-body-bytes", "1048576"};
+const std::vector<std::string> kDaemonArgs = {
+    "--threads",   "2",     "--max-jobs",       "2",       "--max-width",      "2048",     "--max-height", "2048",
+    "--log-level", "debug", "--max-body-bytes", "1048576", "--max-film-bytes", "300000000"};
 
 std::string submit(httplib::Client& c, const json& doc, json* status = nullptr) {
   auto res = c.Post("/v1/jobs", doc.dump(), "application/json");
@@ -319,6 +319,12 @@ std::vector<BadRequest> bad_requests() {
       {"negative radiance", json_type,
        patched(R"([{"op":"replace","path":"/scene/materials/light/radiance/2","value":-4}])").dump(), 422,
        "/scene/materials/light/radiance/2"},
+      {"a film above --max-film-bytes (2048 x 2048 x 680 bytes with the light passes)", json_type,
+       patched(R"([{"op":"replace","path":"/render/width","value":2048},
+                   {"op":"replace","path":"/render/height","value":2048},
+                   {"op":"add","path":"/render/aovs","value":["diffuse_color"]}])")
+           .dump(),
+       422, "/render/aovs"},
       {"misspelt pass", json_type, patched(R"([{"op":"add","path":"/render/aovs","value":["depth","albdo"]}])").dump(),
        422, "/render/aovs/1"},
       {"pass asked twice", json_type,

@@ -347,6 +347,21 @@ TEST_P(LightPasses, GlossGlassAndFogRecomposeAndLandInTheirPasses) {
 
 INSTANTIATE_TEST_SUITE_P(Integrators, LightPasses, testing::Values("path", "bdpt"));
 
+// film_bytes, which the daemon bounds a job's memory by, counts exactly what a film of those passes holds.
+TEST(AovSettings, FilmBytesAreWhatTheFilmHolds) {
+  for (const std::vector<std::string>& aovs :
+       {std::vector<std::string>{}, std::vector<std::string>{"depth"}, std::vector<std::string>{"glossy_color"},
+        std::vector<std::string>{"albedo", "sample_count", "variance", "emission"}}) {
+    Film film(7, 5);
+    add_aov_layers(film, aovs);
+    uint64_t held = film.sums_lum2().size() * sizeof(float) + film.pixel_sample_counts().size() * sizeof(uint32_t);
+    for (int i = 0; i < film.layer_count(); ++i)
+      held += film.layer_at(i).sums.size() * sizeof(FixedSum) + film.layer_at(i).hits.size() * sizeof(uint32_t);
+    EXPECT_EQ(film_bytes(7, 5, aovs), held) << aovs.size();
+  }
+  EXPECT_EQ(film_bytes(1920, 1080, {}), 1920u * 1080u * 56u);
+}
+
 TEST(AovSettings, TheContractListsEveryPassOfTheTable) {
   std::ifstream in("proto/schemas/render.schema.json");
   ASSERT_TRUE(in) << "run from the source tree";
