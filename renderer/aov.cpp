@@ -94,14 +94,6 @@ std::vector<std::string> aovs_of(const Film& film, bool sample_count) {
   return aovs;
 }
 
-bool aovs_read_surfaces(const std::vector<std::string>& aovs) {
-  for (const std::string& name : aovs) {
-    const AovInfo* a = find_aov(name);
-    if (a && a->source != AovSource::kSampleCount && a->source != AovSource::kSquares) return true;
-  }
-  return false;
-}
-
 AovWriter::AovWriter(const Film& film)
     : albedo_(film.layer("albedo")),
       normal_(film.layer("normal")),

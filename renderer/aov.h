@@ -80,8 +80,6 @@ void add_aov_layers(Film& film, const std::vector<std::string>& aovs);
 uint64_t film_bytes(int width, int height, const std::vector<std::string>& aovs);
 // The passes a film holds (in the table's order): those with a layer in it, and sample_count when `sample_count`.
 std::vector<std::string> aovs_of(const Film& film, bool sample_count);
-// Whether `aovs` holds a pass that reads the camera ray's surfaces (SurfaceFeatures).
-bool aovs_read_surfaces(const std::vector<std::string>& aovs);
 
 // What a camera sample's light adds to the light passes (kLight), filled in by the integrators. The classes are
 // Bsdf's lobe classes: 0 diffuse, 1 glossy, 2 transmission.
