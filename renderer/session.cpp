@@ -26,6 +26,13 @@ const char* stop_reason_name(StopReason r) {
   return "samples";
 }
 
+std::optional<StopReason> stop_reason_from_name(std::string_view name) {
+  for (StopReason r : {StopReason::kSamples, StopReason::kTimeLimit, StopReason::kNoiseTarget, StopReason::kStopped,
+                       StopReason::kCancelled})
+    if (name == stop_reason_name(r)) return r;
+  return std::nullopt;
+}
+
 RenderSession::RenderSession(std::shared_ptr<const Scene> scene, const RenderSettings& settings, ThreadPool& pool)
     : scene_(std::move(scene)), settings_(settings), film_(settings.width, settings.height) {
   if (settings_.region.width <= 0 || settings_.region.height <= 0) {

@@ -8,6 +8,8 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
+#include <string_view>
 #include <utility>
 
 #include "renderer/camera.h"
@@ -23,6 +25,7 @@ class Scene;
 
 enum class StopReason { kSamples, kTimeLimit, kNoiseTarget, kStopped, kCancelled };
 const char* stop_reason_name(StopReason r);
+std::optional<StopReason> stop_reason_from_name(std::string_view name);
 
 struct RenderProgress {
   uint32_t pass = 0;           // passes completed

@@ -199,7 +199,8 @@ const std::vector<Option>& options() {
        integer(&Config::unit_pixel_samples, 0, 1ll << 50)},
       {"--threads", "TESSERA_THREADS", "N", "render threads (default 0: every hardware thread)",
        integer(&Config::threads, 0, 4096)},
-      {"--max-jobs", "TESSERA_MAX_JOBS", "N", "jobs rendering at once, sharing the threads (default 1)",
+      {"--max-jobs", "TESSERA_MAX_JOBS", "N",
+       "jobs rendering at once, each in a worker process of --threads threads (default 1)",
        integer(&Config::max_jobs, 1, 1024)},
       {"--max-body-bytes", "TESSERA_MAX_BODY_BYTES", "N", "largest request body (default 67108864)",
        integer(&Config::max_body_bytes, 1024, 1ll << 40)},
@@ -244,6 +245,17 @@ const std::vector<Option>& options() {
        "times a job is rendered again after its renderer died while rendering it (a crash, a kill, a node lost); "
        "past that it fails naming the crashes, never resumed at a start again (default 2)",
        integer(&Config::crash_retries, 0, 1000)},
+      {"--worker-memory", "TESSERA_WORKER_MEMORY", "SIZE",
+       "address space a render worker may reserve (RLIMIT_AS, which counts reservations, not only memory in use), "
+       "e.g. 16GiB; a job whose render needs more fails naming the limit (default: the machine's physical memory; "
+       "0: no limit)",
+       [](Config& c, const std::string& v) -> std::string {
+         std::string error;
+         const std::optional<uint64_t> value = parse_byte_size(v, &error);
+         if (!value) return error;
+         c.worker_memory = *value;
+         return "";
+       }},
       {"--max-work", "TESSERA_MAX_WORK", "N",
        "largest width*height*spp*max_depth of a job (max_depth + max_volume_depth where its media scatter), 422 above "
        "(0: no limit)",

@@ -28,7 +28,7 @@ struct Config {
   // On a shared store, jobs are split into work units of about this many pixel samples (work_units.h); 0: never.
   uint64_t unit_pixel_samples = kDefaultUnitPixelSamples;
   int threads = 0;   // render threads; 0: every hardware thread
-  int max_jobs = 1;  // jobs rendering at once, sharing the render threads
+  int max_jobs = 1;  // jobs rendering at once, each in a worker process with `threads` render threads
   size_t max_body_bytes = 64u << 20;
   int max_width = 8192;
   int max_height = 8192;
@@ -38,9 +38,11 @@ struct Config {
   std::string tokens_file;      // bearer tokens; empty: no authentication
   int max_user_priority = 100;  // above it, admin only (403)
   std::vector<std::string> cors_origins;
-  int max_queued_per_user = 0;              // 0: no limit; above it 429
-  int max_running_per_user = 0;             // runs one owner holds at once across the store's nodes; 0: no limit
-  int crash_retries = 2;                    // lost runs of a job (its renderer died while rendering it) before it fails
+  int max_queued_per_user = 0;   // 0: no limit; above it 429
+  int max_running_per_user = 0;  // runs one owner holds at once across the store's nodes; 0: no limit
+  int crash_retries = 2;         // lost runs of a job (its renderer died while rendering it) before it fails
+  // A render worker's address space (RLIMIT_AS), in bytes; nothing: the machine's physical memory; 0: no limit.
+  std::optional<uint64_t> worker_memory;
   double max_work = 0;                      // width x height x spp x max_depth; 0: no limit; above it 422
   size_t max_film_bytes = size_t{8} << 30;  // a job's film with its passes; 0: no limit; above it 422
   uint64_t max_gltf_instances = 1'000'000;  // node instances of a glTF (paths through its hierarchy); above: 422

@@ -30,6 +30,7 @@
 #include "server/jobs/metrics.h"
 #include "server/jobs/retention.h"
 #include "server/jobs/scheduler.h"
+#include "server/jobs/worker_process.h"
 #include "server/store/postgres_event_bus.h"
 #include "server/store/postgres_job_store.h"
 #include "server/store/postgres_notifications.h"
@@ -127,6 +128,15 @@ int run(const Config& config) {
   scheduler_options.lease = std::chrono::milliseconds(static_cast<int64_t>(config.lease_s * 1000));
   scheduler_options.resolve_asset = asset_resolver(*assets);
   scheduler_options.max_gltf_instances = config.max_gltf_instances;
+  // Every render runs in a worker process of its own (worker_process.h): a scene that crashes the renderer ends that
+  // process, never the daemon.
+  WorkerOptions worker;
+  worker.data_dir = std::filesystem::absolute(data_dir);
+  worker.threads = pool.size();
+  worker.max_gltf_instances = config.max_gltf_instances;
+  worker.memory_limit = config.worker_memory.value_or(static_cast<uint64_t>(sysconf(_SC_PHYS_PAGES)) *
+                                                      static_cast<uint64_t>(sysconf(_SC_PAGESIZE)));
+  scheduler_options.runner = std::make_shared<WorkerProcessRunner>(worker);
   Scheduler scheduler(*store, *files, pool, scheduler_options);
   JobServiceOptions service_options;
   service_options.max_user_priority = config.max_user_priority;
@@ -281,6 +291,8 @@ int run(const Config& config) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // The daemon runs itself as each render's worker process (worker_process.h).
+  if (argc == 2 && std::strcmp(argv[1], "--render-worker") == 0) return tessera::server::render_worker_main();
   ConfigResult parsed = parse_config(argc, argv, [](const char* name) { return std::getenv(name); });
   if (parsed.help) {
     std::fputs(config_usage().c_str(), stdout);

@@ -150,8 +150,9 @@ std::string sha256_hex(std::string_view bytes) {
   return out;
 }
 
-DirectoryAssetStore::DirectoryAssetStore(const fs::path& data_dir, AssetCheckOptions check)
+DirectoryAssetStore::DirectoryAssetStore(const fs::path& data_dir, AssetCheckOptions check, bool owner)
     : root_(data_dir / "assets"), check_(std::move(check)) {
+  if (!owner) return;
   fs::create_directories(root_);
   // Temp dirs of uploads a crash interrupted.
   std::error_code ec;

@@ -76,7 +76,9 @@ struct AssetCheckOptions {
 // The assets in the data directory, <data>/assets/<id>/.
 class DirectoryAssetStore final : public AssetStore {
  public:
-  explicit DirectoryAssetStore(const std::filesystem::path& data_dir, AssetCheckOptions check = {});
+  // The store's owner (the daemon) removes what uploads a crash interrupted left; a reader (a render worker, which
+  // only resolves assets) passes `owner` false and changes nothing.
+  explicit DirectoryAssetStore(const std::filesystem::path& data_dir, AssetCheckOptions check = {}, bool owner = true);
 
   std::variant<StoredAsset, Problem> store(std::vector<UploadFile> files, const std::string& owner) override;
   std::optional<AssetInfo> get(const std::string& id) const override;

@@ -18,11 +18,11 @@ uint64_t unit_settings_hash(const std::string& settings, int unit) {
 JobResults::JobResults(JobStore& store, const JobFiles& files, std::string node)
     : store_(store), files_(files), log_(files, std::move(node)) {}
 
-std::string JobResults::write_outputs(const std::string& id, const OutputPipeline& outputs, const Image& image,
-                                      int64_t key) const {
+std::string stage_outputs(const JobFiles& files, const std::string& id, const OutputPipeline& outputs,
+                          const Image& image, int64_t key) {
   std::string written;
   auto stage = [&](JobFile f, std::string_view bytes) {
-    files_.stage(id, f, key, bytes);
+    files.stage(id, f, key, bytes);
     (written += ' ') += job_file_name(f);
   };
   outputs.publish(image, [&](ImageFormat format, std::string_view bytes) { stage(result_file(format), bytes); });
@@ -95,7 +95,7 @@ void JobResults::stage_partial_results(const JobRecord& job, int64_t key) const 
     }
     if (!film || film->samples() == 0) return;
     const OutputPipeline outputs(settings, output_spec_from_text(job.outputs));
-    const std::string written = write_outputs(job.id, outputs, outputs.image(*film), key);
+    const std::string written = stage_outputs(files_, job.id, outputs, outputs.image(*film), key);
     log_.add(job.id, "kept what it rendered, " + std::to_string(film->samples()) + " spp in " + std::to_string(passes) +
                          " passes, as its partial results (once the cancel is taken):" + written);
   } catch (const std::exception& e) {

@@ -21,15 +21,16 @@ namespace tessera::server {
 // never read as another's.
 uint64_t unit_settings_hash(const std::string& settings, int unit);
 
+// The outputs a job asked for (result.png, result.exr, its passes' PNGs), encoded from `image`
+// (OutputPipeline::image) and staged under `key` for JobResults::settle_staged(); the names written, for its log.
+std::string stage_outputs(const JobFiles& files, const std::string& id, const OutputPipeline& outputs,
+                          const Image& image, int64_t key);
+
 class JobResults {
  public:
   // `node`: this daemon's name among the nodes sharing the store, for the lines it adds to job logs (JobLog).
   JobResults(JobStore& store, const JobFiles& files, std::string node = "");
 
-  // The outputs the job asked for (result.png, result.exr), encoded from `image` (OutputPipeline::image) and staged
-  // under `key` for settle_staged(); the names written, for its log.
-  std::string write_outputs(const std::string& id, const OutputPipeline& outputs, const Image& image,
-                            int64_t key) const;
   // The result files staged under `key`: published over the final names, or removed.
   void settle_staged(const std::string& id, int64_t key, bool publish) const;
   // The film of a split job's units: the done ones, with `in_progress` also the last checkpoints of the others

@@ -26,10 +26,9 @@ using nlohmann::json;
 class Scheduler::RenderSlot {
  public:
   std::string id;
-  int unit = -1;                     // the work unit it renders (JobRecord::unit); -1: the whole job
-  RenderSession* session = nullptr;  // set while the render runs
-  std::stop_source load_stop;        // asked to stop with the render: ends the scene's load (LoadStopped)
-  bool delete_requested = false;     // by a client: the job is gone, its files go when the render stops
+  int unit = -1;                  // the work unit it renders (JobRecord::unit); -1: the whole job
+  RunControl control;             // stops its render (or its load), wherever the render runs
+  bool delete_requested = false;  // by a client: the job is gone, its files go when the render stops
   std::optional<JobProgress> progress;
   bool awaiting_store = false;  // its end is rendered but the store failed to record it; retried
   bool ending = false;          // its end is being recorded: its lease is no longer renewed nor checked
@@ -42,20 +41,16 @@ class Scheduler::RenderSlot {
   std::thread thread;
 
   // Ends the scene's load, or the render's pass under way, within a tile's time; the last checkpoint stays.
-  void abandon() {
-    load_stop.request_stop();
-    if (session) session->cancel();
-  }
+  void abandon() { control.cancel(); }
   // A client's change, recorded in the store, stops the render (Scheduler::stop()). A paused job rendered whole ends
   // its pass and keeps it as its checkpoint; anything else gives up its pass under way (a unit's would not count:
   // the store takes a unit's checkpoint only from a run still running).
   void signal(StopSignal s) {
     settled = s;
-    load_stop.request_stop();
-    if (session && s == StopSignal::kPause && unit < 0)
-      session->stop();
-    else if (session)
-      session->cancel();
+    if (s == StopSignal::kPause && unit < 0)
+      control.stop();
+    else
+      control.cancel();
   }
 };
 
@@ -104,7 +99,17 @@ Scheduler::Scheduler(JobStore& store, const JobFiles& files, ThreadPool& pool, S
       log_(files, options.node),
       results_(store, files, options.node),
       pool_(pool),
-      options_(std::move(options)) {}
+      options_(std::move(options)),
+      runner_(options_.runner) {
+  if (!runner_) {
+    RenderEnvironment env;
+    env.files = &files_;
+    env.pool = &pool_;
+    env.resolve_asset = options_.resolve_asset;
+    env.max_gltf_instances = options_.max_gltf_instances;
+    runner_ = std::make_shared<InProcessRunner>(std::move(env));
+  }
+}
 
 Scheduler::ClaimHold::ClaimHold(Scheduler& scheduler) : scheduler_(scheduler) {
   // Claims happen under the mutex: once it is held, none is under way.
@@ -179,10 +184,8 @@ void Scheduler::begin_drain() {
     std::lock_guard lock(mutex_);
     if (!started_) return;
     stopping_ = true;
-    for (auto& [id, slot] : running_) {
-      slot->load_stop.request_stop();  // a load has no pass to end: it stops now, and the job is requeued
-      if (slot->session) slot->session->stop();
-    }
+    // A load has no pass to end: it stops now, and the job is requeued.
+    for (auto& [id, slot] : running_) slot->control.stop();
   }
   cv_.notify_all();
 }
@@ -312,9 +315,10 @@ void Scheduler::dispatch_loop() {
   }
 }
 
-// A run's steps: claimed by dispatch_loop(), it restores (load_run, resume_from_checkpoint), renders (render_passes)
-// and publishes its end (end_interrupted, end_unit, end_job); the merge of a split job's units and the failure of a
-// job lost too often are runs of their own. Whatever the end, finish_run() releases the slot.
+// A run's steps: claimed by dispatch_loop(), it renders (render_run: its runner loads, restores and renders, and
+// reports each step) and publishes its end (end_interrupted, end_unit, end_job, end_crashed); the merge of a split
+// job's units and the failure of a job lost too often are runs of their own. Whatever the end, finish_run() releases
+// the slot.
 void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record) {
   // The job's files have their place from here on; writes never make it (JobFiles::prepare), so a render still
   // winding down cannot bring back the files of a job that was deleted meanwhile.
@@ -357,56 +361,80 @@ void Scheduler::finish_run(RenderSlot& slot) {
 struct Scheduler::Run {
   RenderSlot& slot;
   const JobRecord& record;
-  RenderJob job;
+  RenderSettings settings;  // run_settings(): a unit's narrowed to its range
   OutputPipeline outputs;
-  uint64_t settings_hash = 0;  // what its checkpoints are checked against
-  RenderSession* session = nullptr;
-  uint32_t samples_counted = 0;       // the samples per pixel counted in SchedulerHooks::samples_rendered
-  uint32_t checkpointed_samples = 0;  // of a unit: its last checkpoint written (its film, once it is done)
+  uint32_t samples_counted = 0;  // the samples per pixel counted in SchedulerHooks::samples_rendered
+  bool ended = false;
 
-  Run(RenderSlot& s, const JobRecord& r, RenderJob j)
-      : slot(s), record(r), job(std::move(j)), outputs(job.settings, job.outputs) {}
+  Run(RenderSlot& s, const JobRecord& r, const RenderRequest& request)
+      : slot(s), record(r), settings(run_settings(request)), outputs(settings, output_spec_from_text(r.outputs)) {}
   const std::string& id() const { return record.id; }
   bool is_unit() const { return record.unit >= 0; }
 };
 
+// The render's reports, on the run's thread, to the scheduler's steps.
+class Scheduler::RunReport final : public RunListener {
+ public:
+  RunReport(Scheduler& scheduler, Run& run) : scheduler_(scheduler), run_(run) {}
+
+  void loaded(const std::vector<std::string>& warnings, double load_s) override {
+    scheduler_.log_.add(run_.id(), printf_string("scene loaded in %.3f s", load_s));
+    scheduler_.record_warnings(run_.id(), warnings);
+  }
+  void resumed(const std::optional<RenderProgress>& restored, bool unusable) override {
+    scheduler_.resumed(run_, restored, unusable);
+    run_.samples_counted = restored ? restored->samples_done : 0;
+    scheduler_.log_start(run_);
+  }
+  void pass(const RenderProgress& progress, const std::string& write_error) override {
+    scheduler_.publish_pass(run_, progress, write_error);
+  }
+  void ended(const RunEnd& end) override {
+    run_.ended = true;
+    scheduler_.end_run_reported(run_, end);
+  }
+
+ private:
+  Scheduler& scheduler_;
+  Run& run_;
+};
+
 void Scheduler::render_run(RenderSlot& slot, const JobRecord& record) {
-  double render_s = 0;
-  const auto detach = [&] {
-    std::lock_guard lock(mutex_);
-    slot.session = nullptr;
-  };
+  std::optional<Run> run;
   try {
-    Run run(slot, record, load_run(slot, record));
-    record_warnings(record.id, run.job.scene->warnings);
-    RenderSession session(run.job.scene, run.job.settings, pool_);
-    run.session = &session;
-    run.settings_hash = run.is_unit() ? unit_settings_hash(record.settings, record.unit) : fnv1a64(record.settings);
-    resume_from_checkpoint(slot, record, run.job.settings, run.settings_hash, session);
-    log_start(run);
-    const StopReason reason = render_passes(run);
-    detach();
-    render_s = session.progress().elapsed_s;
-    const bool interrupted = reason == StopReason::kStopped || reason == StopReason::kCancelled;
-    if (interrupted || !still_ours_before_outputs(slot))
-      end_interrupted(slot, record, session.progress().samples_done);
-    else if (run.is_unit())
-      end_unit(run);
-    else
-      end_job(run, reason);
-  } catch (const LoadStopped&) {
-    detach();
-    end_interrupted(slot, record, 0);
+    const RenderRequest request = render_request(record, slot.epoch);
+    run.emplace(slot, record, request);
+    log_.add(record.id, "loading the scene");
+    RunReport report(*this, *run);
+    runner_->run(request, slot.control, report);
   } catch (const std::exception& e) {
-    detach();
-    std::string message = e.what();
-    // The renderer refused the scene or an asset it names: the input is at fault, not this run.
-    const auto* se = dynamic_cast<const SceneError*>(&e);
-    if (se && !se->pointer().empty()) message = se->pointer() + ": " + message;
-    record_failure(slot, message, render_s, se != nullptr);
-  } catch (...) {
-    detach();
-    record_failure(slot, "unknown error", render_s, false);
+    // The stored settings do not read, or a step of the scheduler failed where the runner could not report it.
+    if (!run || !run->ended) record_failure(slot, e.what(), 0, false);
+  }
+}
+
+void Scheduler::end_run_reported(Run& run, const RunEnd& end) {
+  RenderSlot& slot = run.slot;
+  switch (end.outcome) {
+    case RunOutcome::kInterrupted:
+      end_interrupted(slot, run.record, end.progress.samples_done);
+      return;
+    case RunOutcome::kRendered:
+      if (!still_ours_before_outputs(slot)) {
+        if (!run.is_unit()) results_.settle_staged(run.id(), slot.epoch, false);
+        end_interrupted(slot, run.record, end.progress.samples_done);
+      } else if (run.is_unit()) {
+        end_unit(run, end);
+      } else {
+        end_job(run, end);
+      }
+      return;
+    case RunOutcome::kFailed:
+      record_failure(slot, end.error, end.progress.elapsed_s, end.input_refused);
+      return;
+    case RunOutcome::kCrashed:
+      end_crashed(slot, run.record, end);
+      return;
   }
 }
 
@@ -423,56 +451,37 @@ void Scheduler::record_warnings(const std::string& id, const std::vector<std::st
 }
 
 void Scheduler::log_start(const Run& run) {
-  const RenderSettings& s = run.job.settings;
+  const RenderSettings& s = run.settings;
   const JobRecord& record = run.record;
   log(LogLevel::kInfo, "job started",
-      {{"job", record.id}, {"samples_done", run.session->progress().samples_done}, {"unit", record.unit}});
+      {{"job", record.id}, {"samples_done", run.samples_counted}, {"unit", record.unit}, {"where", runner_->where()}});
   if (run.is_unit())
     log_.add(record.id,
              printf_string("unit %d of %d: rendering samples %u..%u of %dx%d, integrator %s, on %d threads (epoch "
-                           "%lld)",
+                           "%lld, %s)",
                            record.unit + 1, record.units, static_cast<unsigned>(s.first_sample),
                            static_cast<unsigned>(s.first_sample + s.spp), s.width, s.height, s.integrator.name.c_str(),
-                           pool_.size(), static_cast<long long>(run.slot.epoch)));
+                           runner_->threads(), static_cast<long long>(run.slot.epoch), runner_->where()));
   else
-    log_.add(record.id, printf_string("rendering %dx%d, %u spp, integrator %s, on %d threads", s.width, s.height,
-                                      static_cast<unsigned>(s.spp), s.integrator.name.c_str(), pool_.size()));
+    log_.add(record.id, printf_string("rendering %dx%d, %u spp, integrator %s, on %d threads %s", s.width, s.height,
+                                      static_cast<unsigned>(s.spp), s.integrator.name.c_str(), runner_->threads(),
+                                      runner_->where()));
 }
 
-StopReason Scheduler::render_passes(Run& run) {
-  RenderSession& session = *run.session;
-  {
-    // Signals that came before the render could take them (RenderSlot).
-    std::lock_guard lock(mutex_);
-    run.slot.session = &session;
-    if (run.slot.delete_requested || run.slot.lease_lost) session.cancel();
-    if (run.slot.settled) run.slot.signal(*run.slot.settled);
-    if (stopping_) session.stop();
-  }
-  run.samples_counted = session.progress().samples_done;
-  return session.run([&](const RenderProgress& p, const Film& film) { publish_pass(run, p, film); });
-}
-
-void Scheduler::publish_pass(Run& run, const RenderProgress& p, const Film& film) {
+void Scheduler::publish_pass(Run& run, const RenderProgress& p, const std::string& write_error) {
   const std::string& id = run.id();
   const JobProgress jp = to_job_progress(p);
   if (hooks_.samples_rendered) {
-    const uint64_t pixels = static_cast<uint64_t>(film.width()) * static_cast<uint64_t>(film.height());
+    const uint64_t pixels = static_cast<uint64_t>(run.settings.width) * static_cast<uint64_t>(run.settings.height);
     hooks_.samples_rendered(pixels * (p.samples_done - run.samples_counted));
   }
   run.samples_counted = p.samples_done;
   try {
     // Files first, then the news: once the progress says N samples, a crash resumes from N and the preview of that
     // pass can be fetched. A unit's checkpoint is named by its run's epoch: the store's update below makes it the
-    // unit's. A split job's preview is the merge of its done units (end_unit).
-    const std::string checkpoint = encode_checkpoint(film, p.pass, p.elapsed_s, run.settings_hash, run.job.settings);
-    if (run.is_unit()) {
-      files_.write_unit(id, run.record.unit, run.slot.epoch, checkpoint);
-      run.checkpointed_samples = p.samples_done;
-    } else {
-      files_.write(id, JobFile::kCheckpoint, checkpoint);
-      files_.write(id, JobFile::kPreviewPng, run.outputs.preview_png(film));
-    }
+    // unit's. A pass whose files could not be written (a full disk) is not worth the render: the last good
+    // checkpoint stays, and the next pass writes both again.
+    if (!write_error.empty()) throw std::runtime_error(write_error);
     {
       std::lock_guard lock(mutex_);
       run.slot.progress = jp;
@@ -587,15 +596,11 @@ void Scheduler::end_stopping(RenderSlot& slot, const std::string& id, uint32_t s
         {{"job", id}, {"samples_done", samples_done}});
 }
 
-void Scheduler::end_unit(Run& run) {
+void Scheduler::end_unit(Run& run, const RunEnd& end) {
   const std::string& id = run.id();
   const JobRecord& record = run.record;
-  const RenderSettings& s = run.job.settings;
-  // The unit's film is its last checkpoint; written again if the last pass's could not be.
-  const RenderProgress& p = run.session->progress();
-  if (run.checkpointed_samples != p.samples_done)
-    files_.write_unit(id, record.unit, run.slot.epoch,
-                      encode_checkpoint(run.session->film(), p.pass, p.elapsed_s, run.settings_hash, s));
+  const RenderSettings& s = run.settings;
+  const RenderProgress& p = end.progress;
   log_.add(id, printf_string("unit %d of %d done: samples %u..%u in %.2f s", record.unit + 1, record.units,
                              static_cast<unsigned>(s.first_sample), static_cast<unsigned>(s.first_sample + s.spp),
                              p.elapsed_s));
@@ -621,13 +626,13 @@ void Scheduler::end_unit(Run& run) {
   }
 }
 
-void Scheduler::end_job(Run& run, StopReason reason) {
+void Scheduler::end_job(Run& run, const RunEnd& end) {
   const std::string& id = run.id();
-  // The outputs first, staged (publish_outputs()): a file that cannot be written (a full disk) fails the job, as it
-  // should.
-  const std::string written =
-      results_.write_outputs(id, run.outputs, run.outputs.image(run.session->film()), run.slot.epoch);
-  JobProgress final_progress = to_job_progress(run.session->progress());
+  // The render staged the outputs (a file that cannot be written, a full disk, failed the job, as it should); they
+  // are published once the store takes the end (publish_outputs()).
+  const std::string& written = end.written;
+  const StopReason reason = end.reason;
+  JobProgress final_progress = to_job_progress(end.progress);
   final_progress.eta_s = 0;
   log_.add(id, printf_string("succeeded: %s after %.2f s, %u spp in %u passes; wrote%s", stop_explained(reason).c_str(),
                              final_progress.elapsed_s, static_cast<unsigned>(final_progress.samples_done),
@@ -642,29 +647,6 @@ void Scheduler::end_job(Run& run, StopReason reason) {
          {"elapsed_s", final_progress.elapsed_s},
          {"samples_per_s", final_progress.samples_per_s},
          {"stop_reason", stop_reason_name(reason)}});
-}
-
-RenderJob Scheduler::load_run(RenderSlot& slot, const JobRecord& record) {
-  RenderJob job;
-  job.settings = render_settings_from_text(record.settings);
-  job.outputs = output_spec_from_text(record.outputs);
-  if (record.unit >= 0) {
-    // One unit: its range of the job's sample indices (work_units.h).
-    job.settings.first_sample += record.unit_first_sample;
-    job.settings.job_spp = job.settings.spp;  // every unit's rays have the whole job's texture footprints
-    job.settings.spp = record.unit_samples;
-  }
-  SceneLoadOptions options;
-  options.resolve_asset = options_.resolve_asset;
-  options.max_gltf_instances = options_.max_gltf_instances;
-  options.stop = slot.load_stop.get_token();
-  log_.add(record.id, "loading the scene");
-  const auto load_start = std::chrono::steady_clock::now();
-  job.scene = load_job_scene(json::parse(record.document), job.settings, options);
-  log_.add(record.id,
-           printf_string("scene loaded in %.3f s",
-                         std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count()));
-  return job;
 }
 
 // A failing store is no fault of the job: the render's outcome stands and is written again, after 100 ms doubling up
@@ -740,10 +722,10 @@ bool Scheduler::record_terminal(RenderSlot& slot, JobState to, double render_s, 
 // Logs a job that failed (its scene, its outputs) and records it as record_terminal() does, with the stop reason
 // kInputRefused when its input is at fault; false when it was not recorded.
 // A run resumes from the job's checkpoint (a unit's: the one the store names as its own, of the last run that
-// recorded one), and what it holds is the job's progress from then on: recorded at once, not at the end of the next
-// pass, so that a job resumed after a restart does not read 0 samples done meanwhile.
-void Scheduler::resume_from_checkpoint(RenderSlot& slot, const JobRecord& record, const RenderSettings& settings,
-                                       uint64_t settings_hash, RenderSession& session) {
+// recorded one).
+void Scheduler::resumed(Run& run, const std::optional<RenderProgress>& restored, bool unusable) {
+  RenderSlot& slot = run.slot;
+  const JobRecord& record = run.record;
   const std::string& id = record.id;
   // A run taken over from a node that stopped renewing its lease says so, whatever it resumes from: the wait for the
   // lease to expire is otherwise invisible in the log.
@@ -752,33 +734,26 @@ void Scheduler::resume_from_checkpoint(RenderSlot& slot, const JobRecord& record
       record.taken_over_from.empty()
           ? std::string()
           : who + "node " + record.taken_over_from + " stopped renewing its lease; taken over by this node, ";
-  std::optional<std::string> checkpoint;
-  if (record.unit < 0)
-    checkpoint = files_.read(id, JobFile::kCheckpoint);
-  else if (record.unit_checkpoint_epoch > 0)
-    checkpoint = files_.read_unit(id, record.unit, record.unit_checkpoint_epoch);
-  auto cp = checkpoint ? decode_checkpoint(*checkpoint, settings.width, settings.height, settings_hash) : std::nullopt;
-  if (checkpoint && !cp) {
+  if (unusable) {
     log(LogLevel::kWarn, "checkpoint unusable; the render starts over", {{"job", id}});
     log_.add(id, "warning: its checkpoint is unusable (damaged, or of other settings); the render starts over");
   }
-  if (!cp) {
+  if (!restored) {
     if (!takeover.empty()) log_.add(id, takeover + "starting over (it left no checkpoint)");
     return;
   }
   log(LogLevel::kInfo, "job resumed from its checkpoint",
-      {{"job", id}, {"samples_done", cp->film.samples()}, {"passes", cp->passes}});
+      {{"job", id}, {"samples_done", restored->samples_done}, {"passes", restored->pass}});
   log_.add(id, printf_string("%sresuming from its checkpoint at %u spp (%u passes)",
-                             takeover.empty() ? "" : takeover.c_str(), static_cast<unsigned>(cp->film.samples()),
-                             static_cast<unsigned>(cp->passes)));
-  session.restore(std::move(cp->film), cp->passes, cp->elapsed_s);
-  const JobProgress restored = to_job_progress(session.progress());
+                             takeover.empty() ? "" : takeover.c_str(), static_cast<unsigned>(restored->samples_done),
+                             static_cast<unsigned>(restored->pass)));
+  const JobProgress progress = to_job_progress(*restored);
   {
     std::lock_guard lock(mutex_);
-    slot.progress = restored;
+    slot.progress = progress;
   }
   try {
-    if (!store_.update_progress(id, slot.epoch, restored)) return;  // the run is no longer ours: its render finds out
+    if (!store_.update_progress(id, slot.epoch, progress)) return;  // the run is no longer ours: its render finds out
   } catch (const JobStoreError& e) {
     count_store_error();
     log(LogLevel::kWarn, "cannot record a resumed job's progress; the next pass does",
@@ -787,9 +762,46 @@ void Scheduler::resume_from_checkpoint(RenderSlot& slot, const JobRecord& record
   }
   if (!hooks_.progress) return;
   if (record.unit < 0) {
-    hooks_.progress(id, restored);
+    hooks_.progress(id, progress);
   } else if (auto now = store_.get(id)) {  // the job's progress over every unit and node, as the store sums it
     hooks_.progress(id, now->progress);
+  }
+}
+
+void Scheduler::end_crashed(RenderSlot& slot, const JobRecord& record, const RunEnd& end) {
+  const std::string& id = record.id;
+  bool changed;
+  {
+    std::lock_guard lock(mutex_);
+    changed = slot.delete_requested || slot.settled || slot.lease_lost;
+  }
+  log(LogLevel::kError, "a render worker died", {{"job", id}, {"unit", record.unit}, {"error", end.error}});
+  // A job deleted, cancelled, paused or taken over meanwhile is no longer this run's to record.
+  if (changed) {
+    end_interrupted(slot, record, end.progress.samples_done);
+    return;
+  }
+  const int lost = record.lost_runs + 1;
+  if (lost > options_.crash_retries) {
+    record_failure(slot,
+                   end.error + printf_string(" (%d runs of this job were lost, more than the %d retries allowed: "
+                                             "--crash-retries)",
+                                             lost, options_.crash_retries),
+                   end.progress.elapsed_s, true);
+    return;
+  }
+  log_.add(id, printf_string("%s%s; rendered again from its last checkpoint (retry %d of %d)",
+                             record.unit >= 0 ? printf_string("unit %d: ", record.unit + 1).c_str() : "",
+                             end.error.c_str(), lost, options_.crash_retries));
+  // The run is given up as lost: its lease ends now, so that the next claim, on this node or another, takes the job
+  // over from its last checkpoint and counts a lost run (JobStore::claim_next), as it does for a node that died. A
+  // store that fails here leaves the lease to run out by itself.
+  try {
+    store_.renew_lease(id, slot.epoch, now_ms(), -1);
+  } catch (const JobStoreError& e) {
+    count_store_error();
+    log(LogLevel::kWarn, "cannot end the lease of a crashed run; it runs out by itself",
+        {{"job", id}, {"error", e.what()}});
   }
 }
 
@@ -865,7 +877,7 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
   }
   const OutputPipeline outputs(settings, output_spec_from_text(record.outputs));
   const Image image = outputs.image(*film);
-  const std::string written = results_.write_outputs(id, outputs, image, slot.epoch);
+  const std::string written = stage_outputs(files_, id, outputs, image, slot.epoch);
   files_.write(id, JobFile::kPreviewPng, outputs.preview_png(image));
   const double merge_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   log_.add(id, printf_string("succeeded: its %d units merged in %.3f s, %u spp; wrote%s", record.units, merge_s,

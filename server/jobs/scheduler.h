@@ -24,14 +24,13 @@
 #include <thread>
 #include <vector>
 
-#include "renderer/job.h"
 #include "renderer/output.h"
-#include "renderer/scene_loader.h"
 #include "renderer/session.h"
 #include "renderer/thread_pool.h"
 #include "server/files/job_files.h"
 #include "server/files/job_log.h"
 #include "server/jobs/job_results.h"
+#include "server/jobs/render_work.h"
 #include "server/store/job_store.h"
 
 namespace tessera::server {
@@ -41,9 +40,13 @@ struct SchedulerOptions {
   // Runs (jobs rendered whole, work units) one owner's jobs may hold at once across every node of the store; 0: no
   // limit (JobStore::claim_next).
   int max_running_per_user = 0;
-  // Runs of a job that may be lost (its node died while rendering it: JobRecord::lost_runs) before it fails instead
-  // of rendering again: a scene that crashes the renderer fails after this many retries, never in a loop.
+  // Runs of a job that may be lost (its worker process crashed, or its node died while rendering it:
+  // JobRecord::lost_runs) before it fails instead of rendering again: a scene that crashes the renderer fails after
+  // this many retries, never in a loop.
   int crash_retries = 2;
+  // Where renders run (render_work.h): the daemon's are supervised worker processes (WorkerProcessRunner). Unset: on
+  // the run's own thread, with the scheduler's pool (InProcessRunner).
+  std::shared_ptr<RenderRunner> runner;
   // This daemon's name among the nodes sharing the store, written on the lines it adds to job logs; empty for a
   // daemon alone.
   std::string node;
@@ -139,19 +142,22 @@ class Scheduler {
  private:
   class RenderSlot;
   struct Run;
+  class RunReport;
   void dispatch_loop();
   // A claimed run, on its own thread: a render (render_run), a split job's merge, or the failure of a job lost too
   // often; then finish_run().
   void run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord& record);
   void finish_run(RenderSlot& slot);
-  // restore (load_run, resume_from_checkpoint) → render (render_passes, publish_pass after each pass) → the end
-  // (end_interrupted, end_unit or end_job). A scene the renderer refuses fails the job.
+  // A render, wherever the runner runs it (render_work.h): load, restore (resumed), passes (publish_pass after
+  // each), then its end (end_rendered, end_interrupted, record_failure or end_crashed), all reported through a
+  // RunReport on the run's thread.
   void render_run(RenderSlot& slot, const JobRecord& record);
+  void end_run_reported(Run& run, const RunEnd& end);
   void record_warnings(const std::string& id, const std::vector<std::string>& warnings);
   void log_start(const Run& run);
-  StopReason render_passes(Run& run);
-  // A pass ended: its checkpoint, its preview, its progress (in memory, in the store, to the hooks).
-  void publish_pass(Run& run, const RenderProgress& progress, const Film& film);
+  // A pass ended, its checkpoint and preview written (unless `write_error`): its progress, in memory, in the store
+  // and to the hooks.
+  void publish_pass(Run& run, const RenderProgress& progress, const std::string& write_error);
   bool still_ours_before_outputs(RenderSlot& slot);
   void end_interrupted(RenderSlot& slot, const JobRecord& record, uint32_t samples_done);
   // The lines a render stopped by a client's change (stop()) adds to the logs; it records nothing.
@@ -159,21 +165,21 @@ class Scheduler {
   // A render whose lease the store refused: it records nothing, and the job's files go if the job is gone.
   void end_taken_away(const std::string& id, uint32_t samples_done);
   void end_stopping(RenderSlot& slot, const std::string& id, uint32_t samples_done);
-  // A unit rendered its range: its film kept, its end recorded, the split job's preview refined.
-  void end_unit(Run& run);
-  // A job rendered whole: its outputs staged, its end recorded, its outputs published.
-  void end_job(Run& run, StopReason reason);
+  // A unit rendered its range (its film kept): its end recorded, the split job's preview refined.
+  void end_unit(Run& run, const RunEnd& end);
+  // A job rendered whole (its outputs staged): its end recorded, its outputs published.
+  void end_job(Run& run, const RunEnd& end);
+  // The process rendering the run died (RunOutcome::kCrashed): the job is taken over from its last checkpoint, here
+  // or on another node, counting a lost run; past options_.crash_retries it fails, naming the crash.
+  void end_crashed(RenderSlot& slot, const JobRecord& record, const RunEnd& end);
   bool record_end(RenderSlot& slot, const std::function<bool()>& write);
   bool record_terminal(RenderSlot& slot, JobState to, double render_s, const std::string& stop_reason,
                        const std::string& error = "", const std::function<void()>& before = nullptr);
   bool record_failure(RenderSlot& slot, const std::string& message, double render_s, bool input_refused);
-  // What a run renders: the settings and outputs its record stores (render_settings.h), narrowed to a unit's sample
-  // range, and the scene its document describes (load_job_scene). Throws SceneError for a scene the renderer refuses,
-  // LoadStopped when the slot is asked to stop meanwhile.
-  RenderJob load_run(RenderSlot& slot, const JobRecord& record);
-  // Restores `session` from the run's checkpoint, if it has a usable one, and records the progress it holds.
-  void resume_from_checkpoint(RenderSlot& slot, const JobRecord& record, const RenderSettings& settings,
-                              uint64_t settings_hash, RenderSession& session);
+  // The run read its checkpoint (RunListener::resumed): the log says what it resumed from, and the progress it holds
+  // is recorded at once, not at the end of the next pass, so that a job resumed after a restart does not read 0
+  // samples done meanwhile.
+  void resumed(Run& run, const std::optional<RenderProgress>& restored, bool unusable);
   // Fails a job claimed after more lost runs than options_.crash_retries, naming them; it is not rendered again.
   void fail_lost_too_often(RenderSlot& slot, const JobRecord& record);
   void count_store_error();
@@ -201,6 +207,7 @@ class Scheduler {
   JobResults results_;
   ThreadPool& pool_;
   SchedulerOptions options_;
+  std::shared_ptr<RenderRunner> runner_;
   SchedulerHooks hooks_;
 
   mutable std::mutex mutex_;

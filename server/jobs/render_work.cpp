@@ -1,0 +1,286 @@
+#include "server/jobs/render_work.h"
+
+#include <chrono>
+#include <cstdio>
+#include <new>
+
+#include <nlohmann/json.hpp>
+
+#include "renderer/job.h"
+#include "renderer/output.h"
+#include "renderer/scene.h"
+#include "renderer/scene_error.h"
+#include "renderer/scene_loader.h"
+#include "server/jobs/checkpoint.h"
+#include "server/jobs/job_results.h"
+
+namespace tessera::server {
+
+using nlohmann::json;
+
+RenderRequest render_request(const JobRecord& record, int64_t epoch) {
+  RenderRequest r;
+  r.id = record.id;
+  r.unit = record.unit;
+  r.units = record.units;
+  r.epoch = epoch;
+  r.settings = record.settings;
+  r.outputs = record.outputs;
+  r.document = record.document;
+  r.unit_first_sample = record.unit_first_sample;
+  r.unit_samples = record.unit_samples;
+  r.unit_checkpoint_epoch = record.unit_checkpoint_epoch;
+  return r;
+}
+
+json render_request_to_json(const RenderRequest& r) {
+  return {{"id", r.id},
+          {"unit", r.unit},
+          {"units", r.units},
+          {"epoch", r.epoch},
+          {"settings", r.settings},
+          {"outputs", r.outputs},
+          {"document", r.document},
+          {"unit_first_sample", r.unit_first_sample},
+          {"unit_samples", r.unit_samples},
+          {"unit_checkpoint_epoch", r.unit_checkpoint_epoch}};
+}
+
+RenderRequest render_request_from_json(const json& j) {
+  RenderRequest r;
+  j.at("id").get_to(r.id);
+  j.at("unit").get_to(r.unit);
+  j.at("units").get_to(r.units);
+  j.at("epoch").get_to(r.epoch);
+  j.at("settings").get_to(r.settings);
+  j.at("outputs").get_to(r.outputs);
+  j.at("document").get_to(r.document);
+  j.at("unit_first_sample").get_to(r.unit_first_sample);
+  j.at("unit_samples").get_to(r.unit_samples);
+  j.at("unit_checkpoint_epoch").get_to(r.unit_checkpoint_epoch);
+  return r;
+}
+
+RenderSettings run_settings(const RenderRequest& request) {
+  RenderSettings s = render_settings_from_text(request.settings);
+  if (request.unit >= 0) {
+    // One unit: its range of the job's sample indices (work_units.h).
+    s.first_sample += request.unit_first_sample;
+    s.job_spp = s.spp;  // every unit's rays have the whole job's texture footprints
+    s.spp = request.unit_samples;
+  }
+  return s;
+}
+
+uint64_t run_settings_hash(const RenderRequest& request) {
+  return request.unit >= 0 ? unit_settings_hash(request.settings, request.unit) : fnv1a64(request.settings);
+}
+
+// Doubles are written with the digits that read back to the same value (nlohmann::json), so that a worker's
+// progress reaches the store as the render measured it.
+json render_progress_to_json(const RenderProgress& p) {
+  return {{"pass", p.pass},
+          {"samples_done", p.samples_done},
+          {"samples_total", p.samples_total},
+          {"elapsed_s", p.elapsed_s},
+          {"eta_s", p.eta_s},
+          {"samples_per_s", p.samples_per_s}};
+}
+
+RenderProgress render_progress_from_json(const json& j) {
+  RenderProgress p;
+  j.at("pass").get_to(p.pass);
+  j.at("samples_done").get_to(p.samples_done);
+  j.at("samples_total").get_to(p.samples_total);
+  j.at("elapsed_s").get_to(p.elapsed_s);
+  j.at("eta_s").get_to(p.eta_s);
+  j.at("samples_per_s").get_to(p.samples_per_s);
+  return p;
+}
+
+bool RunControl::stop_requested() const {
+  std::lock_guard lock(mutex_);
+  return stop_;
+}
+
+bool RunControl::cancel_requested() const {
+  std::lock_guard lock(mutex_);
+  return cancel_;
+}
+
+void RunControl::request(bool cancel) {
+  std::lock_guard lock(mutex_);
+  (cancel ? cancel_ : stop_) = true;
+  if (deliver_) deliver_(cancel);
+}
+
+RunControl::Attachment RunControl::attach(std::function<void(bool cancel)> deliver) {
+  std::lock_guard lock(mutex_);
+  deliver_ = std::move(deliver);
+  if (stop_) deliver_(false);
+  if (cancel_) deliver_(true);
+  return Attachment(this);
+}
+
+RunControl::Attachment::~Attachment() {
+  if (!control_) return;
+  std::lock_guard lock(control_->mutex_);
+  control_->deliver_ = nullptr;
+}
+
+const char* run_outcome_name(RunOutcome outcome) {
+  switch (outcome) {
+    case RunOutcome::kRendered:
+      return "rendered";
+    case RunOutcome::kInterrupted:
+      return "interrupted";
+    case RunOutcome::kFailed:
+      return "failed";
+    case RunOutcome::kCrashed:
+      return "crashed";
+  }
+  return "failed";
+}
+
+std::optional<RunOutcome> run_outcome_from_name(std::string_view name) {
+  for (RunOutcome o : {RunOutcome::kRendered, RunOutcome::kInterrupted, RunOutcome::kFailed, RunOutcome::kCrashed})
+    if (name == run_outcome_name(o)) return o;
+  return std::nullopt;
+}
+
+std::string describe_bytes(uint64_t bytes) {
+  char buf[64];
+  if (bytes >= (1ull << 30))
+    std::snprintf(buf, sizeof buf, "%.3g GiB", static_cast<double>(bytes) / static_cast<double>(1ull << 30));
+  else
+    std::snprintf(buf, sizeof buf, "%.3g MiB", static_cast<double>(bytes) / static_cast<double>(1ull << 20));
+  return buf;
+}
+
+namespace {
+
+// The run's checkpoint, restored into `session` when it is one of these settings; what it held, to `listener`.
+void resume(const RenderRequest& request, const JobFiles& files, const RenderSettings& settings, uint64_t hash,
+            RenderSession& session, RunListener& listener) {
+  std::optional<std::string> checkpoint;
+  if (request.unit < 0)
+    checkpoint = files.read(request.id, JobFile::kCheckpoint);
+  else if (request.unit_checkpoint_epoch > 0)
+    checkpoint = files.read_unit(request.id, request.unit, request.unit_checkpoint_epoch);
+  auto cp = checkpoint ? decode_checkpoint(*checkpoint, settings.width, settings.height, hash) : std::nullopt;
+  if (!cp) {
+    listener.resumed(std::nullopt, checkpoint.has_value());
+    return;
+  }
+  session.restore(std::move(cp->film), cp->passes, cp->elapsed_s);
+  listener.resumed(session.progress(), false);
+}
+
+// A pass's checkpoint (a unit's, named by its run's epoch: the store's record of the run's progress makes it the
+// unit's) and, of a job rendered whole, its preview. A split job's preview is the merge of its done units.
+void write_pass(const RenderRequest& request, const JobFiles& files, const OutputPipeline& outputs,
+                const RenderProgress& p, const Film& film, const RenderSettings& settings, uint64_t hash) {
+  const std::string checkpoint = encode_checkpoint(film, p.pass, p.elapsed_s, hash, settings);
+  if (request.unit >= 0) {
+    files.write_unit(request.id, request.unit, request.epoch, checkpoint);
+  } else {
+    files.write(request.id, JobFile::kCheckpoint, checkpoint);
+    files.write(request.id, JobFile::kPreviewPng, outputs.preview_png(film));
+  }
+}
+
+RunEnd failed(std::string message, bool input_refused, const RenderProgress& progress) {
+  RunEnd end;
+  end.outcome = RunOutcome::kFailed;
+  end.error = std::move(message);
+  end.input_refused = input_refused;
+  end.progress = progress;
+  return end;
+}
+
+}  // namespace
+
+void perform_render(const RenderRequest& request, const RenderEnvironment& env, RunControl& control,
+                    RunListener& listener) {
+  RenderProgress progress;
+  RunEnd end;
+  try {
+    const RenderSettings settings = run_settings(request);
+    const uint64_t hash = run_settings_hash(request);
+    std::stop_source load_stop;
+    std::shared_ptr<const Scene> scene;
+    {
+      // Any request ends a load: it has no pass to finish.
+      auto attached = control.attach([&](bool) { load_stop.request_stop(); });
+      SceneLoadOptions options;
+      options.resolve_asset = env.resolve_asset;
+      options.max_gltf_instances = env.max_gltf_instances;
+      options.stop = load_stop.get_token();
+      const auto load_start = std::chrono::steady_clock::now();
+      scene = load_job_scene(json::parse(request.document), settings, options);
+      listener.loaded(scene->warnings,
+                      std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count());
+    }
+    RenderSession session(scene, settings, *env.pool);
+    resume(request, *env.files, settings, hash, session, listener);
+    const OutputPipeline outputs(settings, output_spec_from_text(request.outputs));
+    uint32_t checkpointed = session.progress().samples_done;
+    StopReason reason;
+    {
+      auto attached = control.attach([&](bool cancel) {
+        if (cancel)
+          session.cancel();
+        else
+          session.stop();
+      });
+      reason = session.run([&](const RenderProgress& p, const Film& film) {
+        std::string error;
+        try {
+          write_pass(request, *env.files, outputs, p, film, settings, hash);
+          checkpointed = p.samples_done;
+        } catch (const std::exception& e) {
+          // A missed checkpoint or preview (a full disk) is not worth the render: the last good checkpoint stays,
+          // and the next pass writes both again.
+          error = e.what();
+        }
+        listener.pass(p, error);
+      });
+    }
+    progress = session.progress();
+    end.progress = progress;
+    end.reason = reason;
+    if (reason == StopReason::kStopped || reason == StopReason::kCancelled) {
+      end.outcome = RunOutcome::kInterrupted;
+    } else if (request.unit >= 0) {
+      // A unit's film is its last checkpoint; written again if the last pass's could not be.
+      if (checkpointed != progress.samples_done)
+        env.files->write_unit(request.id, request.unit, request.epoch,
+                              encode_checkpoint(session.film(), progress.pass, progress.elapsed_s, hash, settings));
+      end.outcome = RunOutcome::kRendered;
+    } else {
+      // The outputs, staged under the run's epoch: published only once the store takes the run's end.
+      end.written = stage_outputs(*env.files, request.id, outputs, outputs.image(session.film()), request.epoch);
+      end.outcome = RunOutcome::kRendered;
+    }
+  } catch (const LoadStopped&) {
+    end = RunEnd{};
+    end.outcome = RunOutcome::kInterrupted;
+    end.reason = StopReason::kCancelled;
+  } catch (const std::bad_alloc&) {
+    end = failed(env.memory_limit ? "the render needs more than the " + describe_bytes(env.memory_limit) +
+                                        " memory limit of a render worker (--worker-memory)"
+                                  : "the render needs more memory than this machine has",
+                 true, progress);
+  } catch (const std::exception& e) {
+    std::string message = e.what();
+    // The renderer refused the scene or an asset it names: the input is at fault, not this run.
+    const auto* se = dynamic_cast<const SceneError*>(&e);
+    if (se && !se->pointer().empty()) message = se->pointer() + ": " + message;
+    end = failed(message, se != nullptr, progress);
+  } catch (...) {
+    end = failed("unknown error", false, progress);
+  }
+  listener.ended(end);
+}
+
+}  // namespace tessera::server

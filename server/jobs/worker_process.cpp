@@ -1,0 +1,381 @@
+#include "server/jobs/worker_process.h"
+
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <iostream>
+#include <mutex>
+#include <optional>
+#include <string_view>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "renderer/thread_pool.h"
+#include "server/base/log.h"
+#include "server/files/assets.h"
+#include "server/jobs/worker_sandbox.h"
+
+extern char** environ;
+
+namespace tessera::server {
+
+using nlohmann::json;
+
+namespace {
+
+constexpr int kReportFd = 3;  // the worker's descriptor for its reports
+// A report longer than this is not one of the worker's (warnings are capped: scene.h kMaxWarnings).
+constexpr size_t kMaxReportLine = 16u << 20;
+
+// Writes all of `bytes`, retrying short writes; false when the other end is gone.
+bool write_all(int fd, std::string_view bytes) {
+  while (!bytes.empty()) {
+    const ssize_t n = ::write(fd, bytes.data(), bytes.size());
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) return false;
+    bytes.remove_prefix(static_cast<size_t>(n));
+  }
+  return true;
+}
+
+std::string signal_name(int sig) {
+  const char* abbrev = sigabbrev_np(sig);
+  return abbrev ? std::string("SIG") + abbrev : "signal " + std::to_string(sig);
+}
+
+// The two pipes of a worker, closed when they go.
+struct Fd {
+  int fd = -1;
+  Fd() = default;
+  explicit Fd(int f) : fd(f) {}
+  Fd(const Fd&) = delete;
+  Fd& operator=(const Fd&) = delete;
+  ~Fd() { reset(); }
+  void reset() {
+    if (fd >= 0) ::close(fd);
+    fd = -1;
+  }
+};
+
+bool make_pipe(Fd& read_end, Fd& write_end) {
+  int fds[2];
+  if (pipe2(fds, O_CLOEXEC) != 0) return false;
+  read_end.fd = fds[0];
+  write_end.fd = fds[1];
+  return true;
+}
+
+// The daemon's side of one worker: the reports it reads, dispatched to the listener; the end it heard.
+class ReportReader {
+ public:
+  explicit ReportReader(RunListener& listener) : listener_(listener) {}
+
+  // Takes a line of the worker's; false for one that is not a report (the worker is then not to be trusted).
+  bool take(std::string_view line) {
+    try {
+      const json j = json::parse(line);
+      if (auto it = j.find("pass"); it != j.end()) {
+        last_progress_ = render_progress_from_json(it->at("progress"));
+        listener_.pass(last_progress_, it->at("write_error").get<std::string>());
+      } else if (auto it = j.find("loaded"); it != j.end()) {
+        listener_.loaded(it->at("warnings").get<std::vector<std::string>>(), it->at("load_s").get<double>());
+      } else if (auto it = j.find("resumed"); it != j.end()) {
+        std::optional<RenderProgress> restored;
+        if (!it->at("progress").is_null()) restored = last_progress_ = render_progress_from_json(it->at("progress"));
+        listener_.resumed(restored, it->at("unusable").get<bool>());
+      } else if (auto it = j.find("ended"); it != j.end()) {
+        RunEnd end;
+        const auto outcome = run_outcome_from_name(it->at("outcome").get<std::string>());
+        if (!outcome) return false;
+        end.outcome = *outcome;
+        end.reason = stop_reason_from_name(it->at("reason").get<std::string>()).value_or(StopReason::kSamples);
+        end.progress = render_progress_from_json(it->at("progress"));
+        it->at("written").get_to(end.written);
+        it->at("error").get_to(end.error);
+        it->at("input_refused").get_to(end.input_refused);
+        end_ = std::move(end);
+      } else {
+        return false;
+      }
+      return true;
+    } catch (const json::exception&) {
+      return false;
+    }
+  }
+  const std::optional<RunEnd>& end() const { return end_; }
+  const RenderProgress& last_progress() const { return last_progress_; }
+
+ private:
+  RunListener& listener_;
+  RenderProgress last_progress_;
+  std::optional<RunEnd> end_;
+};
+
+RunEnd crashed(std::string error, const RenderProgress& progress) {
+  RunEnd end;
+  end.outcome = RunOutcome::kCrashed;
+  end.error = std::move(error);
+  end.progress = progress;
+  return end;
+}
+
+}  // namespace
+
+std::string describe_worker_exit(int status) {
+  if (WIFSIGNALED(status)) {
+    const int sig = WTERMSIG(status);
+    const std::string name = signal_name(sig);
+    if (sig == SIGKILL)
+      return "the render worker was killed (" + name + "), by an operator or by the system when it ran out of memory";
+    if (sig == SIGXCPU) return "the render worker ran out of CPU time (" + name + ")";
+    return "the renderer crashed on this scene (" + name + ")";
+  }
+  if (WIFEXITED(status)) return "the render worker exited with status " + std::to_string(WEXITSTATUS(status));
+  return "the render worker ended (wait status " + std::to_string(status) + ")";
+}
+
+void WorkerProcessRunner::run(const RenderRequest& request, RunControl& control, RunListener& listener) {
+  Fd to_worker_read, to_worker, from_worker, from_worker_write;
+  if (!make_pipe(to_worker_read, to_worker) || !make_pipe(from_worker, from_worker_write)) {
+    listener.ended(crashed(std::string("cannot start a render worker: ") + std::strerror(errno), {}));
+    return;
+  }
+  // The worker: its standard input and report descriptor are the pipes' ends, every other descriptor of the daemon
+  // (its listening socket, its store) closed; its own process group, so that a terminal's Ctrl-C reaches the daemon
+  // alone (which stops its renders in order); no signal blocked (the daemon blocks SIGTERM in every thread).
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_adddup2(&actions, to_worker_read.fd, 0);
+  posix_spawn_file_actions_adddup2(&actions, from_worker_write.fd, kReportFd);
+  posix_spawn_file_actions_addclosefrom_np(&actions, kReportFd + 1);
+  posix_spawnattr_t attr;
+  posix_spawnattr_init(&attr);
+  sigset_t none, defaults;
+  sigemptyset(&none);
+  sigemptyset(&defaults);
+  for (int sig : {SIGPIPE, SIGINT, SIGTERM, SIGHUP}) sigaddset(&defaults, sig);
+  posix_spawnattr_setsigmask(&attr, &none);
+  posix_spawnattr_setsigdefault(&attr, &defaults);
+  posix_spawnattr_setpgroup(&attr, 0);
+  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF | POSIX_SPAWN_SETPGROUP);
+  const std::string program = options_.executable.string();
+  char arg0[] = "tesserad";
+  char arg1[] = "--render-worker";
+  char* argv[] = {arg0, arg1, nullptr};
+  pid_t pid = -1;
+  const int spawned = posix_spawn(&pid, program.c_str(), &actions, &attr, argv, environ);
+  posix_spawn_file_actions_destroy(&actions);
+  posix_spawnattr_destroy(&attr);
+  to_worker_read.reset();
+  from_worker_write.reset();
+  if (spawned != 0) {
+    listener.ended(crashed("cannot start a render worker (" + program + "): " + std::strerror(spawned), {}));
+    return;
+  }
+
+  const json environment = {{"data_dir", options_.data_dir.string()},
+                            {"threads", options_.threads},
+                            {"max_gltf_instances", options_.max_gltf_instances},
+                            {"memory_limit", options_.memory_limit},
+                            {"open_files", options_.open_files},
+                            {"daemon_pid", static_cast<int64_t>(getpid())}};
+  // A worker that dies at once leaves this write unread (EPIPE; SIGPIPE is ignored by the daemon): its exit says why.
+  write_all(to_worker.fd, json{{"worker", environment}, {"request", render_request_to_json(request)}}.dump() + "\n");
+  fcntl(to_worker.fd, F_SETFL, O_NONBLOCK);  // a request never waits for a worker that does not read
+
+  using Clock = std::chrono::steady_clock;
+  std::mutex requests_mutex;
+  std::optional<Clock::time_point> cancelled_at;
+  ReportReader reader(listener);
+  bool killed = false;
+  {
+    auto attached = control.attach([&](bool cancel) {
+      std::lock_guard lock(requests_mutex);
+      if (to_worker.fd >= 0) write_all(to_worker.fd, cancel ? "cancel\n" : "stop\n");
+      if (cancel && !cancelled_at) cancelled_at = Clock::now();
+    });
+    std::string buffer;
+    char chunk[65536];
+    for (;;) {
+      pollfd p{from_worker.fd, POLLIN, 0};
+      const int ready = ::poll(&p, 1, 100);
+      if (ready < 0 && errno != EINTR) break;
+      if (ready > 0) {
+        const ssize_t n = ::read(from_worker.fd, chunk, sizeof chunk);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) break;  // the worker closed its end: it exited
+        buffer.append(chunk, static_cast<size_t>(n));
+        size_t start = 0;
+        for (size_t nl; (nl = buffer.find('\n', start)) != std::string::npos; start = nl + 1) {
+          if (!reader.take(std::string_view(buffer).substr(start, nl - start))) {
+            log(LogLevel::kError, "a render worker wrote what is not a report; it is stopped",
+                {{"job", request.id}, {"pid", pid}});
+            ::kill(pid, SIGKILL);
+          }
+        }
+        buffer.erase(0, start);
+        if (buffer.size() > kMaxReportLine) {
+          log(LogLevel::kError, "a render worker's report is too long; it is stopped", {{"job", request.id}});
+          ::kill(pid, SIGKILL);
+          buffer.clear();
+        }
+      }
+      std::lock_guard lock(requests_mutex);
+      if (cancelled_at && !killed && Clock::now() - *cancelled_at > options_.kill_grace) {
+        log(LogLevel::kWarn, "a render worker did not stop when cancelled; it is killed",
+            {{"job", request.id}, {"pid", pid}});
+        ::kill(pid, SIGKILL);
+        killed = true;
+      }
+    }
+    std::lock_guard lock(requests_mutex);
+    to_worker.reset();  // end of input: a worker still running cancels its render and exits
+  }
+  // Reaped before the run ends, so that a run's slot never outlives its worker: no more workers than --max-jobs.
+  int status = 0;
+  const auto reap_deadline = Clock::now() + options_.kill_grace;
+  for (;;) {
+    const pid_t r = ::waitpid(pid, &status, WNOHANG);
+    if (r == pid || (r < 0 && errno != EINTR)) break;
+    if (r == 0 && Clock::now() > reap_deadline && !killed) {
+      ::kill(pid, SIGKILL);
+      killed = true;
+    }
+    if (r == 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  if (reader.end()) {
+    // It reported its end (its outputs are written): how it exited after does not change that.
+    listener.ended(*reader.end());
+    return;
+  }
+  if (killed && control.cancel_requested()) {
+    // Killed because it did not stop when cancelled: an interrupted run, as the cancel asked.
+    RunEnd end;
+    end.outcome = RunOutcome::kInterrupted;
+    end.reason = StopReason::kCancelled;
+    end.progress = reader.last_progress();
+    listener.ended(end);
+    return;
+  }
+  listener.ended(crashed(describe_worker_exit(status), reader.last_progress()));
+}
+
+namespace {
+
+// The worker's reports, one line each on descriptor 3.
+class ReportWriter final : public RunListener {
+ public:
+  void loaded(const std::vector<std::string>& warnings, double load_s) override {
+    send({{"loaded", {{"warnings", warnings}, {"load_s", load_s}}}});
+  }
+  void resumed(const std::optional<RenderProgress>& restored, bool unusable) override {
+    send({{"resumed",
+           {{"progress", restored ? render_progress_to_json(*restored) : json(nullptr)}, {"unusable", unusable}}}});
+  }
+  void pass(const RenderProgress& progress, const std::string& write_error) override {
+    send({{"pass", {{"progress", render_progress_to_json(progress)}, {"write_error", write_error}}}});
+  }
+  void ended(const RunEnd& end) override {
+    send({{"ended",
+           {{"outcome", run_outcome_name(end.outcome)},
+            {"reason", stop_reason_name(end.reason)},
+            {"progress", render_progress_to_json(end.progress)},
+            {"written", end.written},
+            {"error", end.error},
+            {"input_refused", end.input_refused}}}});
+  }
+
+ private:
+  static void send(const json& report) {
+    // A daemon that is gone reads no more: the worker then ends at the next stop it hears (its input closed).
+    write_all(kReportFd, report.dump() + "\n");
+  }
+};
+
+}  // namespace
+
+int render_worker_main() {
+  // The worker dies with the daemon: at its death (PR_SET_PDEATHSIG), and if it is gone already (the worker was
+  // adopted), at once. Its input closing also stops the render (below).
+  prctl(PR_SET_PDEATHSIG, SIGKILL);
+  std::string first;
+  if (!std::getline(std::cin, first)) return 2;
+  json environment;
+  RenderRequest request;
+  try {
+    const json j = json::parse(first);
+    environment = j.at("worker");
+    request = render_request_from_json(j.at("request"));
+    if (getppid() != environment.at("daemon_pid").get<pid_t>()) return 2;
+  } catch (const json::exception& e) {
+    std::fprintf(stderr, "tesserad --render-worker: the request does not read: %s\n", e.what());
+    return 2;
+  }
+  const std::filesystem::path data_dir = environment.at("data_dir").get<std::string>();
+  const uint64_t memory_limit = environment.at("memory_limit").get<uint64_t>();
+
+  // Confined before anything of the scene is read.
+  SandboxLimits limits;
+  limits.address_space = memory_limit;
+  limits.open_files = environment.at("open_files").get<uint64_t>();
+  for (const std::string& failed : apply_limits(limits))
+    log(LogLevel::kWarn, "a render worker's limit could not be set", {{"job", request.id}, {"error", failed}});
+  try {
+    deny_network_and_exec();
+  } catch (const std::exception& e) {
+    log(LogLevel::kWarn, "a render worker runs without its system-call filter",
+        {{"job", request.id}, {"error", e.what()}});
+  }
+  if (std::string why; !confine_writes(data_dir, &why))
+    log(LogLevel::kWarn, "a render worker may write outside the data directory", {{"job", request.id}, {"why", why}});
+
+  ReportWriter writer;
+  try {
+    const int threads = std::max(1, environment.at("threads").get<int>());
+    ThreadPool pool(threads);
+    limit_parallel_helpers(pool.size() - 1);
+    DirectoryJobFiles files(data_dir);
+    DirectoryAssetStore assets(data_dir, {}, false);
+    RenderEnvironment env;
+    env.files = &files;
+    env.pool = &pool;
+    env.resolve_asset = asset_resolver(assets);
+    env.max_gltf_instances = environment.at("max_gltf_instances").get<uint64_t>();
+    env.memory_limit = memory_limit;
+
+    // The daemon's requests; the end of its input (it closed the pipe, or died) cancels the render. The control
+    // lives as long as the process: the thread reading them is never joined.
+    auto* control = new RunControl;
+    std::thread([control] {
+      std::string line;
+      while (std::getline(std::cin, line)) {
+        if (line == "stop") control->stop();
+        if (line == "cancel") control->cancel();
+      }
+      control->cancel();
+    }).detach();
+    perform_render(request, env, *control, writer);
+  } catch (const std::exception& e) {
+    // The worker could not set itself up (its threads, under an address-space limit too low for their stacks): the
+    // daemon's configuration is at fault, not the scene.
+    RunEnd end;
+    end.outcome = RunOutcome::kFailed;
+    end.error =
+        std::string("the render worker cannot start: ") + e.what() +
+        (memory_limit ? " (is the " + describe_bytes(memory_limit) + " limit of --worker-memory too low?)" : "");
+    writer.ended(end);
+  }
+  // The reports are written (unbuffered); nothing else is worth the time of destructors racing the reader thread.
+  std::fflush(stderr);
+  std::_Exit(0);
+}
+
+}  // namespace tessera::server
