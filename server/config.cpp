@@ -256,6 +256,10 @@ const std::vector<Option>& options() {
          c.worker_memory = *value;
          return "";
        }},
+      {"--asset-check-cpu-s", "TESSERA_ASSET_CHECK_CPU_S", "S",
+       "CPU seconds the check of an uploaded asset may take (in a worker process); past it the upload is 422 "
+       "(default 120)",
+       integer(&Config::asset_check_cpu_s, 1, 86400)},
       {"--max-work", "TESSERA_MAX_WORK", "N",
        "largest width*height*spp*max_depth of a job (max_depth + max_volume_depth where its media scatter), 422 above "
        "(0: no limit)",

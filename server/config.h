@@ -43,6 +43,7 @@ struct Config {
   int crash_retries = 2;         // lost runs of a job (its renderer died while rendering it) before it fails
   // A render worker's address space (RLIMIT_AS), in bytes; nothing: the machine's physical memory; 0: no limit.
   std::optional<uint64_t> worker_memory;
+  uint64_t asset_check_cpu_s = 120;         // CPU seconds an upload's check may take in its worker; past it: 422
   double max_work = 0;                      // width x height x spp x max_depth; 0: no limit; above it 422
   size_t max_film_bytes = size_t{8} << 30;  // a job's film with its passes; 0: no limit; above it 422
   uint64_t max_gltf_instances = 1'000'000;  // node instances of a glTF (paths through its hierarchy); above: 422

@@ -40,6 +40,12 @@ namespace {
 
 using namespace tessera::server;
 
+// A worker's address space: --worker-memory, or the machine's physical memory.
+uint64_t worker_memory_limit(const Config& config) {
+  return config.worker_memory.value_or(static_cast<uint64_t>(sysconf(_SC_PHYS_PAGES)) *
+                                       static_cast<uint64_t>(sysconf(_SC_PAGESIZE)));
+}
+
 int run(const Config& config) {
   // Blocks of 1 MiB and more (request bodies, documents parsed from them) are mapped on their own and unmapped when
   // freed. glibc's default threshold rises with every large block freed, up to 32 MiB, after which such blocks come
@@ -103,6 +109,16 @@ int run(const Config& config) {
   AssetCheckOptions asset_check;
   asset_check.max_gltf_instances = config.max_gltf_instances;
   asset_check.stop = stopping.get_token();
+  // Uploads are checked in a worker process too: an asset that crashes the loader is a 422, not the daemon's end.
+  AssetCheckWorker check_worker;
+  check_worker.data_dir = std::filesystem::absolute(data_dir);
+  check_worker.memory_limit = worker_memory_limit(config);
+  check_worker.cpu_seconds = config.asset_check_cpu_s;
+  check_worker.max_gltf_instances = config.max_gltf_instances;
+  asset_check.load = [check_worker, stop = asset_check.stop](const nlohmann::json& scene,
+                                                             const std::filesystem::path& file) {
+    check_asset_in_worker(check_worker, scene, file, stop);
+  };
   std::unique_ptr<AssetStore> assets = std::make_unique<DirectoryAssetStore>(data_dir, asset_check);
   // On a shared store, what changes on one node reaches the others as it happens: a dedicated connection LISTENs for
   // the jobs' changes (a render cancelled elsewhere stops at once) and the events clients stream, which are rows any
@@ -134,8 +150,7 @@ int run(const Config& config) {
   worker.data_dir = std::filesystem::absolute(data_dir);
   worker.threads = pool.size();
   worker.max_gltf_instances = config.max_gltf_instances;
-  worker.memory_limit = config.worker_memory.value_or(static_cast<uint64_t>(sysconf(_SC_PHYS_PAGES)) *
-                                                      static_cast<uint64_t>(sysconf(_SC_PAGESIZE)));
+  worker.memory_limit = worker_memory_limit(config);
   scheduler_options.runner = std::make_shared<WorkerProcessRunner>(worker);
   Scheduler scheduler(*store, *files, pool, scheduler_options);
   JobServiceOptions service_options;
@@ -293,6 +308,7 @@ int run(const Config& config) {
 int main(int argc, char** argv) {
   // The daemon runs itself as each render's worker process (worker_process.h).
   if (argc == 2 && std::strcmp(argv[1], "--render-worker") == 0) return tessera::server::render_worker_main();
+  if (argc == 2 && std::strcmp(argv[1], "--check-worker") == 0) return tessera::server::asset_check_worker_main();
   ConfigResult parsed = parse_config(argc, argv, [](const char* name) { return std::getenv(name); });
   if (parsed.help) {
     std::fputs(config_usage().c_str(), stdout);

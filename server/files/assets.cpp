@@ -247,7 +247,10 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
                {"environment", {{"map", "upload"}}}};
     }
     try {
-      load_scene(scene, "", options);
+      if (check_.load)
+        check_.load(scene, temp / info.main);
+      else
+        load_scene(scene, "", options);
     } catch (const SceneError& e) {
       fs::remove_all(temp, ec);
       // The loader names files by their temp path; the client knows them by name.

@@ -71,6 +71,10 @@ class AssetStore {
 struct AssetCheckOptions {
   uint64_t max_gltf_instances = 1'000'000;  // SceneLoadOptions::max_gltf_instances
   std::stop_token stop;                     // the daemon stopping: a check under way ends, and the upload is 503
+  // Loads the upload's scene as the renderer will (its asset references naming `main_file`), without building it:
+  // throws SceneError for what the renderer refuses, LoadStopped once `stop` is asked. The daemon's runs in a worker
+  // process (check_asset_in_worker); unset: in this process.
+  std::function<void(const nlohmann::json& scene, const std::filesystem::path& main_file)> load;
 };
 
 // The assets in the data directory, <data>/assets/<id>/.

@@ -224,7 +224,9 @@ void perform_render(const RenderRequest& request, const RenderEnvironment& env, 
     RenderSession session(scene, settings, *env.pool);
     resume(request, *env.files, settings, hash, session, listener);
     const OutputPipeline outputs(settings, output_spec_from_text(request.outputs));
-    uint32_t checkpointed = session.progress().samples_done;
+    // The samples of this run's last checkpoint; nothing until it writes one (a unit's film must be written under
+    // the run's own epoch, even when it restored all its samples from another run's checkpoint).
+    std::optional<uint32_t> checkpointed;
     StopReason reason;
     {
       auto attached = control.attach([&](bool cancel) {

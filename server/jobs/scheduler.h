@@ -1,9 +1,11 @@
-// Runs jobs: claims queued jobs from the store up to `max_jobs` at once and renders each on its own thread, every
-// render sharing the process's one ThreadPool. After each pass a render writes its checkpoint (the film, atomically),
-// publishes its progress (in memory for status requests, and to the store) and a preview PNG; at the end it writes
-// the outputs the job asked for. A job claimed with a checkpoint (the daemon stopped or died mid-render, or it was
-// paused) resumes from it; sampling being deterministic, its image is the one an uninterrupted render gives. A job
-// that throws fails alone; the daemon stays up. A store that fails while a job's end is recorded is retried until it
+// Runs jobs: claims queued jobs from the store up to `max_jobs` at once and has each rendered by its runner
+// (render_work.h; in the daemon, a supervised worker process: worker_process.h), from a thread of its own that hears
+// the render's reports. After each pass a render writes its checkpoint (the film, atomically) and a preview PNG, and
+// the scheduler publishes its progress (in memory for status requests, and to the store); at the end the render stages
+// the outputs the job asked for, and the scheduler records the end and publishes them. A job claimed with a checkpoint
+// (the daemon stopped or died mid-render, or it was paused) resumes from it; sampling being deterministic, its image is
+// the one an uninterrupted render gives. A job that throws fails alone, and a worker that crashes is retried up to
+// `crash_retries` times: the daemon stays up. A store that fails while a job's end is recorded is retried until it
 // takes it (JobStoreError never fails a job): the store, not the job, is at fault. An end the store's state machine
 // refuses (the job was deleted, or changed elsewhere) is not recorded, and nothing is done as if it had been.
 //

@@ -8,6 +8,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <iostream>
@@ -18,6 +19,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "renderer/scene_error.h"
+#include "renderer/scene_loader.h"
 #include "renderer/thread_pool.h"
 #include "server/base/log.h"
 #include "server/files/assets.h"
@@ -119,6 +122,133 @@ class ReportReader {
   std::optional<RunEnd> end_;
 };
 
+// A child process of the daemon that speaks lines of JSON: the daemon writes to its standard input and reads its
+// descriptor 3. Killed and reaped, if still there, when it goes.
+class WorkerChild {
+ public:
+  WorkerChild() = default;
+  WorkerChild(const WorkerChild&) = delete;
+  WorkerChild& operator=(const WorkerChild&) = delete;
+  ~WorkerChild() {
+    if (pid_ > 0) {
+      kill();
+      reap(std::chrono::milliseconds(0));
+    }
+  }
+
+  // Starts `<executable> <mode>`: its standard input and descriptor 3 the pipes' ends, every other descriptor of the
+  // daemon (its listening socket, its store) closed; its own process group, so that a terminal's Ctrl-C reaches the
+  // daemon alone (which stops its renders in order); no signal blocked (the daemon blocks SIGTERM in every thread).
+  bool start(const std::filesystem::path& executable, const char* mode, std::string* error) {
+    Fd input_read, output_write;
+    if (!make_pipe(input_read, input_) || !make_pipe(output_, output_write)) {
+      *error = std::string("cannot make its pipes: ") + std::strerror(errno);
+      return false;
+    }
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_adddup2(&actions, input_read.fd, 0);
+    posix_spawn_file_actions_adddup2(&actions, output_write.fd, kReportFd);
+    posix_spawn_file_actions_addclosefrom_np(&actions, kReportFd + 1);
+    posix_spawnattr_t attr;
+    posix_spawnattr_init(&attr);
+    sigset_t none, defaults;
+    sigemptyset(&none);
+    sigemptyset(&defaults);
+    for (int sig : {SIGPIPE, SIGINT, SIGTERM, SIGHUP}) sigaddset(&defaults, sig);
+    posix_spawnattr_setsigmask(&attr, &none);
+    posix_spawnattr_setsigdefault(&attr, &defaults);
+    posix_spawnattr_setpgroup(&attr, 0);
+    posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF | POSIX_SPAWN_SETPGROUP);
+    const std::string program = executable.string();
+    std::string arg0 = "tesserad", arg1 = mode;
+    char* argv[] = {arg0.data(), arg1.data(), nullptr};
+    const int spawned = posix_spawn(&pid_, program.c_str(), &actions, &attr, argv, environ);
+    posix_spawn_file_actions_destroy(&actions);
+    posix_spawnattr_destroy(&attr);
+    if (spawned != 0) {
+      pid_ = -1;
+      *error = program + ": " + std::strerror(spawned);
+      return false;
+    }
+    return true;
+  }
+
+  pid_t pid() const { return pid_; }
+
+  // Writes `line` and a newline to its input; false when it is gone (EPIPE: the daemon ignores SIGPIPE). After the
+  // first line, a write never waits for a child that does not read.
+  bool send(std::string_view line) {
+    std::lock_guard lock(input_mutex_);
+    if (input_.fd < 0) return false;
+    const bool sent = write_all(input_.fd, std::string(line) + "\n");
+    fcntl(input_.fd, F_SETFL, O_NONBLOCK);
+    return sent;
+  }
+  // End of input: the child ends what it does and exits.
+  void close_input() {
+    std::lock_guard lock(input_mutex_);
+    input_.reset();
+  }
+
+  // Hands each of its lines to `on_line` (false: not one of its reports, and the child is killed) until it closes its
+  // end, calling `on_tick` about every 100 ms meanwhile.
+  void read(const std::function<bool(std::string_view)>& on_line, const std::function<void()>& on_tick) {
+    std::string buffer;
+    char chunk[65536];
+    for (;;) {
+      pollfd p{output_.fd, POLLIN, 0};
+      const int ready = ::poll(&p, 1, 100);
+      if (ready < 0 && errno != EINTR) break;
+      if (ready > 0) {
+        const ssize_t n = ::read(output_.fd, chunk, sizeof chunk);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) break;  // the child closed its end: it exited
+        buffer.append(chunk, static_cast<size_t>(n));
+        size_t start = 0;
+        for (size_t nl; (nl = buffer.find('\n', start)) != std::string::npos; start = nl + 1)
+          if (!on_line(std::string_view(buffer).substr(start, nl - start))) {
+            log(LogLevel::kError, "a worker wrote what is not a report; it is stopped", {{"pid", pid_}});
+            kill();
+          }
+        buffer.erase(0, start);
+        if (buffer.size() > kMaxReportLine) {
+          log(LogLevel::kError, "a worker's report is too long; it is stopped", {{"pid", pid_}});
+          kill();
+          buffer.clear();
+        }
+      }
+      on_tick();
+    }
+  }
+
+  void kill() {
+    if (pid_ > 0 && !killed_) ::kill(pid_, SIGKILL);
+    killed_ = true;
+  }
+  bool killed() const { return killed_; }
+
+  // Waits for the child's exit, killing it when it is not gone within `grace`; its wait status.
+  int reap(std::chrono::milliseconds grace) {
+    int status = 0;
+    const auto deadline = std::chrono::steady_clock::now() + grace;
+    for (;;) {
+      const pid_t r = ::waitpid(pid_, &status, WNOHANG);
+      if (r == pid_ || (r < 0 && errno != EINTR)) break;
+      if (r == 0 && std::chrono::steady_clock::now() > deadline) kill();
+      if (r == 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    pid_ = -1;
+    return status;
+  }
+
+ private:
+  pid_t pid_ = -1;
+  Fd input_, output_;
+  std::mutex input_mutex_;
+  std::atomic<bool> killed_ = false;
+};
+
 RunEnd crashed(std::string error, const RenderProgress& progress) {
   RunEnd end;
   end.outcome = RunOutcome::kCrashed;
@@ -143,120 +273,49 @@ std::string describe_worker_exit(int status) {
 }
 
 void WorkerProcessRunner::run(const RenderRequest& request, RunControl& control, RunListener& listener) {
-  Fd to_worker_read, to_worker, from_worker, from_worker_write;
-  if (!make_pipe(to_worker_read, to_worker) || !make_pipe(from_worker, from_worker_write)) {
-    listener.ended(crashed(std::string("cannot start a render worker: ") + std::strerror(errno), {}));
+  WorkerChild worker;
+  if (std::string error; !worker.start(options_.executable, "--render-worker", &error)) {
+    listener.ended(crashed("cannot start a render worker: " + error, {}));
     return;
   }
-  // The worker: its standard input and report descriptor are the pipes' ends, every other descriptor of the daemon
-  // (its listening socket, its store) closed; its own process group, so that a terminal's Ctrl-C reaches the daemon
-  // alone (which stops its renders in order); no signal blocked (the daemon blocks SIGTERM in every thread).
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_adddup2(&actions, to_worker_read.fd, 0);
-  posix_spawn_file_actions_adddup2(&actions, from_worker_write.fd, kReportFd);
-  posix_spawn_file_actions_addclosefrom_np(&actions, kReportFd + 1);
-  posix_spawnattr_t attr;
-  posix_spawnattr_init(&attr);
-  sigset_t none, defaults;
-  sigemptyset(&none);
-  sigemptyset(&defaults);
-  for (int sig : {SIGPIPE, SIGINT, SIGTERM, SIGHUP}) sigaddset(&defaults, sig);
-  posix_spawnattr_setsigmask(&attr, &none);
-  posix_spawnattr_setsigdefault(&attr, &defaults);
-  posix_spawnattr_setpgroup(&attr, 0);
-  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF | POSIX_SPAWN_SETPGROUP);
-  const std::string program = options_.executable.string();
-  char arg0[] = "tesserad";
-  char arg1[] = "--render-worker";
-  char* argv[] = {arg0, arg1, nullptr};
-  pid_t pid = -1;
-  const int spawned = posix_spawn(&pid, program.c_str(), &actions, &attr, argv, environ);
-  posix_spawn_file_actions_destroy(&actions);
-  posix_spawnattr_destroy(&attr);
-  to_worker_read.reset();
-  from_worker_write.reset();
-  if (spawned != 0) {
-    listener.ended(crashed("cannot start a render worker (" + program + "): " + std::strerror(spawned), {}));
-    return;
-  }
-
   const json environment = {{"data_dir", options_.data_dir.string()},
                             {"threads", options_.threads},
                             {"max_gltf_instances", options_.max_gltf_instances},
                             {"memory_limit", options_.memory_limit},
                             {"open_files", options_.open_files},
                             {"daemon_pid", static_cast<int64_t>(getpid())}};
-  // A worker that dies at once leaves this write unread (EPIPE; SIGPIPE is ignored by the daemon): its exit says why.
-  write_all(to_worker.fd, json{{"worker", environment}, {"request", render_request_to_json(request)}}.dump() + "\n");
-  fcntl(to_worker.fd, F_SETFL, O_NONBLOCK);  // a request never waits for a worker that does not read
+  // A worker that dies at once leaves this unread: its exit says why.
+  worker.send(json{{"worker", environment}, {"request", render_request_to_json(request)}}.dump());
 
   using Clock = std::chrono::steady_clock;
-  std::mutex requests_mutex;
+  std::mutex cancel_mutex;
   std::optional<Clock::time_point> cancelled_at;
   ReportReader reader(listener);
-  bool killed = false;
   {
     auto attached = control.attach([&](bool cancel) {
-      std::lock_guard lock(requests_mutex);
-      if (to_worker.fd >= 0) write_all(to_worker.fd, cancel ? "cancel\n" : "stop\n");
+      worker.send(cancel ? "cancel" : "stop");
+      std::lock_guard lock(cancel_mutex);
       if (cancel && !cancelled_at) cancelled_at = Clock::now();
     });
-    std::string buffer;
-    char chunk[65536];
-    for (;;) {
-      pollfd p{from_worker.fd, POLLIN, 0};
-      const int ready = ::poll(&p, 1, 100);
-      if (ready < 0 && errno != EINTR) break;
-      if (ready > 0) {
-        const ssize_t n = ::read(from_worker.fd, chunk, sizeof chunk);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) break;  // the worker closed its end: it exited
-        buffer.append(chunk, static_cast<size_t>(n));
-        size_t start = 0;
-        for (size_t nl; (nl = buffer.find('\n', start)) != std::string::npos; start = nl + 1) {
-          if (!reader.take(std::string_view(buffer).substr(start, nl - start))) {
-            log(LogLevel::kError, "a render worker wrote what is not a report; it is stopped",
-                {{"job", request.id}, {"pid", pid}});
-            ::kill(pid, SIGKILL);
-          }
-        }
-        buffer.erase(0, start);
-        if (buffer.size() > kMaxReportLine) {
-          log(LogLevel::kError, "a render worker's report is too long; it is stopped", {{"job", request.id}});
-          ::kill(pid, SIGKILL);
-          buffer.clear();
-        }
-      }
-      std::lock_guard lock(requests_mutex);
-      if (cancelled_at && !killed && Clock::now() - *cancelled_at > options_.kill_grace) {
-        log(LogLevel::kWarn, "a render worker did not stop when cancelled; it is killed",
-            {{"job", request.id}, {"pid", pid}});
-        ::kill(pid, SIGKILL);
-        killed = true;
-      }
-    }
-    std::lock_guard lock(requests_mutex);
-    to_worker.reset();  // end of input: a worker still running cancels its render and exits
+    worker.read([&](std::string_view line) { return reader.take(line); },
+                [&] {
+                  std::lock_guard lock(cancel_mutex);
+                  if (cancelled_at && !worker.killed() && Clock::now() - *cancelled_at > options_.kill_grace) {
+                    log(LogLevel::kWarn, "a render worker did not stop when cancelled; it is killed",
+                        {{"job", request.id}, {"pid", worker.pid()}});
+                    worker.kill();
+                  }
+                });
   }
+  worker.close_input();  // a worker still running cancels its render and exits
   // Reaped before the run ends, so that a run's slot never outlives its worker: no more workers than --max-jobs.
-  int status = 0;
-  const auto reap_deadline = Clock::now() + options_.kill_grace;
-  for (;;) {
-    const pid_t r = ::waitpid(pid, &status, WNOHANG);
-    if (r == pid || (r < 0 && errno != EINTR)) break;
-    if (r == 0 && Clock::now() > reap_deadline && !killed) {
-      ::kill(pid, SIGKILL);
-      killed = true;
-    }
-    if (r == 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
+  const int status = worker.reap(options_.kill_grace);
   if (reader.end()) {
     // It reported its end (its outputs are written): how it exited after does not change that.
     listener.ended(*reader.end());
     return;
   }
-  if (killed && control.cancel_requested()) {
+  if (worker.killed() && control.cancel_requested()) {
     // Killed because it did not stop when cancelled: an interrupted run, as the cancel asked.
     RunEnd end;
     end.outcome = RunOutcome::kInterrupted;
@@ -302,40 +361,61 @@ class ReportWriter final : public RunListener {
 
 }  // namespace
 
-int render_worker_main() {
-  // The worker dies with the daemon: at its death (PR_SET_PDEATHSIG), and if it is gone already (the worker was
-  // adopted), at once. Its input closing also stops the render (below).
+namespace {
+
+// The sandbox every worker enters before it reads anything of a client's (worker_sandbox.h). Failures are logged: a
+// kernel without Landlock or seccomp still renders.
+void enter_sandbox(const std::filesystem::path& writable, const SandboxLimits& limits, const std::string& job) {
+  for (const std::string& failed : apply_limits(limits))
+    log(LogLevel::kWarn, "a worker's limit could not be set", {{"job", job}, {"error", failed}});
+  try {
+    deny_network_and_exec();
+  } catch (const std::exception& e) {
+    log(LogLevel::kWarn, "a worker runs without its system-call filter", {{"job", job}, {"error", e.what()}});
+  }
+  if (std::string why; !confine_writes(writable, &why))
+    log(LogLevel::kWarn, "a worker may write outside the data directory", {{"job", job}, {"why", why}});
+}
+
+// The first line of a worker's input, {"worker": {...}, ...}, from its daemon; nothing (the worker exits) when it does
+// not read or its daemon is gone already.
+std::optional<json> read_assignment() {
+  // The worker dies with the daemon: at its death (PR_SET_PDEATHSIG), and at once if it is gone already (the worker
+  // was adopted).
   prctl(PR_SET_PDEATHSIG, SIGKILL);
   std::string first;
-  if (!std::getline(std::cin, first)) return 2;
+  if (!std::getline(std::cin, first)) return std::nullopt;
+  try {
+    json j = json::parse(first);
+    if (getppid() != j.at("worker").at("daemon_pid").get<pid_t>()) return std::nullopt;
+    return j;
+  } catch (const json::exception& e) {
+    std::fprintf(stderr, "tesserad: a worker's assignment does not read: %s\n", e.what());
+    return std::nullopt;
+  }
+}
+
+}  // namespace
+
+int render_worker_main() {
+  const std::optional<json> assignment = read_assignment();
+  if (!assignment) return 2;
   json environment;
   RenderRequest request;
   try {
-    const json j = json::parse(first);
-    environment = j.at("worker");
-    request = render_request_from_json(j.at("request"));
-    if (getppid() != environment.at("daemon_pid").get<pid_t>()) return 2;
+    environment = assignment->at("worker");
+    request = render_request_from_json(assignment->at("request"));
   } catch (const json::exception& e) {
     std::fprintf(stderr, "tesserad --render-worker: the request does not read: %s\n", e.what());
     return 2;
   }
   const std::filesystem::path data_dir = environment.at("data_dir").get<std::string>();
   const uint64_t memory_limit = environment.at("memory_limit").get<uint64_t>();
-
   // Confined before anything of the scene is read.
   SandboxLimits limits;
   limits.address_space = memory_limit;
   limits.open_files = environment.at("open_files").get<uint64_t>();
-  for (const std::string& failed : apply_limits(limits))
-    log(LogLevel::kWarn, "a render worker's limit could not be set", {{"job", request.id}, {"error", failed}});
-  try {
-    deny_network_and_exec();
-  } catch (const std::exception& e) {
-    log(LogLevel::kWarn, "a render worker runs without its system-call filter",
-        {{"job", request.id}, {"error", e.what()}});
-  }
-  if (std::string why; !confine_writes(data_dir, &why))
-    log(LogLevel::kWarn, "a render worker may write outside the data directory", {{"job", request.id}, {"why", why}});
+  enter_sandbox(data_dir, limits, request.id);
 
   ReportWriter writer;
   try {
@@ -374,6 +454,82 @@ int render_worker_main() {
     writer.ended(end);
   }
   // The reports are written (unbuffered); nothing else is worth the time of destructors racing the reader thread.
+  std::fflush(stderr);
+  std::_Exit(0);
+}
+
+void check_asset_in_worker(const AssetCheckWorker& options, const json& scene, const std::filesystem::path& main_file,
+                           std::stop_token stop) {
+  WorkerChild worker;
+  if (std::string error; !worker.start(options.executable, "--check-worker", &error))
+    throw std::runtime_error("cannot start an asset check worker: " + error);
+  const json environment = {{"data_dir", options.data_dir.string()},
+                            {"memory_limit", options.memory_limit},
+                            {"cpu_seconds", options.cpu_seconds},
+                            {"open_files", options.open_files},
+                            {"max_gltf_instances", options.max_gltf_instances},
+                            {"daemon_pid", static_cast<int64_t>(getpid())}};
+  worker.send(json{{"worker", environment}, {"scene", scene}, {"file", main_file.string()}}.dump());
+  std::optional<json> checked;
+  bool stopped = false;
+  worker.read(
+      [&](std::string_view line) {
+        const json j = json::parse(line, nullptr, false);
+        if (!j.is_object() || !j.contains("checked")) return false;
+        checked = j["checked"];
+        return true;
+      },
+      [&] {
+        if (stop.stop_requested() && !stopped) {
+          stopped = true;
+          worker.kill();
+        }
+      });
+  worker.close_input();
+  const int status = worker.reap(std::chrono::milliseconds(5000));
+  if (stopped) throw LoadStopped();
+  if (checked) {
+    const std::string error = checked->value("error", "");
+    if (error.empty()) return;
+    throw SceneError(checked->value("pointer", ""), error);
+  }
+  if (WIFSIGNALED(status) && (WTERMSIG(status) == SIGXCPU || WTERMSIG(status) == SIGKILL))
+    throw SceneError("", "checking it took more than " + std::to_string(options.cpu_seconds) +
+                             " s of CPU time, or was killed (" + signal_name(WTERMSIG(status)) + ")");
+  if (WIFSIGNALED(status))
+    throw SceneError("", "checking it crashed the loader (" + signal_name(WTERMSIG(status)) + ")");
+  throw SceneError("", "checking it ended the check worker (" + describe_worker_exit(status) + ")");
+}
+
+int asset_check_worker_main() {
+  const std::optional<json> assignment = read_assignment();
+  if (!assignment) return 2;
+  json result;
+  try {
+    const json& environment = assignment->at("worker");
+    SandboxLimits limits;
+    limits.address_space = environment.at("memory_limit").get<uint64_t>();
+    limits.cpu_seconds = environment.at("cpu_seconds").get<uint64_t>();
+    limits.open_files = environment.at("open_files").get<uint64_t>();
+    enter_sandbox(environment.at("data_dir").get<std::string>(), limits, "");
+    const std::filesystem::path file = assignment->at("file").get<std::string>();
+    SceneLoadOptions options;
+    options.build = false;
+    options.max_gltf_instances = environment.at("max_gltf_instances").get<uint64_t>();
+    options.resolve_asset = [&](const std::string&, const std::string&) { return file; };
+    try {
+      load_scene(assignment->at("scene"), "", options);
+      result = {{"error", ""}};
+    } catch (const SceneError& e) {
+      result = {{"error", e.what()}, {"pointer", e.pointer()}};
+    } catch (const std::bad_alloc&) {
+      result = {{"error", "checking it needs more than the " + describe_bytes(limits.address_space) +
+                              " memory limit of a worker (--worker-memory)"}};
+    }
+  } catch (const std::exception& e) {
+    result = {{"error", std::string("cannot be checked: ") + e.what()}};
+  }
+  write_all(kReportFd, json{{"checked", result}}.dump() + "\n");
   std::fflush(stderr);
   std::_Exit(0);
 }

@@ -3,6 +3,7 @@
 // process and never the daemon, as render managers run their renderers apart from themselves (Flamenco, OpenCue,
 // Deadline). The worker loads and renders (render_work.h) confined (worker_sandbox.h): an address-space limit, no
 // network, no programs, writes only beneath the data directory. The daemon keeps the API, the store and the leases.
+// An uploaded asset is checked the same way, in a worker of its own (check_asset_in_worker).
 //
 // The protocol, lines of JSON over two pipes:
 //   daemon -> worker (its standard input): {"worker": {...its environment...}, "request": RenderRequest}, then
@@ -17,7 +18,10 @@
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
+#include <stop_token>
 #include <string>
+
+#include <nlohmann/json_fwd.hpp>
 
 #include "server/jobs/render_work.h"
 
@@ -54,5 +58,22 @@ std::string describe_worker_exit(int wait_status);
 
 // `tesserad --render-worker`: the worker's side of the protocol above. Returns the process's exit status.
 int render_worker_main();
+
+// An uploaded asset checked in a worker process (`tesserad --check-worker`), under the same confinement and a limit
+// of CPU time too: `scene` (whose asset references all name `main_file`) loaded as the renderer will, without building
+// it (SceneLoadOptions::build false). Throws SceneError naming what is wrong, a crash of the loader or a limit
+// included, and LoadStopped once `stop` is asked (the worker is then killed).
+struct AssetCheckWorker {
+  std::filesystem::path executable = "/proc/self/exe";
+  std::filesystem::path data_dir;  // the only place it may write (it writes nothing)
+  uint64_t memory_limit = 0;
+  uint64_t cpu_seconds = 120;
+  uint64_t open_files = 1024;
+  uint64_t max_gltf_instances = 1'000'000;
+};
+void check_asset_in_worker(const AssetCheckWorker& worker, const nlohmann::json& scene,
+                           const std::filesystem::path& main_file, std::stop_token stop);
+// `tesserad --check-worker`: reads {"worker", "scene", "file"}, writes {"checked": {"error", "pointer"}}.
+int asset_check_worker_main();
 
 }  // namespace tessera::server

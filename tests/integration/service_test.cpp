@@ -1111,7 +1111,8 @@ TEST(ServiceCrash, KillLoopLosesNothingAndResumedRendersAreBitIdentical) {
       for (int i = 0; i < 2; ++i) ids.push_back(submit(*c, crash_job(static_cast<int>(ids.size()))));
     for (const auto& [id, png] : finished_png)
       EXPECT_EQ(c->Get("/v1/jobs/" + id + "/result.png")->body, png) << "round " << round;
-    std::this_thread::sleep_for(std::chrono::milliseconds(std::uniform_int_distribution<int>(150, 700)(rng)));
+    // Long enough, at times, for a render to start in its worker process and pass a checkpoint.
+    std::this_thread::sleep_for(std::chrono::milliseconds(std::uniform_int_distribution<int>(300, 2000)(rng)));
     for (const std::string& id : ids) {
       const json s = get_job(*c, id);
       if (s.value("state", "") == "succeeded" && !finished_png.count(id))
