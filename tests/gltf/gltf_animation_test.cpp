@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <numbers>
 #include <optional>
@@ -25,12 +26,16 @@ using test::GltfBuilder;
 using Interpolation = AnimationSampler::Interpolation;
 
 std::filesystem::path fixture_dir() {
+  // One folder per test process, removed when the process ends; TESSERA_GLTF_FIXTURES keeps them in a given folder
+  // (for the Khronos validator test, tests/gltf/CMakeLists.txt).
   static const struct Folder {
+    const char* keep = std::getenv("TESSERA_GLTF_FIXTURES");
     std::filesystem::path path =
-        std::filesystem::temp_directory_path() / ("tessera-gltf-animation-" + std::to_string(::getpid()));
+        keep ? std::filesystem::path(keep)
+             : std::filesystem::temp_directory_path() / ("tessera-gltf-animation-" + std::to_string(::getpid()));
     ~Folder() {
       std::error_code ec;
-      std::filesystem::remove_all(path, ec);
+      if (!keep) std::filesystem::remove_all(path, ec);
     }
   } folder;
   std::filesystem::create_directories(folder.path);
@@ -156,6 +161,8 @@ void channel(GltfBuilder& b, size_t a, int node, const std::string& path, const 
     b.doc["animations"].push_back({{"channels", json::array()}, {"samplers", json::array()}});
   json& anim = b.doc["animations"][a];
   const int input = b.floats(times, "SCALAR", 1), output = b.floats(values, type, comps);
+  b.doc["accessors"][input]["min"] = {times.front()};  // required of a sampler's input (glTF 2.0, 5.4)
+  b.doc["accessors"][input]["max"] = {times.back()};
   anim["samplers"].push_back({{"input", input}, {"output", output}, {"interpolation", interpolation}});
   anim["channels"].push_back({{"sampler", anim["samplers"].size() - 1}, {"target", {{"node", node}, {"path", path}}}});
 }
@@ -251,7 +258,9 @@ TEST(GltfAnimation, MorphWeightsAtAKeyframeMoveTheVertices) {
 TEST(GltfAnimation, ASkinnedMeshAtAKeyframeFollowsItsAnimatedJoints) {
   GltfBuilder b = one_triangle();
   // Vertex 0 follows joint 0 alone, vertex 1 joint 1 alone, vertex 2 half of each.
-  const int joints = b.floats({0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0}, "VEC4", 4);
+  const int joints = b.indices16({0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0});  // unsigned shorts, as VEC4
+  b.doc["accessors"][joints]["type"] = "VEC4";
+  b.doc["accessors"][joints]["count"] = 3;
   const int weights = b.floats({1, 0, 0, 0, 1, 0, 0, 0, 0.5, 0.5, 0, 0}, "VEC4", 4);
   b.doc["meshes"][0]["primitives"][0]["attributes"]["JOINTS_0"] = joints;
   b.doc["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"] = weights;
