@@ -1,5 +1,6 @@
-// The glTF scene graph: which nodes a scene holds, their transforms (glTF 2.0, 3.5), meshes placed and instanced
-// (shared meshes, EXT_mesh_gpu_instancing), skins posed by their joints, cameras and KHR_lights_punctual lights.
+// The glTF scene graph: which nodes a scene holds, their transforms in a pose (glTF 2.0, 3.5; as stated, or animated
+// by gltf_animation.cpp), meshes placed and instanced (shared meshes, EXT_mesh_gpu_instancing), skins posed by their
+// joints, cameras and KHR_lights_punctual lights.
 #include <cmath>
 #include <functional>
 
