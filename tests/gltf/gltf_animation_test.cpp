@@ -376,6 +376,56 @@ TEST(GltfAnimation, AnUnknownAnimationIsRefusedNamingTheField) {
   EXPECT_EQ(what, "accepted");
 }
 
+// Keyframes that break the specification are refused naming the animation's part, at the asset's pointer: times that
+// do not increase, an output whose count does not fit the input's (CUBICSPLINE needs three per keyframe), an unknown
+// interpolation, a node that does not exist. A channel on a node with a matrix (which the specification forbids) and
+// one animating the weights of a mesh without morph targets are warnings, and the rest of the animation applies.
+TEST(GltfAnimation, MalformedKeyframesAreRefusedOrWarned) {
+  auto refusal = [](GltfBuilder b, const std::string& name) -> std::string {
+    const auto path = b.write(fixture_dir(), name);
+    Scene scene;
+    try {
+      import_at(path, scene, 0.5);
+    } catch (const SceneError& e) {
+      EXPECT_EQ(e.pointer(), "/scene/gltf") << name;
+      return e.what();
+    }
+    return "accepted";
+  };
+  GltfBuilder b = one_triangle();
+  channel(b, 0, 0, "translation", "LINEAR", {0, 1, 1}, {0, 0, 0, 1, 0, 0, 2, 0, 0}, "VEC3", 3);
+  EXPECT_NE(refusal(b, "times_not_increasing")
+                .find("animation 0 sampler 0: its keyframe times are not strictly "
+                      "increasing (at keyframe 2)"),
+            std::string::npos);
+  b = one_triangle();
+  channel(b, 0, 0, "translation", "CUBICSPLINE", {0, 1}, {0, 0, 0, 1, 0, 0}, "VEC3", 3);
+  EXPECT_NE(refusal(b, "cubic_count")
+                .find("its output holds 6 values where 2 keyframes of translation (in-tangent, "
+                      "value, out-tangent) need 18"),
+            std::string::npos);
+  b = one_triangle();
+  channel(b, 0, 0, "scale", "SMOOTH", {0}, {1, 1, 1}, "VEC3", 3);
+  EXPECT_NE(refusal(b, "unknown_interpolation").find("the unknown interpolation \"SMOOTH\""), std::string::npos);
+  b = one_triangle();
+  channel(b, 0, 7, "scale", "STEP", {0}, {1, 1, 1}, "VEC3", 3);
+  EXPECT_NE(refusal(b, "no_such_node").find("targets node 7, which does not exist"), std::string::npos);
+
+  b = one_triangle();
+  b.node({{"matrix", {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}}}, true);
+  channel(b, 0, 1, "translation", "STEP", {0}, {5, 0, 0}, "VEC3", 3);
+  channel(b, 0, 0, "weights", "STEP", {0}, {1}, "SCALAR", 1);
+  channel(b, 0, 0, "translation", "STEP", {0}, {0, 3, 0}, "VEC3", 3);
+  const auto path = b.write(fixture_dir(), "warned_channels");
+  Scene scene;
+  const GltfImport imported = import_at(path, scene, 0.5);
+  expect_near(scene.meshes[0].positions[0], Vec3(0, 3, 0), "the channel that is well-formed applies");
+  std::string all;
+  for (const std::string& w : imported.warnings) all += w + "\n";
+  EXPECT_NE(all.find("animates node 1, which has a matrix"), std::string::npos) << all;
+  EXPECT_NE(all.find("whose mesh has no morph targets"), std::string::npos) << all;
+}
+
 // An asset without animations renders bit-identical with and without an explicit scene.time 0: a still without a
 // time is the asset as stated, and so is any time of an asset that nothing animates. The Duck (examples/), and a
 // fixture whose rotation is not quite a unit quaternion (posing it normalised would scale it) and whose mesh two
