@@ -1,7 +1,7 @@
 // The parts of the glTF importer (import_gltf, renderer/gltf_loader.h), one file each by concern: reading the asset
-// (gltf_files.cpp: container, confined URIs, extensions, images), materials (gltf_materials.cpp), meshes
-// (gltf_meshes.cpp: accessors, morph targets, skins) and nodes (gltf_nodes.cpp: the scene graph, instancing, cameras,
-// lights). Internal to the renderer.
+// (gltf_files.cpp: container, confined URIs, extensions, images), materials (gltf_materials.cpp), animations
+// (gltf_animation.cpp: keyframes, interpolation, poses), meshes (gltf_meshes.cpp: accessors, morph targets, skins)
+// and nodes (gltf_nodes.cpp: the scene graph, instancing, cameras, lights). Internal to the renderer.
 #pragma once
 
 #include <tiny_gltf.h>
@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 #include <utility>
@@ -155,9 +156,75 @@ class AccessorReader {
 // The triangles of glTF mesh `mesh_index` under transform `world` (identity for instanced prototypes), one Mesh per
 // triangle primitive, counted into import.triangles. With `joints` (a skin's joint matrices: joint world transform
 // times inverse bind matrix), each vertex is moved by the blend of its JOINTS_0 matrices by WEIGHTS_0 (glTF 2.0,
-// 3.7.3 "Skins"), and `world` is not used.
+// 3.7.3 "Skins"), and `world` is not used. Morph targets are applied at `weights` (a pose's, animated), or at the
+// mesh's default weights when it is null or empty.
 std::vector<Mesh> build_meshes(Import& import, const AccessorReader& reader, Materials& materials, int mesh_index,
-                               const TransformD& world, const std::vector<TransformD>* joints = nullptr);
+                               const TransformD& world, const std::vector<TransformD>* joints = nullptr,
+                               const std::vector<double>* weights = nullptr);
+
+// ---- gltf_animation.cpp ----
+
+// A node's local transform as the asset states it (glTF 2.0, 3.5.2 "Transformations"): a matrix, or a translation, a
+// rotation (a unit quaternion x, y, z, w) and a scale, the properties animations target.
+struct NodeTransform {
+  std::vector<double> matrix;  // 16 values, column-major; empty: translation * rotation * scale
+  double translation[3] = {0, 0, 0};
+  double rotation[4] = {0, 0, 0, 1};
+  double scale[3] = {1, 1, 1};
+  static NodeTransform of(const tinygltf::Node& node);
+  TransformD local() const;
+};
+
+// Every node's local transform and morph weights at one time: what the scene graph is walked with. weights[n] empty
+// means the node's mesh's default weights.
+struct Pose {
+  std::vector<NodeTransform> nodes;
+  std::vector<std::vector<double>> weights;
+};
+
+// The nodes as the asset states them (no animation applied): the pose of a still without scene.time.
+Pose static_pose(const tinygltf::Model& model);
+
+// One animation sampler's keyframes (glTF 2.0, 3.11 "Animations"), evaluated at any time by the interpolation of the
+// specification's Appendix C.
+struct AnimationSampler {
+  enum class Interpolation { kLinear, kStep, kCubicSpline };
+  Interpolation interpolation = Interpolation::kLinear;
+  std::vector<float> times;   // seconds, strictly increasing
+  std::vector<float> values;  // `width` per keyframe; CUBICSPLINE: in-tangent, value, out-tangent per keyframe
+  int width = 1;
+  bool rotation = false;  // unit quaternions: spherical interpolation, results normalised
+  // The value at `t` seconds (`width` numbers into `out`); before the first keyframe the first value, after the last
+  // the last.
+  void evaluate(double t, double* out) const;
+};
+
+// One channel: a sampler driving one property of one node.
+struct AnimationChannel {
+  enum class Path { kTranslation, kRotation, kScale, kWeights };
+  int node = -1;
+  Path path = Path::kTranslation;
+  int sampler = -1;  // in Animation::samplers
+};
+
+// An animation's channels with their samplers' keyframes read (bounded by the accessor reader's limits): posing the
+// scene at any time reads nothing more, so that several times (frames, a shutter's interval) can be posed from it.
+struct Animation {
+  std::string name;
+  std::vector<AnimationSampler> samplers;
+  std::vector<AnimationChannel> channels;
+  // Sets the properties the channels target in `pose` to their values at `t` seconds; the rest stay as they are.
+  void pose_at(double t, Pose& pose) const;
+};
+
+// The animation the options choose (options.animate; by options.animation_name or options.animation_index, else the
+// asset's first), read; nullopt for the static pose. SceneError at options.animation_pointer for a name or index the
+// asset does not have; warnings for the animations not applied.
+std::optional<Animation> chosen_animation(Import& import);
+
+// Animation `index` of the asset, its channels' samplers read through `reader`. Throws SceneError for keyframes that
+// do not match the specification (times not increasing, an output count that does not fit the input's).
+Animation read_animation(Import& import, const AccessorReader& reader, int index);
 
 // ---- gltf_nodes.cpp ----
 
@@ -165,8 +232,9 @@ std::vector<Mesh> build_meshes(Import& import, const AccessorReader& reader, Mat
 // walking them makes at most options.max_instances node instances.
 std::vector<int> scene_roots(const Import& import);
 
-// Walks the node hierarchy from `roots`: meshes placed (instanced when several nodes share one), skins posed,
-// EXT_mesh_gpu_instancing expanded, cameras and KHR_lights_punctual lights into import.result.
-void place_nodes(Import& import, Materials& materials, const std::vector<int>& roots);
+// Walks the node hierarchy from `roots` in `pose`: meshes placed (instanced when several nodes share one), skins posed
+// by their joints' transforms in it, EXT_mesh_gpu_instancing expanded, cameras and KHR_lights_punctual lights into
+// import.result.
+void place_nodes(Import& import, Materials& materials, const std::vector<int>& roots, const Pose& pose);
 
 }  // namespace tessera::gltf

@@ -1,5 +1,6 @@
-// import_gltf: the asset read (gltf_files.cpp), its materials made (gltf_materials.cpp), its scene graph walked
-// (gltf_nodes.cpp) and its meshes built on the way (gltf_meshes.cpp); the parts share renderer/gltf_internal.h.
+// import_gltf: the asset read (gltf_files.cpp), its materials made (gltf_materials.cpp), its nodes posed
+// (gltf_animation.cpp), its scene graph walked (gltf_nodes.cpp) and its meshes built on the way (gltf_meshes.cpp); the
+// parts share renderer/gltf_internal.h.
 #include "renderer/gltf_loader.h"
 
 #include "renderer/gltf_internal.h"
@@ -16,10 +17,16 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   import.check_stop();
   gltf::decode_compressed_geometry(import);
   gltf::apply_variant(import);
+  // The animation to pose the nodes by, if one is chosen: its keyframes read (and a bad choice refused) before the
+  // images are decoded.
+  const std::optional<gltf::Animation> animation = gltf::chosen_animation(import);
   // Images, decoded once, shared by every texture that uses them (as "#image<i>").
   gltf::Materials materials = gltf::make_materials(import, gltf::decode_images(import));
   import.triangles = scene.triangle_count();
-  gltf::place_nodes(import, materials, roots);
+  // The nodes as stated, or posed by the chosen animation at the chosen time.
+  gltf::Pose pose = gltf::static_pose(import.model);
+  if (animation) animation->pose_at(options.time, pose);
+  gltf::place_nodes(import, materials, roots, pose);
   if (!import.tinygltf_warnings.empty()) result.warnings.push_back(import.tinygltf_warnings);
   // Each warning once (a mesh drawn by many nodes says it once), and not too many.
   tidy_warnings(&result.warnings);

@@ -49,6 +49,15 @@ struct GltfImportOptions {
   // `variant_pointer` naming the asset's variants.
   std::string variant;
   std::string variant_pointer;
+  // Animation (glTF 2.0, 3.11): with `animate`, the nodes are posed by one of the asset's animations at `time`
+  // seconds: the one named `animation_name`, else the one at `animation_index`, else the first (an asset without
+  // animations is then posed as stated). Without it, the nodes' own transforms and the meshes' default weights (the
+  // static pose). An animation the asset does not have is a SceneError at `animation_pointer`.
+  bool animate = false;
+  double time = 0;
+  std::string animation_name;
+  int animation_index = -1;
+  std::string animation_pointer;
   // Images are checked from their headers (they open, within max_texture_pixels) and stand in as 1x1 white: for a
   // scene that is checked, not rendered.
   bool headers_only = false;

@@ -1,5 +1,5 @@
-// glTF meshes: accessors read with every offset checked, primitives triangulated, morph targets applied at the mesh's
-// default weights, skinned vertices posed by their joints.
+// glTF meshes: accessors read with every offset checked, primitives triangulated, morph targets applied at the pose's
+// or the mesh's default weights, skinned vertices posed by their joints.
 #include <algorithm>
 #include <cstring>
 
@@ -195,7 +195,8 @@ void AccessorReader::view(int view_index, int accessor_index, const unsigned cha
 }
 
 std::vector<Mesh> build_meshes(Import& import, const AccessorReader& reader, Materials& materials, int mesh_index,
-                               const TransformD& world, const std::vector<TransformD>* joints) {
+                               const TransformD& world, const std::vector<TransformD>* joints,
+                               const std::vector<double>* pose_weights) {
   const tinygltf::Model& model = import.model;
   const std::string& pointer = import.pointer;
   const bool flip = world.determinant() < 0;  // a mirroring transform reverses the winding
@@ -214,9 +215,10 @@ std::vector<Mesh> build_meshes(Import& import, const AccessorReader& reader, Mat
     import.count_vertices(reader.count(pos_it->second));
     std::vector<float> pos = reader.floats(pos_it->second, 3);
     const size_t nv = pos.size() / 3;
-    // Morph targets at the mesh's default weights (glTF 2.0, 3.7.2.2): attribute + sum of weight_k * target_k's
-    // displacement, for POSITION, NORMAL and TANGENT (whose targets are 3-vectors added to xyz).
-    const std::vector<double>& weights = model.meshes[mesh_index].weights;
+    // Morph targets at the pose's weights, else the mesh's default weights (glTF 2.0, 3.7.2.2): attribute + sum of
+    // weight_k * target_k's displacement, for POSITION, NORMAL and TANGENT (whose targets are 3-vectors added to xyz).
+    const std::vector<double>& weights =
+        pose_weights && !pose_weights->empty() ? *pose_weights : model.meshes[mesh_index].weights;
     auto morph = [&](std::vector<float>& values, const char* name, int stride) {
       for (size_t k = 0; k < prim.targets.size() && k < weights.size(); ++k) {
         auto it = prim.targets[k].find(name);

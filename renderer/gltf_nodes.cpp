@@ -1,5 +1,6 @@
-// The glTF scene graph: which nodes a scene holds, their transforms (glTF 2.0, 3.5), meshes placed and instanced
-// (shared meshes, EXT_mesh_gpu_instancing), skins posed by their joints, cameras and KHR_lights_punctual lights.
+// The glTF scene graph: which nodes a scene holds, their transforms in a pose (glTF 2.0, 3.5; as stated, or animated
+// by gltf_animation.cpp), meshes placed and instanced (shared meshes, EXT_mesh_gpu_instancing), skins posed by their
+// joints, cameras and KHR_lights_punctual lights.
 #include <cmath>
 #include <functional>
 
@@ -8,20 +9,6 @@
 namespace tessera::gltf {
 
 namespace {
-
-// A node's local transform: its matrix, or translation * rotation * scale (glTF 2.0, 5.25).
-TransformD local_transform(const std::vector<double>& matrix, const std::vector<double>& translation,
-                           const std::vector<double>& rotation, const std::vector<double>& scale) {
-  if (matrix.size() == 16) return TransformD::from_column_major(matrix.data());
-  double t[3] = {0, 0, 0}, s[3] = {1, 1, 1}, q[4] = {0, 0, 0, 1};
-  if (translation.size() == 3) std::copy(translation.begin(), translation.end(), t);
-  if (scale.size() == 3) std::copy(scale.begin(), scale.end(), s);
-  if (rotation.size() == 4) std::copy(rotation.begin(), rotation.end(), q);
-  return TransformD::from_trs(t, q, s);
-}
-TransformD local_transform(const tinygltf::Node& node) {
-  return local_transform(node.matrix, node.translation, node.rotation, node.scale);
-}
 
 // The node instances a walk from `roots` makes: a node counts once per path that reaches it. The specification wants
 // the hierarchy to be disjoint trees (glTF 2.0, section 3.5.3), where this is the number of nodes; a file whose nodes
@@ -82,7 +69,7 @@ std::vector<int> scene_roots(const Import& import) {
   return roots;
 }
 
-void place_nodes(Import& import, Materials& materials, const std::vector<int>& roots) {
+void place_nodes(Import& import, Materials& materials, const std::vector<int>& roots, const Pose& pose) {
   const tinygltf::Model& model = import.model;
   const GltfImportOptions& options = import.options;
   const std::string& pointer = import.pointer;
@@ -130,7 +117,7 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
       if (!t.empty()) trs.translation = {t[3 * i], t[3 * i + 1], t[3 * i + 2]};
       if (!r.empty()) trs.rotation = {r[4 * i], r[4 * i + 1], r[4 * i + 2], r[4 * i + 3]};
       if (!sc.empty()) trs.scale = {sc[3 * i], sc[3 * i + 1], sc[3 * i + 2]};
-      out[i] = local_transform(trs);
+      out[i] = NodeTransform::of(trs).local();
     }
     return out;
   };
@@ -142,11 +129,13 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
     if (depth > 256) throw SceneError(pointer, "the node hierarchy is deeper than 256 levels (a cycle?)");
     check_stop();
     const tinygltf::Node& node = model.nodes[node_index];
-    if (!node.weights.empty() && node.mesh >= 0 && node.mesh < static_cast<int>(model.meshes.size()) &&
-        node.weights != model.meshes[node.mesh].weights)
+    // The node's morph weights in the pose (animated), else its mesh's default weights.
+    const std::vector<double>& weights = pose.weights[node_index];
+    if (!node.weights.empty() && weights.empty() && node.mesh >= 0 &&
+        node.mesh < static_cast<int>(model.meshes.size()) && node.weights != model.meshes[node.mesh].weights)
       result.warnings.push_back("node " + std::to_string(node_index) +
                                 ": its own morph weights are not applied (the mesh's default weights are)");
-    const TransformD world = parent * local_transform(node);
+    const TransformD world = parent * pose.nodes[node_index].local();
 
     if (node.mesh >= 0) {
       if (node.mesh >= static_cast<int>(model.meshes.size()))
@@ -154,7 +143,7 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
                                       ", which does not exist");
       // The mesh at transform `at`: an instance of its one object-space copy, or triangles of its own.
       auto place = [&](const TransformD& at) {
-        if (instanced.count(node.mesh)) {
+        if (instanced.count(node.mesh) && weights.empty()) {
           // Shared by several nodes: one object-space copy, one Embree instance per node.
           auto [it, fresh] = group_of_mesh.try_emplace(node.mesh, static_cast<uint32_t>(scene.groups.size()));
           if (fresh) {
@@ -178,7 +167,7 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
           import.check_triangles();
           scene.instances.push_back(inst);
         } else {
-          for (Mesh& m : build_meshes(import, reader, materials, node.mesh, at)) {
+          for (Mesh& m : build_meshes(import, reader, materials, node.mesh, at, nullptr, &weights)) {
             for (const Vec3& p : m.positions) result.bounds.extend(p);
             scene.meshes.push_back(std::move(m));
           }
@@ -186,8 +175,8 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
       };
       const std::vector<TransformD> copies = gpu_instances(node, node_index);
       if (node.skin >= 0) {
-        // Posed by its joints' node transforms (the scene's, for a still image); the node's own transform is not
-        // used (glTF 2.0, 3.7.3).
+        // Posed by its joints' node transforms in the pose (animated or as stated); the node's own transform is
+        // not used (glTF 2.0, 3.7.3).
         if (node.skin >= static_cast<int>(model.skins.size()))
           throw SceneError(pointer, "node " + std::to_string(node_index) + " names a skin that does not exist");
         const tinygltf::Skin& skin = model.skins[node.skin];
@@ -209,7 +198,7 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
           }
           joints[j] = node_world[jn] * inverse_bind;
         }
-        for (Mesh& m : build_meshes(import, reader, materials, node.mesh, TransformD(), &joints)) {
+        for (Mesh& m : build_meshes(import, reader, materials, node.mesh, TransformD(), &joints, &weights)) {
           for (const Vec3& p : m.positions) result.bounds.extend(p);
           scene.meshes.push_back(std::move(m));
         }
@@ -298,7 +287,7 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
     std::function<void(int, const TransformD&, int)> walk = [&](int n, const TransformD& parent, int depth) {
       if (n < 0 || n >= static_cast<int>(model.nodes.size()) || depth > 256 || placed[n]) return;
       placed[n] = true;
-      node_world[n] = parent * local_transform(model.nodes[n]);
+      node_world[n] = parent * pose.nodes[n].local();
       for (int c : model.nodes[n].children) walk(c, node_world[n], depth + 1);
     };
     for (int r : roots) walk(r, TransformD(), 0);

@@ -255,6 +255,24 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
         throw SceneError(gopts.variant_pointer, "must be a variant's name (1 to 256 characters)");
       gopts.variant = v->get<std::string>();
     }
+    // A still at scene.time seconds of the animation scene.animation chooses (by name or index; default the first).
+    // Neither given: the nodes as the asset states them.
+    if (auto a = doc.find("animation"); a != doc.end()) {
+      gopts.animate = true;
+      gopts.animation_pointer = at(pointer, "animation");
+      if (a->is_string() && !a->get<std::string>().empty() && a->get<std::string>().size() <= 256)
+        gopts.animation_name = a->get<std::string>();
+      else if (a->is_number_integer() && a->get<int64_t>() >= 0 && a->get<int64_t>() <= 1'000'000)
+        gopts.animation_index = static_cast<int>(a->get<int64_t>());
+      else
+        throw SceneError(gopts.animation_pointer, "must be an animation's name (1 to 256 characters) or index");
+    }
+    if (auto t = doc.find("time"); t != doc.end()) {
+      gopts.animate = true;
+      if (!t->is_number() || !std::isfinite(t->get<double>()) || std::abs(t->get<double>()) > 1e9)
+        throw SceneError(at(pointer, "time"), "must be a time in seconds (at most 1e9 in magnitude)");
+      gopts.time = t->get<double>();
+    }
     gltf = import_gltf(resolve(options, *it, gp), gp, *scene, gopts);
     has_gltf = true;
     for (const std::string& w : gltf.warnings) scene->warnings.push_back(w);
@@ -262,6 +280,9 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
 
   if (!has_gltf && doc.contains("gltf_variant"))
     throw SceneError(at(pointer, "gltf_variant"), "a variant is chosen only for a glTF asset (scene.gltf)");
+  for (const char* key : {"animation", "time"})
+    if (!has_gltf && doc.contains(key))
+      throw SceneError(at(pointer, key), "animations are posed only for a glTF asset (scene.gltf)");
 
   // Objects.
   static const json kNoObjects = json::array();

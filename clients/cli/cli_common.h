@@ -7,6 +7,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -109,6 +110,13 @@ inline double parse_number(const std::string& option, const std::string& v) {
   if (pos != v.size() || v.empty() || !std::isfinite(d))
     throw std::invalid_argument(option + " needs a number, not \"" + v + "\"");
   return d;
+}
+
+// --animation's value as scene.animation: an index when it is all digits (and a plausible index), else a name.
+inline nlohmann::json animation_choice(const std::string& v) {
+  if (!v.empty() && v.size() <= 7 && std::all_of(v.begin(), v.end(), [](char c) { return c >= '0' && c <= '9'; }))
+    return std::stoll(v);
+  return v;
 }
 
 inline std::vector<long long> parse_list(const std::string& option, const std::string& v, char sep, size_t count) {

@@ -52,6 +52,9 @@ const char* kRenderUsage =
     "                         render.aovs): albedo normal depth position uv roughness object_id material_id\n"
     "                         sample_count variance\n"
     "  --variant NAME         the glTF asset's KHR_materials_variants variant (scene.gltf_variant)\n"
+    "  --time SECONDS         a still of the glTF asset's animation at this time (scene.time)\n"
+    "  --animation NAME|N     the glTF asset's animation to pose, by name or index (scene.animation; default\n"
+    "                         the first)\n"
     "  -q, --quiet            print nothing but errors and the scene's warnings (no progress bar, no summary)\n"
     "\n"
     "exit codes: 0 done, 1 bad input (fatal), 2 usage, 75 transient failure (retry)\n";
@@ -135,6 +138,7 @@ int cmd_render(int argc, char** argv) {
   std::optional<std::pair<long long, long long>> samples;
   std::optional<std::vector<long long>> region;
   std::optional<std::string> variant;
+  json scene_overrides = json::object();  // --time, --animation
   for (int i = 0; i < argc; ++i) {
     std::string a = argv[i];
     auto value = [&]() -> std::string {
@@ -184,12 +188,16 @@ int cmd_render(int argc, char** argv) {
       overrides["aovs"] = std::move(aovs);
     } else if (a == "--variant")
       variant = value();
+    else if (a == "--time")
+      scene_overrides["time"] = parse_number(a, value());
+    else if (a == "--animation")
+      scene_overrides["animation"] = animation_choice(value());
     else if (a == "-q" || a == "--quiet")
       quiet = true;
     else if (!a.empty() && a[0] == '-')
-      unknown_option(
-          a, {"--output", "--spp", "--samples", "--region", "--width", "--height", "--time-limit", "--threads",
-              "--integrator", "--estimator", "--seed", "--max-depth", "--aov", "--variant", "--quiet", "--help"});
+      unknown_option(a, {"--output", "--spp", "--samples", "--region", "--width", "--height", "--time-limit",
+                         "--threads", "--integrator", "--estimator", "--seed", "--max-depth", "--aov", "--variant",
+                         "--time", "--animation", "--quiet", "--help"});
     else if (input.empty())
       input = a;
     else
@@ -237,6 +245,7 @@ int cmd_render(int argc, char** argv) {
       doc["render"]["spp"] = samples->first + samples->second;
     }
     if (variant && doc.contains("scene") && doc["scene"].is_object()) doc["scene"]["gltf_variant"] = *variant;
+    if (doc.contains("scene") && doc["scene"].is_object()) doc["scene"].update(scene_overrides);
   }
 
   // The daemon's own check, with its messages: the contract's schema (an unknown property such as "albdo" is

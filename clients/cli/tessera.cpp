@@ -231,10 +231,12 @@ void require_args(const std::vector<std::string>& args, size_t lo, size_t hi, co
 
 const char* kSubmitUsage =
     "usage: tessera submit JOB.json|SCENE.glb|SCENE.gltf [FILE...] [--priority N] [--spp N] [--width N] [--height N]\n"
-    "                      [--variant NAME] [--watch] [--url URL] [--token T]\n"
+    "                      [--variant NAME] [--time SECONDS] [--animation NAME|N] [--watch] [--url URL] [--token T]\n"
     "Submits a job and prints its id. With a .glb/.gltf (and the .bin and images a .gltf needs) the job goes as\n"
     "multipart/form-data; a job document whose scene.gltf names a file beside it takes that file along.\n"
     "--variant chooses the glTF asset's KHR_materials_variants variant (scene.gltf_variant).\n"
+    "--time renders a still of the glTF asset's animation at that time in seconds (scene.time); --animation chooses\n"
+    "the animation by name or index (scene.animation; default the first).\n"
     "--watch follows the job until it ends (exit code as for watch).\n";
 
 int cmd_watch_remote(const Remote& remote, const std::string& id, bool quiet);
@@ -245,6 +247,7 @@ int cmd_submit(std::vector<std::string> args) {
   json overrides = json::object();
   std::optional<long long> priority;
   std::optional<std::string> variant;
+  json scene_overrides = json::object();  // --time, --animation
   bool watch = false;
   for (size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
@@ -262,11 +265,15 @@ int cmd_submit(std::vector<std::string> args) {
       overrides[a.substr(2)] = parse_integer(a, value());
     else if (a == "--variant")
       variant = value();
+    else if (a == "--time")
+      scene_overrides["time"] = parse_number(a, value());
+    else if (a == "--animation")
+      scene_overrides["animation"] = animation_choice(value());
     else if (a == "--watch")
       watch = true;
     else if (!a.empty() && a[0] == '-')
-      unknown_option(
-          a, {"--priority", "--spp", "--width", "--height", "--variant", "--watch", "--url", "--token", "--help"});
+      unknown_option(a, {"--priority", "--spp", "--width", "--height", "--variant", "--time", "--animation", "--watch",
+                         "--url", "--token", "--help"});
     else
       files.push_back(a);
   }
@@ -298,6 +305,7 @@ int cmd_submit(std::vector<std::string> args) {
   }
   if (priority) doc["priority"] = *priority;
   if (variant && doc.contains("scene") && doc["scene"].is_object()) doc["scene"]["gltf_variant"] = *variant;
+  if (doc.contains("scene") && doc["scene"].is_object()) doc["scene"].update(scene_overrides);
   // A job is called by the file it was submitted from, unless its document names it.
   if (const std::string file = std::filesystem::path(main).filename().string();
       main != "-" && !doc.contains("name") && file.size() <= 200)

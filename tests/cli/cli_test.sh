@@ -142,6 +142,43 @@ if awk -v c="$centre" 'BEGIN { split(c, v, " "); d1 = v[1] - v[2] - 0.5; d2 = v[
 else
   not_ok "the centre pixel of the asset is '$centre', not its emission (1, 0.5, 0.25) over a grey reflection"
 fi
+# --time and --animation (scene.time, scene.animation): an asset without animations renders the same at any time; an
+# animation that moves the triangle out of view does so at its time; one the asset does not have is refused.
+expect 0 "tessera render --time of an asset without animations" "$TESSERA" render assets/tri.gltf --width 16 \
+  --height 16 --spp 2 --threads 2 -q -o tri-t0.exr --time 0
+if same_pixels tri.exr tri-t0.exr; then ok "--time 0 renders an asset without animations unchanged"; else
+  not_ok "--time 0 changed the render of an asset without animations"
+fi
+python3 - <<'PY'
+import base64, json, struct
+gltf = json.load(open("assets/tri.gltf"))
+raw = base64.b64decode(gltf["buffers"][0]["uri"].split(",")[1])
+keys = struct.pack("<2f", 0, 1) + struct.pack("<6f", 0, 0, 0, 100, 0, 0)
+gltf["buffers"][0] = {"byteLength": len(raw) + len(keys),
+                      "uri": "data:application/octet-stream;base64," + base64.b64encode(raw + keys).decode()}
+gltf["bufferViews"] += [{"buffer": 0, "byteOffset": len(raw), "byteLength": 8},
+                        {"buffer": 0, "byteOffset": len(raw) + 8, "byteLength": 24}]
+gltf["accessors"] += [{"bufferView": 1, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0], "max": [1]},
+                      {"bufferView": 2, "componentType": 5126, "count": 2, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [100, 0, 0]}]
+gltf["animations"] = [{"name": "away", "samplers": [{"input": 1, "output": 2}],
+                       "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}]}]
+json.dump(gltf, open("assets/tri-anim.gltf", "w"))
+PY
+expect 0 "tessera render --time 1 --animation away" "$TESSERA" render assets/tri-anim.gltf --width 16 --height 16 \
+  --spp 2 --threads 2 -q -o tri-away.exr --time 1 --animation away
+if same_pixels tri.exr tri-away.exr; then not_ok "--time 1 did not move the animated triangle"; else
+  ok "--time 1 renders the animated triangle moved away"
+fi
+expect 0 "tessera render --animation 0 (an index) at 0 s" "$TESSERA" render assets/tri-anim.gltf --width 16 \
+  --height 16 --spp 2 --threads 2 -q -o tri-anim0.exr --animation 0
+if same_pixels tri.exr tri-anim0.exr; then ok "at 0 s the animated triangle is where it starts"; else
+  not_ok "--animation 0 at 0 s moved the triangle"
+fi
+expect 1 "tessera render --animation of an animation the asset lacks" "$TESSERA" render assets/tri-anim.gltf \
+  --width 16 --height 16 --spp 1 --threads 2 -q -o x.exr --animation awya
+grep -qF 'at /scene/animation: the glTF asset has no animation "awya" (did you mean "away"?)' "$tmp/err" \
+  && ok "the refusal names /scene/animation and the closest name" || not_ok "--animation awya said: $(cat "$tmp/err")"
 
 # --- refused merges and bad input: fatal (1) ---------------------------------------------------------------------
 expect 1 "overlapping ranges are refused" "$TESSERA" merge a.tfilm all.tfilm -o x.exr
