@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # One job through a daemon, start to end: starts TESSERAD (default build/server/tesserad) on a fresh data directory,
-# submits JOB (default proto/examples/cornell.json at WIDTH x HEIGHT, SPP), waits for it to succeed, and prints the
+# submits JOB (default proto/examples/cornell.json at WIDTH x HEIGHT, SPP; with GLTF=file, that asset is uploaded
+# first and named as the job's scene.gltf, e.g. JOB=examples/duck/job.json GLTF=examples/duck/Duck.glb), waits for it to succeed, and prints the
 # wall time from submission to success and the render time the job reports (elapsed_s). Run it with two daemons (a
 # build that renders in worker processes and one that does not) under a timer to compare them:
 #   TESSERAD=/path/to/old/tesserad bench/worker.sh
@@ -28,7 +29,13 @@ for _ in $(seq 200); do
   sleep 0.05
 done
 url="http://127.0.0.1:$port"
-doc=$(python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); r=d.setdefault("render",{}); r["width"]=int(sys.argv[2]); r["height"]=int(sys.argv[3]); r["spp"]=int(sys.argv[4]); print(json.dumps(d))' "$JOB" "$WIDTH" "$HEIGHT" "$SPP")
+asset=""
+if [ -n "${GLTF:-}" ]; then
+  asset=$(curl -sf -X POST "$url/v1/assets" -F "file=@$GLTF" | python3 -c 'import json,sys; print(json.load(sys.stdin)["id"])')
+fi
+doc=$(python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); r=d.setdefault("render",{}); r["width"]=int(sys.argv[2]); r["height"]=int(sys.argv[3]); r["spp"]=int(sys.argv[4]); a=sys.argv[5]
+if a: d["scene"]["gltf"]=a
+print(json.dumps(d))' "$JOB" "$WIDTH" "$HEIGHT" "$SPP" "$asset")
 start=$(date +%s.%N)
 id=$(curl -sf -X POST "$url/v1/jobs" -H 'content-type: application/json' -d "$doc" | python3 -c 'import json,sys; print(json.load(sys.stdin)["id"])')
 while :; do
