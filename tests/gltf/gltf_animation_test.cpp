@@ -26,20 +26,7 @@ using test::GltfBuilder;
 using Interpolation = AnimationSampler::Interpolation;
 
 std::filesystem::path fixture_dir() {
-  // One folder per test process, removed when the process ends; TESSERA_GLTF_FIXTURES keeps them in a given folder
-  // (for the Khronos validator test, tests/gltf/CMakeLists.txt).
-  static const struct Folder {
-    const char* keep = std::getenv("TESSERA_GLTF_FIXTURES");
-    std::filesystem::path path =
-        keep ? std::filesystem::path(keep)
-             : std::filesystem::temp_directory_path() / ("tessera-gltf-animation-" + std::to_string(::getpid()));
-    ~Folder() {
-      std::error_code ec;
-      if (!keep) std::filesystem::remove_all(path, ec);
-    }
-  } folder;
-  std::filesystem::create_directories(folder.path);
-  return folder.path;
+  return test::gltf_fixture_dir();
 }
 
 AnimationSampler sampler(Interpolation interpolation, std::vector<float> times, std::vector<float> values, int width,

@@ -27,21 +27,8 @@ namespace {
 using nlohmann::json;
 using test::GltfBuilder;
 
-// One folder per test process, removed when the process ends; TESSERA_GLTF_FIXTURES keeps them in a given folder
-// (for the Khronos validator test, tests/gltf/CMakeLists.txt).
 std::filesystem::path fixture_dir() {
-  static const struct Folder {
-    const char* keep = std::getenv("TESSERA_GLTF_FIXTURES");
-    std::filesystem::path path =
-        keep ? std::filesystem::path(keep)
-             : std::filesystem::temp_directory_path() / ("tessera-gltf-compression-" + std::to_string(::getpid()));
-    Folder() { std::filesystem::create_directories(path); }
-    ~Folder() {
-      std::error_code ec;
-      if (!keep) std::filesystem::remove_all(path, ec);
-    }
-  } folder;
-  return folder.path;
+  return test::gltf_fixture_dir();
 }
 
 // A curved grid of n x n vertices with normals: positions, normals, triangle indices.

@@ -1,6 +1,9 @@
 // Writes small glTF 2.0 fixtures for tests: geometry in one buffer, embedded as a data: URI or beside the file.
 #pragma once
 
+#include <unistd.h>
+
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -10,6 +13,23 @@
 #include <nlohmann/json.hpp>
 
 namespace tessera::test {
+
+// Where a test process writes its glTF fixtures: one folder per process, removed when the process ends;
+// TESSERA_GLTF_FIXTURES keeps them in a given folder (for the Khronos validator test, tests/gltf/CMakeLists.txt).
+inline std::filesystem::path gltf_fixture_dir() {
+  static const struct Folder {
+    const char* keep = std::getenv("TESSERA_GLTF_FIXTURES");
+    std::filesystem::path path =
+        keep ? std::filesystem::path(keep)
+             : std::filesystem::temp_directory_path() / ("tessera-gltf-" + std::to_string(::getpid()));
+    Folder() { std::filesystem::create_directories(path); }
+    ~Folder() {
+      std::error_code ec;
+      if (!keep) std::filesystem::remove_all(path, ec);
+    }
+  } folder;
+  return folder.path;
+}
 
 inline std::string base64(const std::vector<unsigned char>& in) {
   static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";

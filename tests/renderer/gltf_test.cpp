@@ -32,20 +32,7 @@ using test::GltfBuilder;
 using test::shared_children_chain;
 
 std::filesystem::path fixture_dir() {
-  // One folder per test process, removed when the process ends.
-  // TESSERA_GLTF_FIXTURES keeps them in a given folder (for the Khronos validator test, tests/gltf).
-  static const struct Folder {
-    const char* keep = std::getenv("TESSERA_GLTF_FIXTURES");
-    std::filesystem::path path =
-        keep ? std::filesystem::path(keep)
-             : std::filesystem::temp_directory_path() / ("tessera-gltf-" + std::to_string(::getpid()));
-    ~Folder() {
-      std::error_code ec;
-      if (!keep) std::filesystem::remove_all(path, ec);
-    }
-  } folder;
-  std::filesystem::create_directories(folder.path);
-  return folder.path;
+  return test::gltf_fixture_dir();
 }
 
 struct Rendered {
