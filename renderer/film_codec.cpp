@@ -99,6 +99,7 @@ void read_common_fields(FilmFile& f, std::string_view in) {
               get_field<int32_t>(in, 40)};
   f.exr_half = (get_field<uint32_t>(in, 44) & 1u) != 0;
   f.sample_count_pass = (get_field<uint32_t>(in, 44) & 2u) != 0;
+  f.denoise = ((get_field<uint32_t>(in, 44) >> 2) & 3u) == 1 ? Denoiser::kRegression : Denoiser::kNone;
   f.display.exposure_ev = get_field<float>(in, 48);
   f.display.tonemap = get_field<uint32_t>(in, 52) == 1 ? ToneMap::kAces : ToneMap::kClamp;
   f.fingerprint = get_field<uint64_t>(in, 56);
@@ -203,7 +204,8 @@ std::string encode_film_file(const FilmFileHeader& f, const Film& film) {
   put_field<int32_t>(out, f.region.y);
   put_field<int32_t>(out, f.region.width);
   put_field<int32_t>(out, f.region.height);
-  put_field<uint32_t>(out, (f.exr_half ? 1u : 0u) | (f.sample_count_pass ? 2u : 0u));
+  put_field<uint32_t>(
+      out, (f.exr_half ? 1u : 0u) | (f.sample_count_pass ? 2u : 0u) | (f.denoise == Denoiser::kRegression ? 4u : 0u));
   put_field<float>(out, f.display.exposure_ev);
   put_field<uint32_t>(out, f.display.tonemap == ToneMap::kAces ? 1u : 0u);
   put_field<uint64_t>(out, f.fingerprint);
