@@ -34,9 +34,9 @@ const ImageLayer& layer_named(const Image& image, const std::string& name, size_
 // What the denoiser reads per pixel, planar.
 struct Inputs {
   int width = 0, height = 0;
-  std::array<std::vector<float>, 3> y;         // the illumination
-  std::array<std::vector<float>, 3> v;         // its variance
-  std::vector<std::array<float, 4>> features;  // normal, depth over the image's largest finite depth
+  std::array<std::vector<float>, 3> y;  // the illumination
+  std::array<std::vector<float>, 3> v;  // its variance
+  std::array<std::vector<float>, 4> f;  // the features: normal, depth over the image's largest finite depth
 };
 
 // Solves A x = b for a symmetric positive definite A (kDims x kDims, upper triangle given) by its Cholesky
@@ -72,87 +72,133 @@ bool solve_intercepts(const double (&a)[kDims][kDims], const double (&b)[3][kDim
   return true;
 }
 
-// Denoises the illumination of rows [y0, y1) into out (3 channels a pixel, the whole image's layout).
+// Element-wise loops over arrays that do not overlap, which the compiler vectorises.
+void difference(float* __restrict out, const float* __restrict a, const float* __restrict b, size_t n) {
+  for (size_t i = 0; i < n; ++i) out[i] = a[i] - b[i];
+}
+void product(float* __restrict out, const float* __restrict a, const float* __restrict b, size_t n) {
+  for (size_t i = 0; i < n; ++i) out[i] = a[i] * b[i];
+}
+void add(float* __restrict acc, const float* __restrict a, size_t n) {
+  for (size_t i = 0; i < n; ++i) acc[i] += a[i];
+}
+void add_product(float* __restrict acc, const float* __restrict a, const float* __restrict b, size_t n) {
+  for (size_t i = 0; i < n; ++i) acc[i] += a[i] * b[i];
+}
+
+// Denoises the illumination of rows [y0, y1) into out (3 channels a pixel, the whole image's layout). Offset by
+// offset of the window, the weights of a row's pixels are worked out and added with their neighbours' terms to the
+// row's sums of the normal equations: the loops run along rows, over contiguous arrays.
 void denoise_band(const Inputs& in, const RegressionDenoiserOptions& o, int y0, int y1, float* out) {
   const int w = in.width, h = in.height, r = o.window_radius, f = o.patch_radius;
-  const int side = 2 * r + 1;
   const int ya = std::max(0, y0 - f), yb = std::min(h, y1 + f);  // the band and the patches' halo
-  const size_t band = static_cast<size_t>(y1 - y0) * static_cast<size_t>(w);
+  const size_t W = static_cast<size_t>(w), band = static_cast<size_t>(y1 - y0) * W;
   const float k2 = o.strength * o.strength;
-  std::vector<float> weights(static_cast<size_t>(side * side) * band);
-  std::vector<float> delta(static_cast<size_t>(yb - ya) * static_cast<size_t>(w));
-  std::vector<float> rows(delta.size());
+  std::vector<float> delta(static_cast<size_t>(yb - ya) * W), rows(delta.size()), weight(W);
+  std::vector<float> regressors(static_cast<size_t>(kDims) * W), weighted(static_cast<size_t>(kDims) * W);
+  // The normal equations' sums per pixel of the band: the upper triangle of sum w x x^T (kTerms), then sum w x y_c
+  // for each channel (3 kDims), each as an array over the band.
+  // The arrays are 64 floats apart beyond the band's size: arrays a multiple of 4 KiB apart would share cache sets.
+  constexpr int kTerms = kDims * (kDims + 1) / 2;
+  const size_t stride = band + 64;
+  std::vector<float> sums(static_cast<size_t>(kTerms + 3 * kDims) * stride, 0.0f);
 
   // The per-pixel term of the patch distance between p and its neighbour q = p + (dx, dy) (q clamped to the image,
   // so that patches near the border are whole; a q outside the image gets no weight below).
+  const float* __restrict y[3] = {in.y[0].data(), in.y[1].data(), in.y[2].data()};
+  const float* __restrict v[3] = {in.v[0].data(), in.v[1].data(), in.v[2].data()};
+  const float* __restrict fe[4] = {in.f[0].data(), in.f[1].data(), in.f[2].data(), in.f[3].data()};
   auto term = [&](size_t p, size_t q) {
     float s = 0;
     for (int c = 0; c < 3; ++c) {
-      const float vp = in.v[c][p], vq = in.v[c][q], d = in.y[c][p] - in.y[c][q];
+      const float vp = v[c][p], vq = v[c][q], d = y[c][p] - y[c][q];
       s += (d * d - (vp + std::min(vp, vq))) / (1e-10f + k2 * (vp + vq));
     }
     return s;
   };
   for (int dy = -r; dy <= r; ++dy)
     for (int dx = -r; dx <= r; ++dx) {
+      const int lo = std::clamp(-dx, 0, w), hi = std::clamp(w - dx, lo, w);  // the x whose q is inside
       for (int row = ya; row < yb; ++row) {
         const int qy = std::clamp(row + dy, 0, h - 1);
-        const size_t p0 = static_cast<size_t>(row) * static_cast<size_t>(w);
-        const size_t q0 = static_cast<size_t>(qy) * static_cast<size_t>(w);
-        float* d = &delta[static_cast<size_t>(row - ya) * static_cast<size_t>(w)];
-        const int lo = std::clamp(-dx, 0, w), hi = std::clamp(w - dx, lo, w);
+        const size_t p0 = static_cast<size_t>(row) * W, q0 = static_cast<size_t>(qy) * W;
+        float* __restrict d = &delta[static_cast<size_t>(row - ya) * W];
         for (int x = 0; x < lo; ++x) d[x] = term(p0 + static_cast<size_t>(x), q0);
         for (int x = lo; x < hi; ++x) d[x] = term(p0 + static_cast<size_t>(x), q0 + static_cast<size_t>(x + dx));
-        for (int x = hi; x < w; ++x) d[x] = term(p0 + static_cast<size_t>(x), q0 + static_cast<size_t>(w - 1));
+        for (int x = hi; x < w; ++x) d[x] = term(p0 + static_cast<size_t>(x), q0 + W - 1);
         // The patch's horizontal sums.
-        float* s = &rows[static_cast<size_t>(row - ya) * static_cast<size_t>(w)];
+        float* s = &rows[static_cast<size_t>(row - ya) * W];
         for (int x = 0; x < w; ++x) {
           float sum = 0;
           for (int i = std::max(0, x - f); i <= std::min(w - 1, x + f); ++i) sum += d[i];
           s[x] = sum;
         }
       }
-      float* wt = &weights[static_cast<size_t>((dy + r) * side + (dx + r)) * band];
       for (int row = y0; row < y1; ++row) {
+        if (row + dy < 0 || row + dy >= h) continue;
         const int r0 = std::max(ya, row - f), r1 = std::min(yb - 1, row + f);
-        const bool inside_y = row + dy >= 0 && row + dy < h;
-        for (int x = 0; x < w; ++x) {
-          float sum = 0;
-          for (int i = r0; i <= r1; ++i) sum += rows[static_cast<size_t>(i - ya) * static_cast<size_t>(w) + x];
+        float* __restrict sum = weight.data();
+        std::fill(weight.begin(), weight.end(), 0.0f);
+        for (int i = r0; i <= r1; ++i) {
+          const float* __restrict s = &rows[static_cast<size_t>(i - ya) * W];
+          for (int x = lo; x < hi; ++x) sum[x] += s[x];
+        }
+        for (int x = lo; x < hi; ++x) {
           const int cols = std::min(w - 1, x + f) - std::max(0, x - f) + 1;
-          const float d2 = sum / static_cast<float>(3 * cols * (r1 - r0 + 1));
-          const bool inside = inside_y && x + dx >= 0 && x + dx < w;
-          const float weight = inside ? std::exp(-std::max(0.0f, d2)) : 0.0f;
-          wt[static_cast<size_t>(row - y0) * static_cast<size_t>(w) + x] = weight < kMinWeight ? 0.0f : weight;
+          const float d2 = sum[x] / static_cast<float>(3 * cols * (r1 - r0 + 1));
+          const float wt = d2 < 7.0f ? std::exp(-std::max(0.0f, d2)) : 0.0f;
+          sum[x] = wt < kMinWeight ? 0.0f : wt;
+        }
+        const size_t p0 = static_cast<size_t>(row) * W;
+        const size_t q0 = static_cast<size_t>(static_cast<std::ptrdiff_t>(p0) +
+                                              static_cast<std::ptrdiff_t>(dy) * static_cast<std::ptrdiff_t>(w) + dx);
+        // Over the row's x whose q is inside: the regressors x_i (1, then the features' differences), w x_i, and
+        // their products added to the sums.
+        const size_t n = static_cast<size_t>(hi - lo), x0 = static_cast<size_t>(lo);
+        const float* xs[kDims];
+        float* wxs[kDims];
+        xs[0] = nullptr;  // the constant 1
+        for (int k = 1; k < kDims; ++k) {
+          float* xk = &regressors[static_cast<size_t>(k) * W];
+          difference(xk, fe[k - 1] + q0 + x0, fe[k - 1] + p0 + x0, n);
+          xs[k] = xk;
+        }
+        for (int k = 0; k < kDims; ++k) {
+          wxs[k] = &weighted[static_cast<size_t>(k) * W];
+          if (k == 0)
+            std::copy_n(sum + x0, n, wxs[0]);
+          else
+            product(wxs[k], sum + x0, xs[k], n);
+        }
+        float* acc = &sums[static_cast<size_t>(row - y0) * W + x0];
+        int t = 0;
+        for (int i = 0; i < kDims; ++i) {
+          for (int j = i; j < kDims; ++j, ++t) {
+            if (j == 0)
+              add(acc + static_cast<size_t>(t) * stride, wxs[i], n);  // w * 1 * 1
+            else
+              add_product(acc + static_cast<size_t>(t) * stride, wxs[i], xs[j], n);
+          }
+          for (int c = 0; c < 3; ++c)
+            add_product(acc + static_cast<size_t>(kTerms + c * kDims + i) * stride, wxs[i], y[c] + q0 + x0, n);
         }
       }
     }
 
-  for (int row = y0; row < y1; ++row)
-    for (int x = 0; x < w; ++x) {
-      const size_t p = static_cast<size_t>(row) * static_cast<size_t>(w) + static_cast<size_t>(x);
-      const size_t bi = static_cast<size_t>(row - y0) * static_cast<size_t>(w) + static_cast<size_t>(x);
-      const std::array<float, 4>& fp = in.features[p];
-      double a[kDims][kDims] = {}, b[3][kDims] = {};
-      for (int dy = -r; dy <= r; ++dy)
-        for (int dx = -r; dx <= r; ++dx) {
-          const double wq = weights[static_cast<size_t>((dy + r) * side + (dx + r)) * band + bi];
-          if (wq == 0) continue;
-          const size_t q = static_cast<size_t>(static_cast<std::ptrdiff_t>(p) + dy * w + dx);
-          const std::array<float, 4>& fq = in.features[q];
-          const double xs[kDims] = {1.0, fq[0] - fp[0], fq[1] - fp[1], fq[2] - fp[2], fq[3] - fp[3]};
-          for (int i = 0; i < kDims; ++i) {
-            const double wx = wq * xs[i];
-            for (int j = i; j < kDims; ++j) a[i][j] += wx * xs[j];
-            for (int c = 0; c < 3; ++c) b[c][i] += wx * in.y[c][q];
-          }
-        }
-      for (int i = 1; i < kDims; ++i) a[i][i] += kRidge * a[0][0];
-      double x0[3];
-      if (!solve_intercepts(a, b, x0))
-        for (int c = 0; c < 3; ++c) x0[c] = b[c][0] / a[0][0];  // the weighted mean
-      for (int c = 0; c < 3; ++c) out[3 * p + static_cast<size_t>(c)] = static_cast<float>(std::max(0.0, x0[c]));
+  for (size_t bi = 0; bi < band; ++bi) {
+    double a[kDims][kDims] = {}, b[3][kDims] = {};
+    int t = 0;
+    for (int i = 0; i < kDims; ++i) {
+      for (int j = i; j < kDims; ++j) a[i][j] = sums[static_cast<size_t>(t++) * stride + bi];
+      for (int c = 0; c < 3; ++c) b[c][i] = sums[static_cast<size_t>(kTerms + c * kDims + i) * stride + bi];
     }
+    for (int i = 1; i < kDims; ++i) a[i][i] += kRidge * a[0][0];
+    double x0[3];
+    if (!solve_intercepts(a, b, x0))
+      for (int c = 0; c < 3; ++c) x0[c] = b[c][0] / a[0][0];  // the weighted mean
+    const size_t p = static_cast<size_t>(y0) * W + bi;
+    for (int c = 0; c < 3; ++c) out[3 * p + static_cast<size_t>(c)] = static_cast<float>(std::max(0.0, x0[c]));
+  }
 }
 
 }  // namespace
@@ -175,7 +221,7 @@ void RegressionDenoiser::apply(Image& image) const {
   float far = 0;
   for (float z : depth.pixels)
     if (std::isfinite(z)) far = std::max(far, z);
-  in.features.resize(n);
+  for (std::vector<float>& feature : in.f) feature.resize(n);
   for (int c = 0; c < 3; ++c) {
     in.y[c].resize(n);
     in.v[c].resize(n);
@@ -195,10 +241,10 @@ void RegressionDenoiser::apply(Image& image) const {
       // Unknown below 2 samples (infinite): as large as floats allow, so that every neighbour weighs 1.
       const float v = std::isfinite(variance.pixels[k]) ? variance.pixels[k] : 1e30f;
       in.v[c][i] = std::min(v / (a * a), 1e30f);
-      in.features[i][static_cast<size_t>(c)] = normal.pixels[k];
+      in.f[static_cast<size_t>(c)][i] = normal.pixels[k];
     }
     // Escaped rays (infinite depth) as the farthest surface.
-    in.features[i][3] = far > 0 ? (std::isfinite(depth.pixels[i]) ? depth.pixels[i] / far : 1.0f) : 0.0f;
+    in.f[3][i] = far > 0 ? (std::isfinite(depth.pixels[i]) ? depth.pixels[i] / far : 1.0f) : 0.0f;
   }
 
   std::vector<float> illumination(3 * n);
