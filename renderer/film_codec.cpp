@@ -123,7 +123,9 @@ std::optional<FilmFile> decode_v3(std::string_view in, std::string* why) {
   if (in.size() < kHeaderBytes) return refuse(why, "truncated header");
   FilmFile f;
   read_common_fields(f, in);
-  if ((get_field<uint32_t>(in, 44) & ~3u) != 0 || get_field<uint32_t>(in, 52) > 1 || get_field<uint32_t>(in, 84) != 0)
+  const uint32_t flags = get_field<uint32_t>(in, 44);
+  if ((flags & ~15u) != 0 || ((flags >> 2) & 3u) > 1 || get_field<uint32_t>(in, 52) > 1 ||
+      get_field<uint32_t>(in, 84) != 0)
     return refuse(why, "bad display fields or reserved bits");
   f.job_spp = get_field<uint32_t>(in, 64);
   f.passes = get_field<uint32_t>(in, 68);
