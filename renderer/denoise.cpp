@@ -40,7 +40,7 @@ struct Inputs {
 };
 
 // Solves A x = b for a symmetric positive definite A (kDims x kDims, upper triangle given) by its Cholesky
-// factorisation (Golub and Van Loan, Matrix Computations, 4th ed., 2013, §4.2.5) for three right-hand sides, and
+// factorisation (Golub and Van Loan, Matrix Computations, 4th ed., 2013, §4.2) for three right-hand sides, and
 // returns x[0] of each; false when A is not numerically positive definite.
 bool solve_intercepts(const double (&a)[kDims][kDims], const double (&b)[3][kDims], double (&x0)[3]) {
   double l[kDims][kDims] = {};

@@ -3,20 +3,23 @@
 //
 // "regression" is a first-order regression on the feature passes with non-local-means weights, the core of
 // NFOR (Bitterli, Rousselle, Moon, Iglesias-Guitián, Adler, Mitchell, Jarosz and Novák, "Nonlinear Weighted
-// First-Order Regression for Denoising Monte Carlo Renderings", EGSR 2016, §4), without its two half-buffers: the
-// weights are guided by the per-pixel variance of the mean (the `variance` pass) instead, as in the variance-
-// normalised patch distance of Rousselle, Knaus and Zwicker ("Adaptive Rendering with Non-Local Means Filtering",
-// SIGGRAPH Asia 2012, eq. 9). Per pixel p:
-//   1. the illumination y = beauty / (albedo + 0.01) is what is filtered, so that texture detail, which lives in the
-//      albedo, is multiplied back unfiltered (the demodulation of Zimmer, Rousselle, Jakob, Wang, Adler, Jarosz,
-//      Sorkine-Hornung and Sorkine-Hornung, "Path-space Motion Estimation and Decomposition for Robust Animation
-//      Filtering", EGSR 2015, §5); its variance is the beauty's over (albedo + 0.01)^2;
+// First-Order Regression for Denoising Monte Carlo Renderings", EGSR 2016), without its two half-buffers and its
+// selection among several filters: the weights are guided by the per-pixel variance of the mean (the `variance` pass)
+// instead, with the variance-cancelling patch distance of Rousselle, Knaus and Zwicker ("Adaptive Rendering with
+// Non-Local Means Filtering", SIGGRAPH Asia 2012). Per pixel p:
+//   1. the illumination y = beauty / a is what is filtered and a multiplied back, so that texture detail, which lives
+//      in the albedo, is never blurred (the albedo demodulation of Schied et al., "Spatiotemporal Variance-Guided
+//      Filtering", HPG 2017, and Bako et al., "Kernel-Predicting Convolutional Networks for Denoising Monte Carlo
+//      Renderings", SIGGRAPH 2017). a is the albedo pass plus the share of samples that escaped (they see the
+//      environment unmodulated: albedo 1; the share is 1 - |mean normal|), at least 0.01; y's variance is the
+//      beauty's over a^2;
 //   2. every pixel q of a (2R+1)^2 window gets the weight w = exp(-max(0, d^2)), d^2 the mean over a (2f+1)^2 patch
 //      and the three channels of ((y_p - y_q)^2 - (v_p + min(v_p, v_q))) / (1e-10 + k^2 (v_p + v_q)): neighbours
 //      whose difference the noise explains weigh 1, those across a shadow edge ~0;
 //   3. the illumination is fit by weighted least squares to a linear function of the features' differences from
-//      p's, y_q ~ b0 + b . (normal_q - normal_p, depth_q - depth_p), with a small ridge term (Tikhonov) on b; b0, the
-//      fit at p, is p's denoised illumination (clamped at 0), times p's albedo + 0.01 its beauty.
+//      p's, y_q ~ b0 + b . (normal_q - normal_p, depth_q - depth_p) (depth over the image's farthest), with a small
+//      ridge term (Tikhonov) on b; b0, the fit at p, is p's denoised illumination (clamped at 0), times a_p its
+//      beauty.
 // A noiseless image (variance 0) gives weight 0 to every neighbour that differs from p and comes out as it went in;
 // a constant one comes out constant. Each pixel's sums run over the window in a fixed order, and rows are computed in
 // fixed bands whatever the threads, so the result is the same bits on any thread count.
