@@ -139,7 +139,7 @@ int main(int argc, char** argv) try {
     denoiser.apply(image);
     const double took = seconds_since(t0);
     const double denoised = relative_mse(image.beauty().pixels, reference);
-    std::printf("%6u %12.6f %12.6f %10.2f %10.3f\n", spp, noisy, denoised, noisy / denoised, took);
+    std::printf("%6u %12.4e %12.4e %10.2f %10.3f\n", spp, noisy, denoised, noisy / denoised, took);
   }
 
   if (!time_big) return 0;
