@@ -80,7 +80,7 @@ asan: test-deps
 
 bench: deps
 	$(CMAKE_CONFIGURE) -DTESSERA_BUILD_TESTS=$(or $(TESTS_CONFIGURED),OFF) -DTESSERA_BUILD_BENCH=ON
-	cmake --build $(BUILD) -j $(JOBS) --target tessera-bench tessera-poll-load tessera-claim-load
+	cmake --build $(BUILD) -j $(JOBS) --target tessera-bench tessera-poll-load tessera-claim-load tessera-denoise-bench
 
 image:
 	deploy/install-deps.sh deploy

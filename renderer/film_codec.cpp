@@ -99,6 +99,7 @@ void read_common_fields(FilmFile& f, std::string_view in) {
               get_field<int32_t>(in, 40)};
   f.exr_half = (get_field<uint32_t>(in, 44) & 1u) != 0;
   f.sample_count_pass = (get_field<uint32_t>(in, 44) & 2u) != 0;
+  f.denoise = ((get_field<uint32_t>(in, 44) >> 2) & 3u) == 1 ? Denoiser::kRegression : Denoiser::kNone;
   f.display.exposure_ev = get_field<float>(in, 48);
   f.display.tonemap = get_field<uint32_t>(in, 52) == 1 ? ToneMap::kAces : ToneMap::kClamp;
   f.fingerprint = get_field<uint64_t>(in, 56);
@@ -122,7 +123,9 @@ std::optional<FilmFile> decode_v3(std::string_view in, std::string* why) {
   if (in.size() < kHeaderBytes) return refuse(why, "truncated header");
   FilmFile f;
   read_common_fields(f, in);
-  if ((get_field<uint32_t>(in, 44) & ~3u) != 0 || get_field<uint32_t>(in, 52) > 1 || get_field<uint32_t>(in, 84) != 0)
+  const uint32_t flags = get_field<uint32_t>(in, 44);
+  if ((flags & ~15u) != 0 || ((flags >> 2) & 3u) > 1 || get_field<uint32_t>(in, 52) > 1 ||
+      get_field<uint32_t>(in, 84) != 0)
     return refuse(why, "bad display fields or reserved bits");
   f.job_spp = get_field<uint32_t>(in, 64);
   f.passes = get_field<uint32_t>(in, 68);
@@ -203,7 +206,8 @@ std::string encode_film_file(const FilmFileHeader& f, const Film& film) {
   put_field<int32_t>(out, f.region.y);
   put_field<int32_t>(out, f.region.width);
   put_field<int32_t>(out, f.region.height);
-  put_field<uint32_t>(out, (f.exr_half ? 1u : 0u) | (f.sample_count_pass ? 2u : 0u));
+  put_field<uint32_t>(
+      out, (f.exr_half ? 1u : 0u) | (f.sample_count_pass ? 2u : 0u) | (f.denoise == Denoiser::kRegression ? 4u : 0u));
   put_field<float>(out, f.display.exposure_ev);
   put_field<uint32_t>(out, f.display.tonemap == ToneMap::kAces ? 1u : 0u);
   put_field<uint64_t>(out, f.fingerprint);

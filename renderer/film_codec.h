@@ -13,7 +13,8 @@
 //       24     4  u32 sample_count     samples every pixel of the region received (the film's samples())
 //       28    16  i32 x, y, w, h       the region rendered (the whole image when not cropped)
 //       44     4  u32 flags            bit 0: the job's EXR output is half precision; bit 1: the job asks for the
-//                                      sample_count pass (aov.h; the other passes are layers); the others 0
+//                                      sample_count pass (aov.h; the other passes are layers); bits 2-3: the job's
+//                                      denoiser (0 none, 1 regression: denoise.h); the others 0
 //       48     4  f32 exposure_ev      the job's display settings, for PNG outputs of a merge
 //       52     4  u32 tonemap          0 clamp, 1 ACES
 //       56     8  u64 fingerprint      FNV-1a 64 of the settings the pixels depend on: films of other settings never
@@ -51,6 +52,7 @@
 #include "renderer/display.h"
 #include "renderer/film.h"
 #include "renderer/integrator.h"
+#include "renderer/render_settings.h"
 
 namespace tessera {
 
@@ -61,7 +63,8 @@ struct FilmFileHeader {
   uint32_t job_spp = 0;  // the whole job's samples per pixel; 0 unknown
   PixelRegion region;    // {0, 0, width, height} for the whole image
   bool exr_half = true;
-  bool sample_count_pass = false;  // the job asks for the sample_count pass
+  bool sample_count_pass = false;      // the job asks for the sample_count pass
+  Denoiser denoise = Denoiser::kNone;  // the job's denoiser, for the images of a merge
   DisplaySettings display;
   uint64_t fingerprint = 0;
   uint32_t passes = 0;

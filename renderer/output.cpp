@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "renderer/aov.h"
+#include "renderer/denoise.h"
 
 namespace tessera {
 
@@ -127,11 +128,18 @@ std::string encode_pass_png(const Image& image, std::string_view pass) {
   throw std::invalid_argument("the image has no pass " + std::string(pass));
 }
 
-OutputPipeline::OutputPipeline(EncodeOptions options, std::vector<ImageFormat> formats, std::vector<std::string> aovs)
-    : options_(options), formats_(std::move(formats)), aovs_(std::move(aovs)) {}
+OutputPipeline::OutputPipeline(EncodeOptions options, std::vector<ImageFormat> formats, std::vector<std::string> aovs,
+                               Denoiser denoise)
+    : options_(options), formats_(std::move(formats)), aovs_(std::move(aovs)) {
+  RenderSettings passes;
+  passes.aovs = aovs_;
+  passes.denoise = denoise;
+  resolved_ = film_aovs(passes);
+  if (auto stage = make_denoiser(denoise)) add_post_stage(std::move(stage));
+}
 
 OutputPipeline::OutputPipeline(const RenderSettings& settings, const OutputSpec& outputs)
-    : options_{settings.display, settings.exr_half}, aovs_(settings.aovs) {
+    : OutputPipeline(EncodeOptions{settings.display, settings.exr_half}, {}, settings.aovs, settings.denoise) {
   if (outputs.png) formats_.push_back(ImageFormat::kPng);
   if (outputs.exr) formats_.push_back(ImageFormat::kExr);
 }
@@ -141,8 +149,13 @@ void OutputPipeline::add_post_stage(std::shared_ptr<const PostStage> stage) {
 }
 
 Image OutputPipeline::image(const Film& film) const {
-  Image image = resolve_image(film, aovs_);
+  Image image = resolve_image(film, resolved_);
   for (const auto& stage : post_) stage->apply(image);
+  // The passes resolved for the stages alone are not the job's.
+  std::erase_if(image.layers, [&](const ImageLayer& layer) {
+    return std::find(resolved_.begin(), resolved_.end(), layer.name) != resolved_.end() &&
+           std::find(aovs_.begin(), aovs_.end(), layer.name) == aovs_.end();
+  });
   return image;
 }
 
@@ -152,8 +165,13 @@ void OutputPipeline::publish(const Image& image, const Publish& publish) const {
 
 void OutputPipeline::publish_passes(const Image& image,
                                     const std::function<void(std::string_view, std::string_view)>& publish) const {
-  for (size_t i = 1; i < image.layers.size(); ++i)
-    publish(image.layers[i].name, encode_pass_png(image, image.layers[i].name));
+  for (size_t i = 1; i < image.layers.size(); ++i) {
+    const ImageLayer& layer = image.layers[i];
+    if (find_aov(layer.name) || layer.channels.size() != 3)
+      publish(layer.name, encode_pass_png(image, layer.name));
+    else
+      publish(layer.name, encode_png(layer.pixels, image.width, image.height, options_.display));
+  }
 }
 
 std::string OutputPipeline::preview_png(const Image& image) const {

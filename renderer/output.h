@@ -3,7 +3,8 @@
 // encoded bytes are published (a job's files, fenced by its run; paths on the user's disk).
 //
 //   resolve   the film's sums divided by their sample counts: a linear image of named layers, the beauty first
-//   post      stages that change the resolved image in order (a denoiser goes here); none yet
+//   post      stages that change the resolved image in order: the job's denoiser (denoise.h), which reads passes
+//             the job may not have asked for (they are resolved for it, and left out of the encoded image)
 //   encode    each format the job asks for, in memory: OpenEXR (every layer, linear, half or float channels) and
 //             PNG (the beauty, exposed and tone-mapped to 8-bit sRGB)
 //   publish   the caller's: it receives each format's bytes
@@ -76,9 +77,12 @@ class OutputPipeline {
   // Receives each format's encoded bytes, in the order of formats().
   using Publish = std::function<void(ImageFormat format, std::string_view bytes)>;
 
-  // `aovs`: the passes the images hold beside the beauty (aov.h).
-  OutputPipeline(EncodeOptions options, std::vector<ImageFormat> formats, std::vector<std::string> aovs = {});
-  // A job's: its display settings, EXR precision and passes, the formats its outputs ask for (PNG, then EXR).
+  // `aovs`: the passes the images hold beside the beauty (aov.h); `denoise`: the denoiser that post-processes them,
+  // whose features the film must hold (film_aovs), and whose "noisy" layer the images hold too.
+  OutputPipeline(EncodeOptions options, std::vector<ImageFormat> formats, std::vector<std::string> aovs = {},
+                 Denoiser denoise = Denoiser::kNone);
+  // A job's: its display settings, EXR precision, passes and denoiser, the formats its outputs ask for (PNG, then
+  // EXR).
   OutputPipeline(const RenderSettings& settings, const OutputSpec& outputs);
 
   void add_post_stage(std::shared_ptr<const PostStage> stage);
@@ -90,7 +94,8 @@ class OutputPipeline {
   void publish(const Image& image, const Publish& publish) const;
   // The whole pipeline.
   void run(const Film& film, const Publish& publish) const { this->publish(image(film), publish); }
-  // Each pass of `image` (the layers after the beauty) as PNG (encode_pass_png), to `publish` with its name.
+  // Each pass of `image` (the layers after the beauty) as PNG (encode_pass_png), to `publish` with its name; a layer
+  // that is no pass (the denoiser's "noisy") as the beauty is shown.
   void publish_passes(const Image& image,
                       const std::function<void(std::string_view pass, std::string_view png)>& publish) const;
   // A render's preview: the image as PNG, whatever the formats.
@@ -104,6 +109,7 @@ class OutputPipeline {
   EncodeOptions options_;
   std::vector<ImageFormat> formats_;
   std::vector<std::string> aovs_;
+  std::vector<std::string> resolved_;  // aovs_ and the passes the post stages read
   std::vector<std::shared_ptr<const PostStage>> post_;
 };
 

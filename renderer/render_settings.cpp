@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "renderer/aov.h"
+#include "renderer/denoise.h"
 #include "renderer/json_fields.h"
 #include "renderer/scene_error.h"
 
@@ -31,6 +32,7 @@ constexpr Named<Estimator> kEstimators[] = {
     {Estimator::kMis, "mis"}, {Estimator::kArea, "area"}, {Estimator::kHemisphere, "hemisphere"}};
 constexpr Named<ToneMap> kTonemaps[] = {{ToneMap::kClamp, "clamp"}, {ToneMap::kAces, "aces"}};
 constexpr Named<bool> kExrPrecisions[] = {{true, "half"}, {false, "float"}};  // RenderSettings::exr_half
+constexpr Named<Denoiser> kDenoisers[] = {{Denoiser::kNone, "none"}, {Denoiser::kRegression, "regression"}};
 constexpr Named<bool OutputSpec::*> kOutputFormats[] = {{&OutputSpec::png, "png"}, {&OutputSpec::exr, "exr"}};
 
 template <typename T, size_t N>
@@ -80,6 +82,19 @@ const char* estimator_name(Estimator estimator) {
 }
 const char* tonemap_name(ToneMap tonemap) {
   return name_of(kTonemaps, tonemap);
+}
+const char* denoiser_name(Denoiser denoiser) {
+  return name_of(kDenoisers, denoiser);
+}
+
+std::vector<std::string> film_aovs(const RenderSettings& settings) {
+  const std::vector<std::string>& features = denoiser_features(settings.denoise);
+  std::vector<std::string> aovs;
+  for (const AovInfo& a : aov_table())
+    if (std::find(settings.aovs.begin(), settings.aovs.end(), a.name) != settings.aovs.end() ||
+        std::find(features.begin(), features.end(), a.name) != features.end())
+      aovs.emplace_back(a.name);
+  return aovs;
 }
 
 namespace {
@@ -155,6 +170,12 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
   s.display.tonemap = named_key(render, "tonemap", pointer, kTonemaps, defaults.display.tonemap);
   s.exr_half = named_key(render, "exr_precision", pointer, kExrPrecisions, defaults.exr_half);
   s.aovs = aovs_key(render, pointer, s.integrator.name);
+  s.denoise = named_key(render, "denoise", pointer, kDenoisers, defaults.denoise);
+  // The denoiser reads passes the integrator must make.
+  for (const std::string& feature : denoiser_features(s.denoise))
+    if (std::string problem = integrator_aov_problem(s.integrator.name, feature); !problem.empty())
+      throw SceneError(at(pointer, "denoise"), "the denoiser \"" + std::string(denoiser_name(s.denoise)) +
+                                                   "\" reads the pass \"" + feature + "\": " + problem);
   return s;
 }
 
@@ -173,12 +194,14 @@ json render_settings_to_json(const RenderSettings& s) {
               {"tonemap", tonemap_name(s.display.tonemap)},
               {"exr_precision", name_of(kExrPrecisions, s.exr_half)},
               {"max_volume_depth", s.integrator.max_volume_depth},
-              {"aovs", s.aovs}};
+              {"aovs", s.aovs},
+              {"denoise", denoiser_name(s.denoise)}};
   // Keys the mapping gained after jobs were first stored are written only where they differ from their defaults:
   // records (and their checkpoints' fingerprints, FNV-1a of this text) of jobs stored before a key existed keep their
   // text byte for byte.
   static const json kLaterKeysDefaults = {{"max_volume_depth", IntegratorSettings{}.max_volume_depth},
-                                          {"aovs", json::array()}};
+                                          {"aovs", json::array()},
+                                          {"denoise", denoiser_name(Denoiser::kNone)}};
   for (const auto& [key, fallback] : kLaterKeysDefaults.items())
     if (out[key] == fallback) out.erase(key);
   return out;

@@ -8,7 +8,8 @@
 // document reader, so that a record written by an earlier version, with fewer fields, takes the defaults for the
 // rest, as a document would.
 //
-// The names of every enumeration a document spells out (sampler, estimator, tone curve, EXR precision, output format)
+// The names of every enumeration a document spells out (sampler, estimator, tone curve, EXR precision, output format,
+// denoiser)
 // are tables in render_settings.cpp, read both ways; the integrators' names are their registry's (integrator.h).
 #pragma once
 
@@ -25,6 +26,9 @@
 
 namespace tessera {
 
+// A post stage that denoises the beauty (denoise.h); kNone leaves it as rendered.
+enum class Denoiser { kNone, kRegression };
+
 struct RenderSettings {
   int width = 512;
   int height = 512;
@@ -38,6 +42,7 @@ struct RenderSettings {
   bool exr_half = true;           // EXR channel precision
   // The render passes beside the beauty (aov.h), by name, in the order of aov_table(): each once.
   std::vector<std::string> aovs;
+  Denoiser denoise = Denoiser::kNone;  // the beauty denoised, the rendered one kept as the layer "noisy"
 
   // Set by whoever renders a part of a job, never by a document (not in the JSON mapping); integrator.rr_start_depth
   // neither.
@@ -73,12 +78,16 @@ struct RenderLimits {
   int max_volume_depth = 4096;
 };
 
+// The passes the film of a job with `settings` holds: render.aovs and those the output pipeline's stages read (the
+// denoiser's features), in the order of aov_table(). The images keep render.aovs alone.
+std::vector<std::string> film_aovs(const RenderSettings& settings);
+
 // A document's "render" object (`pointer` is its JSON pointer, "/render" in a job): defaults for absent keys, null
 // for none at all. Throws SceneError naming the field.
 RenderSettings render_settings_from_json(const nlohmann::json& render, const std::string& pointer,
                                          const RenderLimits& limits);
-// The normalised form: every field a document can set, defaults filled in (but max_volume_depth and aovs only where
-// they are not their defaults, so that records written before they existed keep their text).
+// The normalised form: every field a document can set, defaults filled in (but max_volume_depth, aovs and denoise only
+// where they are not their defaults, so that records written before they existed keep their text).
 nlohmann::json render_settings_to_json(const RenderSettings& settings);
 // The same as the job status shows it: a stopping rule that is off (time_limit_s, noise_target at 0, the documents'
 // default) is left out, as a document leaves it out, so that it reads as "none" rather than as a limit of zero.
@@ -101,5 +110,6 @@ OutputSpec output_spec_from_text(std::string_view text);
 const char* sampler_name(SamplerKind sampler);
 const char* estimator_name(Estimator estimator);
 const char* tonemap_name(ToneMap tonemap);
+const char* denoiser_name(Denoiser denoiser);
 
 }  // namespace tessera

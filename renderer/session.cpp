@@ -62,7 +62,7 @@ RenderSession::RenderSession(std::shared_ptr<const Scene> scene, const RenderSet
   for (const std::string& aov : settings.aovs)
     if (std::string problem = integrator_aov_problem(settings.integrator.name, aov); !problem.empty())
       throw std::invalid_argument(problem);
-  add_aov_layers(film_, settings.aovs);
+  add_aov_layers(film_, film_aovs(settings));
   progress_.samples_total = settings.spp;
 }
 

@@ -51,6 +51,8 @@ const char* kRenderUsage =
     "  --aov NAME             a render pass beside the beauty, in the EXR as NAME.<channel> (repeatable;\n"
     "                         render.aovs): albedo normal depth position uv roughness object_id material_id\n"
     "                         sample_count variance\n"
+    "  --denoise NAME         none | regression (render.denoise): the beauty denoised, the rendered one kept in\n"
+    "                         the EXR as noisy.<channel>\n"
     "  --variant NAME         the glTF asset's KHR_materials_variants variant (scene.gltf_variant)\n"
     "  --time SECONDS         a still of the glTF asset's animation at this time (scene.time)\n"
     "  --animation NAME|N     the glTF asset's animation to pose, by name or index (scene.animation; default\n"
@@ -93,8 +95,11 @@ void progress_bar(const tessera::RenderProgress& p) {
 }
 
 // Writes the film to every output; the extension picks the format: .tfilm the film itself (the film codec), an
-// image format through the output pipeline that the daemon's results go through, each format encoded once.
-void write_outputs(const std::vector<std::string>& outputs, const PartialFilm& part) {
+// image format through the output pipeline that the daemon's results go through, each format encoded once. The images
+// hold the passes `aovs` (those of the job that rendered the film), or where not given every pass the film holds
+// (a merge: the parts do not record which of their layers the job asked for and which its denoiser reads).
+void write_outputs(const std::vector<std::string>& outputs, const PartialFilm& part,
+                   const std::vector<std::string>* aovs = nullptr) {
   std::vector<tessera::ImageFormat> formats;
   for (const std::string& out : outputs) {
     if (lower_extension(out) == ".tfilm") {
@@ -105,7 +110,8 @@ void write_outputs(const std::vector<std::string>& outputs, const PartialFilm& p
     }
   }
   const tessera::OutputPipeline pipeline(tessera::EncodeOptions{part.display, part.exr_half}, formats,
-                                         tessera::aovs_of(part.film, part.sample_count_pass));
+                                         aovs ? *aovs : tessera::aovs_of(part.film, part.sample_count_pass),
+                                         part.denoise);
   try {
     pipeline.run(part.film, [&](tessera::ImageFormat format, std::string_view bytes) {
       for (const std::string& out : outputs)
@@ -186,7 +192,9 @@ int cmd_render(int argc, char** argv) {
       aovs.push_back(value());
       option_of["aovs/" + std::to_string(aovs.size() - 1)] = a + " " + aovs.back().get<std::string>();
       overrides["aovs"] = std::move(aovs);
-    } else if (a == "--variant")
+    } else if (a == "--denoise")
+      set("denoise", value());
+    else if (a == "--variant")
       variant = value();
     else if (a == "--time")
       scene_overrides["time"] = parse_number(a, value());
@@ -196,8 +204,8 @@ int cmd_render(int argc, char** argv) {
       quiet = true;
     else if (!a.empty() && a[0] == '-')
       unknown_option(a, {"--output", "--spp", "--samples", "--region", "--width", "--height", "--time-limit",
-                         "--threads", "--integrator", "--estimator", "--seed", "--max-depth", "--aov", "--variant",
-                         "--time", "--animation", "--quiet", "--help"});
+                         "--threads", "--integrator", "--estimator", "--seed", "--max-depth", "--aov", "--denoise",
+                         "--variant", "--time", "--animation", "--quiet", "--help"});
     else if (input.empty())
       input = a;
     else
@@ -363,8 +371,9 @@ int cmd_render(int argc, char** argv) {
       std::find(job.settings.aovs.begin(), job.settings.aovs.end(), "sample_count") != job.settings.aovs.end();
   part.display = job.settings.display;
   part.fingerprint = film_fingerprint(doc, job.settings, options.scene.asset_root);
+  part.denoise = job.settings.denoise;
   part.film = session.take_film();
-  write_outputs(outputs, part);
+  write_outputs(outputs, part, &job.settings.aovs);
   return kExitOk;
 }
 
@@ -486,6 +495,7 @@ int cmd_merge(int argc, char** argv) {
   merged.region = {0, 0, first.width, first.height};
   merged.exr_half = first.exr_half;
   merged.sample_count_pass = first.sample_count_pass;
+  merged.denoise = first.denoise;
   merged.display = first.display;
   merged.fingerprint = first.fingerprint;
   // Every layer's integer sums, hit counts and per-pixel sample counts: exact in any order.

@@ -109,7 +109,7 @@ std::optional<Problem> check_work(const RenderJob& job, double max_work) {
 // Refuses a job whose film (its beauty and passes' sums, renderer/aov.h film_bytes) is above `max_film_bytes` (0: no
 // limit): a render holds it, and its checkpoint and outputs are of its size.
 std::optional<Problem> check_film(const RenderSettings& s, uint64_t max_film_bytes) {
-  const uint64_t bytes = film_bytes(s.width, s.height, s.aovs);
+  const uint64_t bytes = film_bytes(s.width, s.height, film_aovs(s));
   if (max_film_bytes == 0 || bytes <= max_film_bytes) return std::nullopt;
   const uint64_t per_pixel = bytes / (static_cast<uint64_t>(s.width) * static_cast<uint64_t>(s.height));
   return Problem{

@@ -93,6 +93,29 @@ grep -qF -- '--aov albdo: must be one of' "$tmp/err" && grep -qF 'did you mean "
   && ok "render names the misspelt --aov and suggests albedo" || not_ok "render --aov albdo said: $(cat "$tmp/err")"
 expect 2 "a pass the integrator cannot make is usage" "$TESSERA" render "$job" "${r[@]}" --spp 1 --integrator light --aov normal -o x.exr
 
+# --- the denoiser: the beauty denoised, the rendered one kept as the layer noisy, the features only where asked ------
+expect 0 "render denoised" "$TESSERA" render "$job" "${r[@]}" --spp 12 --aov normal --denoise regression -o dn.exr
+channels=$(oiiotool --info -v dn.exr 2>/dev/null | grep 'channel list')
+if [[ $channels == *"channel list: R, G, B, noisy.R, noisy.G, noisy.B, normal.X, normal.Y, normal.Z" ]]; then
+  ok "the denoised EXR holds the beauty, noisy and the asked pass alone"
+else
+  not_ok "the denoised EXR's channels: $channels"
+fi
+oiiotool dn.exr --ch noisy.R,noisy.G,noisy.B --chnames R,G,B -o dn_noisy.exr
+expect 0 "render the same without the denoiser" "$TESSERA" render "$job" "${r[@]}" --spp 12 --aov normal -o plain.exr
+oiiotool plain.exr --ch R,G,B -o plain_beauty.exr
+if same_pixels dn_noisy.exr plain_beauty.exr; then ok "noisy is the beauty as rendered"; else not_ok "noisy differs"; fi
+expect 0 "render samples 0:5 denoised" "$TESSERA" render "$job12" "${r[@]}" --samples 0:5 --denoise regression -o d1.tfilm
+expect 0 "render samples 5:7 denoised" "$TESSERA" render "$job12" "${r[@]}" --samples 5:7 --denoise regression -o d2.tfilm
+expect 0 "merge the denoised parts" "$TESSERA" merge d2.tfilm d1.tfilm -o dn_merged.exr
+oiiotool dn_merged.exr --ch R,G,B -o dn_merged_beauty.exr
+oiiotool dn.exr --ch R,G,B -o dn_beauty.exr
+if same_pixels dn_merged_beauty.exr dn_beauty.exr; then ok "a merge of denoised parts is denoised as the single render";
+else not_ok "the merged denoised beauty differs"; fi
+expect 2 "an unknown denoiser is usage" "$TESSERA" render "$job" "${r[@]}" --spp 1 --denoise nfor -o x.exr
+grep -qF -- '--denoise nfor: must be' "$tmp/err" && ok "render names the unknown --denoise" \
+  || not_ok "render --denoise nfor said: $(cat "$tmp/err")"
+
 # --- assets resolve beside the job file, also when it is named relative to the current directory -------------------
 mkdir -p assets
 cp all.exr assets/sky.exr

@@ -35,6 +35,7 @@ FilmFile layered_file() {
   f.job_spp = 32;
   f.region = {1, 0, 3, 2};
   f.exr_half = false;
+  f.denoise = Denoiser::kRegression;
   f.display.exposure_ev = -1.5f;
   f.display.tonemap = ToneMap::kAces;
   f.fingerprint = 0xfeedface12345678ull;
@@ -70,6 +71,7 @@ TEST(FilmCodec, RoundTripsEveryLayerBitExactly) {
   EXPECT_EQ(d->job_spp, 32u);
   EXPECT_EQ(d->region, f.region);
   EXPECT_FALSE(d->exr_half);
+  EXPECT_EQ(d->denoise, Denoiser::kRegression);
   EXPECT_EQ(d->display, f.display);
   EXPECT_EQ(d->fingerprint, f.fingerprint);
   EXPECT_EQ(d->passes, 3u);
@@ -174,7 +176,8 @@ TEST(FilmCodec, RefusesMalformedFiles) {
       {"region past the edge", with_field<int32_t>(good, 36, 4)},
       {"region near 2^31", with_field<int32_t>(good, 28, 0x7fffffff)},
       {"empty region", with_field<int32_t>(good, 40, 0)},
-      {"unknown flags", with_field<uint32_t>(good, 44, 4)},
+      {"unknown flags", with_field<uint32_t>(good, 44, 16)},
+      {"unknown denoiser", with_field<uint32_t>(good, 44, 8)},
       {"unknown tone map", with_field<uint32_t>(good, 52, 2)},
       {"NaN elapsed time", with_field<double>(good, 72, NAN)},
       {"negative elapsed time", with_field<double>(good, 72, -1)},

@@ -67,15 +67,18 @@ TEST(RenderSettingsMapping, TheNormalisedFormIsTheSchemasFieldsAndDefaults) {
   std::ifstream in("proto/schemas/render.schema.json");
   ASSERT_TRUE(in) << "run from the source tree";
   const json properties = json::parse(in)["properties"];
-  // max_volume_depth and aovs are left out at their defaults (the stored records' text, below), written otherwise.
+  // max_volume_depth, aovs and denoise are left out at their defaults (the stored records' text, below), written
+  // otherwise.
   RenderSettings deep;
   deep.integrator.max_volume_depth = 7;
   EXPECT_EQ(render_settings_to_json(deep).value("max_volume_depth", 0), 7);
   json normalised = render_settings_to_json(RenderSettings{});
   EXPECT_FALSE(normalised.contains("max_volume_depth"));
   EXPECT_FALSE(normalised.contains("aovs"));
+  EXPECT_FALSE(normalised.contains("denoise"));
   normalised["max_volume_depth"] = RenderSettings{}.integrator.max_volume_depth;
   normalised["aovs"] = json::array();
+  normalised["denoise"] = "none";
   EXPECT_EQ(normalised.size(), properties.size()) << normalised.dump();
   for (const auto& [key, property] : properties.items()) {
     ASSERT_TRUE(normalised.contains(key)) << key;

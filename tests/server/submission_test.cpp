@@ -183,6 +183,36 @@ TEST(Submission, SemanticErrorsNameTheField) {
   EXPECT_EQ(p.pointer, "/scene/objects/6/positions");
 }
 
+// render.denoise: a name the contract lists, and one the integrator can feed (the denoiser reads the variance pass,
+// which bdpt cannot make); its features count in the film's size.
+TEST(Submission, RefusesADenoiserByName) {
+  json doc = test::cornell_job();
+  doc["render"]["denoise"] = "nfor";
+  Problem p = refused("application/json", doc.dump());
+  EXPECT_EQ(p.status, 422);
+  EXPECT_EQ(p.pointer, "/render/denoise");
+
+  doc["render"]["denoise"] = "regression";
+  doc["render"]["integrator"] = "bdpt";
+  p = refused("application/json", doc.dump());
+  EXPECT_EQ(p.status, 422);
+  EXPECT_EQ(p.pointer, "/render/denoise");
+  EXPECT_NE(p.detail.find("variance"), std::string::npos) << p.detail;
+
+  doc["render"]["integrator"] = "path";
+  auto r = check_submission("application/json", doc.dump(), {});
+  ASSERT_TRUE(std::get_if<AcceptedJob>(&r)) << std::get<Problem>(r).detail;
+  EXPECT_EQ(std::get<AcceptedJob>(r).settings.denoise, Denoiser::kRegression);
+
+  // 512 x 512: 56 bytes a pixel for the beauty, 164 for the features.
+  SubmissionLimits limits;
+  limits.max_film_bytes = 512 * 512 * 100;
+  EXPECT_EQ(refused("application/json", doc.dump(), limits).status, 422);
+  doc["render"].erase("denoise");
+  r = check_submission("application/json", doc.dump(), limits);
+  EXPECT_TRUE(std::get_if<AcceptedJob>(&r));
+}
+
 TEST(Submission, ConfiguredLimitsNameTheField) {
   SubmissionLimits limits;
   limits.render.max_width = 256;
