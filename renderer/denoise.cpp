@@ -5,6 +5,12 @@
 #include <cmath>
 #include <stdexcept>
 
+// Eigen's scalar code, compiled without fused multiply-adds as the rest of the renderer is: its vectorised kernels
+// would fuse them where the processor has FMA, and the denoised image would then depend on the build's processor.
+#define EIGEN_DONT_VECTORIZE
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
 #include "renderer/thread_pool.h"
 
 namespace tessera {
@@ -39,36 +45,21 @@ struct Inputs {
   std::array<std::vector<float>, 4> f;  // the features: normal, depth over the image's largest finite depth
 };
 
-// Solves A x = b for a symmetric positive definite A (kDims x kDims, upper triangle given) by its Cholesky
-// factorisation (Golub and Van Loan, Matrix Computations, 4th ed., 2013, §4.2) for three right-hand sides, and
-// returns x[0] of each; false when A is not numerically positive definite.
+// Solves A x = b for a symmetric positive definite A (kDims x kDims, upper triangle given) for three right-hand
+// sides by its Cholesky factorisation (Eigen's LLT; Golub and Van Loan, Matrix Computations, 4th ed., 2013, §4.2), and
+// returns x[0] of each; false when A is not numerically positive definite (a flat or degenerate window: the caller
+// keeps the pixel's own estimate).
 bool solve_intercepts(const double (&a)[kDims][kDims], const double (&b)[3][kDims], double (&x0)[3]) {
-  double l[kDims][kDims] = {};
-  for (int j = 0; j < kDims; ++j) {
-    double d = a[j][j];
-    for (int k = 0; k < j; ++k) d -= l[j][k] * l[j][k];
-    if (!(d > 1e-12 * a[0][0])) return false;
-    l[j][j] = std::sqrt(d);
-    for (int i = j + 1; i < kDims; ++i) {
-      double s = a[j][i];
-      for (int k = 0; k < j; ++k) s -= l[i][k] * l[j][k];
-      l[i][j] = s / l[j][j];
-    }
-  }
-  for (int c = 0; c < 3; ++c) {
-    double z[kDims], x[kDims];
-    for (int i = 0; i < kDims; ++i) {
-      double s = b[c][i];
-      for (int k = 0; k < i; ++k) s -= l[i][k] * z[k];
-      z[i] = s / l[i][i];
-    }
-    for (int i = kDims - 1; i >= 0; --i) {
-      double s = z[i];
-      for (int k = i + 1; k < kDims; ++k) s -= l[k][i] * x[k];
-      x[i] = s / l[i][i];
-    }
-    x0[c] = x[0];
-  }
+  Eigen::Matrix<double, kDims, kDims> m;
+  for (int i = 0; i < kDims; ++i)
+    for (int j = i; j < kDims; ++j) m(i, j) = m(j, i) = a[i][j];
+  const Eigen::LLT<Eigen::Matrix<double, kDims, kDims>> llt(m);
+  if (llt.info() != Eigen::Success || !(llt.rcond() > 1e-12)) return false;
+  Eigen::Matrix<double, kDims, 3> rhs;
+  for (int c = 0; c < 3; ++c)
+    for (int i = 0; i < kDims; ++i) rhs(i, c) = b[c][i];
+  const Eigen::Matrix<double, kDims, 3> x = llt.solve(rhs);
+  for (int c = 0; c < 3; ++c) x0[c] = x(0, c);
   return true;
 }
 

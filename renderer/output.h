@@ -100,10 +100,9 @@ class OutputPipeline {
                       const std::function<void(std::string_view pass, std::string_view png)>& publish) const;
   // A render's preview: the image as PNG, whatever the formats.
   std::string preview_png(const Image& image) const;
-  // A preview shows the beauty alone: without post stages, the passes are not resolved for it.
-  std::string preview_png(const Film& film) const {
-    return preview_png(post_.empty() ? resolve_image(film) : image(film));
-  }
+  // A pass's preview: the beauty as rendered so far, before the post stages (a denoiser takes seconds at 1080p, which
+  // every pass would wait for); the passes are not resolved for it.
+  std::string preview_png(const Film& film) const { return preview_png(resolve_image(film)); }
 
  private:
   EncodeOptions options_;

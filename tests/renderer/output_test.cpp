@@ -111,13 +111,17 @@ TEST(Output, PostStagesRunBetweenResolveAndEncode) {
     for (float v : pixels) EXPECT_FLOAT_EQ(v, 0.4f);
   });
   EXPECT_EQ(published, (std::vector<ImageFormat>{ImageFormat::kExr, ImageFormat::kPng}));
-  std::vector<float> preview;
-  spec_of(pipeline.preview_png(film), "a.png", &preview);
+  // A pass's preview is the film as rendered, before the post stages; the preview of a finished image has them.
+  std::vector<float> pass_preview, image_preview;
+  spec_of(pipeline.preview_png(film), "a.png", &pass_preview);
+  spec_of(pipeline.preview_png(pipeline.image(film)), "b.png", &image_preview);
   OutputPipeline plain(EncodeOptions{{}, false}, {});
   std::vector<float> unhalved;
-  spec_of(plain.preview_png(film), "a.png", &unhalved);
-  ASSERT_EQ(preview.size(), unhalved.size());
-  EXPECT_LT(preview[0], unhalved[0]);
+  spec_of(plain.preview_png(film), "c.png", &unhalved);
+  ASSERT_EQ(pass_preview.size(), unhalved.size());
+  EXPECT_EQ(pass_preview, unhalved);
+  ASSERT_EQ(image_preview.size(), unhalved.size());
+  EXPECT_LT(image_preview[0], unhalved[0]);
 }
 
 // A job's pipeline writes the formats its outputs ask for, PNG first.
