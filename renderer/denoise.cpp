@@ -194,11 +194,6 @@ void denoise_band(const Inputs& in, const RegressionDenoiserOptions& o, int y0, 
 
 }  // namespace
 
-const std::vector<std::string>& denoiser_features(Denoiser d) {
-  static const std::vector<std::string> none, regression = {"albedo", "normal", "depth", "variance"};
-  return d == Denoiser::kRegression ? regression : none;
-}
-
 void RegressionDenoiser::apply(Image& image) const {
   const ImageLayer& albedo = layer_named(image, "albedo", 3);
   const ImageLayer& normal = layer_named(image, "normal", 3);

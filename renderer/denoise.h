@@ -29,13 +29,10 @@
 #include <string>
 #include <vector>
 
-#include "renderer/output.h"
+#include "renderer/image.h"
 #include "renderer/render_settings.h"
 
 namespace tessera {
-
-// The passes (aov.h names) denoiser `d` reads; none for Denoiser::kNone.
-const std::vector<std::string>& denoiser_features(Denoiser d);
 
 struct RegressionDenoiserOptions {
   int window_radius = 6;   // R: the regression's window is (2R + 1)^2 pixels

@@ -21,24 +21,10 @@
 
 #include "renderer/display.h"
 #include "renderer/film.h"
+#include "renderer/image.h"
 #include "renderer/render_settings.h"
 
 namespace tessera {
-
-// One layer of a resolved image: its channels interleaved per pixel, row-major.
-struct ImageLayer {
-  std::string name;                   // empty for the beauty, whose channels are stored as R, G, B
-  std::vector<std::string> channels;  // "R", "G", "B"; a layer "albedo" is stored as albedo.R, albedo.G, ...
-  std::vector<float> pixels;          // width * height * channels.size()
-  bool always_float = false;          // stored as 32-bit float whatever the EXR precision (ids, depth, positions)
-};
-
-struct Image {
-  int width = 0;
-  int height = 0;
-  std::vector<ImageLayer> layers;  // the beauty first
-  const ImageLayer& beauty() const { return layers.front(); }
-};
 
 enum class ImageFormat { kPng, kExr };
 // ".png", ".exr"
@@ -58,15 +44,6 @@ Image resolve_image(const Film& film, const std::vector<std::string>& aovs = {})
 // encode: the image in `format`. PNG holds the beauty alone; EXR every layer, the beauty as R, G, B and each other
 // layer's channels as <layer>.<channel>, zip-compressed. Throws std::runtime_error with OpenImageIO's message.
 std::string encode_image(const Image& image, ImageFormat format, const EncodeOptions& options);
-
-// A stage between resolve and encode, applied to the linear image in place; deterministic (the same image gives
-// the same bits on any machine and thread count).
-class PostStage {
- public:
-  virtual ~PostStage() = default;
-  virtual const char* name() const = 0;
-  virtual void apply(Image& image) const = 0;
-};
 
 // A pass of `image` (a layer of that name, aov.h) as PNG, for a look at it (aov_look): throws std::invalid_argument
 // when the image has no such layer.

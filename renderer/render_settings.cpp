@@ -6,7 +6,6 @@
 #include <vector>
 
 #include "renderer/aov.h"
-#include "renderer/denoise.h"
 #include "renderer/json_fields.h"
 #include "renderer/scene_error.h"
 
@@ -83,6 +82,11 @@ const char* estimator_name(Estimator estimator) {
 const char* tonemap_name(ToneMap tonemap) {
   return name_of(kTonemaps, tonemap);
 }
+const std::vector<std::string>& denoiser_features(Denoiser d) {
+  static const std::vector<std::string> none, regression = {"albedo", "normal", "depth", "variance"};
+  return d == Denoiser::kRegression ? regression : none;
+}
+
 const char* denoiser_name(Denoiser denoiser) {
   return name_of(kDenoisers, denoiser);
 }

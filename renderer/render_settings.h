@@ -111,5 +111,8 @@ const char* sampler_name(SamplerKind sampler);
 const char* estimator_name(Estimator estimator);
 const char* tonemap_name(ToneMap tonemap);
 const char* denoiser_name(Denoiser denoiser);
+// The passes (aov.h names) denoiser `d` reads, which the film records whatever render.aovs names; none for
+// Denoiser::kNone.
+const std::vector<std::string>& denoiser_features(Denoiser d);
 
 }  // namespace tessera
