@@ -222,12 +222,13 @@ const SELECT_SETTINGS = [
   ["#sampler", "sampler"],
   ["#tonemap", "tonemap"],
   ["#exr-precision", "exr_precision"],
+  ["#denoise", "denoise"],
 ];
 // The render settings of a document in the form; a setting the document leaves out shows its default (the
 // contract's, render.schema.json).
 const RENDER_DEFAULTS = {
   width: 512, height: 512, spp: 64, max_depth: 8, integrator: "path", estimator: "mis", seed: 0,
-  sampler: "sobol", exposure_ev: 0, tonemap: "clamp", exr_precision: "half",
+  sampler: "sobol", exposure_ev: 0, tonemap: "clamp", exr_precision: "half", denoise: "none",
 };
 // The render passes picked (render.aovs): one checkbox per pass the contract lists (render.schema.json, aovs.items),
 // built when it has been read; the choice a document brings before then is kept for it.
@@ -420,6 +421,11 @@ $("#submit-form").addEventListener("submit", async (e) => {
       doc = withCommon({ kind: "scene", scene: { gltf: main.name } }, main.name);
       const variant = $("#gltf-variant").value.trim();
       if (variant) doc.scene.gltf_variant = variant;
+      // A still of the asset's animation: at a time, of an animation named or numbered (all digits: its index).
+      const time = $("#anim-time").value.trim();
+      if (time !== "") doc.scene.time = Number(time);
+      const animation = $("#anim-name").value.trim();
+      if (animation) doc.scene.animation = /^\d+$/.test(animation) ? Number(animation) : animation;
       // An environment map goes along as a file of the same request; the daemon stores it as an asset of its own.
       const env = $("#env-map").files[0];
       if (env) {

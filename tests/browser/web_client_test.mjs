@@ -645,6 +645,28 @@ test("render passes are picked in the form and shown in the viewer with their va
   assert.deepEqual(pageErrors, []);
 });
 
+// The denoiser: the form offers the contract's denoisers (render.schema.json) and sends the one chosen.
+test("the denoiser is chosen in the form and sent as render.denoise", async () => {
+  await page.goto(`${baseUrl}/`);
+  await page.locator('#connection[data-state="online"]').waitFor();
+  const schema = await (await page.request.get(`${baseUrl}/v1/schemas/render.schema.json`)).json();
+  await page.locator('#denoise option[value="regression"]').waitFor({ state: "attached" });
+  const denoisers = await page.locator("#denoise option").evaluateAll((os) => os.map((o) => o.value));
+  assert.deepEqual(denoisers, schema.properties.denoise.enum);
+  await page.getByRole("tab", { name: "Example" }).click();
+  await page.getByLabel("Example scene").selectOption("material");
+  await page.getByLabel("Width").fill("48");
+  await page.getByLabel("Height").fill("40");
+  await page.getByLabel("Samples per pixel").fill("8");
+  await page.getByLabel("Integrator").selectOption("path");
+  await page.getByLabel("Denoiser").selectOption("regression");
+  const job = await submitFromForm();
+  assert.equal(job.status.state, "succeeded", job.status.error);
+  assert.equal(job.sent.render.denoise, "regression");
+  assert.equal(job.status.render.denoise, "regression");
+  await page.getByLabel("Denoiser").selectOption("none");
+});
+
 // A glTF whose texture has a valid PNG header and undecodable pixels: accepted (headers are checked at upload),
 // then failed when it renders. Returns the job's id.
 async function submitBrokenGltf() {
