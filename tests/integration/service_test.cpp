@@ -1087,8 +1087,10 @@ TEST_F(ServiceTest, SixtyHostileRequestsGetTheRight4xx) {
 
 // ---- nothing lost --------------------------------------------------------------------------------------------
 
+// Each renders for a few seconds on two threads, over several of the kill loop's rounds (each of which also starts a
+// worker process), and passes checkpoints on the way.
 json crash_job(int i) {
-  json doc = cornell_job(40, 96 + 32 * i);
+  json doc = cornell_job(64, 384 + 64 * i);
   doc["render"]["seed"] = 100 + i;
   doc["render"]["exr_precision"] = "float";
   return doc;
