@@ -109,12 +109,15 @@ int run(const Config& config) {
   AssetCheckOptions asset_check;
   asset_check.max_gltf_instances = config.max_gltf_instances;
   asset_check.stop = stopping.get_token();
-  // Uploads are checked in a worker process too: an asset that crashes the loader is a 422, not the daemon's end.
-  AssetCheckWorker check_worker;
-  check_worker.data_dir = std::filesystem::absolute(data_dir);
-  check_worker.memory_limit = worker_memory_limit(config);
+  // Every render runs in a worker process of its own (worker_process.h): a scene that crashes the renderer ends that
+  // process, never the daemon. Uploads are checked in one too, under a limit of CPU time: an asset that crashes the
+  // loader is a 422.
+  WorkerOptions worker;
+  worker.data_dir = std::filesystem::absolute(data_dir);
+  worker.max_gltf_instances = config.max_gltf_instances;
+  worker.memory_limit = worker_memory_limit(config);
+  WorkerOptions check_worker = worker;
   check_worker.cpu_seconds = config.asset_check_cpu_s;
-  check_worker.max_gltf_instances = config.max_gltf_instances;
   asset_check.load = [check_worker, stop = asset_check.stop](const nlohmann::json& scene,
                                                              const std::filesystem::path& file) {
     check_asset_in_worker(check_worker, scene, file, stop);
@@ -144,13 +147,7 @@ int run(const Config& config) {
   scheduler_options.lease = std::chrono::milliseconds(static_cast<int64_t>(config.lease_s * 1000));
   scheduler_options.resolve_asset = asset_resolver(*assets);
   scheduler_options.max_gltf_instances = config.max_gltf_instances;
-  // Every render runs in a worker process of its own (worker_process.h): a scene that crashes the renderer ends that
-  // process, never the daemon.
-  WorkerOptions worker;
-  worker.data_dir = std::filesystem::absolute(data_dir);
   worker.threads = pool.size();
-  worker.max_gltf_instances = config.max_gltf_instances;
-  worker.memory_limit = worker_memory_limit(config);
   scheduler_options.runner = std::make_shared<WorkerProcessRunner>(worker);
   Scheduler scheduler(*store, *files, pool, scheduler_options);
   JobServiceOptions service_options;

@@ -148,6 +148,28 @@ std::optional<RunOutcome> run_outcome_from_name(std::string_view name) {
   return std::nullopt;
 }
 
+json run_end_to_json(const RunEnd& end) {
+  return {{"outcome", run_outcome_name(end.outcome)},
+          {"reason", stop_reason_name(end.reason)},
+          {"progress", render_progress_to_json(end.progress)},
+          {"written", end.written},
+          {"error", end.error},
+          {"input_refused", end.input_refused}};
+}
+
+std::optional<RunEnd> run_end_from_json(const json& j) {
+  const auto outcome = run_outcome_from_name(j.at("outcome").get<std::string>());
+  if (!outcome) return std::nullopt;
+  RunEnd end;
+  end.outcome = *outcome;
+  end.reason = stop_reason_from_name(j.at("reason").get<std::string>()).value_or(StopReason::kSamples);
+  end.progress = render_progress_from_json(j.at("progress"));
+  j.at("written").get_to(end.written);
+  j.at("error").get_to(end.error);
+  j.at("input_refused").get_to(end.input_refused);
+  return end;
+}
+
 std::string describe_bytes(uint64_t bytes) {
   char buf[64];
   if (bytes >= (1ull << 30))

@@ -105,6 +105,9 @@ struct RunEnd {
   std::string error;
   bool input_refused = false;  // failed on its input (the scene, an asset): it would fail the same way again
 };
+nlohmann::json run_end_to_json(const RunEnd& end);
+// Nothing for an unknown outcome; throws nlohmann::json::exception for a document that is not one.
+std::optional<RunEnd> run_end_from_json(const nlohmann::json& j);
 
 // What a render reports, in this order: loaded (unless the load fails or stops), resumed, pass after each pass, and
 // ended, exactly once whatever happens.

@@ -58,7 +58,6 @@ std::string signal_name(int sig) {
 struct Fd {
   int fd = -1;
   Fd() = default;
-  explicit Fd(int f) : fd(f) {}
   Fd(const Fd&) = delete;
   Fd& operator=(const Fd&) = delete;
   ~Fd() { reset(); }
@@ -95,16 +94,8 @@ class ReportReader {
         if (!it->at("progress").is_null()) restored = last_progress_ = render_progress_from_json(it->at("progress"));
         listener_.resumed(restored, it->at("unusable").get<bool>());
       } else if (auto it = j.find("ended"); it != j.end()) {
-        RunEnd end;
-        const auto outcome = run_outcome_from_name(it->at("outcome").get<std::string>());
-        if (!outcome) return false;
-        end.outcome = *outcome;
-        end.reason = stop_reason_from_name(it->at("reason").get<std::string>()).value_or(StopReason::kSamples);
-        end.progress = render_progress_from_json(it->at("progress"));
-        it->at("written").get_to(end.written);
-        it->at("error").get_to(end.error);
-        it->at("input_refused").get_to(end.input_refused);
-        end_ = std::move(end);
+        end_ = run_end_from_json(*it);
+        if (!end_) return false;
       } else {
         return false;
       }
@@ -249,6 +240,18 @@ class WorkerChild {
   std::atomic<bool> killed_ = false;
 };
 
+// What a worker is told of its daemon and its limits: the first line's "worker" object (read_assignment,
+// enter_sandbox).
+json environment_of(const WorkerOptions& options) {
+  return {{"data_dir", options.data_dir.string()},
+          {"threads", options.threads},
+          {"max_gltf_instances", options.max_gltf_instances},
+          {"memory_limit", options.memory_limit},
+          {"open_files", options.open_files},
+          {"cpu_seconds", options.cpu_seconds},
+          {"daemon_pid", static_cast<int64_t>(getpid())}};
+}
+
 RunEnd crashed(std::string error, const RenderProgress& progress) {
   RunEnd end;
   end.outcome = RunOutcome::kCrashed;
@@ -278,14 +281,8 @@ void WorkerProcessRunner::run(const RenderRequest& request, RunControl& control,
     listener.ended(crashed("cannot start a render worker: " + error, {}));
     return;
   }
-  const json environment = {{"data_dir", options_.data_dir.string()},
-                            {"threads", options_.threads},
-                            {"max_gltf_instances", options_.max_gltf_instances},
-                            {"memory_limit", options_.memory_limit},
-                            {"open_files", options_.open_files},
-                            {"daemon_pid", static_cast<int64_t>(getpid())}};
   // A worker that dies at once leaves this unread: its exit says why.
-  worker.send(json{{"worker", environment}, {"request", render_request_to_json(request)}}.dump());
+  worker.send(json{{"worker", environment_of(options_)}, {"request", render_request_to_json(request)}}.dump());
 
   using Clock = std::chrono::steady_clock;
   std::mutex cancel_mutex;
@@ -342,15 +339,7 @@ class ReportWriter final : public RunListener {
   void pass(const RenderProgress& progress, const std::string& write_error) override {
     send({{"pass", {{"progress", render_progress_to_json(progress)}, {"write_error", write_error}}}});
   }
-  void ended(const RunEnd& end) override {
-    send({{"ended",
-           {{"outcome", run_outcome_name(end.outcome)},
-            {"reason", stop_reason_name(end.reason)},
-            {"progress", render_progress_to_json(end.progress)},
-            {"written", end.written},
-            {"error", end.error},
-            {"input_refused", end.input_refused}}}});
-  }
+  void ended(const RunEnd& end) override { send({{"ended", run_end_to_json(end)}}); }
 
  private:
   static void send(const json& report) {
@@ -359,13 +348,15 @@ class ReportWriter final : public RunListener {
   }
 };
 
-}  // namespace
-
-namespace {
-
-// The sandbox every worker enters before it reads anything of a client's (worker_sandbox.h). Failures are logged: a
-// kernel without Landlock or seccomp still renders.
-void enter_sandbox(const std::filesystem::path& writable, const SandboxLimits& limits, const std::string& job) {
+// The sandbox every worker enters before it reads anything of a client's (worker_sandbox.h), as its `environment`
+// (environment_of) gives it: writes beneath the data directory, the limits. Failures are logged: a kernel without
+// Landlock or seccomp still renders. Returns the limits.
+SandboxLimits enter_sandbox(const json& environment, const std::string& job) {
+  SandboxLimits limits;
+  limits.address_space = environment.at("memory_limit").get<uint64_t>();
+  limits.open_files = environment.at("open_files").get<uint64_t>();
+  limits.cpu_seconds = environment.at("cpu_seconds").get<uint64_t>();
+  const std::filesystem::path writable = environment.at("data_dir").get<std::string>();
   for (const std::string& failed : apply_limits(limits))
     log(LogLevel::kWarn, "a worker's limit could not be set", {{"job", job}, {"error", failed}});
   try {
@@ -375,6 +366,7 @@ void enter_sandbox(const std::filesystem::path& writable, const SandboxLimits& l
   }
   if (std::string why; !confine_writes(writable, &why))
     log(LogLevel::kWarn, "a worker may write outside the data directory", {{"job", job}, {"why", why}});
+  return limits;
 }
 
 // The first line of a worker's input, {"worker": {...}, ...}, from its daemon; nothing (the worker exits) when it does
@@ -409,13 +401,9 @@ int render_worker_main() {
     std::fprintf(stderr, "tesserad --render-worker: the request does not read: %s\n", e.what());
     return 2;
   }
-  const std::filesystem::path data_dir = environment.at("data_dir").get<std::string>();
-  const uint64_t memory_limit = environment.at("memory_limit").get<uint64_t>();
   // Confined before anything of the scene is read.
-  SandboxLimits limits;
-  limits.address_space = memory_limit;
-  limits.open_files = environment.at("open_files").get<uint64_t>();
-  enter_sandbox(data_dir, limits, request.id);
+  const uint64_t memory_limit = enter_sandbox(environment, request.id).address_space;
+  const std::filesystem::path data_dir = environment.at("data_dir").get<std::string>();
 
   ReportWriter writer;
   try {
@@ -458,18 +446,12 @@ int render_worker_main() {
   std::_Exit(0);
 }
 
-void check_asset_in_worker(const AssetCheckWorker& options, const json& scene, const std::filesystem::path& main_file,
+void check_asset_in_worker(const WorkerOptions& options, const json& scene, const std::filesystem::path& main_file,
                            std::stop_token stop) {
   WorkerChild worker;
   if (std::string error; !worker.start(options.executable, "--check-worker", &error))
     throw std::runtime_error("cannot start an asset check worker: " + error);
-  const json environment = {{"data_dir", options.data_dir.string()},
-                            {"memory_limit", options.memory_limit},
-                            {"cpu_seconds", options.cpu_seconds},
-                            {"open_files", options.open_files},
-                            {"max_gltf_instances", options.max_gltf_instances},
-                            {"daemon_pid", static_cast<int64_t>(getpid())}};
-  worker.send(json{{"worker", environment}, {"scene", scene}, {"file", main_file.string()}}.dump());
+  worker.send(json{{"worker", environment_of(options)}, {"scene", scene}, {"file", main_file.string()}}.dump());
   std::optional<json> checked;
   bool stopped = false;
   worker.read(
@@ -507,11 +489,7 @@ int asset_check_worker_main() {
   json result;
   try {
     const json& environment = assignment->at("worker");
-    SandboxLimits limits;
-    limits.address_space = environment.at("memory_limit").get<uint64_t>();
-    limits.cpu_seconds = environment.at("cpu_seconds").get<uint64_t>();
-    limits.open_files = environment.at("open_files").get<uint64_t>();
-    enter_sandbox(environment.at("data_dir").get<std::string>(), limits, "");
+    const SandboxLimits limits = enter_sandbox(environment, "");
     const std::filesystem::path file = assignment->at("file").get<std::string>();
     SceneLoadOptions options;
     options.build = false;

@@ -36,6 +36,7 @@ struct WorkerOptions {
   uint64_t max_gltf_instances = 1'000'000;
   uint64_t memory_limit = 0;  // a worker's address space (RLIMIT_AS), in bytes; 0: not limited
   uint64_t open_files = 1024;
+  uint64_t cpu_seconds = 0;  // a worker's CPU time (RLIMIT_CPU); 0: not limited (an asset check's is)
   // After a cancel, how long a worker has to exit before it is killed.
   std::chrono::milliseconds kill_grace{5000};
 };
@@ -63,15 +64,7 @@ int render_worker_main();
 // of CPU time too: `scene` (whose asset references all name `main_file`) loaded as the renderer will, without building
 // it (SceneLoadOptions::build false). Throws SceneError naming what is wrong, a crash of the loader or a limit
 // included, and LoadStopped once `stop` is asked (the worker is then killed).
-struct AssetCheckWorker {
-  std::filesystem::path executable = "/proc/self/exe";
-  std::filesystem::path data_dir;  // the only place it may write (it writes nothing)
-  uint64_t memory_limit = 0;
-  uint64_t cpu_seconds = 120;
-  uint64_t open_files = 1024;
-  uint64_t max_gltf_instances = 1'000'000;
-};
-void check_asset_in_worker(const AssetCheckWorker& worker, const nlohmann::json& scene,
+void check_asset_in_worker(const WorkerOptions& worker, const nlohmann::json& scene,
                            const std::filesystem::path& main_file, std::stop_token stop);
 // `tesserad --check-worker`: reads {"worker", "scene", "file"}, writes {"checked": {"error", "pointer"}}.
 int asset_check_worker_main();
