@@ -454,6 +454,10 @@ void check_asset_in_worker(const WorkerOptions& options, const json& scene, cons
   worker.send(json{{"worker", environment_of(options)}, {"scene", scene}, {"file", main_file.string()}}.dump());
   std::optional<json> checked;
   bool stopped = false;
+  // A check that does not end within twice its CPU time in wall time (a worker that blocks, or is stopped, uses no
+  // CPU time) is killed too: an upload never waits on it without end.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(2 * options.cpu_seconds);
+  bool overdue = false;
   worker.read(
       [&](std::string_view line) {
         const json j = json::parse(line, nullptr, false);
@@ -466,6 +470,10 @@ void check_asset_in_worker(const WorkerOptions& options, const json& scene, cons
           stopped = true;
           worker.kill();
         }
+        if (options.cpu_seconds && !overdue && std::chrono::steady_clock::now() > deadline) {
+          overdue = true;
+          worker.kill();
+        }
       });
   worker.close_input();
   const int status = worker.reap(std::chrono::milliseconds(5000));
@@ -475,6 +483,9 @@ void check_asset_in_worker(const WorkerOptions& options, const json& scene, cons
     if (error.empty()) return;
     throw SceneError(checked->value("pointer", ""), error);
   }
+  if (overdue)
+    throw SceneError("", "checking it took more than " + std::to_string(2 * options.cpu_seconds) +
+                             " s (twice its CPU time limit, --asset-check-cpu-s)");
   if (WIFSIGNALED(status) && (WTERMSIG(status) == SIGXCPU || WTERMSIG(status) == SIGKILL))
     throw SceneError("", "checking it took more than " + std::to_string(options.cpu_seconds) +
                              " s of CPU time, or was killed (" + signal_name(WTERMSIG(status)) + ")");

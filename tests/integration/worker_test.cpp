@@ -229,5 +229,40 @@ TEST(Workers, AnUploadWhoseCheckCrashesIsRefusedAndTheDaemonGoesOn) {
   EXPECT_EQ(again->status, 201) << again->body;
 }
 
+// A check that never ends (its worker stopped: it uses no CPU time, so its CPU limit never comes) is killed after twice
+// that limit in wall time, and the upload is a 422 that says so.
+TEST(Workers, AnUploadWhoseCheckNeverEndsIsRefusedInBoundedTime) {
+  TempDir dir;
+  std::vector<std::string> args = kArgs;
+  args.insert(args.end(), {"--asset-check-cpu-s", "1"});
+  Daemon daemon(dir.path() / "data", args);
+  const std::string gltf = read_text(fs::path(TESSERA_SOURCE_DIR) / "examples/duck/Duck.glb");
+  httplib::MultipartFormDataItems items = {{"file", gltf, "Duck.glb", "model/gltf-binary"}};
+  int status = 0;
+  std::string body;
+  const auto start = std::chrono::steady_clock::now();
+  std::thread upload([&] {
+    if (auto res = daemon.client()->Post("/v1/assets", items)) {
+      status = res->status;
+      body = res->body;
+    }
+  });
+  pid_t checker = 0;
+  const bool found = eventually(
+      [&] {
+        for (pid_t child : children_of(daemon.pid()))
+          if (command_line(child).find("--check-worker") != std::string::npos) checker = child;
+        return checker > 0;
+      },
+      30);
+  if (found) kill(checker, SIGSTOP);
+  upload.join();
+  const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_TRUE(found) << "no check worker was seen";
+  EXPECT_EQ(status, 422) << body;
+  EXPECT_NE(body.find("checking it took more than 2 s"), std::string::npos) << body;
+  EXPECT_LT(waited, 30) << "the upload waited " << waited << " s";
+}
+
 }  // namespace
 }  // namespace tessera::server::test
