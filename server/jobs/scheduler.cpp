@@ -482,18 +482,20 @@ void Scheduler::publish_pass(Run& run, const RenderProgress& p, const std::strin
     // unit's. A pass whose files could not be written (a full disk) is not worth the render: the last good
     // checkpoint stays, and the next pass writes both again.
     if (!write_error.empty()) throw std::runtime_error(write_error);
-    {
-      std::lock_guard lock(mutex_);
-      run.slot.progress = jp;
-    }
     log_.add(id, printf_string("%spass %u: %u/%u spp, %.2f s, %.3g samples/s",
                                run.is_unit() ? printf_string("unit %d: ", run.record.unit + 1).c_str() : "",
                                static_cast<unsigned>(p.pass), static_cast<unsigned>(p.samples_done),
                                static_cast<unsigned>(p.samples_total), p.elapsed_s, p.samples_per_s));
+    // The store, then the status: what a client reads of the job while it renders is never ahead of what the store
+    // holds (a cancel or pause made on it keeps the image of the passes a client saw).
     if (!store_.update_progress(id, run.slot.epoch, jp)) {
       std::lock_guard lock(mutex_);
       lose_lease_locked(run.slot, "its progress refused");
       return;
+    }
+    {
+      std::lock_guard lock(mutex_);
+      run.slot.progress = jp;
     }
     if (!run.is_unit()) {
       if (hooks_.progress) hooks_.progress(id, jp);
