@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 #include <utility>
 
@@ -21,31 +22,41 @@ const std::vector<AovInfo>& aov_table() {
   using K = LayerKind;
   using S = AovSource;
   static const std::vector<AovInfo> table = {
-      {"albedo", 3, {"R", "G", "B"}, K::kRadiance, S::kShading, false, {}},
-      {"normal", 3, {"X", "Y", "Z"}, K::kSigned, S::kShading, false, {}},
-      {"depth", 1, {"Z"}, K::kDistance, S::kDistance, true, {}},
-      {"position", 3, {"X", "Y", "Z"}, K::kSigned, S::kFirstSample, true, {}},
-      {"uv", 2, {"U", "V"}, K::kSigned, S::kSurface, false, {}},
-      {"roughness", 1, {"X"}, K::kRadiance, S::kSurface, false, {}},
-      {"object_id", 1, {"X"}, K::kSigned, S::kFirstSample, true, {}},
-      {"material_id", 1, {"X"}, K::kSigned, S::kFirstSample, true, {}},
-      {"sample_count", 1, {"X"}, K::kRadiance, S::kSampleCount, true, {}},
-      {kVariance, 3, {"R", "G", "B"}, K::kRadiance, S::kSquares, true, {}},
-      {"emission", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
-      {"background", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
-      {"volume_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
-      {"volume_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
-      {"diffuse_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "diffuse_color"},
-      {"diffuse_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "diffuse_color"},
-      {"diffuse_color", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
-      {"glossy_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "glossy_color"},
-      {"glossy_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "glossy_color"},
-      {"glossy_color", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
-      {"transmission_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "transmission_color"},
-      {"transmission_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "transmission_color"},
-      {"transmission_color", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}},
+      {"albedo", 3, {"R", "G", "B"}, K::kRadiance, S::kShading, false, {}, {}},
+      {"normal", 3, {"X", "Y", "Z"}, K::kSigned, S::kShading, false, {}, {}},
+      {"depth", 1, {"Z"}, K::kDistance, S::kDistance, true, {}, {}},
+      {"position", 3, {"X", "Y", "Z"}, K::kSigned, S::kFirstSample, true, {}, {}},
+      {"uv", 2, {"U", "V"}, K::kSigned, S::kSurface, false, {}, {}},
+      {"roughness", 1, {"X"}, K::kRadiance, S::kSurface, false, {}, {}},
+      {"object_id", 1, {"X"}, K::kSigned, S::kFirstSample, true, {}, {}},
+      {"material_id", 1, {"X"}, K::kSigned, S::kFirstSample, true, {}, {}},
+      {"sample_count", 1, {"X"}, K::kRadiance, S::kSampleCount, true, {}, {}},
+      {kVariance, 3, {"R", "G", "B"}, K::kRadiance, S::kSquares, true, {}, {}},
+      {"emission", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}, {}},
+      {"background", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}, {}},
+      {"volume_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}, {}},
+      {"volume_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}, {}},
+      {"diffuse_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "diffuse_color", {}},
+      {"diffuse_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "diffuse_color", {}},
+      {"diffuse_color", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}, {}},
+      {"glossy_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "glossy_color", {}},
+      {"glossy_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "glossy_color", {}},
+      {"glossy_color", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}, {}},
+      {"transmission_direct", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "transmission_color", {}},
+      {"transmission_indirect", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, "transmission_color", {}},
+      {"transmission_color", 3, {"R", "G", "B"}, K::kRadiance, S::kLight, false, {}, {}},
+      {"crypto_object", 2 * cryptomatte::kRanks, {}, K::kIds, S::kCryptomatte, true, {}, "CryptoObject"},
+      {"crypto_material", 2 * cryptomatte::kRanks, {}, K::kIds, S::kCryptomatte, true, {}, "CryptoMaterial"},
   };
   return table;
+}
+
+std::vector<std::string> aov_channel_names(const AovInfo& aov) {
+  if (aov.source == AovSource::kCryptomatte) return cryptomatte::channel_names(aov.crypto_type, aov.channels / 2);
+  std::vector<std::string> names;
+  for (int c = 0; c < aov.channels; ++c)
+    names.push_back(std::string(aov.name) + "." + std::string(aov.channel_names[static_cast<size_t>(c)]));
+  return names;
 }
 
 const AovInfo* find_aov(std::string_view name) {
@@ -75,14 +86,21 @@ std::vector<const AovInfo*> aov_layers(const std::vector<std::string>& aovs) {
   return layers;
 }
 
-void add_aov_layers(Film& film, const std::vector<std::string>& aovs) {
-  for (const AovInfo* a : aov_layers(aovs)) film.add_layer(std::string(a->name), a->channels, a->kind);
+void add_aov_layers(Film& film, const std::vector<std::string>& aovs, const cryptomatte::Ids* ids) {
+  for (const AovInfo* a : aov_layers(aovs)) {
+    const int layer = film.add_layer(std::string(a->name), a->channels, a->kind);
+    if (a->source != AovSource::kCryptomatte) continue;
+    if (!ids) throw std::invalid_argument("the pass " + std::string(a->name) + " needs the scene's Cryptomatte ids");
+    film.layer_at(layer).manifest = a->crypto_type == "CryptoObject" ? ids->object_manifest : ids->material_manifest;
+  }
 }
 
 uint64_t film_bytes(int width, int height, const std::vector<std::string>& aovs) {
   uint64_t per_pixel = 3 * sizeof(FixedSum) + sizeof(float) + sizeof(uint32_t);
   for (const AovInfo* a : aov_layers(aovs))
-    per_pixel += static_cast<uint64_t>(a->channels) * sizeof(FixedSum) + (a->kind == LayerKind::kDistance ? 4 : 0);
+    per_pixel += a->kind == LayerKind::kIds ? sizeof(std::vector<IdCount>) + Film::kMaxIdsPerPixel * sizeof(IdCount)
+                                            : static_cast<uint64_t>(a->channels) * sizeof(FixedSum) +
+                                                  (a->kind == LayerKind::kDistance ? 4 : 0);
   return per_pixel * static_cast<uint64_t>(width) * static_cast<uint64_t>(height);
 }
 
@@ -94,7 +112,7 @@ std::vector<std::string> aovs_of(const Film& film, bool sample_count) {
   return aovs;
 }
 
-AovWriter::AovWriter(const Film& film)
+AovWriter::AovWriter(const Film& film, const cryptomatte::Ids* ids)
     : albedo_(film.layer("albedo")),
       normal_(film.layer("normal")),
       depth_(film.layer("depth")),
@@ -103,8 +121,14 @@ AovWriter::AovWriter(const Film& film)
       position_(film.layer("position")),
       object_(film.layer("object_id")),
       material_(film.layer("material_id")),
-      squares_(film.layer(kVariance)) {
-  for (int layer : {albedo_, normal_, depth_, uv_, roughness_, position_, object_, material_})
+      squares_(film.layer(kVariance)),
+      crypto_object_(film.layer("crypto_object")),
+      crypto_material_(film.layer("crypto_material")),
+      ids_(ids) {
+  if ((crypto_object_ >= 0 || crypto_material_ >= 0) && !ids_)
+    throw std::invalid_argument("a film with Cryptomatte passes needs the scene's ids");
+  for (int layer :
+       {albedo_, normal_, depth_, uv_, roughness_, position_, object_, material_, crypto_object_, crypto_material_})
     wants_features_ = wants_features_ || layer >= 0;
   static constexpr std::string_view kLightLayers[13] = {
       "emission",      "background",          "volume_direct",     "volume_indirect", "diffuse_direct",
@@ -150,6 +174,10 @@ void AovWriter::add(Film& film, int x, int y, uint32_t sample_index, const Surfa
   if (depth_ >= 0) film.add_layer_sample(depth_, x, y, &f.depth);
   if (uv_ >= 0) film.add_layer_sample(uv_, x, y, &f.uv.x);
   if (roughness_ >= 0) film.add_layer_sample(roughness_, x, y, &f.roughness);
+  if (crypto_object_ >= 0 && f.object < ids_->object.size())
+    film.add_id_sample(crypto_object_, x, y, ids_->object[f.object]);
+  if (crypto_material_ >= 0 && f.material < ids_->material.size())
+    film.add_id_sample(crypto_material_, x, y, ids_->material[f.material]);
   if (sample_index != 0) return;
   if (position_ >= 0) film.add_layer_sample(position_, x, y, &f.position.x);
   const float object = static_cast<float>(f.object) + 1, material = static_cast<float>(f.material) + 1;
@@ -172,11 +200,9 @@ float stretch(float v, std::pair<float, float> range) {
   return range.second > range.first ? (v - range.first) / (range.second - range.first) : 1.0f;
 }
 
-// A colour of its own for each id: the bits of the id mixed by MurmurHash3's 32-bit finaliser (Appleby 2011), three
+// A colour of its own for each number: its bits mixed by MurmurHash3's 32-bit finaliser (Appleby 2011), three
 // of its bytes as the channels, kept away from black.
-Rgb id_colour(float id) {
-  if (!(id > 0)) return Rgb(0);
-  uint32_t h = static_cast<uint32_t>(id);
+Rgb bits_colour(uint32_t h) {
   h ^= h >> 16;
   h *= 0x85ebca6bu;
   h ^= h >> 13;
@@ -184,6 +210,19 @@ Rgb id_colour(float id) {
   h ^= h >> 16;
   auto channel = [&](int shift) { return 0.15f + 0.85f * static_cast<float>((h >> shift) & 0xffu) / 255.0f; };
   return Rgb(channel(0), channel(8), channel(16));
+}
+
+// An id pass's colour (0, nothing, black).
+Rgb id_colour(float id) {
+  if (!(id > 0)) return Rgb(0);
+  return bits_colour(static_cast<uint32_t>(id));
+}
+
+// The colour of a Cryptomatte id: of its float's bits.
+Rgb crypto_colour(float id) {
+  uint32_t bits;
+  std::memcpy(&bits, &id, sizeof bits);
+  return bits_colour(bits);
 }
 
 }  // namespace
@@ -215,6 +254,13 @@ std::vector<float> aov_look(const AovInfo& aov, const std::vector<float>& values
       set(i, Rgb(values[2 * i] - std::floor(values[2 * i]), values[2 * i + 1] - std::floor(values[2 * i + 1]), 0));
   } else if (aov.name == "object_id" || aov.name == "material_id") {
     for (size_t i = 0; i < pixels; ++i) set(i, id_colour(values[i]));
+  } else if (aov.source == AovSource::kCryptomatte) {
+    for (size_t i = 0; i < pixels; ++i) {
+      Rgb c(0);
+      for (size_t r = 0; r + 1 < n; r += 2)
+        if (values[n * i + r + 1] > 0) c += crypto_colour(values[n * i + r]) * values[n * i + r + 1];
+      set(i, c);
+    }
   } else if (aov.name == "variance") {
     std::vector<float> deviation(pixels);
     for (size_t i = 0; i < pixels; ++i)

@@ -21,6 +21,9 @@
 //   sample_count          the samples the pixel received
 //   variance              per channel, the variance of the pixel's mean, from the sum of its samples' squares:
 //                         (E[L^2] - E[L]^2) / (n - 1), infinite below 2 samples
+//   crypto_object,        Cryptomatte (cryptomatte.h): the ids of the names of the first drawn surface's object and
+//   crypto_material       material, counted over the pixel's samples (samples that escape count for no id), ranked
+//                         with their coverage; stored as the layers CryptoObject00 … 02 and CryptoMaterial00 … 02
 // and the light passes, which split the beauty by where its light came from, as Cycles' do (Blender manual, "Render
 // Passes"): emission (emitters seen from the camera, directly or across index-matched boundaries), background (the
 // environment seen so), and by the first bounce of the path: diffuse, glossy and transmission (the lobe class that
@@ -38,6 +41,7 @@
 #include <string_view>
 #include <vector>
 
+#include "renderer/cryptomatte.h"
 #include "renderer/film.h"
 #include "renderer/math.h"
 
@@ -51,6 +55,7 @@ enum class AovSource : uint8_t {
   kSampleCount,  // the film's per-pixel sample counts (no layer of its own)
   kSquares,      // variance: the beauty's squares
   kLight,        // the light passes: summed per sample; a _direct or _indirect pass divided by its _color when resolved
+  kCryptomatte,  // crypto_object, crypto_material: the first drawn surface's ids, counted
 };
 
 struct AovInfo {
@@ -59,9 +64,14 @@ struct AovInfo {
   std::array<std::string_view, 3> channel_names;  // as the EXR stores them, <name>.<channel>
   LayerKind kind = LayerKind::kRadiance;          // of its film layer
   AovSource source = AovSource::kSurface;
-  bool always_float = false;  // stored as 32-bit float whatever the EXR precision
-  std::string_view divisor;   // kLight: the pass this one is divided by when resolved (X_color), or empty
+  bool always_float = false;     // stored as 32-bit float whatever the EXR precision
+  std::string_view divisor;      // kLight: the pass this one is divided by when resolved (X_color), or empty
+  std::string_view crypto_type;  // kCryptomatte: the type name its EXR layers and metadata carry ("CryptoObject")
 };
+
+// The EXR channel names of a pass: <name>.<channel> (albedo.R), a Cryptomatte pass's the specification's
+// (CryptoObject00.R …).
+std::vector<std::string> aov_channel_names(const AovInfo& aov);
 
 // Every pass, in the order images list them.
 const std::vector<AovInfo>& aov_table();
@@ -73,10 +83,11 @@ std::string unknown_aov_message(std::string_view name);
 // The film layers the passes `aovs` (names find_aov knows) accumulate into, in the table's order. Any light pass
 // brings the layers of all of them: they are recorded together, and a _direct or _indirect pass needs its _color.
 std::vector<const AovInfo*> aov_layers(const std::vector<std::string>& aovs);
-// Adds those layers to `film`.
-void add_aov_layers(Film& film, const std::vector<std::string>& aovs);
-// The bytes a width x height film with the passes `aovs` holds: 56 a pixel for the beauty (three 128-bit sums, its
-// squared luminance and its sample count), 16 a channel for each layer and 4 more for a distance layer's hit counts.
+// Adds those layers to `film`; `ids` (needed when a Cryptomatte pass is among them) gives their manifests.
+void add_aov_layers(Film& film, const std::vector<std::string>& aovs, const cryptomatte::Ids* ids = nullptr);
+// The most bytes a width x height film with the passes `aovs` holds: 56 a pixel for the beauty (three 128-bit sums,
+// its squared luminance and its sample count), 16 a channel for each layer, 4 more for a distance layer's hit counts,
+// and for an id layer 24 and 8 an id, up to Film::kMaxIdsPerPixel ids.
 uint64_t film_bytes(int width, int height, const std::vector<std::string>& aovs);
 // The passes a film holds (in the table's order): those with a layer in it, and sample_count when `sample_count`.
 std::vector<std::string> aovs_of(const Film& film, bool sample_count);
@@ -106,7 +117,8 @@ struct SurfaceFeatures {
 // caller's thread owns the pixel, as Film::add_sample.
 class AovWriter {
  public:
-  explicit AovWriter(const Film& film);
+  // `ids`: the scene's Cryptomatte ids, which a film with a Cryptomatte pass needs (std::invalid_argument without).
+  explicit AovWriter(const Film& film, const cryptomatte::Ids* ids = nullptr);
   // Whether the film has a layer that SurfaceFeatures feed (the integrator records them only then).
   bool wants_features() const { return wants_features_; }
   // Whether the film has the light passes' layers (LightPassSample).
@@ -119,7 +131,8 @@ class AovWriter {
 
  private:
   int albedo_ = -1, normal_ = -1, depth_ = -1, uv_ = -1, roughness_ = -1, position_ = -1, object_ = -1, material_ = -1,
-      squares_ = -1;
+      squares_ = -1, crypto_object_ = -1, crypto_material_ = -1;
+  const cryptomatte::Ids* ids_ = nullptr;
   bool wants_features_ = false;
   // The light passes' layers, in LightPassSample's order: emission, background, volume_direct, volume_indirect, then
   // the direct of diffuse, glossy and transmission, their indirect, their color.
@@ -130,7 +143,7 @@ class AovWriter {
 // albedo as it is; roughness and sample_count grey (the count over the image's largest); normal as (n + 1) / 2;
 // depth and position stretched over the image's finite range (near bright; escaped rays black); uv as the fractions
 // of u and v; ids as a colour per id (0, nothing, black); variance as the standard deviation of the luminance over the
-// image's largest (white where it is unknown).
+// image's largest (white where it is unknown); Cryptomatte as each rank's id colour weighted by its coverage.
 std::vector<float> aov_look(const AovInfo& aov, const std::vector<float>& values);
 
 // The pass `aov` of the film, its channels interleaved per pixel, row-major. Throws std::invalid_argument when the

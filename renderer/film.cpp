@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 namespace tessera {
@@ -32,16 +33,21 @@ int Film::add_layer(std::string name, int channels, LayerKind kind) {
   for (char c : name)
     if (c <= ' ' || c > '~') throw std::invalid_argument("a film layer's name is printable ASCII without spaces");
   if (layer(name) >= 0) throw std::invalid_argument("the film already has a layer " + name);
-  if (channels < 1 || channels > kMaxChannels || (kind == LayerKind::kDistance && channels != 1))
+  if (channels < 1 || channels > kMaxChannels || (kind == LayerKind::kDistance && channels != 1) ||
+      (kind == LayerKind::kIds && channels % 2 != 0))
     throw std::invalid_argument("film layer " + name + ": bad channel count");
-  if (kind != LayerKind::kRadiance && kind != LayerKind::kSigned && kind != LayerKind::kDistance)
+  if (kind != LayerKind::kRadiance && kind != LayerKind::kSigned && kind != LayerKind::kDistance &&
+      kind != LayerKind::kIds)
     throw std::invalid_argument("film layer " + name + ": unknown kind");
   if (layer_count() >= kMaxLayers) throw std::invalid_argument("a film holds at most 64 layers");
   FilmLayer l;
   l.name = std::move(name);
   l.channels = channels;
   l.kind = kind;
-  l.sums.assign(static_cast<size_t>(channels) * pixel_count(), 0);
+  if (kind == LayerKind::kIds)
+    l.ids.resize(pixel_count());
+  else
+    l.sums.assign(static_cast<size_t>(channels) * pixel_count(), 0);
   if (kind == LayerKind::kDistance) l.hits.assign(pixel_count(), 0);
   extra_.push_back(std::move(l));
   return layer_count() - 1;
@@ -79,7 +85,18 @@ void Film::add_layer_sample(int layer, int x, int y, const float* values) {
         l.hits[i] += 1;
       }
       break;
+    case LayerKind::kIds:
+      throw std::invalid_argument("film layer " + l.name + " counts ids: add_id_sample");
   }
+}
+
+void Film::add_id_sample(int layer, int x, int y, uint32_t id) {
+  std::vector<IdCount>& ids = layer_at(layer).ids[index(x, y)];
+  auto it = std::lower_bound(ids.begin(), ids.end(), id, [](const IdCount& e, uint32_t v) { return e.id < v; });
+  if (it != ids.end() && it->id == id)
+    ++it->count;
+  else if (ids.size() < kMaxIdsPerPixel)
+    ids.insert(it, IdCount{id, 1});
 }
 
 void Film::add_layer_sample_shared(int layer, int x, int y, const float* values) {
@@ -99,6 +116,8 @@ void Film::add_layer_sample_shared(int layer, int x, int y, const float* values)
         __atomic_fetch_add(&l.hits[i], 1u, __ATOMIC_RELAXED);
       }
       break;
+    case LayerKind::kIds:
+      throw std::invalid_argument("film layer " + l.name + " counts ids: add_id_sample");
   }
 }
 
@@ -110,8 +129,58 @@ std::vector<float> Film::resolve() const {
   return out;
 }
 
+namespace {
+
+// The ranks of an id layer: per pixel, channels / 2 pairs (id, coverage).
+std::vector<float> resolve_ids(const FilmLayer& l, const std::vector<uint32_t>& pixel_samples) {
+  const size_t c = static_cast<size_t>(l.channels), ranks = c / 2;
+  std::vector<float> out(c * l.ids.size(), 0.0f);
+  std::vector<IdCount> ranked;
+  for (size_t i = 0; i < l.ids.size(); ++i) {
+    ranked = l.ids[i];
+    std::sort(ranked.begin(), ranked.end(),
+              [](const IdCount& a, const IdCount& b) { return a.count != b.count ? a.count > b.count : a.id < b.id; });
+    const double n = pixel_samples[i];
+    for (size_t r = 0; r < std::min(ranks, ranked.size()); ++r) {
+      float id;
+      static_assert(sizeof id == sizeof ranked[r].id);
+      std::memcpy(&id, &ranked[r].id, sizeof id);
+      out[c * i + 2 * r] = id;
+      out[c * i + 2 * r + 1] = n > 0 ? static_cast<float>(ranked[r].count / n) : 0.0f;
+    }
+  }
+  return out;
+}
+
+// The ids of `a` and `b` together, counts added; the kMaxIdsPerPixel of most samples (ties to the lower id) when
+// there are more.
+void merge_ids(std::vector<IdCount>& a, const std::vector<IdCount>& b, size_t max_ids) {
+  if (b.empty()) return;
+  std::vector<IdCount> joined;
+  joined.reserve(a.size() + b.size());
+  size_t i = 0, j = 0;
+  while (i < a.size() || j < b.size()) {
+    if (j == b.size() || (i < a.size() && a[i].id < b[j].id))
+      joined.push_back(a[i++]);
+    else if (i == a.size() || b[j].id < a[i].id)
+      joined.push_back(b[j++]);
+    else
+      joined.push_back(IdCount{a[i].id, a[i++].count + b[j++].count});
+  }
+  if (joined.size() > max_ids) {
+    std::sort(joined.begin(), joined.end(),
+              [](const IdCount& x, const IdCount& y) { return x.count != y.count ? x.count > y.count : x.id < y.id; });
+    joined.resize(max_ids);
+    std::sort(joined.begin(), joined.end(), [](const IdCount& x, const IdCount& y) { return x.id < y.id; });
+  }
+  a = std::move(joined);
+}
+
+}  // namespace
+
 std::vector<float> Film::resolve_layer(int layer) const {
   const FilmLayer& l = layer_at(layer);
+  if (l.kind == LayerKind::kIds) return resolve_ids(l, pixel_samples_);
   const size_t c = static_cast<size_t>(l.channels);
   std::vector<float> out(l.sums.size());
   for (size_t i = 0; i < pixel_count(); ++i) {
@@ -139,6 +208,8 @@ void Film::merge(const Film& other) {
     const FilmLayer& b = other.layer_at(k);
     for (size_t i = 0; i < a.sums.size(); ++i) a.sums[i] += b.sums[i];
     for (size_t i = 0; i < a.hits.size(); ++i) a.hits[i] += b.hits[i];
+    for (size_t i = 0; i < a.ids.size(); ++i) merge_ids(a.ids[i], b.ids[i], kMaxIdsPerPixel);
+    a.manifest.insert(b.manifest.begin(), b.manifest.end());
   }
   for (size_t i = 0; i < sum_lum2_.size(); ++i) sum_lum2_[i] += other.sum_lum2_[i];
   for (size_t i = 0; i < pixel_samples_.size(); ++i) pixel_samples_[i] += other.pixel_samples_[i];

@@ -16,12 +16,20 @@
 //   - kDistance: one channel of distances (depth): only finite non-negative values are summed, and a per-pixel count
 //                of them is kept beside the sum, so a ray that escapes (infinite distance) is counted out rather than
 //                putting an infinity in a sum; the pixel's mean is over its hits, infinite where there were none.
+//   - kIds:      ids (Cryptomatte's, cryptomatte.h) counted per pixel: each pixel holds the ids its samples found and
+//                how many samples found each, in the order of the ids. Counts are integers, so merging two films adds
+//                them and the result is the same in any order. A pixel keeps at most kMaxIdsPerPixel ids; a sample of
+//                a further id is left out of the counts (the pixel's sample count still has it). The layer also
+//                holds the manifest, the names its ids stand for. It resolves to `channels` / 2 ranks of (id,
+//                coverage): the ids by falling count (ties by rising id), each with its count over the pixel's
+//                samples (Cryptomatte's ranking pixel filter with a box filter, Friedman and Jones 2015).
 // Every pixel also has its own sample count (adaptive sampling gives pixels different counts); the film's samples()
 // is the count of a film whose pixels all advance together.
 #pragma once
 
 #include <cmath>
 #include <cstdint>
+#include <map>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -33,7 +41,14 @@ namespace tessera {
 using FixedSum = __int128;
 inline constexpr double kFixedScale = 0x1p40;
 
-enum class LayerKind : uint32_t { kRadiance = 0, kSigned = 1, kDistance = 2 };
+enum class LayerKind : uint32_t { kRadiance = 0, kSigned = 1, kDistance = 2, kIds = 3 };
+
+// One id of a pixel of a kIds layer and the samples that found it.
+struct IdCount {
+  uint32_t id = 0;
+  uint32_t count = 0;
+  bool operator==(const IdCount&) const = default;
+};
 
 // One named layer's per-pixel statistics.
 struct FilmLayer {
@@ -42,6 +57,8 @@ struct FilmLayer {
   LayerKind kind = LayerKind::kRadiance;
   std::vector<FixedSum> sums;  // `channels` per pixel, interleaved, row-major from the top left
   std::vector<uint32_t> hits;  // kDistance: per pixel, the samples whose distance was finite; empty otherwise
+  std::vector<std::vector<IdCount>> ids;     // kIds: per pixel, its ids in rising order (no sums)
+  std::map<std::string, uint32_t> manifest;  // kIds: the name each id stands for, by name
 };
 
 class Film {
@@ -50,6 +67,7 @@ class Film {
   static constexpr int kMaxLayers = 64;
   static constexpr int kMaxChannels = 16;
   static constexpr size_t kMaxNameLength = 31;
+  static constexpr size_t kMaxIdsPerPixel = 16;
 
   Film() = default;
   Film(int width, int height);
@@ -108,6 +126,8 @@ class Film {
   // Adds one sample of layer `layer` (an index from add_layer or layer()) to pixel (x, y): `values` holds the layer's
   // channels. On the beauty (layer 0) it is add_sample.
   void add_layer_sample(int layer, int x, int y, const float* values);
+  // Counts one sample of id `id` in pixel (x, y) of the kIds layer `layer`, from the thread that owns the pixel.
+  void add_id_sample(int layer, int x, int y, uint32_t id);
   // add_layer_sample while other threads may add to the same pixel (the sums and hit counts added atomically, as
   // splat() adds; on the beauty, as splat(): no squared luminance).
   void add_layer_sample_shared(int layer, int x, int y, const float* values);
@@ -120,13 +140,15 @@ class Film {
                static_cast<float>(static_cast<double>(beauty_.sums[3 * i + 1]) * inv),
                static_cast<float>(static_cast<double>(beauty_.sums[3 * i + 2]) * inv));
   }
-  // Adds the samples of `other` (same layout, a disjoint sample range): exact for every layer's sums and hit counts
-  // and for the per-pixel counts; throws std::invalid_argument for another layout.
+  // Adds the samples of `other` (same layout, a disjoint sample range): exact for every layer's sums, hit counts and
+  // id counts (a kIds pixel keeps its kMaxIdsPerPixel ids of most samples, ties to the lower id) and for the
+  // per-pixel counts; manifests are joined. Throws std::invalid_argument for another layout.
   void merge(const Film& other);
   // Mean radiance of every pixel over the film's samples(), RGB interleaved, row-major from the top-left.
   std::vector<float> resolve() const;
   // Mean of every pixel of a layer, its channels interleaved: over the pixel's own sample count (0 for a pixel
-  // without samples); a distance layer's over the pixel's hits (infinite for a pixel without any).
+  // without samples); a distance layer's over the pixel's hits (infinite for a pixel without any); an id layer's
+  // ranks of (id as the float of its bits, coverage), (0, 0) for ranks the pixel has no id for.
   std::vector<float> resolve_layer(int layer) const;
   // resolve_layer of the layer named `name`; throws std::invalid_argument when there is none.
   std::vector<float> resolve_layer(std::string_view name) const;

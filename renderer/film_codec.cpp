@@ -1,5 +1,6 @@
 #include "renderer/film_codec.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -12,16 +13,19 @@ namespace {
 
 constexpr char kFilmMagic[8] = {'T', 'S', 'R', 'F', 'I', 'L', 'M', '\n'};
 constexpr char kCheckpointMagic[8] = {'T', 'S', 'R', 'C', 'K', 'P', 'T', '1'};
-constexpr uint32_t kVersion = 3;
-constexpr size_t kChecksumAt = 88;       // version 3: the checksum's offset
-constexpr size_t kHeaderBytes = 96;      // version 3: the fixed header
-constexpr size_t kLayerEntryBytes = 40;  // version 3: one layer's name, channels, kind
+constexpr uint32_t kVersion = 3;  // a film without id layers; one with them is version 4
+constexpr uint32_t kIdsVersion = 4;
+constexpr uint32_t kMaxManifestName = 4096;  // bytes of one manifest name
+constexpr size_t kChecksumAt = 88;           // version 3: the checksum's offset
+constexpr size_t kHeaderBytes = 96;          // version 3: the fixed header
+constexpr size_t kLayerEntryBytes = 40;      // version 3: one layer's name, channels, kind
 constexpr size_t kNameBytes = 32;
 constexpr int kMaxSide = 65536;
 constexpr size_t kCheckpointHeaderBytes = 48;  // TSRCKPT1: up to and including the settings fingerprint
 constexpr size_t kRadianceStateBytes = 3 * sizeof(FixedSum) + sizeof(float);  // per pixel, the older formats
 
 static_assert(sizeof(FixedSum) == 16, "the file holds 128-bit sums");
+static_assert(sizeof(IdCount) == 8, "the file holds an id and its count as two u32");
 
 std::optional<FilmFile> refuse(std::string* why, std::string reason) {
   if (why) *why = std::move(reason);
@@ -119,7 +123,39 @@ std::optional<FilmFile> decode_partial_v1_v2(std::string_view in, uint32_t versi
   return f;
 }
 
-std::optional<FilmFile> decode_v3(std::string_view in, std::string* why) {
+// An id layer's variable part: per pixel its count of ids, then every pixel's (id, count) pairs, then the manifest
+// (a count, then per name its id, its length and its bytes). `read` reads the next bytes or says there are none.
+template <typename Read>
+bool read_ids(FilmLayer& l, Read& read, std::string* why) {
+  auto no = [&](std::string reason) {
+    if (why) *why = "layer " + l.name + ": " + std::move(reason);
+    return false;
+  };
+  std::vector<uint32_t> sizes(l.ids.size());
+  if (!read(sizes.data(), sizes.size() * sizeof(uint32_t))) return no("truncated");
+  for (size_t p = 0; p < sizes.size(); ++p) {
+    if (sizes[p] > Film::kMaxIdsPerPixel)
+      return no("a pixel with more than " + std::to_string(Film::kMaxIdsPerPixel) + " ids");
+    l.ids[p].resize(sizes[p]);
+    if (!read(l.ids[p].data(), sizes[p] * sizeof(IdCount))) return no("truncated");
+    for (size_t k = 0; k < sizes[p]; ++k)
+      if (l.ids[p][k].count == 0 || (k > 0 && l.ids[p][k].id <= l.ids[p][k - 1].id))
+        return no("ids out of order or counted 0 times");
+  }
+  uint32_t names = 0;
+  if (!read(&names, sizeof names)) return no("truncated manifest");
+  for (uint32_t k = 0; k < names; ++k) {
+    uint32_t id = 0, length = 0;
+    if (!read(&id, sizeof id) || !read(&length, sizeof length) || length > kMaxManifestName)
+      return no("truncated or bad manifest");
+    std::string name(length, '\0');
+    if (!read(name.data(), length)) return no("truncated manifest");
+    l.manifest[std::move(name)] = id;
+  }
+  return true;
+}
+
+std::optional<FilmFile> decode_v3_v4(std::string_view in, uint32_t version, std::string* why) {
   if (in.size() < kHeaderBytes) return refuse(why, "truncated header");
   FilmFile f;
   read_common_fields(f, in);
@@ -152,15 +188,23 @@ std::optional<FilmFile> decode_v3(std::string_view in, std::string* why) {
     if (len == std::string_view::npos || field.find_first_not_of('\0', len) != std::string_view::npos)
       return refuse(why, "bad layer name");
     const uint32_t channels = get_field<uint32_t>(e, kNameBytes), kind = get_field<uint32_t>(e, kNameBytes + 4);
-    if (kind > static_cast<uint32_t>(LayerKind::kDistance) || channels < 1 ||
-        channels > static_cast<uint32_t>(Film::kMaxChannels))
+    const uint32_t last_kind = static_cast<uint32_t>(version >= kIdsVersion ? LayerKind::kIds : LayerKind::kDistance);
+    if (kind > last_kind || channels < 1 || channels > static_cast<uint32_t>(Film::kMaxChannels))
       return refuse(why, "bad layer " + std::to_string(i));
     entries.push_back({std::string(field.substr(0, len)), static_cast<int>(channels), static_cast<LayerKind>(kind)});
-    per_pixel += 16ull * channels + (kind == static_cast<uint32_t>(LayerKind::kDistance) ? 4 : 0);
+    if (kind == static_cast<uint32_t>(LayerKind::kIds))
+      per_pixel += 4;  // the entry counts; the entries and the manifest follow, of their own sizes
+    else
+      per_pixel += 16ull * channels + (kind == static_cast<uint32_t>(LayerKind::kDistance) ? 4 : 0);
   }
+  const bool has_ids =
+      std::any_of(entries.begin(), entries.end(), [](const Entry& e) { return e.kind == LayerKind::kIds; });
+  if (has_ids != (version == kIdsVersion))
+    return refuse(why, "version " + std::to_string(version) + (has_ids ? " with" : " without") + " id layers");
   if (entries[0].name != Film::kBeauty || entries[0].channels != 3 || entries[0].kind != LayerKind::kRadiance)
     return refuse(why, "the first layer is not the beauty (radiance, 3 channels)");
-  if (in.size() - table_end != n * per_pixel)
+  const uint64_t payload = in.size() - table_end;
+  if (has_ids ? payload < n * per_pixel : payload != n * per_pixel)
     return refuse(why, "truncated or oversized (" + std::to_string(in.size()) + " bytes for " +
                            std::to_string(f.width) + "x" + std::to_string(f.height) + " and its layers)");
   if (get_field<uint64_t>(in, kChecksumAt) != fnv1a64(in.substr(kChecksumAt + 8), fnv1a64(in.substr(0, kChecksumAt))))
@@ -174,18 +218,32 @@ std::optional<FilmFile> decode_v3(std::string_view in, std::string* why) {
     }
   }
   size_t at = table_end;
+  // Reads `bytes` more, false when the file has fewer left.
   auto read = [&](void* to, size_t bytes) {
+    if (bytes > in.size() - at) return false;
     std::memcpy(to, in.data() + at, bytes);
     at += bytes;
+    return true;
   };
   for (int i = 0; i < f.film.layer_count(); ++i) {
     FilmLayer& l = f.film.layer_at(i);
-    read(l.sums.data(), l.sums.size() * sizeof(FixedSum));
-    if (i == 0) read(f.film.sums_lum2().data(), n * sizeof(float));
-    if (l.kind == LayerKind::kDistance) read(l.hits.data(), n * sizeof(uint32_t));
+    if (!read(l.sums.data(), l.sums.size() * sizeof(FixedSum)) ||
+        (i == 0 && !read(f.film.sums_lum2().data(), n * sizeof(float))) ||
+        (l.kind == LayerKind::kDistance && !read(l.hits.data(), n * sizeof(uint32_t))))
+      return refuse(why, "truncated");
+    if (l.kind == LayerKind::kIds && !read_ids(l, read, why)) return std::nullopt;
   }
   f.film.set_samples(f.sample_count);
-  read(f.film.pixel_sample_counts().data(), n * sizeof(uint32_t));
+  if (!read(f.film.pixel_sample_counts().data(), n * sizeof(uint32_t))) return refuse(why, "truncated");
+  if (at != in.size()) return refuse(why, "oversized");
+  // An id layer's counts are samples of their pixel.
+  for (int i = 0; i < f.film.layer_count(); ++i)
+    for (size_t p = 0; p < f.film.layer_at(i).ids.size(); ++p) {
+      uint64_t counted = 0;
+      for (const IdCount& e : f.film.layer_at(i).ids[p]) counted += e.count;
+      if (counted > f.film.pixel_sample_counts()[p])
+        return refuse(why, "an id layer counts more samples than its pixel");
+    }
   return f;
 }
 
@@ -197,7 +255,9 @@ std::string encode_film_file(const FilmFileHeader& f, const Film& film) {
   const size_t n = film.pixel_count();
   std::string out;
   out.append(kFilmMagic, sizeof kFilmMagic);
-  put_field<uint32_t>(out, kVersion);
+  bool has_ids = false;
+  for (int i = 0; i < film.layer_count(); ++i) has_ids = has_ids || film.layer_at(i).kind == LayerKind::kIds;
+  put_field<uint32_t>(out, has_ids ? kIdsVersion : kVersion);
   put_field<int32_t>(out, f.width);
   put_field<int32_t>(out, f.height);
   put_field<uint32_t>(out, f.first_sample);
@@ -231,6 +291,18 @@ std::string encode_film_file(const FilmFileHeader& f, const Film& film) {
     append(l.sums.data(), l.sums.size() * sizeof(FixedSum));
     if (i == 0) append(film.sums_lum2().data(), n * sizeof(float));
     if (l.kind == LayerKind::kDistance) append(l.hits.data(), n * sizeof(uint32_t));
+    if (l.kind == LayerKind::kIds) {
+      for (const std::vector<IdCount>& ids : l.ids) put_field<uint32_t>(out, static_cast<uint32_t>(ids.size()));
+      for (const std::vector<IdCount>& ids : l.ids) append(ids.data(), ids.size() * sizeof(IdCount));
+      put_field<uint32_t>(out, static_cast<uint32_t>(l.manifest.size()));
+      for (const auto& [name, id] : l.manifest) {
+        if (name.size() > kMaxManifestName)
+          throw std::invalid_argument("a manifest name longer than " + std::to_string(kMaxManifestName) + " bytes");
+        put_field<uint32_t>(out, id);
+        put_field<uint32_t>(out, static_cast<uint32_t>(name.size()));
+        out += name;
+      }
+    }
   }
   append(film.pixel_sample_counts().data(), n * sizeof(uint32_t));
   const uint64_t checksum =
@@ -244,8 +316,8 @@ std::optional<FilmFile> decode_film_file(std::string_view in, std::string* why) 
   if (in.size() < 12 || std::memcmp(in.data(), kFilmMagic, 8) != 0) return refuse(why, "not a tessera film");
   const uint32_t version = get_field<uint32_t>(in, 8);
   if (version == 1 || version == 2) return decode_partial_v1_v2(in, version, why);
-  if (version == kVersion) return decode_v3(in, why);
-  return refuse(why, "film version " + std::to_string(version) + " (this tessera reads versions 1 to 3)");
+  if (version == kVersion || version == kIdsVersion) return decode_v3_v4(in, version, why);
+  return refuse(why, "film version " + std::to_string(version) + " (this tessera reads versions 1 to 4)");
 }
 
 }  // namespace tessera

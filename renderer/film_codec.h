@@ -2,11 +2,11 @@
 // resume, merge or check it. Render checkpoints (server/jobs/checkpoint.h), the server's work-unit films and the
 // command line's partial films (.tfilm, clients/cli/partial_film.h) are all this file.
 //
-// Layout, version 3 (all fields little-endian, as the machines we run on; offsets in bytes):
+// Layout, versions 3 and 4 (all fields little-endian, as the machines we run on; offsets in bytes):
 //
 //   offset  size  field
 //        0     8  magic "TSRFILM\n"
-//        8     4  u32 version (3)
+//        8     4  u32 version (3, or 4 with id layers)
 //       12     4  i32 width            the full image, 1 … 65536
 //       16     4  i32 height
 //       20     4  u32 first_sample     the sample range's first index
@@ -26,13 +26,18 @@
 //       84     4  u32 reserved (0)
 //       88     8  u64 checksum         FNV-1a 64 of bytes [0, 88) followed by every byte from 96 to the end
 //       96  40·L  the layers: name (32 bytes, printable ASCII padded with NUL, at least one NUL), u32 channels
-//                 (1 … 16), u32 kind (0 radiance, 1 signed, 2 distance); the first is "radiance", 3 channels, kind 0
+//                 (1 … 16), u32 kind (0 radiance, 1 signed, 2 distance, 3 ids); the first is "radiance", 3
+//                 channels, kind 0
 //   then, per layer in order, with N = width × height, row-major from the top left:
-//            16·C·N  its sums, C channels per pixel interleaved: i128 fixed point in units of 2^-40
+//            16·C·N  its sums, C channels per pixel interleaved: i128 fixed point in units of 2^-40 (none for ids)
 //               4·N  the first layer only: f32 sums of squared luminance (the noise estimate's)
 //               4·N  a distance layer only: u32 hit counts
+//               4·N  an id layer only: u32 ids per pixel (0 … 16), then for every pixel in turn its ids as
+//                    (u32 id, u32 count) pairs in rising id order, then the manifest: u32 names, and per name
+//                    u32 id, u32 length (at most 4096) and its bytes, in the names' byte order
 //   and last 4·N  u32 per-pixel sample counts.
-// The file size is checked exactly against the header.
+// The file size is checked exactly against the header and the id layers' counts. A film with an id layer is version 4;
+// one without is version 3, byte for byte the file it was before id layers existed.
 //
 // Older files still read, as a film of the radiance layer alone whose pixels all have sample_count samples (those
 // outside the region none):

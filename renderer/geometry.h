@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "renderer/math.h"
@@ -22,6 +23,7 @@ struct Mesh {
   uint32_t material = 0;
   uint32_t first_light = 0;  // index of its first triangle's light when the material emits
   bool prototype = false;    // object-space geometry of a MeshGroup, traced only through its instances
+  std::string name;          // the object's, for Cryptomatte (Scene::object_names)
   size_t triangle_count() const { return indices.size() / 3; }
 };
 
@@ -36,6 +38,7 @@ struct Instance {
   Transform to_world;
   Transform normal_to_world;  // inverse transpose of to_world's linear part
   bool mirrored = false;      // negative determinant: the front face is the clockwise one
+  std::string name;           // the object's, for Cryptomatte (Scene::object_names)
 };
 
 struct Sphere {
@@ -43,6 +46,7 @@ struct Sphere {
   float radius = 1;
   uint32_t material = 0;
   uint32_t light = 0;  // its light index when the material emits
+  std::string name;    // the object's, for Cryptomatte (Scene::object_names)
 };
 
 // How far from the origin, in scene units, geometry may lie. Embree 3 aborts the process on a ray whose origin or

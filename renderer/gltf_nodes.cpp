@@ -136,6 +136,8 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
       result.warnings.push_back("node " + std::to_string(node_index) +
                                 ": its own morph weights are not applied (the mesh's default weights are)");
     const TransformD world = parent * pose.nodes[node_index].local();
+    // The node's name names what it draws, for Cryptomatte's object mattes.
+    const std::string object_name = node.name.empty() ? "node " + std::to_string(node_index) : node.name;
 
     if (node.mesh >= 0) {
       if (node.mesh >= static_cast<int>(model.meshes.size()))
@@ -160,6 +162,7 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
           inst.to_world = at.cast<float>();
           inst.normal_to_world = at.normal_transform().cast<float>();
           inst.mirrored = at.determinant() < 0;
+          inst.name = object_name;
           for (uint32_t m : scene.groups[inst.group].meshes) {
             if (!fresh) import.triangles += scene.meshes[m].triangle_count();  // build_meshes counted the first
             for (const Vec3& p : scene.meshes[m].positions) result.bounds.extend(inst.to_world.point(p));
@@ -169,6 +172,7 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
         } else {
           for (Mesh& m : build_meshes(import, reader, materials, node.mesh, at, nullptr, &weights)) {
             for (const Vec3& p : m.positions) result.bounds.extend(p);
+            m.name = object_name;
             scene.meshes.push_back(std::move(m));
           }
         }
@@ -200,6 +204,7 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
         }
         for (Mesh& m : build_meshes(import, reader, materials, node.mesh, TransformD(), &joints, &weights)) {
           for (const Vec3& p : m.positions) result.bounds.extend(p);
+          m.name = object_name;
           scene.meshes.push_back(std::move(m));
         }
       } else if (copies.empty()) {

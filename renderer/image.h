@@ -3,6 +3,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace tessera {
@@ -13,12 +14,15 @@ struct ImageLayer {
   std::vector<std::string> channels;  // "R", "G", "B"; a layer "albedo" is stored as albedo.R, albedo.G, ...
   std::vector<float> pixels;          // width * height * channels.size()
   bool always_float = false;          // stored as 32-bit float whatever the EXR precision (ids, depth, positions)
+  bool named_in_full = false;         // `channels` are the stored names themselves (Cryptomatte's CryptoObject00.R)
 };
 
 struct Image {
   int width = 0;
   int height = 0;
   std::vector<ImageLayer> layers;  // the beauty first
+  // String attributes of the EXR header (Cryptomatte's manifests), in order.
+  std::vector<std::pair<std::string, std::string>> metadata;
   const ImageLayer& beauty() const { return layers.front(); }
 };
 

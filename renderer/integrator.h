@@ -25,6 +25,10 @@
 
 namespace tessera {
 
+namespace cryptomatte {
+struct Ids;
+}  // namespace cryptomatte
+
 class Bsdf;
 class Scene;
 class ThreadPool;
@@ -95,6 +99,8 @@ struct IntegratorSetup {
   uint32_t samples_per_pixel = 1;  // the whole job's, for the rays' cones (Camera::pixel_cone)
   int tile_size = 32;
   ThreadPool* pool = nullptr;
+  // The scene's Cryptomatte ids, for a film with Cryptomatte passes (aov.h); null otherwise.
+  std::shared_ptr<const cryptomatte::Ids> crypto;
 };
 
 // The shadow ray from a surface point (p, geometric normal ng) to a sampled light point: both ends offset clear of

@@ -62,7 +62,7 @@ std::string encode_exr(const Image& image, bool half) {
     spec.channelnames.clear();
     for (const ImageLayer& layer : image.layers)
       for (const std::string& c : layer.channels) {
-        spec.channelnames.push_back(layer.name.empty() ? c : layer.name + "." + c);
+        spec.channelnames.push_back(layer.name.empty() || layer.named_in_full ? c : layer.name + "." + c);
         spec.channelformats.push_back(layer.always_float ? OIIO::TypeDesc::FLOAT : precision);
       }
     interleaved.resize(pixels * channels);
@@ -81,6 +81,7 @@ std::string encode_exr(const Image& image, bool half) {
   // the wall-clock time (OpenEXR's capDate, "YYYY:MM:DD hh:mm:ss") unless the spec has a DateTime: an empty one says
   // "no date" and is the same in every file.
   spec.attribute("DateTime", "");
+  for (const auto& [name, value] : image.metadata) spec.attribute(name, value);
   return write_in_memory("image.exr", spec, OIIO::TypeDesc::FLOAT,
                          image.layers.size() > 1 ? interleaved.data() : image.beauty().pixels.data());
 }
@@ -109,7 +110,14 @@ Image resolve_image(const Film& film, const std::vector<std::string>& aovs) {
   for (const AovInfo& aov : aov_table()) {
     if (std::find(aovs.begin(), aovs.end(), aov.name) == aovs.end()) continue;
     ImageLayer layer{std::string(aov.name), {}, resolve_aov(film, aov), aov.always_float};
-    for (int c = 0; c < aov.channels; ++c) layer.channels.emplace_back(aov.channel_names[static_cast<size_t>(c)]);
+    if (aov.source == AovSource::kCryptomatte) {
+      layer.channels = aov_channel_names(aov);
+      layer.named_in_full = true;
+      for (auto& attribute : cryptomatte::exr_metadata(aov.crypto_type, film.layer_at(film.layer(aov.name)).manifest))
+        image.metadata.push_back(std::move(attribute));
+    } else {
+      for (int c = 0; c < aov.channels; ++c) layer.channels.emplace_back(aov.channel_names[static_cast<size_t>(c)]);
+    }
     image.layers.push_back(std::move(layer));
   }
   return image;

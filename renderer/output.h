@@ -42,7 +42,8 @@ struct EncodeOptions {
 Image resolve_image(const Film& film, const std::vector<std::string>& aovs = {});
 
 // encode: the image in `format`. PNG holds the beauty alone; EXR every layer, the beauty as R, G, B and each other
-// layer's channels as <layer>.<channel>, zip-compressed. Throws std::runtime_error with OpenImageIO's message.
+// layer's channels as <layer>.<channel> (a layer named_in_full by its channels' own names), with the image's
+// metadata as string attributes, zip-compressed. Throws std::runtime_error with OpenImageIO's message.
 std::string encode_image(const Image& image, ImageFormat format, const EncodeOptions& options);
 
 // A pass of `image` (a layer of that name, aov.h) as PNG, for a look at it (aov_look): throws std::invalid_argument

@@ -109,6 +109,18 @@ void tidy_warnings(std::vector<std::string>* warnings) {
   *warnings = std::move(kept);
 }
 
+std::vector<std::string> Scene::object_names() const {
+  std::vector<std::string> names;
+  names.reserve(meshes.size() + spheres.size() + instances.size());
+  auto add = [&](const std::string& name) {
+    names.push_back(name.empty() ? "object " + std::to_string(names.size()) : name);
+  };
+  for (const Mesh& m : meshes) add(m.name);
+  for (const Sphere& s : spheres) add(s.name);
+  for (const Instance& i : instances) add(i.name);
+  return names;
+}
+
 size_t Scene::triangle_count() const {
   size_t n = 0;
   for (const Mesh& m : meshes)

@@ -48,6 +48,9 @@ class Scene {
   // fields above; *finite (when given) is false when a vertex, a sphere or an instance's placement is not a finite
   // number.
   Bounds geometry_bounds(bool* finite = nullptr) const;
+  // The names of the objects, by number (SurfaceInteraction::object: meshes, then spheres, then instances); an
+  // object without a name of its own is called by its number, "object 7".
+  std::vector<std::string> object_names() const;
   size_t triangle_count() const;         // triangles traced, instances counted each time
   size_t unique_triangle_count() const;  // triangles stored
   double build_seconds() const { return build_seconds_; }

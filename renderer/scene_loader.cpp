@@ -301,6 +301,14 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     if (!shape.is_string()) throw SceneError(at(p, "shape"), "must be \"mesh\", \"sphere\" or \"rectangle\"");
     uint32_t material = material_index(obj, p, names);
     const std::string s = shape.get<std::string>();
+    // The object's name, for Cryptomatte's object mattes: its own, or where it stands in the document.
+    std::string object_name = "objects[" + std::to_string(i) + "]";
+    if (auto n = obj.find("name"); n != obj.end()) {
+      if (!n->is_string() || n->get_ref<const std::string&>().empty() || n->get_ref<const std::string&>().size() > 256)
+        throw SceneError(at(p, "name"), "must be a name of 1 to 256 characters");
+      object_name = n->get<std::string>();
+    }
+    const size_t meshes_before = scene->meshes.size(), spheres_before = scene->spheres.size();
     if (auto m = obj.find("medium"); m != obj.end()) {
       // The medium fills the shape; its boundary is the object's material, which a path crosses to get in and out:
       // a dielectric (refracting) or an interface (index-matched, not drawn). The object gets a material of its own
@@ -341,6 +349,8 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
     } else {
       throw SceneError(at(p, "shape"), "unknown shape \"" + s + "\"; expected \"mesh\", \"sphere\" or \"rectangle\"");
     }
+    for (size_t m = meshes_before; m < scene->meshes.size(); ++m) scene->meshes[m].name = object_name;
+    for (size_t k = spheres_before; k < scene->spheres.size(); ++k) scene->spheres[k].name = object_name;
   }
 
   // The camera: the document's, a glTF camera chosen by index or name, the asset's first camera, or one that

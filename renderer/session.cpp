@@ -58,11 +58,18 @@ RenderSession::RenderSession(std::shared_ptr<const Scene> scene, const RenderSet
   setup.samples_per_pixel = settings.job_spp ? settings.job_spp : settings.spp;
   setup.tile_size = settings.tile_size;
   setup.pool = &pool;
+  const std::vector<std::string> aovs = film_aovs(settings);
+  for (const AovInfo* layer : aov_layers(aovs))
+    if (layer->source == AovSource::kCryptomatte) {
+      setup.crypto =
+          std::make_shared<const cryptomatte::Ids>(cryptomatte::ids_of(scene_->object_names(), scene_->material_names));
+      break;
+    }
   integrator_ = IntegratorRegistry::builtin().create(setup);
   for (const std::string& aov : settings.aovs)
     if (std::string problem = integrator_aov_problem(settings.integrator.name, aov); !problem.empty())
       throw std::invalid_argument(problem);
-  add_aov_layers(film_, film_aovs(settings));
+  add_aov_layers(film_, aovs, setup.crypto.get());
   progress_.samples_total = settings.spp;
 }
 

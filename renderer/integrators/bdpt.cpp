@@ -398,7 +398,7 @@ class BidirectionalIntegrator final : public Integrator {
   bool measures_noise() const override { return !light_only_; }
 
   void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel) override {
-    const AovWriter aovs(film);
+    const AovWriter aovs(film, setup_.crypto.get());
     setup_.pool->parallel_for(tiles_.count(), [&](size_t tile, int w) {
       if (cancel.load(std::memory_order_relaxed)) return;
       render_tile(tiles_.tile(tile), w, first_sample, count, film, aovs);

@@ -400,7 +400,7 @@ class PathIntegrator final : public Integrator {
   explicit PathIntegrator(const IntegratorSetup& setup) : Integrator(setup) {}
 
   void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel) override {
-    const AovWriter aovs(film);
+    const AovWriter aovs(film, setup_.crypto.get());
     setup_.pool->parallel_for(tiles_.count(), [&](size_t tile, int w) {
       if (cancel.load(std::memory_order_relaxed)) return;
       render_tile(tiles_.tile(tile), worker(w), first_sample, count, film, aovs);

@@ -202,6 +202,26 @@ TEST_F(DaemonTest, RendersPassesIntoTheExrAndEachAsPng) {
   EXPECT_FALSE(fs::exists(data_ / "jobs" / plain / "aov.depth.png"));
 }
 
+// Cryptomatte mattes rendered in a worker: the EXR holds the specification's 24 channels beside the beauty, and the
+// passes show as PNGs.
+TEST_F(DaemonTest, WritesCryptomatteLayersAndTheirLooks) {
+  json doc = cornell_job(32, 4);
+  doc["render"]["aovs"] = {"crypto_material", "crypto_object"};
+  const std::string id = submit(*client_, doc);
+  ASSERT_FALSE(id.empty());
+  const json done =
+      wait_for(*client_, id, [](const json& s) { return in_state(s, "succeeded") || in_state(s, "failed"); });
+  ASSERT_TRUE(in_state(done, "succeeded")) << done.dump();
+  EXPECT_EQ(done["render"]["aovs"], json({"crypto_object", "crypto_material"}));
+  const ImageData exr = decode(fetch(*client_, "/v1/jobs/" + id + "/result.exr"), dir_.path() / "c.exr");
+  EXPECT_EQ(exr.channels, 3 + 2 * 12);
+  for (const char* pass : {"crypto_object", "crypto_material"}) {
+    const ImageData look = decode(fetch(*client_, "/v1/jobs/" + id + "/aovs/" + pass + ".png"), dir_.path() / "c.png");
+    EXPECT_EQ(look.width, 32) << pass;
+    EXPECT_GT(mean(look), 0.05) << pass;
+  }
+}
+
 TEST_F(DaemonTest, PreviewWhileRunningThenCancel) {
   const std::string id = submit(*client_, long_cornell_job());
   ASSERT_FALSE(id.empty());

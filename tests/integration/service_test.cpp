@@ -245,7 +245,8 @@ TEST_F(ServiceTest, MultipartJobWithGltfAndBin) {
 TEST_F(ServiceTest, ImagesAreCheckedByTheirHeadersAtSubmissionAndByTheirPixelsAtRender) {
   start();
   std::string png = tessera::encode_image(
-      tessera::Image{8, 8, {tessera::ImageLayer{"", {"R", "G", "B"}, std::vector<float>(8 * 8 * 3, 0.5f), false}}},
+      tessera::Image{
+          8, 8, {tessera::ImageLayer{"", {"R", "G", "B"}, std::vector<float>(8 * 8 * 3, 0.5f), false, false}}, {}},
       tessera::ImageFormat::kPng, tessera::EncodeOptions{});
   const auto idat = std::search(png.begin(), png.end(), std::begin("IDAT"), std::begin("IDAT") + 4);
   ASSERT_LT(idat - png.begin() + 12, static_cast<std::ptrdiff_t>(png.size()));

@@ -23,6 +23,8 @@ void expect_same_film(const Film& a, const Film& b) {
   for (int i = 0; i < a.layer_count(); ++i) {
     EXPECT_TRUE(a.layer_at(i).sums == b.layer_at(i).sums) << a.layer_at(i).name;
     EXPECT_EQ(a.layer_at(i).hits, b.layer_at(i).hits) << a.layer_at(i).name;
+    EXPECT_EQ(a.layer_at(i).ids, b.layer_at(i).ids) << a.layer_at(i).name;
+    EXPECT_EQ(a.layer_at(i).manifest, b.layer_at(i).manifest) << a.layer_at(i).name;
   }
 }
 
@@ -83,6 +85,35 @@ TEST(FilmCodec, RoundTripsEveryLayerBitExactly) {
   EXPECT_EQ(d->film.pixel_samples(1, 0), 5u);
   EXPECT_EQ(encode_film_file(*d), bytes);
   EXPECT_EQ(bytes.size(), 96 + 4 * 40 + 12 * (16 * (3 + 3 + 1 + 2) + 4 + 4 + 4));
+}
+
+// layered_file with an id layer (Cryptomatte's) after the others: pixels with 0, 1 and 2 ids, and a manifest.
+FilmFile ids_file() {
+  FilmFile f = layered_file();
+  const int ids = f.film.add_layer("crypto_object", 12, LayerKind::kIds);
+  for (uint32_t s = 0; s < 5; ++s)
+    for (int x = 2; x < 4; ++x) f.film.add_id_sample(ids, x, 1, x == 3 && s % 2 ? 0x4b0c1a2du : 0x3f8e2f10u);
+  f.film.layer_at(ids).manifest = {{"floor", 0x3f8e2f10u}, {"ball", 0x4b0c1a2du}, {"unseen", 0x12345678u}};
+  return f;
+}
+
+TEST(FilmCodec, RoundTripsIdLayersAndKeepsTheOtherFormatWithoutThem) {
+  const FilmFile f = ids_file();
+  const std::string bytes = encode_film_file(f);
+  EXPECT_EQ(get_field<uint32_t>(bytes, 8), 4u) << "a film with an id layer is version 4";
+  EXPECT_EQ(get_field<uint32_t>(encode_film_file(layered_file()), 8), 3u) << "and one without stays version 3";
+  std::string why;
+  const std::optional<FilmFile> d = decode_film_file(bytes, &why);
+  ASSERT_TRUE(d) << why;
+  expect_same_film(d->film, f.film);
+  const FilmLayer& ids = d->film.layer_at(4);
+  EXPECT_EQ(ids.kind, LayerKind::kIds);
+  EXPECT_EQ(ids.ids[4 + 3], (std::vector<IdCount>{{0x3f8e2f10u, 3}, {0x4b0c1a2du, 2}}));
+  EXPECT_EQ(ids.ids[4 + 2], (std::vector<IdCount>{{0x3f8e2f10u, 5}}));
+  EXPECT_EQ(ids.manifest.at("ball"), 0x4b0c1a2du);
+  EXPECT_EQ(encode_film_file(*d), bytes);
+  // The id layer's part: 12 entry counts, 3 pairs, the manifest's count and 3 names (id, length, bytes).
+  EXPECT_EQ(bytes.size(), encode_film_file(layered_file()).size() + 40 + 12 * 4 + 3 * 8 + 4 + (3 * 8 + 5 + 4 + 6));
 }
 
 std::string read_fixture(const std::string& name) {
@@ -163,7 +194,8 @@ TEST(FilmCodec, RefusesMalformedFiles) {
   const std::vector<Case> cases = {
       {"empty", ""},
       {"another format", std::string("P6\n3 2\n255\n") + std::string(18, '\0')},
-      {"version 4", with_field<uint32_t>(good, 8, 4)},
+      {"version 4 without id layers", with_field<uint32_t>(good, 8, 4)},
+      {"version 5", with_field<uint32_t>(good, 8, 5)},
       {"header only", good.substr(0, 96)},
       {"one byte short", good.substr(0, good.size() - 1)},
       {"one byte more", good + '\0'},
@@ -207,6 +239,36 @@ TEST(FilmCodec, RefusesMalformedFiles) {
     std::string damaged = good;
     damaged[at] = static_cast<char>(damaged[at] ^ 0x10);
     EXPECT_FALSE(decode_film_file(damaged)) << "a bit flipped at byte " << at;
+  }
+}
+
+TEST(FilmCodec, RefusesMalformedIdLayers) {
+  const std::string good = encode_film_file(ids_file());
+  ASSERT_TRUE(decode_film_file(good));
+  // The id layer's part starts after the other layers' fixed parts: its 12 entry counts, then the pairs.
+  const size_t counts = encode_film_file(layered_file()).size() + 40 - 4 * 12;
+  const size_t pairs = counts + 4 * 12;
+  // Pixel 6 holds 1 id, pixel 7 two (its pairs at pairs + 8 and pairs + 16).
+  struct Case {
+    const char* what;
+    std::string bytes;
+  };
+  const std::vector<Case> cases = {
+      {"one byte short", with_field<uint32_t>(good.substr(0, good.size() - 1), 8, 4)},
+      {"more ids in a pixel than a film keeps", with_field<uint32_t>(good, counts + 4 * 6, 17)},
+      {"more ids than the file holds", with_field<uint32_t>(good, counts + 4 * 6, 3)},
+      {"ids out of order", with_field<uint32_t>(good, pairs + 16, 0x3f8e2f10u)},
+      {"an id counted 0 times", with_field<uint32_t>(good, pairs + 4, 0)},
+      {"more samples counted than the pixel has", with_field<uint32_t>(good, pairs + 4, 6)},
+      {"a manifest of more names than it holds", with_field<uint32_t>(good, pairs + 24, 4)},
+      {"a manifest name past the end", with_field<uint32_t>(good, pairs + 24 + 8, 1000)},
+      {"an id layer in version 3", with_field<uint32_t>(good, 8, 3)},
+      {"an id layer of odd channels", with_field<uint32_t>(good, 96 + 4 * 40 + 32, 11)},
+  };
+  for (const Case& c : cases) {
+    std::string why;
+    EXPECT_FALSE(decode_film_file(c.bytes, &why)) << c.what;
+    EXPECT_FALSE(why.empty()) << c.what;
   }
 }
 

@@ -46,7 +46,7 @@ std::vector<float> gradient(int w, int h) {
 
 // An RGB image through the output pipeline's encoders (renderer/output.h), in memory or to a file.
 Image rgb_image(const std::vector<float>& rgb, int w, int h) {
-  return Image{w, h, {ImageLayer{"", {"R", "G", "B"}, rgb, false}}};
+  return Image{w, h, {ImageLayer{"", {"R", "G", "B"}, rgb, false, false}}, {}};
 }
 std::vector<uint8_t> encode_png(const std::vector<float>& rgb, int w, int h, const DisplaySettings& display) {
   const std::string bytes = encode_image(rgb_image(rgb, w, h), ImageFormat::kPng, EncodeOptions{display, true});

@@ -20,7 +20,7 @@ uint32_t add_material(Scene& scene, const json& params) {
 
 // A grey diffuse unit sphere at the origin: the scene's bounds (radius sqrt(3)) for lights at infinity.
 void add_ball(Scene& scene) {
-  scene.spheres.push_back({Vec3(0), 1, add_material(scene, {{"type", "lambert"}, {"albedo", 0.5}}), 0});
+  scene.spheres.push_back({Vec3(0), 1, add_material(scene, {{"type", "lambert"}, {"albedo", 0.5}}), 0, {}});
 }
 
 // A rectangle emitting `radiance`, of area 0.5 x 0.8, tilted.
@@ -73,7 +73,7 @@ TEST(LightEmission, AreaLightsEmitTheirClosedFormPower) {
     expect_power(scene, (one_sided ? 1 : 2) * kPi * 0.4 * 3);
   }
   Scene scene;
-  scene.spheres.push_back({Vec3(1, 0, 0), 0.5f, add_material(scene, {{"type", "emission"}, {"radiance", 2}}), 0});
+  scene.spheres.push_back({Vec3(1, 0, 0), 0.5f, add_material(scene, {{"type", "emission"}, {"radiance", 2}}), 0, {}});
   scene.finalize();
   const auto& mat = *scene.materials[0];
   expect_power(scene, (mat.emission_one_sided ? 1 : 2) * kPi * 4 * kPi * 0.25 * 2);

@@ -53,7 +53,7 @@ TEST(Output, FormatsAreNamedByTheirExtension) {
 
 // The beauty alone is the file a job without passes has always had: three channels R, G, B in the job's precision.
 TEST(Output, TheBeautyAloneIsAnRgbExr) {
-  Image image{4, 2, {ImageLayer{"", {"R", "G", "B"}, std::vector<float>(4 * 2 * 3, 0.25f), false}}};
+  Image image{4, 2, {ImageLayer{"", {"R", "G", "B"}, std::vector<float>(4 * 2 * 3, 0.25f), false, false}}, {}};
   const OIIO::ImageSpec spec = spec_of(encode_image(image, ImageFormat::kExr, EncodeOptions{{}, true}), "a.exr");
   ASSERT_EQ(spec.nchannels, 3);
   EXPECT_EQ(spec.channelnames, (std::vector<std::string>{"R", "G", "B"}));
@@ -70,7 +70,8 @@ TEST(Output, LayersAreNamedChannelsOfOneExr) {
               h,
               {ImageLayer{"", {"R", "G", "B"}, std::vector<float>(w * h * 3, 0.5f), false},
                ImageLayer{"normal", {"X", "Y", "Z"}, std::vector<float>(w * h * 3, -0.75f), false},
-               ImageLayer{"depth", {"Z"}, depth, true}}};
+               ImageLayer{"depth", {"Z"}, depth, true, false}},
+              {}};
   std::vector<float> pixels;
   const OIIO::ImageSpec spec =
       spec_of(encode_image(image, ImageFormat::kExr, EncodeOptions{{}, true}), "a.exr", &pixels);
