@@ -16,6 +16,7 @@
 #include "renderer/scene.h"
 #include "renderer/scene_error.h"
 #include "renderer/session.h"
+#include "tests/renderer/pass_test_util.h"
 
 namespace tessera {
 namespace {
@@ -25,23 +26,8 @@ using nlohmann::json;
 const std::vector<std::string> kSurfacePasses = {"albedo",    "normal",    "depth",       "position",    "uv",
                                                  "roughness", "object_id", "material_id", "sample_count"};
 
-json cornell_scene() {
-  std::ifstream in("proto/examples/cornell.json");
-  if (!in) throw std::runtime_error("run the tests from the repository root (proto/examples/cornell.json)");
-  return json::parse(in)["scene"];
-}
-
-RenderSettings settings(int w, int h, uint32_t spp, const std::string& integrator, std::vector<std::string> aovs) {
-  RenderSettings s;
-  s.width = w;
-  s.height = h;
-  s.spp = spp;
-  s.seed = 7;
-  s.integrator.name = integrator;
-  s.tile_size = 16;
-  s.aovs = std::move(aovs);
-  return s;
-}
+using test::cornell_scene;
+using test::settings;
 
 // A rendered image's passes by name.
 struct Passes {

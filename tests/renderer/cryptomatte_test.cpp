@@ -21,6 +21,7 @@
 #include "renderer/scene.h"
 #include "renderer/scene_error.h"
 #include "renderer/session.h"
+#include "tests/renderer/pass_test_util.h"
 
 namespace tessera {
 namespace {
@@ -127,23 +128,8 @@ TEST(Cryptomatte, APixelKeepsItsSixteenIdsOfMostSamples) {
   EXPECT_EQ(film.layer_at(layer).ids[0][14].id, 15u);
 }
 
-json cornell_scene() {
-  std::ifstream in("proto/examples/cornell.json");
-  if (!in) throw std::runtime_error("run the tests from the repository root (proto/examples/cornell.json)");
-  return json::parse(in)["scene"];
-}
-
-RenderSettings settings(int w, int h, uint32_t spp, const std::string& integrator, std::vector<std::string> aovs) {
-  RenderSettings s;
-  s.width = w;
-  s.height = h;
-  s.spp = spp;
-  s.seed = 11;
-  s.integrator.name = integrator;
-  s.tile_size = 8;
-  s.aovs = std::move(aovs);
-  return s;
-}
+using test::cornell_scene;
+using test::settings;
 
 Film render(const std::shared_ptr<const Scene>& scene, const RenderSettings& s, int threads = 2) {
   ThreadPool pool(threads);
