@@ -136,8 +136,12 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
       result.warnings.push_back("node " + std::to_string(node_index) +
                                 ": its own morph weights are not applied (the mesh's default weights are)");
     const TransformD world = parent * pose.nodes[node_index].local();
-    // The node's name names what it draws, for Cryptomatte's object mattes.
-    const std::string object_name = node.name.empty() ? "node " + std::to_string(node_index) : node.name;
+    // The name of what the node draws, for Cryptomatte's object mattes: the node's, else its mesh's (as Blender's
+    // importer names an unnamed node), else its number.
+    std::string object_name = node.name;
+    if (object_name.empty() && node.mesh >= 0 && node.mesh < static_cast<int>(model.meshes.size()))
+      object_name = model.meshes[node.mesh].name;
+    if (object_name.empty()) object_name = "node " + std::to_string(node_index);
 
     if (node.mesh >= 0) {
       if (node.mesh >= static_cast<int>(model.meshes.size()))

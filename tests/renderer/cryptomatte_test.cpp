@@ -263,6 +263,16 @@ TEST(CryptomatteImage, TheExrHoldsTheSpecificationsChannelsFloatAndManifests) {
   for (const char* m : {"white", "red", "green", "light"}) EXPECT_TRUE(materials.contains(m)) << m;
 }
 
+// A glTF asset's objects go by their node's name, else their mesh's (the Duck's one node is unnamed; its mesh is
+// LOD3spShape), and its materials by theirs.
+TEST(CryptomatteNames, AGltfObjectIsNamedByItsNodeOrMesh) {
+  SceneLoadOptions options;
+  options.asset_root = "examples/duck";
+  auto scene = load_scene(json{{"gltf", "Duck.glb"}}, "/scene", options);
+  EXPECT_EQ(scene->object_names(), std::vector<std::string>{"LOD3spShape"});
+  EXPECT_EQ(scene->material_names, std::vector<std::string>{"blinn3-fx"});
+}
+
 TEST(CryptomatteImage, ThePassesLookShowsEachIdsColourByCoverage) {
   auto scene = load_scene(cornell_scene(), "/scene", SceneLoadOptions{});
   const RenderSettings s = settings(12, 12, 4, "path", {"crypto_object"});
