@@ -297,7 +297,7 @@ std::vector<float> resolve_aov(const Film& film, const AovInfo& aov) {
     // The light's whole sum over its class's colour's, per channel (0 where the colour is 0).
     const int divisor = film.layer(aov.divisor);
     if (divisor < 0) throw std::invalid_argument("the film has no layer for the pass " + std::string(aov.divisor));
-    const std::vector<FixedSum>& colors = film.layer_at(divisor).sums;
+    const FixedSums& colors = film.layer_at(divisor).sums;
     std::vector<float> out(layer.sums.size());
     for (size_t i = 0; i < out.size(); ++i)
       out[i] = colors[i] > 0 ? static_cast<float>(static_cast<double>(layer.sums[i]) / static_cast<double>(colors[i]))
@@ -307,7 +307,7 @@ std::vector<float> resolve_aov(const Film& film, const AovInfo& aov) {
   if (aov.source != AovSource::kSquares) return film.resolve_layer(index);
   // The variance of the pixel's mean, per channel, from the sums of the samples and of their squares.
   std::vector<float> out(3 * n);
-  const std::vector<FixedSum>& sums = film.sums();
+  const FixedSums& sums = film.sums();
   for (size_t i = 0; i < n; ++i) {
     const double count = film.pixel_sample_counts()[i];
     for (size_t c = 0; c < 3; ++c) {

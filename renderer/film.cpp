@@ -221,7 +221,7 @@ double Film::relative_error() const {
   const double n = samples_;
   double var_sum = 0, lum_sum = 0;
   size_t count = 0;
-  const std::vector<FixedSum>& sum = beauty_.sums;
+  const FixedSums& sum = beauty_.sums;
   for (size_t i = 0; i < pixel_count(); ++i) {
     double mean = (0.2126 * static_cast<double>(sum[3 * i]) + 0.7152 * static_cast<double>(sum[3 * i + 1]) +
                    0.0722 * static_cast<double>(sum[3 * i + 2])) /

@@ -34,11 +34,14 @@
 #include <string_view>
 #include <vector>
 
+#include "renderer/large_alloc.h"
 #include "renderer/math.h"
 
 namespace tessera {
 
 using FixedSum = __int128;
+// A layer's sums: large arrays, in huge pages where the kernel gives them (large_alloc.h).
+using FixedSums = std::vector<FixedSum, LargeAllocator<FixedSum>>;
 inline constexpr double kFixedScale = 0x1p40;
 
 enum class LayerKind : uint32_t { kRadiance = 0, kSigned = 1, kDistance = 2, kIds = 3 };
@@ -55,7 +58,7 @@ struct FilmLayer {
   std::string name;
   int channels = 0;
   LayerKind kind = LayerKind::kRadiance;
-  std::vector<FixedSum> sums;  // `channels` per pixel, interleaved, row-major from the top left
+  FixedSums sums;              // `channels` per pixel, interleaved, row-major from the top left
   std::vector<uint32_t> hits;  // kDistance: per pixel, the samples whose distance was finite; empty otherwise
   std::vector<std::vector<IdCount>> ids;     // kIds: per pixel, its ids in rising order (no sums)
   std::map<std::string, uint32_t> manifest;  // kIds: the name each id stands for, by name
@@ -158,9 +161,9 @@ class Film {
 
   // Raw state of the beauty: 3 fixed-point sums per pixel (RGB), and per-pixel sums of squared luminance (float,
   // only for the noise estimate). The film codec (renderer/film_codec.h) reads and writes every layer's.
-  const std::vector<FixedSum>& sums() const { return beauty_.sums; }
+  const FixedSums& sums() const { return beauty_.sums; }
   const std::vector<float>& sums_lum2() const { return sum_lum2_; }
-  std::vector<FixedSum>& sums() { return beauty_.sums; }
+  FixedSums& sums() { return beauty_.sums; }
   std::vector<float>& sums_lum2() { return sum_lum2_; }
 
   static FixedSum to_fixed(float v) {

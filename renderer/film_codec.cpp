@@ -60,7 +60,7 @@ size_t pixels_of(const FilmFile& f) {
 // sample_count samples.
 void read_radiance_state(FilmFile& f, std::string_view payload) {
   f.film = Film(f.width, f.height);
-  std::vector<FixedSum>& sums = f.film.sums();
+  FixedSums& sums = f.film.sums();
   std::vector<float>& lum2 = f.film.sums_lum2();
   std::memcpy(sums.data(), payload.data(), sums.size() * sizeof(FixedSum));
   std::memcpy(lum2.data(), payload.data() + sums.size() * sizeof(FixedSum), lum2.size() * sizeof(float));
