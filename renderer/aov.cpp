@@ -95,10 +95,18 @@ void add_aov_layers(Film& film, const std::vector<std::string>& aovs, const cryp
   }
 }
 
+namespace {
+
+// An id layer's pixel at its largest: its vector, and the vector's block of 16 pairs with the allocator's own
+// 16 bytes (glibc's malloc chunk header and alignment).
+constexpr uint64_t kIdsPixelBytes = sizeof(std::vector<IdCount>) + Film::kMaxIdsPerPixel * sizeof(IdCount) + 16;
+
+}  // namespace
+
 uint64_t film_bytes(int width, int height, const std::vector<std::string>& aovs) {
   uint64_t per_pixel = 3 * sizeof(FixedSum) + sizeof(float) + sizeof(uint32_t);
   for (const AovInfo* a : aov_layers(aovs))
-    per_pixel += a->kind == LayerKind::kIds ? sizeof(std::vector<IdCount>) + Film::kMaxIdsPerPixel * sizeof(IdCount)
+    per_pixel += a->kind == LayerKind::kIds ? kIdsPixelBytes
                                             : static_cast<uint64_t>(a->channels) * sizeof(FixedSum) +
                                                   (a->kind == LayerKind::kDistance ? 4 : 0);
   return per_pixel * static_cast<uint64_t>(width) * static_cast<uint64_t>(height);

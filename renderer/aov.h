@@ -87,7 +87,7 @@ std::vector<const AovInfo*> aov_layers(const std::vector<std::string>& aovs);
 void add_aov_layers(Film& film, const std::vector<std::string>& aovs, const cryptomatte::Ids* ids = nullptr);
 // The most bytes a width x height film with the passes `aovs` holds: 56 a pixel for the beauty (three 128-bit sums,
 // its squared luminance and its sample count), 16 a channel for each layer, 4 more for a distance layer's hit counts,
-// and for an id layer 24 and 8 an id, up to Film::kMaxIdsPerPixel ids.
+// and for an id layer 168 (a vector of up to Film::kMaxIdsPerPixel (id, count) pairs, and the allocator's overhead).
 uint64_t film_bytes(int width, int height, const std::vector<std::string>& aovs);
 // The passes a film holds (in the table's order): those with a layer in it, and sample_count when `sample_count`.
 std::vector<std::string> aovs_of(const Film& film, bool sample_count);

@@ -294,7 +294,7 @@ TEST(CryptomatteSettings, LightTracingRefusesItAndTheFilmCountsItsBytes) {
     EXPECT_EQ(e.pointer(), "/render/aovs/0");
   }
   EXPECT_EQ(film_bytes(10, 10, {"crypto_object"}) - film_bytes(10, 10, {}),
-            100u * (sizeof(std::vector<IdCount>) + Film::kMaxIdsPerPixel * sizeof(IdCount)));
+            100u * (sizeof(std::vector<IdCount>) + Film::kMaxIdsPerPixel * sizeof(IdCount) + 16));
 }
 
 }  // namespace
