@@ -1,6 +1,7 @@
-// A compositor reads tessera's Cryptomatte: Blender's Cryptomatte node, given the EXR, picks the matte of an object
-// and of a material by name (from the manifests in the EXR header) and its matte is, pixel by pixel, the coverage the
-// EXR holds for that name's id. Skipped where Blender is not installed (it is not among the test dependencies).
+// A compositor reads tessera's passes: Blender's compositor finds each render pass of the EXR as an output of its
+// Image node, and its Cryptomatte node, given the EXR, picks the matte of an object and of a material by name (from
+// the manifests in the EXR header), which is, pixel by pixel, the coverage the EXR holds for that name's id. Skipped
+// where Blender is not installed (it is not among the test dependencies).
 #include <gtest/gtest.h>
 
 #include <OpenImageIO/imageio.h>
@@ -9,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <set>
 
 #include "renderer/cryptomatte.h"
 #include "renderer/job.h"
@@ -42,8 +44,38 @@ std::vector<float> expected_matte(const Image& image, const std::string& pass, c
   return {};
 }
 
+bool have_blender() {
+  return std::system("command -v blender >/dev/null 2>&1") == 0;
+}
+
+TEST(CryptomatteBlender, BlendersImageNodeFindsEveryPass) {
+  if (!have_blender()) GTEST_SKIP() << "Blender is not installed";
+  const fs::path dir = fs::temp_directory_path() / ("tessera-blender-passes-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  auto scene = load_scene(cornell_scene(), "/scene", SceneLoadOptions{});
+  const std::vector<std::string> passes = {"albedo",    "normal",   "depth",         "uv",
+                                           "object_id", "variance", "diffuse_direct"};
+  const RenderSettings s = settings(24, 24, 4, "path", passes);
+  ThreadPool pool(2);
+  RenderSession session(scene, s, pool);
+  session.run();
+  OutputPipeline(s, OutputSpec{false, true}).run(session.film(), [&](ImageFormat, std::string_view bytes) {
+    std::ofstream(dir / "render.exr", std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  });
+  const std::string command = "blender -b --factory-startup --python tests/renderer/blender_passes.py -- '" +
+                              (dir / "render.exr").string() + "' '" + (dir / "outputs.txt").string() + "' >'" +
+                              (dir / "blender.log").string() + "' 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+  std::ifstream in(dir / "outputs.txt");
+  std::set<std::string> outputs;
+  for (std::string line; std::getline(in, line);) outputs.insert(line);
+  EXPECT_TRUE(outputs.count("Combined")) << "the beauty";
+  for (const std::string& pass : passes) EXPECT_TRUE(outputs.count(pass)) << pass;
+  fs::remove_all(dir);
+}
+
 TEST(CryptomatteBlender, BlendersCryptomatteNodePicksTheMattesByName) {
-  if (std::system("command -v blender >/dev/null 2>&1") != 0) GTEST_SKIP() << "Blender is not installed";
+  if (!have_blender()) GTEST_SKIP() << "Blender is not installed";
   const fs::path dir = fs::temp_directory_path() / ("tessera-blender-" + std::to_string(::getpid()));
   fs::create_directories(dir);
   nlohmann::json doc = cornell_scene();
