@@ -2,7 +2,7 @@
 // job list and follows the selected job over Server-Sent Events (polling when the events endpoint is missing).
 import { api, allowed, ApiError, getBlob, getToken, onConnection, setToken, TERMINAL } from "./api.js";
 import { CLIENT_EXAMPLES, examplesFrom } from "./examples.js";
-import { decodeExr, ExrError } from "./exr.js";
+import { cryptomatteOfPass, decodeExr, ExrError } from "./exr.js";
 import { materialForm, NOT_ON_PREVIEW_STAGE } from "./materials.js";
 import { ImageViewer } from "./viewer.js";
 
@@ -954,7 +954,8 @@ async function showPass(job, pass) {
     if (pass) {
       const look = await bitmapImage(await getBlob(job.links.aovs[pass]));
       const layer = result.layers?.[pass];
-      image = { ...look, pass: { name: pass, channels: layer?.channels ?? [], values: layer?.values ?? null } };
+      const crypto = layer ? null : cryptomatteOfPass(result, pass);
+      image = { ...look, pass: { name: pass, channels: layer?.channels ?? [], values: layer?.values ?? null, crypto } };
     }
     if (seq !== previewSeq || job.id !== selectedId) return;
     resultShown = job.id;

@@ -72,6 +72,10 @@ function readHeader(view) {
       header[name] = bytes[at];
     } else if (type === "box2i") {
       header[name] = [0, 4, 8, 12].map((o) => view.getInt32(at + o, true));
+    } else if (type === "string" && name.startsWith("cryptomatte/")) {
+      // Cryptomatte's metadata, cryptomatte/<key>/<field> (name, hash, conversion, manifest): by key.
+      const [, key, field] = name.split("/");
+      ((header.cryptomatte ??= {})[key] ??= {})[field] = new TextDecoder().decode(bytes.subarray(at, at + size));
     }
     at = start + size;
   }
@@ -212,5 +216,57 @@ export async function decodeExr(buffer) {
       if (!names.includes("B")) rgb[i + 2] = rgb[i];
     }
   }
-  return { width, height, rgb, channels: names, layers };
+  return { width, height, rgb, channels: names, layers, cryptomatte: cryptomattes(h.cryptomatte, layers) };
+}
+
+// The Cryptomatte types of a file (Cryptomatte specification 1.1): by type name ("CryptoObject"), { names: the
+// manifest as a Map from an id's float bits to its name, ranks: the layers <type>00, <type>01, ... (R, G, B, A: id,
+// coverage, id, coverage) }. Types without layers are left out; a manifest that is not JSON names nothing.
+function cryptomattes(metadata, layers) {
+  const out = {};
+  for (const meta of Object.values(metadata || {})) {
+    const type = meta.name;
+    if (!type) continue;
+    const ranks = [];
+    const rank = (k) => layers[`${type}${String(k).padStart(2, "0")}`];
+    for (let k = 0; rank(k); ++k) ranks.push(rank(k));
+    if (!ranks.length) continue;
+    const names = new Map();
+    try {
+      for (const [name, hex] of Object.entries(JSON.parse(meta.manifest || "{}")))
+        names.set(parseInt(hex, 16) >>> 0, name);
+    } catch {
+      // Mattes still read without names.
+    }
+    out[type] = { names, ranks };
+  }
+  return out;
+}
+
+// The Cryptomatte type a render pass holds: crypto_object is CryptoObject's (the type name in snake case), or null.
+export function cryptomatteOfPass(image, pass) {
+  for (const [type, matte] of Object.entries(image.cryptomatte || {}))
+    if (type.replace(/([a-z0-9])([A-Z])/g, "$1_$2").toLowerCase() === pass) return matte;
+  return null;
+}
+
+// The ids pixel i holds in a Cryptomatte type, by rank: [{ name, coverage }], names from the manifest (else the id's
+// bits in hexadecimal), ranks of coverage 0 left out.
+export function cryptomatteAt(matte, i) {
+  const bits = new Uint32Array(1);
+  const asFloat = new Float32Array(bits.buffer);
+  const out = [];
+  for (const layer of matte.ranks) {
+    const n = layer.channels.length;
+    const at = n * i;
+    for (const [idChannel, coverageChannel] of [["R", "G"], ["B", "A"]]) {
+      const id = layer.channels.indexOf(idChannel);
+      const coverage = layer.channels.indexOf(coverageChannel);
+      if (id < 0 || coverage < 0 || !(layer.values[at + coverage] > 0)) continue;
+      asFloat[0] = layer.values[at + id];
+      const name = matte.names.get(bits[0]) ?? bits[0].toString(16).padStart(8, "0");
+      out.push({ name, coverage: layer.values[at + coverage] });
+    }
+  }
+  return out;
 }

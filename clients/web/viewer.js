@@ -8,7 +8,10 @@
 // browser test checks that the viewer at the job's own settings reproduces the daemon's PNG.
 //
 // A render pass is shown as the daemon's PNG of it (its look, made in one place: renderer/aov.cpp, aov_look) with
-// the pass's own numbers from the EXR beside it: the readout gives those (a depth, an id, a normal), not the look's.
+// the pass's own numbers from the EXR beside it: the readout gives those (a depth, an id, a normal), not the look's;
+// for a Cryptomatte pass, the names of the pixel's objects or materials with their coverage.
+
+import { cryptomatteAt } from "./exr.js";
 
 const MIN_ZOOM = 1 / 64;
 const MAX_ZOOM = 64;
@@ -41,7 +44,8 @@ export function toDisplay(rgb, exposureEv, tonemap) {
 }
 
 // One image: its size, its linear values (or null), and a canvas holding what is drawn; for a render pass, pass:
-// { name, channels, values } (a layer of exr.js's decodeExr; values null when the job wrote no EXR).
+// { name, channels, values } (a layer of exr.js's decodeExr; values null when the job wrote no EXR), or for a
+// Cryptomatte pass { name, crypto } (exr.js's cryptomatteOfPass), read out as the names of the pixel's ids.
 class Layer {
   constructor(image) {
     this.width = image.width;
@@ -71,6 +75,11 @@ class Layer {
   }
   // What the readout says of pixel (x, y), which is inside: a pass's channels by name, else R, G and B.
   describe(x, y) {
+    if (this.pass?.crypto) {
+      const ids = cryptomatteAt(this.pass.crypto, y * this.width + x);
+      const v = ids.map((e) => `${e.name} ${(100 * e.coverage).toFixed(1)} %`);
+      return `${this.pass.name} ${v.length ? v.join(", ") : "nothing"}`;
+    }
     const values = this.pass?.values;
     if (values) {
       const n = this.pass.channels.length;

@@ -15,7 +15,7 @@ import { fileURLToPath } from "node:url";
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const repo = path.resolve(here, "../..");
-const { decodeExr, ExrError } = await import(path.join(repo, "clients/web/exr.js"));
+const { cryptomatteAt, cryptomatteOfPass, decodeExr, ExrError } = await import(path.join(repo, "clients/web/exr.js"));
 const RENDER = process.env.TESSERA_RENDER || path.join(repo, "build/clients/cli/tessera-render");
 const tmp = fs.mkdtempSync(path.join(os.tmpdir(), "tessera-exr-"));
 after(() => fs.rmSync(tmp, { recursive: true, force: true }));
@@ -25,6 +25,13 @@ const arrayBuffer = (file) => {
   const b = fs.readFileSync(file);
   return b.buffer.slice(b.byteOffset, b.byteOffset + b.length);
 };
+
+// One channel of an EXR as a file of its own.
+function oneChannel(file, channel) {
+  const one = path.join(tmp, `one-${channel}.exr`);
+  oiiotool(file, "--ch", channel, "-o", one);
+  return one;
+}
 
 // A value as --dumpdata prints it ("inf" where a depth pass found no surface).
 const value = (t) => (/^[-+]?inf/i.test(t) ? (t[0] === "-" ? -Infinity : Infinity) : Number(t));
@@ -129,6 +136,41 @@ test("tessera-render's EXR with render passes: every layer", async () => {
       }
     });
   }
+});
+
+// Cryptomatte passes: the manifests of the header name the ids, and each pixel's ranks read out as names with their
+// coverage, rank 0's coverage being OpenImageIO's CryptoObject00.G.
+test("tessera-render's EXR with Cryptomatte passes: names and coverage by rank", async () => {
+  const out = path.join(tmp, "render-crypto.exr");
+  execFileSync(RENDER, ["render", path.join(repo, "proto/examples/cornell.json"), "--width", "20", "--height", "16",
+    "--spp", "8", "--aov", "crypto_object", "--aov", "crypto_material", "-o", out, "-q"]);
+  const img = await decodeExr(arrayBuffer(out));
+  assert.deepEqual(Object.keys(img.cryptomatte).sort(), ["CryptoMaterial", "CryptoObject"]);
+  const objects = cryptomatteOfPass(img, "crypto_object");
+  assert.equal(objects, img.cryptomatte.CryptoObject);
+  assert.equal(cryptomatteOfPass(img, "crypto_material"), img.cryptomatte.CryptoMaterial);
+  assert.equal(cryptomatteOfPass(img, "albedo"), null);
+  assert.equal(objects.ranks.length, 3);
+  assert.deepEqual([...objects.names.values()].sort(), [0, 1, 2, 3, 4, 5, 6, 7].map((i) => `objects[${i}]`));
+  assert.deepEqual([...img.cryptomatte.CryptoMaterial.names.values()].sort(), ["green", "light", "red", "white"]);
+  // (--dumpdata prints ids, floats of any magnitude, to 9 decimals: only the coverage is compared with it.)
+  const coverage = reference(oneChannel(out, "CryptoObject00.G"));
+  const names = new Set(objects.names.values());
+  let seen = 0;
+  for (let i = 0; i < img.width * img.height; ++i) {
+    const ranked = cryptomatteAt(objects, i);
+    if (coverage[3 * i] === 0) {
+      assert.deepEqual(ranked, [], `pixel ${i} sees nothing`);
+      continue;
+    }
+    ++seen;
+    const total = ranked.reduce((sum, e) => sum + e.coverage, 0);
+    assert.ok(total <= 1 + 1e-6, `pixel ${i}'s coverage sums to ${total}`);
+    // Every id found is one the manifest names (an id decoded to other bits would read out as hexadecimal).
+    for (const e of ranked) assert.ok(names.has(e.name), `pixel ${i}: ${e.name}`);
+    assert.ok(Math.abs(ranked[0].coverage - coverage[3 * i]) <= 1e-6, `pixel ${i}'s rank 0 coverage`);
+  }
+  assert.ok(seen > (img.width * img.height) / 2, `${seen} pixels see an object`);
 });
 
 test("a cut or garbled file and an unsupported compression are refused with a message", async () => {

@@ -588,11 +588,12 @@ test("render passes are picked in the form and shown in the viewer with their va
     await page.locator("#aovs-details > summary").click();
     await page.getByRole("checkbox", { name: "object_id", exact: true }).check();
     await page.getByRole("checkbox", { name: "depth", exact: true }).check();
+    await page.getByRole("checkbox", { name: "crypto_material", exact: true }).check();
     job = await submitFromForm();
     assert.equal(job.status.state, "succeeded", job.status.error);
-    assert.deepEqual(job.sent.render.aovs, ["depth", "object_id"]);
-    assert.deepEqual(job.status.render.aovs, ["depth", "object_id"]);
-    assert.deepEqual(Object.keys(job.status.links.aovs).sort(), ["depth", "object_id"]);
+    assert.deepEqual(job.sent.render.aovs, ["depth", "object_id", "crypto_material"]);
+    assert.deepEqual(job.status.render.aovs, ["depth", "object_id", "crypto_material"]);
+    assert.deepEqual(Object.keys(job.status.links.aovs).sort(), ["crypto_material", "depth", "object_id"]);
     exr = await (await page.request.get(`${baseUrl}/v1/jobs/${job.status.id}/result.exr`)).body();
   });
 
@@ -601,7 +602,7 @@ test("render passes are picked in the form and shown in the viewer with their va
     await page.locator('#viewer[data-pass="final"][data-aov="beauty"][data-source="linear"]').waitFor();
     await page.locator("#aov-view").waitFor();
     const options = await page.locator("#aov-view option").evaluateAll((os) => os.map((o) => o.textContent));
-    assert.deepEqual(options, ["beauty", "depth", "object_id"]);
+    assert.deepEqual(options, ["beauty", "depth", "object_id", "crypto_material"]);
   });
 
   await t.test("a pass shows the daemon's look of it and reads out its own values", async () => {
@@ -628,6 +629,16 @@ test("render passes are picked in the form and shown in the viewer with their va
       if (pass === "object_id") assert.equal(Number(m[1]), want, "an object id reads out whole");
       else assert.ok(Math.abs(Number(m[1]) - want) <= 1e-3 * want, `${pass} ${m[1]}, not ${want}`);
     }
+    // A Cryptomatte pass reads out the names of the pixel's materials (the EXR's manifest) and their coverage.
+    await page.locator("#aov-view").selectOption("crypto_material");
+    await page.locator('#viewer[data-aov="crypto_material"][data-source="display"]').waitFor();
+    const view = await viewState();
+    await page.mouse.move(box.x + view.x + 24.5, box.y + view.y + 20.5);
+    const text = await page.locator("#viewer .readout").textContent();
+    const m = text.match(/^x 24, y 20: crypto_material (.+) (\d+\.\d) %$/);
+    assert.ok(m, `readout "${text}"`);
+    assert.ok(!/^[0-9a-f]{8}$/.test(m[1]), `the material is named (${m[1]}), not its id's bits`);
+    assert.ok(Number(m[2]) > 50, `the material at the centre covers ${m[2]} %`);
     await page.locator("#aov-view").selectOption("beauty");
     await page.locator('#viewer[data-aov="beauty"][data-source="linear"]').waitFor();
     assert.equal(await canvasHash(), beauty, "the beauty is shown again as it was");
