@@ -202,6 +202,42 @@ TEST_F(ServiceTest, UploadsTheSampleAssetsAndRendersThem) {
   EXPECT_EQ(json::parse(res->body)["pointer"], "/scene/gltf");
 }
 
+// A frame range of more than one frame is not rendered by the daemon yet: a 422 naming /render/frames that says how
+// to render it, never one frame silently; a range of one frame is the still at its time, and a range beyond
+// --max-frames is refused naming the field.
+TEST_F(ServiceTest, AFrameRangeIsRefusedNamingTheFieldUntilTheDaemonRendersRanges) {
+  std::vector<std::string> a = args();
+  a.insert(a.end(), {"--max-frames", "100"});
+  start(a);
+  const std::string bytes = read_text(fs::path(TESSERA_SOURCE_DIR) / "examples/spinning_cube/SpinningCube.glb");
+  auto up = client_->Post("/v1/assets?name=SpinningCube.glb", bytes, "model/gltf-binary");
+  ASSERT_TRUE(up);
+  ASSERT_EQ(up->status, 201) << up->body;
+  const std::string asset = json::parse(up->body)["id"];
+  auto job = [&](const json& frames) {
+    return json{{"kind", "scene"},
+                {"scene", {{"gltf", asset}}},
+                {"render", {{"width", 32}, {"height", 18}, {"spp", 1}, {"frames", frames}}}};
+  };
+  auto res = client_->Post("/v1/jobs", job({{"start", 1}, {"end", 48}}).dump(), "application/json");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 422) << res->body;
+  EXPECT_EQ(res->get_header_value("Content-Type"), "application/problem+json");
+  const json problem = json::parse(res->body);
+  EXPECT_EQ(problem.value("pointer", ""), "/render/frames") << problem.dump();
+  EXPECT_NE(problem.value("detail", problem.dump()).find("tessera render --frames"), std::string::npos)
+      << problem.dump();
+  res = client_->Post("/v1/jobs", job({{"start", 1}, {"end", 101}}).dump(), "application/json");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 422) << res->body;
+  EXPECT_EQ(json::parse(res->body).value("pointer", ""), "/render/frames") << res->body;
+  // One frame: accepted, rendered as the still at 12 / 24 s.
+  const std::string id = submit(*client_, job({{"start", 12}, {"end", 12}}));
+  const json done = wait_for(*client_, id, ended, 120);
+  EXPECT_EQ(done.value("state", ""), "succeeded") << done.dump();
+  EXPECT_EQ(done["render"]["frames"], (json{{"start", 12}, {"end", 12}, {"step", 1}, {"chunk", 1}})) << done.dump();
+}
+
 TEST_F(ServiceTest, MultipartJobWithGltfAndBin) {
   start();
   httplib::MultipartFormDataItems items = {
