@@ -231,11 +231,20 @@ TEST_F(ServiceTest, AFrameRangeIsRefusedNamingTheFieldUntilTheDaemonRendersRange
   ASSERT_TRUE(res);
   EXPECT_EQ(res->status, 422) << res->body;
   EXPECT_EQ(json::parse(res->body).value("pointer", ""), "/render/frames") << res->body;
-  // One frame: accepted, rendered as the still at 12 / 24 s.
+  // One frame: accepted, rendered as the still at 12 / 24 s, pixel for pixel.
   const std::string id = submit(*client_, job({{"start", 12}, {"end", 12}}));
+  json still_doc = job(nullptr);
+  still_doc["render"].erase("frames");
+  still_doc["scene"]["time"] = 0.5;
+  const std::string still = submit(*client_, still_doc);
   const json done = wait_for(*client_, id, ended, 120);
   EXPECT_EQ(done.value("state", ""), "succeeded") << done.dump();
   EXPECT_EQ(done["render"]["frames"], (json{{"start", 12}, {"end", 12}, {"step", 1}, {"chunk", 1}})) << done.dump();
+  EXPECT_EQ(wait_for(*client_, still, ended, 120).value("state", ""), "succeeded");
+  const std::string frame_exr = client_->Get("/v1/jobs/" + id + "/result.exr")->body,
+                    still_exr = client_->Get("/v1/jobs/" + still + "/result.exr")->body;
+  EXPECT_FALSE(frame_exr.empty());
+  EXPECT_TRUE(frame_exr == still_exr) << "frame 12 of 12-12 is not the still at 0.5 s";
 }
 
 TEST_F(ServiceTest, MultipartJobWithGltfAndBin) {
