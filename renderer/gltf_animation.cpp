@@ -252,6 +252,8 @@ std::optional<Animation> chosen_animation(Import& import) {
                                std::to_string(options.animation_index));
     index = options.animation_index;
   } else if (count == 0) {
+    if (!options.frames_pointer.empty())
+      throw SceneError(options.frames_pointer, "the glTF asset has no animations: a frame range renders an animation");
     import.warn("scene.time poses nothing: the glTF asset has no animations");
     return std::nullopt;
   }

@@ -58,6 +58,9 @@ struct GltfImportOptions {
   std::string animation_name;
   int animation_index = -1;
   std::string animation_pointer;
+  // Not empty: a frame range of the animation is rendered (frames.h), and an asset without animations is a SceneError
+  // at this pointer rather than the static pose with a warning.
+  std::string frames_pointer;
   // Images are checked from their headers (they open, within max_texture_pixels) and stand in as 1x1 white: for a
   // scene that is checked, not rendered.
   bool headers_only = false;

@@ -2,6 +2,7 @@
 
 #include <cctype>
 
+#include "renderer/frames.h"
 #include "renderer/scene_error.h"
 
 namespace tessera {
@@ -34,8 +35,27 @@ RenderJob load_job(const json& job, const JobLoadOptions& options) {
 
 std::shared_ptr<Scene> load_job_scene(const json& job, const RenderSettings& settings,
                                       const SceneLoadOptions& options) {
+  return load_frame_scene(job, settings, settings.frames ? settings.frames->start : 0, options);
+}
+
+std::shared_ptr<Scene> load_frame_scene(const json& job, const RenderSettings& settings, int64_t frame,
+                                        const SceneLoadOptions& options) {
   std::shared_ptr<Scene> scene;
-  if (kind_of(job) == "material") {
+  const std::string kind = kind_of(job);
+  if (settings.frames) {
+    if (kind != "scene") throw SceneError("/render/frames", "a material job has no animation to render frames of");
+    const auto it = job.find("scene");
+    if (it != job.end() && it->is_object() && it->contains("time"))
+      throw SceneError("/scene/time",
+                       "a frame range gives each frame its time (frame / render.fps): leave scene.time out, and shift "
+                       "the frames' times with scene.time_offset");
+  } else if (kind == "scene") {
+    const auto it = job.find("scene");
+    if (it != job.end() && it->is_object() && it->contains("time_offset"))
+      throw SceneError("/scene/time_offset",
+                       "shifts the times of a frame range (render.frames); a still is posed at scene.time");
+  }
+  if (kind == "material") {
     // The stage scene names the subjects "subject" (one material) or "subject0".."subject15" (a row); errors found
     // in it are reported at the job's own fields: /material/... or /materials/<i>/...
     try {
@@ -55,7 +75,13 @@ std::shared_ptr<Scene> load_job_scene(const json& job, const RenderSettings& set
   } else {
     auto it = job.find("scene");
     if (it == job.end()) throw SceneError("/scene", "a scene job needs a \"scene\"");
-    scene = load_scene(*it, "/scene", options);
+    if (settings.frames) {
+      SceneLoadOptions frame_options = options;
+      frame_options.frames_pointer = "/render/frames";
+      scene = load_scene(frame_scene(*it, frame, settings.fps), "/scene", frame_options);
+    } else {
+      scene = load_scene(*it, "/scene", options);
+    }
   }
   const Camera camera(scene->camera, settings.width, settings.height);
   const std::string problem = integrator_camera_problem(settings.integrator.name, camera);

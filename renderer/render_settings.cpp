@@ -133,23 +133,27 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
   if (!render.is_object()) throw SceneError(pointer, "must be an object");
   // An integer within [lo, hi], read exactly: a double holds every integer only up to 2^53 (2^53 + 1 read as one is
   // 2^53), so integers are compared as integers, and a number written with a fraction or exponent only where it is a
-  // whole number a double holds exactly.
-  auto integer = [&](const std::string& key, int64_t fallback, int64_t lo, int64_t hi) -> int64_t {
-    auto it = render.find(key);
-    if (it == render.end()) return fallback;
+  // whole number a double holds exactly. obj[key] of the object at `where`; `fallback` when absent.
+  auto integer_of = [](const json& obj, const std::string& where, const std::string& key, int64_t fallback, int64_t lo,
+                       int64_t hi) -> int64_t {
+    auto it = obj.find(key);
+    if (it == obj.end()) return fallback;
     const std::string range = "must be between " + std::to_string(lo) + " and " + std::to_string(hi);
     if (it->is_number_unsigned() && it->get<uint64_t>() > static_cast<uint64_t>(hi))
-      throw SceneError(at(pointer, key), range);
+      throw SceneError(at(where, key), range);
     if (it->is_number_integer()) {
       const int64_t v = it->get<int64_t>();
-      if (v < lo || v > hi) throw SceneError(at(pointer, key), range);
+      if (v < lo || v > hi) throw SceneError(at(where, key), range);
       return v;
     }
     const double d = it->is_number_float() ? it->get<double>() : std::nan("");
-    if (!std::isfinite(d) || d != std::floor(d)) throw SceneError(at(pointer, key), "must be an integer");
+    if (!std::isfinite(d) || d != std::floor(d)) throw SceneError(at(where, key), "must be an integer");
     if (d < static_cast<double>(lo) || d > static_cast<double>(hi) || std::abs(d) > 9007199254740992.0)
-      throw SceneError(at(pointer, key), range);
+      throw SceneError(at(where, key), range);
     return static_cast<int64_t>(d);
+  };
+  auto integer = [&](const std::string& key, int64_t fallback, int64_t lo, int64_t hi) {
+    return integer_of(render, pointer, key, fallback, lo, hi);
   };
   const RenderSettings defaults;
   s.width = static_cast<int>(integer("width", defaults.width, 1, limits.max_width));
@@ -180,6 +184,28 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
     if (std::string problem = integrator_aov_problem(s.integrator.name, feature); !problem.empty())
       throw SceneError(at(pointer, "denoise"), "the denoiser \"" + std::string(denoiser_name(s.denoise)) +
                                                    "\" reads the pass \"" + feature + "\": " + problem);
+  // A frame range (frames.h): frames start, start + step, ... end, at most limits.max_frames of them.
+  if (auto it = render.find("frames"); it != render.end()) {
+    const std::string fp = at(pointer, "frames");
+    if (!it->is_object()) throw SceneError(fp, "must be an object {\"start\", \"end\", \"step\", \"chunk\"}");
+    for (const char* key : {"start", "end"})
+      if (!it->contains(key)) throw SceneError(at(fp, key), "is required: the range's first and last frame");
+    FrameRange range;
+    range.start = integer_of(*it, fp, "start", 0, -kMaxFrameNumber, kMaxFrameNumber);
+    range.end = integer_of(*it, fp, "end", 0, -kMaxFrameNumber, kMaxFrameNumber);
+    range.step = integer_of(*it, fp, "step", 1, 1, 2 * kMaxFrameNumber);
+    range.chunk = integer_of(*it, fp, "chunk", 1, 1, 2 * kMaxFrameNumber + 1);
+    if (range.end < range.start)
+      throw SceneError(at(fp, "end"), "must not be before start (" + std::to_string(range.start) + ")");
+    if (const uint64_t n = frame_count(range); n > limits.max_frames)
+      throw SceneError(fp, "the range holds " + std::to_string(n) + " frames, more than the " +
+                               std::to_string(limits.max_frames) + " a job may have");
+    s.frames = range;
+  }
+  if (auto it = render.find("fps"); it != render.end()) {
+    s.fps = fields::finite_number(*it, at(pointer, "fps"));
+    if (!(s.fps > 0) || s.fps > 1000) throw SceneError(at(pointer, "fps"), "must be greater than 0 and at most 1000");
+  }
   return s;
 }
 
@@ -199,13 +225,21 @@ json render_settings_to_json(const RenderSettings& s) {
               {"exr_precision", name_of(kExrPrecisions, s.exr_half)},
               {"max_volume_depth", s.integrator.max_volume_depth},
               {"aovs", s.aovs},
-              {"denoise", denoiser_name(s.denoise)}};
+              {"denoise", denoiser_name(s.denoise)},
+              {"frames", s.frames ? json{{"start", s.frames->start},
+                                         {"end", s.frames->end},
+                                         {"step", s.frames->step},
+                                         {"chunk", s.frames->chunk}}
+                                  : json()},
+              {"fps", s.fps}};
   // Keys the mapping gained after jobs were first stored are written only where they differ from their defaults:
   // records (and their checkpoints' fingerprints, FNV-1a of this text) of jobs stored before a key existed keep their
   // text byte for byte.
   static const json kLaterKeysDefaults = {{"max_volume_depth", IntegratorSettings{}.max_volume_depth},
                                           {"aovs", json::array()},
-                                          {"denoise", denoiser_name(Denoiser::kNone)}};
+                                          {"denoise", denoiser_name(Denoiser::kNone)},
+                                          {"frames", nullptr},
+                                          {"fps", kDefaultFps}};
   for (const auto& [key, fallback] : kLaterKeysDefaults.items())
     if (out[key] == fallback) out.erase(key);
   return out;
@@ -248,8 +282,11 @@ RenderSettings render_settings_from_text(std::string_view text) {
   const json doc = json::parse(text, nullptr, false);
   if (!doc.is_object()) throw std::runtime_error("the stored render settings are not a JSON object");
   try {
-    // Stored settings passed the limits of the server that took the job; they are read within the contract's.
-    return render_settings_from_json(doc, "", RenderLimits{});
+    // Stored settings passed the limits of the server that took the job; they are read within the contract's (which
+    // bounds the frame numbers, not how many frames a server takes).
+    RenderLimits contract;
+    contract.max_frames = UINT64_MAX;
+    return render_settings_from_json(doc, "", contract);
   } catch (const SceneError& e) {
     throw std::runtime_error("the stored render settings are refused at " + e.pointer() + ": " + e.what());
   }

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -21,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include "renderer/display.h"
+#include "renderer/frames.h"
 #include "renderer/integrator.h"
 #include "renderer/sampler.h"
 
@@ -43,6 +45,9 @@ struct RenderSettings {
   // The render passes beside the beauty (aov.h), by name, in the order of aov_table(): each once.
   std::vector<std::string> aovs;
   Denoiser denoise = Denoiser::kNone;  // the beauty denoised, the rendered one kept as the layer "noisy"
+  // A range of frames of the scene's animation (frames.h), each the still at its time; none: one still.
+  std::optional<FrameRange> frames;
+  double fps = kDefaultFps;  // frames per second: frame f is at f / fps seconds (plus scene.time_offset)
 
   // Set by whoever renders a part of a job, never by a document (not in the JSON mapping); integrator.rr_start_depth
   // neither.
@@ -76,6 +81,7 @@ struct RenderLimits {
   uint32_t max_spp = 1u << 16;
   int max_depth = 1024;
   int max_volume_depth = 4096;
+  uint64_t max_frames = 10000;  // frames of one render.frames range
 };
 
 // The passes the film of a job with `settings` holds: render.aovs and those the output pipeline's stages read (the
@@ -86,8 +92,8 @@ std::vector<std::string> film_aovs(const RenderSettings& settings);
 // for none at all. Throws SceneError naming the field.
 RenderSettings render_settings_from_json(const nlohmann::json& render, const std::string& pointer,
                                          const RenderLimits& limits);
-// The normalised form: every field a document can set, defaults filled in (but max_volume_depth, aovs and denoise only
-// where they are not their defaults, so that records written before they existed keep their text).
+// The normalised form: every field a document can set, defaults filled in (but max_volume_depth, aovs, denoise, frames
+// and fps only where they are not their defaults, so that records written before they existed keep their text).
 nlohmann::json render_settings_to_json(const RenderSettings& settings);
 // The same as the job status shows it: a stopping rule that is off (time_limit_s, noise_target at 0, the documents'
 // default) is left out, as a document leaves it out, so that it reads as "none" rather than as a limit of zero.

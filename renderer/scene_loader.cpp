@@ -273,6 +273,14 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
         throw SceneError(at(pointer, "time"), "must be a time in seconds (at most 1e9 in magnitude)");
       gopts.time = t->get<double>();
     }
+    // Added to the time of every frame of a range (frames.h: frame_scene folds it into scene.time).
+    if (auto t = doc.find("time_offset"); t != doc.end())
+      if (!t->is_number() || !std::isfinite(t->get<double>()) || std::abs(t->get<double>()) > 1e9)
+        throw SceneError(at(pointer, "time_offset"), "must be a time in seconds (at most 1e9 in magnitude)");
+    if (!options.frames_pointer.empty()) {
+      gopts.animate = true;
+      gopts.frames_pointer = options.frames_pointer;
+    }
     gltf = import_gltf(resolve(options, *it, gp), gp, *scene, gopts);
     has_gltf = true;
     for (const std::string& w : gltf.warnings) scene->warnings.push_back(w);
@@ -280,7 +288,9 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
 
   if (!has_gltf && doc.contains("gltf_variant"))
     throw SceneError(at(pointer, "gltf_variant"), "a variant is chosen only for a glTF asset (scene.gltf)");
-  for (const char* key : {"animation", "time"})
+  if (!has_gltf && !options.frames_pointer.empty())
+    throw SceneError(options.frames_pointer, "a frame range renders a glTF asset's animation (scene.gltf)");
+  for (const char* key : {"animation", "time", "time_offset"})
     if (!has_gltf && doc.contains(key))
       throw SceneError(at(pointer, key), "animations are posed only for a glTF asset (scene.gltf)");
 

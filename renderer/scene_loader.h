@@ -29,6 +29,9 @@ struct SceneLoadOptions {
   // Maps an asset reference of the document ("gltf": "<ref>", an environment map) to a file; throws SceneError at
   // `pointer` when the reference is unknown. Unset: references are paths relative to asset_root.
   std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
+  // Not empty: the scene is a frame of a range of its animation (render.frames, frames.h), which needs a glTF asset
+  // with animations; SceneError at this pointer otherwise.
+  std::string frames_pointer;
 };
 
 // Builds a scene from the "scene" object of a job. `pointer` is that object's JSON pointer (e.g. "/scene").

@@ -210,6 +210,8 @@ const std::vector<Option>& options() {
        integer(&Config::max_height, 1, 65536)},
       {"--max-spp", "TESSERA_MAX_SPP", "N", "largest samples-per-pixel budget (default 65536)",
        integer(&Config::max_spp, 1, 1 << 24)},
+      {"--max-frames", "TESSERA_MAX_FRAMES", "N", "most frames of one job's frame range (default 10000)",
+       integer(&Config::max_frames, 1, 100'000'000)},
       {"--log-level", "TESSERA_LOG_LEVEL", "LEVEL", "debug, info, warn or error (default info)",
        [](Config& c, const std::string& v) -> std::string {
          return parse_log_level(v, &c.log_level) ? "" : "must be debug, info, warn or error";

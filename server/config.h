@@ -33,6 +33,7 @@ struct Config {
   int max_width = 8192;
   int max_height = 8192;
   uint32_t max_spp = 65536;
+  uint64_t max_frames = 10000;  // frames of one render.frames range
   LogLevel log_level = LogLevel::kInfo;
   std::string config_file;      // where the values below may also come from
   std::string tokens_file;      // bearer tokens; empty: no authentication

@@ -169,6 +169,7 @@ int run(const Config& config) {
   limits.render.max_width = config.max_width;
   limits.render.max_height = config.max_height;
   limits.render.max_spp = config.max_spp;
+  limits.render.max_frames = config.max_frames;
   limits.max_work = config.max_work;
   limits.max_film_bytes = static_cast<uint64_t>(config.max_film_bytes);
   limits.resolve_asset = scheduler_options.resolve_asset;

@@ -18,6 +18,7 @@
 #include "clients/cli/partial_film.h"
 #include "proto/contract.h"
 #include "renderer/aov.h"
+#include "renderer/frames.h"
 #include "renderer/job.h"
 #include "renderer/output.h"
 #include "renderer/scene_error.h"
@@ -58,6 +59,9 @@ const char* kRenderUsage =
     "  --time SECONDS         a still of the glTF asset's animation at this time (scene.time)\n"
     "  --animation NAME|N     the glTF asset's animation to pose, by name or index (scene.animation; default\n"
     "                         the first)\n"
+    "  --frames START-END[:STEP]  frames of the animation (render.frames; a frame f at f / render.fps seconds),\n"
+    "                         each written to numbered files beside each output: -o out.png writes\n"
+    "                         out.0001.png, out.0002.png, ... (padded to the range's widest frame, at least 4)\n"
     "  -q, --quiet            print nothing but errors and the scene's warnings (no progress bar, no summary)\n"
     "\n"
     "exit codes: 0 done, 1 bad input (fatal), 2 usage, 75 transient failure (retry)\n";
@@ -84,15 +88,48 @@ PartialFilm read_film(const std::string& path) {
 // ---------------------------------------------------------------------------------------------------------------
 // render
 
-void progress_bar(const tessera::RenderProgress& p) {
+// Where a frame range stands: the bar then runs over every frame, its time and ETA those of the whole range.
+struct FramesProgress {
+  std::string label;     // the frame rendering, as its files number it
+  size_t done = 0;       // frames finished
+  size_t count = 0;      // frames of the range
+  double elapsed_s = 0;  // wall time of the finished frames, their loads included
+};
+
+void progress_bar(const tessera::RenderProgress& p, const FramesProgress* frames = nullptr) {
   const int width = 30;
   double frac = p.samples_total ? static_cast<double>(p.samples_done) / p.samples_total : 1.0;
+  double elapsed_s = p.elapsed_s, eta_s = p.eta_s;
+  std::string head;
+  if (frames) {
+    frac = (static_cast<double>(frames->done) + frac) / static_cast<double>(frames->count);
+    elapsed_s += frames->elapsed_s;
+    eta_s = frac > 0 ? elapsed_s / frac * (1 - frac) : 0;
+    head =
+        "frame " + frames->label + " (" + std::to_string(frames->done + 1) + "/" + std::to_string(frames->count) + ") ";
+  }
   int filled = static_cast<int>(frac * width);
   std::string bar(filled, '#');
   bar += std::string(width - filled, '.');
-  std::fprintf(stderr, "\r[%s] %3.0f%%  %u/%u spp  %.1fs  eta %.1fs  %.2f Msamples/s   ", bar.c_str(), frac * 100,
-               p.samples_done, p.samples_total, p.elapsed_s, p.eta_s, p.samples_per_s / 1e6);
+  std::fprintf(stderr, "\r%s[%s] %3.0f%%  %u/%u spp  %.1fs  eta %.1fs  %.2f Msamples/s   ", head.c_str(), bar.c_str(),
+               frac * 100, p.samples_done, p.samples_total, elapsed_s, eta_s, p.samples_per_s / 1e6);
   std::fflush(stderr);
+}
+
+// --frames START-END[:STEP], or a single frame N, as render.frames; frames may be negative (-10--1).
+json frames_option(const std::string& option, const std::string& v) {
+  const std::string usage = option + " needs START-END[:STEP] (such as 1-48 or 1-48:2), not \"" + v + "\"";
+  const size_t colon = v.find(':');
+  const std::string range = v.substr(0, colon);
+  const size_t dash = range.find('-', 1);  // the one between the frames: a '-' at the start is a sign
+  try {
+    json frames = {{"start", parse_integer(option, range.substr(0, dash))},
+                   {"end", parse_integer(option, dash == std::string::npos ? range : range.substr(dash + 1))}};
+    if (colon != std::string::npos) frames["step"] = parse_integer(option, v.substr(colon + 1));
+    return frames;
+  } catch (const std::invalid_argument&) {
+    throw std::invalid_argument(usage);
+  }
 }
 
 // Writes the film to every output; the extension picks the format: .tfilm the film itself (the film codec), an
@@ -201,12 +238,15 @@ int cmd_render(int argc, char** argv) {
       scene_overrides["time"] = parse_number(a, value());
     else if (a == "--animation")
       scene_overrides["animation"] = animation_choice(value());
+    else if (a == "--frames")
+      set("frames", frames_option(a, value()));
     else if (a == "-q" || a == "--quiet")
       quiet = true;
     else if (!a.empty() && a[0] == '-')
-      unknown_option(a, {"--output", "--spp", "--samples", "--region", "--width", "--height", "--time-limit",
-                         "--threads", "--integrator", "--estimator", "--seed", "--max-depth", "--aov", "--denoise",
-                         "--variant", "--time", "--animation", "--quiet", "--help"});
+      unknown_option(a,
+                     {"--output",  "--spp",        "--samples",   "--region", "--width",     "--height", "--time-limit",
+                      "--threads", "--integrator", "--estimator", "--seed",   "--max-depth", "--aov",    "--denoise",
+                      "--variant", "--time",       "--animation", "--frames", "--quiet",     "--help"});
     else if (input.empty())
       input = a;
     else
@@ -215,6 +255,8 @@ int cmd_render(int argc, char** argv) {
   if (input.empty()) throw std::invalid_argument("render needs a job file (tessera render -h)");
   if (outputs.empty()) throw std::invalid_argument("render needs at least one -o OUTPUT (tessera render -h)");
   if (samples && overrides.contains("spp")) throw std::invalid_argument("--samples and --spp exclude each other");
+  if (overrides.contains("frames") && scene_overrides.contains("time"))
+    throw std::invalid_argument("--frames and --time exclude each other (a frame's time is frame / render.fps)");
   check_outputs(outputs);
 
   json doc;
@@ -267,7 +309,9 @@ int cmd_render(int argc, char** argv) {
   auto option_at = [&](const std::string& pointer) -> const std::string* {
     const std::string prefix = "/render/";
     if (pointer.rfind(prefix, 0) != 0) return nullptr;
-    const auto it = option_of.find(pointer.substr(prefix.size()));
+    const std::string key = pointer.substr(prefix.size());
+    auto it = option_of.find(key);
+    if (it == option_of.end()) it = option_of.find(key.substr(0, key.find('/')));  // /render/frames/end: --frames
     return it == option_of.end() ? nullptr : &it->second;
   };
   json checked = doc;
@@ -344,37 +388,113 @@ int cmd_render(int argc, char** argv) {
   }
 
   tessera::ThreadPool pool(threads);
-  tessera::RenderSession session(job.scene, job.settings, pool);
-  tessera::StopReason reason = session.run([&](const tessera::RenderProgress& p, const tessera::Film&) {
-    if (progress && !quiet) progress_bar(p);
-  });
-  const tessera::RenderProgress& p = session.progress();
-  if (progress && !quiet) std::fprintf(stderr, "\n");
-  if (!quiet)
-    std::fprintf(stderr,
-                 "tessera: %dx%d, %u spp in %.2fs (load+BVH %.2fs, %zu triangles), %.3g samples/s, %.3g rays/s, "
-                 "%d threads, stopped by %s\n",
-                 job.settings.width, job.settings.height, p.samples_done, p.elapsed_s, load_s,
-                 job.scene->triangle_count(), p.samples_per_s,
-                 p.elapsed_s > 0 ? static_cast<double>(p.rays.total()) / p.elapsed_s : 0.0, pool.size(),
-                 tessera::stop_reason_name(reason));
+  // Renders `scene` and writes its outputs; `label` marks the summary line of a frame, `frames` the bar's place in a
+  // range. `still` is the job document of the still this render is (a frame's: scene.time at the frame's time), whose
+  // partial films merge with those of the same still.
+  auto render_and_write = [&](std::shared_ptr<const tessera::Scene> scene, const json& still,
+                              const tessera::RenderSettings& settings, const std::vector<std::string>& outs,
+                              double scene_load_s, const std::string& label, const FramesProgress* frames) {
+    tessera::RenderSession session(scene, settings, pool);
+    tessera::StopReason reason = session.run([&](const tessera::RenderProgress& p, const tessera::Film&) {
+      if (progress && !quiet) progress_bar(p, frames);
+    });
+    const tessera::RenderProgress& p = session.progress();
+    // A frame's bar is cleared (ANSI erase in line) for its summary; the next frame's bar follows it.
+    if (progress && !quiet) std::fprintf(stderr, frames ? "\r\x1b[K" : "\n");
+    if (!quiet)
+      std::fprintf(stderr,
+                   "tessera: %s%dx%d, %u spp in %.2fs (load+BVH %.2fs, %zu triangles), %.3g samples/s, %.3g rays/s, "
+                   "%d threads, stopped by %s\n",
+                   label.c_str(), settings.width, settings.height, p.samples_done, p.elapsed_s, scene_load_s,
+                   scene->triangle_count(), p.samples_per_s,
+                   p.elapsed_s > 0 ? static_cast<double>(p.rays.total()) / p.elapsed_s : 0.0, pool.size(),
+                   tessera::stop_reason_name(reason));
 
-  PartialFilm part;
-  part.width = job.settings.width;
-  part.height = job.settings.height;
-  part.first_sample = job.settings.first_sample;
-  part.sample_count = session.film().samples();
-  part.job_spp = job.settings.budget();
-  part.region = session.settings().region;
-  if (part.region.width <= 0 || part.region.height <= 0) part.region = {0, 0, part.width, part.height};
-  part.exr_half = job.settings.exr_half;
-  part.sample_count_pass =
-      std::find(job.settings.aovs.begin(), job.settings.aovs.end(), "sample_count") != job.settings.aovs.end();
-  part.display = job.settings.display;
-  part.fingerprint = film_fingerprint(doc, job.settings, options.scene.asset_root);
-  part.denoise = job.settings.denoise;
-  part.film = session.take_film();
-  write_outputs(outputs, part, &job.settings.aovs);
+    PartialFilm part;
+    part.width = settings.width;
+    part.height = settings.height;
+    part.first_sample = settings.first_sample;
+    part.sample_count = session.film().samples();
+    part.job_spp = settings.budget();
+    part.region = session.settings().region;
+    if (part.region.width <= 0 || part.region.height <= 0) part.region = {0, 0, part.width, part.height};
+    part.exr_half = settings.exr_half;
+    part.sample_count_pass =
+        std::find(settings.aovs.begin(), settings.aovs.end(), "sample_count") != settings.aovs.end();
+    part.display = settings.display;
+    part.fingerprint = film_fingerprint(still, settings, options.scene.asset_root);
+    part.denoise = settings.denoise;
+    part.film = session.take_film();
+    write_outputs(outs, part, &settings.aovs);
+  };
+  if (!job.settings.frames) {
+    render_and_write(job.scene, doc, job.settings, outputs, load_s, "", nullptr);
+    return kExitOk;
+  }
+
+  // A frame range: each frame the still at its time (frames.h), rendered and written as a still is, to numbered
+  // files. The asset is loaded again for each frame: the importer poses the nodes as it reads them.
+  const tessera::FrameRange range = *job.settings.frames;
+  const std::vector<int64_t> frame_list = tessera::frame_numbers(range);
+  const int padding = tessera::frame_padding(range);
+  tessera::RenderSettings still_settings = job.settings;  // a frame's: those of the still at its time
+  still_settings.frames.reset();
+  still_settings.fps = tessera::kDefaultFps;
+  // Every frame's files can be written, before the first renders.
+  for (const int64_t frame : frame_list)
+    for (const std::string& out : outputs) check_writable(tessera::frame_path(out, frame, padding).string());
+  std::vector<std::string> warned = job.scene->warnings;
+  FramesProgress place;
+  place.count = frame_list.size();
+  double total_load_s = 0;
+  const auto range_t0 = t0;  // from the first frame's load
+  for (size_t i = 0; i < frame_list.size(); ++i) {
+    const int64_t frame = frame_list[i];
+    place.label = tessera::frame_number_text(frame, padding);
+    const std::string name = "frame " + place.label;
+    const auto frame_t0 = std::chrono::steady_clock::now();
+    std::shared_ptr<const tessera::Scene> scene = job.scene;  // load_job loaded the range's first frame
+    double frame_load_s = load_s;
+    if (i > 0) {
+      try {
+        scene = tessera::load_frame_scene(doc, job.settings, frame, options.scene);
+      } catch (const tessera::SceneError& e) {
+        fatal(name + ": " + where(e.pointer()) + e.what());
+      }
+      frame_load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - frame_t0).count();
+      for (const std::string& w : scene->warnings)
+        if (std::find(warned.begin(), warned.end(), w) == warned.end()) {
+          std::fprintf(stderr, "tessera: warning: %s: %s\n", name.c_str(), w.c_str());
+          warned.push_back(w);
+        }
+    }
+    total_load_s += frame_load_s;
+    json still = doc;
+    still["scene"] = tessera::frame_scene(doc["scene"], frame, job.settings.fps);
+    still["render"].erase("frames");
+    still["render"].erase("fps");
+    std::vector<std::string> outs;
+    for (const std::string& out : outputs) outs.push_back(tessera::frame_path(out, frame, padding).string());
+    try {
+      render_and_write(scene, still, still_settings, outs, frame_load_s, name + ": ", &place);
+    } catch (const Failure& f) {
+      throw Failure(f.code, name + ": " + f.what());
+    } catch (const std::bad_alloc&) {
+      retry(name + ": out of memory");
+    } catch (const std::exception& e) {
+      retry(name + ": " + e.what());
+    }
+    ++place.done;
+    place.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - range_t0).count();
+  }
+  if (!quiet) {
+    const double n = static_cast<double>(frame_list.size());
+    std::fprintf(stderr,
+                 "tessera: %zu frames (%s to %s) in %.2fs: %.2fs a frame, of which load+BVH %.3fs; %.0f frames/hour\n",
+                 frame_list.size(), tessera::frame_path(outputs.front(), frame_list.front(), padding).c_str(),
+                 tessera::frame_path(outputs.front(), frame_list.back(), padding).c_str(), place.elapsed_s,
+                 place.elapsed_s / n, total_load_s / n, place.elapsed_s > 0 ? 3600 * n / place.elapsed_s : 0.0);
+  }
   return kExitOk;
 }
 

@@ -203,6 +203,31 @@ expect 1 "tessera render --animation of an animation the asset lacks" "$TESSERA"
 grep -qF 'at /scene/animation: the glTF asset has no animation "awya" (did you mean "away"?)' "$tmp/err" \
   && ok "the refusal names /scene/animation and the closest name" || not_ok "--animation awya said: $(cat "$tmp/err")"
 
+# --frames (render.frames): frame f is the still at f / 24 s, byte for byte, in numbered files; bad ranges are usage
+# errors naming the option; an output in a frame's way is refused before anything renders.
+expect 0 "tessera render --frames 0-24:12" "$TESSERA" render assets/tri-anim.gltf --width 16 --height 16 --spp 2 \
+  --threads 2 -q -o tri-f.exr --frames 0-24:12 --animation away
+if [[ -f tri-f.0000.exr && -f tri-f.0012.exr && -f tri-f.0024.exr && ! -e tri-f.exr ]]; then
+  ok "--frames 0-24:12 writes tri-f.0000.exr, tri-f.0012.exr and tri-f.0024.exr"
+else not_ok "--frames 0-24:12 wrote: $(ls tri-f*)"; fi
+cmp -s tri-f.0024.exr tri-away.exr && ok "frame 24 is the still at 1 s, byte for byte" \
+  || not_ok "frame 24 differs from the still at --time 1"
+cmp -s tri-f.0000.exr tri-anim0.exr && ok "frame 0 is the still at 0 s, byte for byte" \
+  || not_ok "frame 0 differs from the still at 0 s"
+expect 2 "tessera render --frames 5-1" "$TESSERA" render assets/tri-anim.gltf -q -o x.exr --frames 5-1
+grep -qF -- "--frames 5-1: must not be before start (5)" "$tmp/err" && ok "the refusal names --frames" \
+  || not_ok "--frames 5-1 said: $(cat "$tmp/err")"
+expect 2 "tessera render --frames 1-x" "$TESSERA" render assets/tri-anim.gltf -q -o x.exr --frames 1-x
+expect 2 "tessera render --frames of an asset without animations" "$TESSERA" render assets/tri.gltf -q -o x.exr \
+  --frames 1-2
+grep -qF "no animations" "$tmp/err" && ok "the refusal says the asset has no animations" \
+  || not_ok "--frames of tri.gltf said: $(cat "$tmp/err")"
+mkdir -p blocked.0002.png
+expect 1 "a frame's output in the way is refused before rendering" "$TESSERA" render assets/tri-anim.gltf \
+  --width 16 --height 16 --spp 1 --threads 2 -q -o blocked.png --frames 1-3
+grep -qF "blocked.0002.png: it is a directory" "$tmp/err" && [[ ! -e blocked.0001.png ]] \
+  && ok "the refusal names frame 2's file, and frame 1 was not rendered" || not_ok "blocked said: $(cat "$tmp/err")"
+
 # --- refused merges and bad input: fatal (1) ---------------------------------------------------------------------
 expect 1 "overlapping ranges are refused" "$TESSERA" merge a.tfilm all.tfilm -o x.exr
 grep -q "overlapping" "$tmp/err" && ok "the refusal says the parts overlap" || not_ok "no overlap message"

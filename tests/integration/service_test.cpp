@@ -202,6 +202,51 @@ TEST_F(ServiceTest, UploadsTheSampleAssetsAndRendersThem) {
   EXPECT_EQ(json::parse(res->body)["pointer"], "/scene/gltf");
 }
 
+// A frame range of more than one frame is not rendered by the daemon yet: a 422 naming /render/frames that says how
+// to render it, never one frame silently; a range of one frame is the still at its time, and a range beyond
+// --max-frames is refused naming the field.
+TEST_F(ServiceTest, AFrameRangeIsRefusedNamingTheFieldUntilTheDaemonRendersRanges) {
+  std::vector<std::string> a = args();
+  a.insert(a.end(), {"--max-frames", "100"});
+  start(a);
+  const std::string bytes = read_text(fs::path(TESSERA_SOURCE_DIR) / "examples/spinning_cube/SpinningCube.glb");
+  auto up = client_->Post("/v1/assets?name=SpinningCube.glb", bytes, "model/gltf-binary");
+  ASSERT_TRUE(up);
+  ASSERT_EQ(up->status, 201) << up->body;
+  const std::string asset = json::parse(up->body)["id"];
+  auto job = [&](const json& frames) {
+    return json{{"kind", "scene"},
+                {"scene", {{"gltf", asset}}},
+                {"render", {{"width", 32}, {"height", 18}, {"spp", 1}, {"frames", frames}}}};
+  };
+  auto res = client_->Post("/v1/jobs", job({{"start", 1}, {"end", 48}}).dump(), "application/json");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 422) << res->body;
+  EXPECT_EQ(res->get_header_value("Content-Type"), "application/problem+json");
+  const json problem = json::parse(res->body);
+  EXPECT_EQ(problem.value("pointer", ""), "/render/frames") << problem.dump();
+  EXPECT_NE(problem.value("detail", problem.dump()).find("tessera render --frames"), std::string::npos)
+      << problem.dump();
+  res = client_->Post("/v1/jobs", job({{"start", 1}, {"end", 101}}).dump(), "application/json");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 422) << res->body;
+  EXPECT_EQ(json::parse(res->body).value("pointer", ""), "/render/frames") << res->body;
+  // One frame: accepted, rendered as the still at 12 / 24 s, pixel for pixel.
+  const std::string id = submit(*client_, job({{"start", 12}, {"end", 12}}));
+  json still_doc = job(nullptr);
+  still_doc["render"].erase("frames");
+  still_doc["scene"]["time"] = 0.5;
+  const std::string still = submit(*client_, still_doc);
+  const json done = wait_for(*client_, id, ended, 120);
+  EXPECT_EQ(done.value("state", ""), "succeeded") << done.dump();
+  EXPECT_EQ(done["render"]["frames"], (json{{"start", 12}, {"end", 12}, {"step", 1}, {"chunk", 1}})) << done.dump();
+  EXPECT_EQ(wait_for(*client_, still, ended, 120).value("state", ""), "succeeded");
+  const std::string frame_exr = client_->Get("/v1/jobs/" + id + "/result.exr")->body,
+                    still_exr = client_->Get("/v1/jobs/" + still + "/result.exr")->body;
+  EXPECT_FALSE(frame_exr.empty());
+  EXPECT_TRUE(frame_exr == still_exr) << "frame 12 of 12-12 is not the still at 0.5 s";
+}
+
 TEST_F(ServiceTest, MultipartJobWithGltfAndBin) {
   start();
   httplib::MultipartFormDataItems items = {

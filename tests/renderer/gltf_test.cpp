@@ -738,7 +738,8 @@ TEST(GltfHostile, RequiredUnsupportedExtensionFailsOptionalWarns) {
   EXPECT_NE(imp.warnings[0].find("EXT_unknown_thing"), std::string::npos);
 }
 
-// The public sample assets of examples/ import without warnings and render something.
+// The public sample assets of examples/ import without warnings and render something; an animated one (the spinning
+// cube) posed at a time, since without one the warning that its animation is not applied is right.
 TEST(Gltf, SampleAssetsRenderWithoutWarnings) {
   const std::filesystem::path scenes = "examples";  // tests run in the repository root
   int found = 0;
@@ -751,6 +752,11 @@ TEST(Gltf, SampleAssetsRenderWithoutWarnings) {
                 {"scene", {{"gltf", entry.path().filename().string()}}},
                 {"render", {{"width", 48}, {"height", 32}, {"spp", 2}}}};
     RenderJob rj = load_job(job, opts);
+    if (rj.scene->warnings.size() == 1 && rj.scene->warnings[0].find(" not applied: its nodes are rendered as they are "
+                                                                     "stated") != std::string::npos) {
+      job["scene"]["time"] = 1;
+      rj = load_job(job, opts);
+    }
     EXPECT_TRUE(rj.scene->warnings.empty()) << entry.path() << ": " << rj.scene->warnings.front();
     EXPECT_GT(rj.scene->triangle_count(), 0u) << entry.path();
     ThreadPool pool(2);

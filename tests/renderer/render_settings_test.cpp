@@ -67,8 +67,8 @@ TEST(RenderSettingsMapping, TheNormalisedFormIsTheSchemasFieldsAndDefaults) {
   std::ifstream in("proto/schemas/render.schema.json");
   ASSERT_TRUE(in) << "run from the source tree";
   const json properties = json::parse(in)["properties"];
-  // max_volume_depth, aovs and denoise are left out at their defaults (the stored records' text, below), written
-  // otherwise.
+  // max_volume_depth, aovs, denoise and fps are left out at their defaults (the stored records' text, below), written
+  // otherwise; frames, which has no default (a still), is written only when set.
   RenderSettings deep;
   deep.integrator.max_volume_depth = 7;
   EXPECT_EQ(render_settings_to_json(deep).value("max_volume_depth", 0), 7);
@@ -79,8 +79,13 @@ TEST(RenderSettingsMapping, TheNormalisedFormIsTheSchemasFieldsAndDefaults) {
   normalised["max_volume_depth"] = RenderSettings{}.integrator.max_volume_depth;
   normalised["aovs"] = json::array();
   normalised["denoise"] = "none";
-  EXPECT_EQ(normalised.size(), properties.size()) << normalised.dump();
+  EXPECT_FALSE(normalised.contains("fps"));
+  EXPECT_FALSE(normalised.contains("frames"));
+  normalised["fps"] = kDefaultFps;
+  EXPECT_FALSE(properties["frames"].contains("default"));
+  EXPECT_EQ(normalised.size() + 1, properties.size()) << normalised.dump();
   for (const auto& [key, property] : properties.items()) {
+    if (key == "frames") continue;
     ASSERT_TRUE(normalised.contains(key)) << key;
     EXPECT_EQ(normalised[key], property["default"]) << key;
   }
