@@ -218,10 +218,11 @@ std::optional<FilmFile> decode_v3_v4(std::string_view in, uint32_t version, std:
     }
   }
   size_t at = table_end;
-  // Reads `bytes` more, false when the file has fewer left.
+  // Reads `bytes` more, false when the file has fewer left. (An empty array, an id layer's sums or a pixel without
+  // ids, may have no storage at all: memcpy is not given its null pointer.)
   auto read = [&](void* to, size_t bytes) {
     if (bytes > in.size() - at) return false;
-    std::memcpy(to, in.data() + at, bytes);
+    if (bytes > 0) std::memcpy(to, in.data() + at, bytes);
     at += bytes;
     return true;
   };
@@ -285,7 +286,9 @@ std::string encode_film_file(const FilmFileHeader& f, const Film& film) {
     put_field<uint32_t>(out, static_cast<uint32_t>(l.channels));
     put_field<uint32_t>(out, static_cast<uint32_t>(l.kind));
   }
-  auto append = [&](const void* from, size_t bytes) { out.append(static_cast<const char*>(from), bytes); };
+  auto append = [&](const void* from, size_t bytes) {
+    if (bytes > 0) out.append(static_cast<const char*>(from), bytes);
+  };
   for (int i = 0; i < film.layer_count(); ++i) {
     const FilmLayer& l = film.layer_at(i);
     append(l.sums.data(), l.sums.size() * sizeof(FixedSum));
