@@ -96,18 +96,16 @@ Regions regions(const Film& film) {
   return r;
 }
 
-// The mean luminance of the pixels `pixels` of `film` and its standard error, from each pixel's own samples.
+// The mean luminance of the pixels `pixels` of `film`'s image and its standard error, from each pixel's own samples.
 struct Estimate {
   double mean = 0, standard_error = 0;
 };
 Estimate region_mean(const Film& film, const std::vector<size_t>& pixels) {
+  const std::vector<float> image = film.resolve();
   double sum = 0, variance = 0;
   for (size_t i : pixels) {
     const double n = film.pixel_sample_counts()[i];
-    const FixedSum* s = &film.sums()[3 * i];
-    const double mean =
-        (0.2126 * static_cast<double>(s[0]) + 0.7152 * static_cast<double>(s[1]) + 0.0722 * static_cast<double>(s[2])) /
-        (kFixedScale * n);
+    const double mean = 0.2126 * image[3 * i] + 0.7152 * image[3 * i + 1] + 0.0722 * image[3 * i + 2];
     sum += mean;
     variance += std::max(0.0, (film.sums_lum2()[i] / n - mean * mean) / (n - 1));  // of the pixel's mean
   }
@@ -142,13 +140,21 @@ TEST(AdaptiveSampling, TheSkyStopsAtMinSppAndTheBoxGetsTheMostSamples) {
 }
 
 TEST(AdaptiveSampling, StopsTheJobWhenEveryPixelHasStopped) {
-  // A threshold no pixel is above after min_spp: every pixel stops there, and the schedule ends.
-  const Rendered a = render(adaptive_settings(1.0));
-  for (uint32_t n : a.film.pixel_sample_counts()) ASSERT_EQ(n, kMinSpp);
-  EXPECT_EQ(a.reason, StopReason::kAdaptiveThreshold);
-  EXPECT_STREQ(stop_reason_name(a.reason), "adaptive_threshold");
-  EXPECT_EQ(a.film.samples(), kSpp);  // the schedule went to its end: a unit's film is complete
-  EXPECT_EQ(a.progress.samples_done, kMinSpp);
+  // A threshold no pixel is above after min_spp: every pixel stops there, and the schedule ends with the pass that
+  // reached it, its film complete (a unit's film has all its samples).
+  ThreadPool pool(2);
+  RenderSession session(sky_and_box(), adaptive_settings(1.0), pool);
+  std::vector<uint32_t> passes;  // the film's samples() after each pass
+  const StopReason reason =
+      session.run([&](const RenderProgress&, const Film& film) { passes.push_back(film.samples()); });
+  for (uint32_t n : session.film().pixel_sample_counts()) ASSERT_EQ(n, kMinSpp);
+  EXPECT_EQ(reason, StopReason::kAdaptiveThreshold);
+  EXPECT_STREQ(stop_reason_name(reason), "adaptive_threshold");
+  EXPECT_EQ(stop_reason_from_name("adaptive_threshold"), StopReason::kAdaptiveThreshold);
+  ASSERT_GE(passes.size(), 2u);
+  EXPECT_EQ(passes.back(), kSpp);
+  EXPECT_LT(passes[passes.size() - 2], kMinSpp);
+  EXPECT_EQ(session.progress().samples_done, kMinSpp);
 }
 
 TEST(AdaptiveSampling, AgreesWithAUniformRenderOfTheSameSamplesWithinItsNoise) {
