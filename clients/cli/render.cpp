@@ -43,6 +43,10 @@ const char* kRenderUsage =
     "  --region X,Y,W,H       render only this pixel rectangle (the image keeps its full size)\n"
     "  --width N, --height N  resolution (override render.width/height)\n"
     "  --time-limit S         stop after the pass that crosses S seconds\n"
+    "  --adaptive-threshold X per-pixel adaptive sampling: a pixel stops once its error estimate and its\n"
+    "                         neighbours' are at most X (render.adaptive_threshold; 0, the default: off)\n"
+    "  --min-spp N            with adaptive sampling, the samples every pixel gets before any stops\n"
+    "                         (render.min_spp; default 16, or spp when fewer)\n"
     "  --threads N            render threads (default: all hardware threads)\n"
     "  --integrator NAME      path | bdpt | light (render.integrator)\n"
     "  --estimator NAME       mis | area | hemisphere (the path tracer's)\n"
@@ -178,6 +182,10 @@ int cmd_render(int argc, char** argv) {
       set("height", parse_integer(a, value()));
     else if (a == "--time-limit")
       set("time_limit_s", parse_number(a, value()));
+    else if (a == "--adaptive-threshold")
+      set("adaptive_threshold", parse_number(a, value()));
+    else if (a == "--min-spp")
+      set("min_spp", parse_integer(a, value()));
     else if (a == "--threads")
       threads = static_cast<int>(parse_integer(a, value()));
     else if (a == "--integrator")
@@ -204,9 +212,12 @@ int cmd_render(int argc, char** argv) {
     else if (a == "-q" || a == "--quiet")
       quiet = true;
     else if (!a.empty() && a[0] == '-')
-      unknown_option(a, {"--output", "--spp", "--samples", "--region", "--width", "--height", "--time-limit",
-                         "--threads", "--integrator", "--estimator", "--seed", "--max-depth", "--aov", "--denoise",
-                         "--variant", "--time", "--animation", "--quiet", "--help"});
+      unknown_option(a, {"--output",  "--spp",       "--samples",    "--region",
+                         "--width",   "--height",    "--time-limit", "--adaptive-threshold",
+                         "--min-spp", "--threads",   "--integrator", "--estimator",
+                         "--seed",    "--max-depth", "--aov",        "--denoise",
+                         "--variant", "--time",      "--animation",  "--quiet",
+                         "--help"});
     else if (input.empty())
       input = a;
     else
