@@ -87,8 +87,9 @@ class Film {
   // Adds `n` to the film's count and to the count of each pixel `active` marks (1; the whole image's size, row-major):
   // a pass of adaptive sampling.
   void advance_samples(uint32_t n, const std::vector<uint8_t>& active);
-  // Sets the film's count to `n`, every pixel's left as it is: the schedule ends early, every pixel having stopped.
-  void end_samples_at(uint32_t n) { samples_ = n; }
+  // Sets the film's count to `n`, every pixel's left as it is: a schedule that ends early, every pixel having
+  // stopped; a merge of parts of one sample range over different regions (Film::merge added their counts).
+  void set_schedule_samples(uint32_t n) { samples_ = n; }
   uint32_t pixel_samples(int x, int y) const { return pixel_samples_[index(x, y)]; }
   const std::vector<uint32_t>& pixel_sample_counts() const { return pixel_samples_; }
   std::vector<uint32_t>& pixel_sample_counts() { return pixel_samples_; }

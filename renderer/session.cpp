@@ -85,7 +85,7 @@ void RenderSession::update_active() {
   active_count_ = static_cast<size_t>(r.width) * static_cast<size_t>(r.height);
   if (!adaptive_.enabled()) return;
   active_count_ = adaptive_.active_pixels(film_, r, active_);
-  if (active_count_ == 0 && film_.samples() < settings_.spp) film_.end_samples_at(settings_.spp);
+  if (active_count_ == 0 && film_.samples() < settings_.spp) film_.set_schedule_samples(settings_.spp);
 }
 
 uint64_t RenderSession::pixel_samples_total() const {

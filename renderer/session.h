@@ -76,7 +76,7 @@ class RenderSession {
   PixelMask active_;         // with adaptive sampling, the pixels the next pass samples
   size_t active_count_ = 0;  // how many
   // With adaptive sampling: the pixels of the next pass, from the film; a film whose pixels have all stopped ends its
-  // schedule (Film::end_samples_at spp).
+  // schedule (Film::set_schedule_samples spp).
   void update_active();
   // The sum over the region's pixels of their sample counts.
   uint64_t pixel_samples_total() const;

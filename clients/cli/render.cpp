@@ -513,8 +513,9 @@ int cmd_merge(int argc, char** argv) {
   // Every layer's integer sums, hit counts and per-pixel sample counts: exact in any order.
   merged.film = first.film;
   for (size_t i = 1; i < parts.size(); ++i) merged.film.merge(parts[i].film);
-  // Film::merge counts every part's samples; parts of different regions share a sample range.
-  merged.film.set_samples(merged.sample_count);
+  // Film::merge counts every part's samples; parts of different regions share a sample range. Each pixel's own count
+  // is its parts' (fewer than the range where adaptive sampling stopped it).
+  merged.film.set_schedule_samples(merged.sample_count);
   write_outputs(outputs, merged);
   std::fprintf(stderr, "tessera: merged %zu parts: %dx%d, samples %u..%u\n", parts.size(), merged.width, merged.height,
                merged.first_sample, merged.first_sample + merged.sample_count);

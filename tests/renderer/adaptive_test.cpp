@@ -293,7 +293,7 @@ TEST(AdaptiveSampling, APixelKeepsSamplingWhileAPixelOfItsNeighbourhoodIsAboveTh
   // Within a region, the neighbourhood is the region's: a region that leaves the noisy pixel out has none active.
   EXPECT_EQ(AdaptiveSampling(s).active_pixels(film, {3, 0, 3, 5}, active), 0u);
   // Between decision points, the pixels that sample are those of the film's count.
-  film.end_samples_at(20);
+  film.set_schedule_samples(20);
   for (size_t i = 0; i < 30; ++i) film.pixel_sample_counts()[i] = i % 2 ? 20 : 16;
   EXPECT_EQ(AdaptiveSampling(s).active_pixels(film, {0, 0, 6, 5}, active), 15u);
   EXPECT_EQ(active[1], 1);
