@@ -27,6 +27,13 @@ void Film::set_samples(uint32_t n, int x, int y, int w, int h) {
       pixel_samples_[index(px, py)] = px >= x && px < x + w && py >= y && py < y + h ? n : 0;
 }
 
+void Film::advance_samples(uint32_t n, const std::vector<uint8_t>& active) {
+  if (active.size() != pixel_samples_.size()) throw std::invalid_argument("a pixel mask of another size");
+  samples_ += n;
+  for (size_t i = 0; i < pixel_samples_.size(); ++i)
+    if (active[i]) pixel_samples_[i] += n;
+}
+
 int Film::add_layer(std::string name, int channels, LayerKind kind) {
   if (name.empty() || name.size() > kMaxNameLength)
     throw std::invalid_argument("a film layer's name has 1 to " + std::to_string(kMaxNameLength) + " characters");
@@ -123,9 +130,12 @@ void Film::add_layer_sample_shared(int layer, int x, int y, const float* values)
 
 std::vector<float> Film::resolve() const {
   std::vector<float> out(beauty_.sums.size());
-  double inv = samples_ > 0 ? 1.0 / (kFixedScale * samples_) : 0.0;
-  for (size_t i = 0; i < beauty_.sums.size(); ++i)
-    out[i] = static_cast<float>(static_cast<double>(beauty_.sums[i]) * inv);
+  for (size_t i = 0; i < pixel_count(); ++i) {
+    const uint32_t n = mean_divisor(i);
+    const double inv = n > 0 ? 1.0 / (kFixedScale * n) : 0.0;
+    for (size_t c = 0; c < 3; ++c)
+      out[3 * i + c] = static_cast<float>(static_cast<double>(beauty_.sums[3 * i + c]) * inv);
+  }
   return out;
 }
 
@@ -218,17 +228,17 @@ void Film::merge(const Film& other) {
 
 double Film::relative_error() const {
   if (samples_ < 2) return INFINITY;
-  const double n = samples_;
   double var_sum = 0, lum_sum = 0;
   size_t count = 0;
   const FixedSums& sum = beauty_.sums;
   for (size_t i = 0; i < pixel_count(); ++i) {
+    const double n = mean_divisor(i);
     double mean = (0.2126 * static_cast<double>(sum[3 * i]) + 0.7152 * static_cast<double>(sum[3 * i + 1]) +
                    0.0722 * static_cast<double>(sum[3 * i + 2])) /
                   (kFixedScale * n);
     double var = (sum_lum2_[i] / n - mean * mean) * n / (n - 1);  // unbiased sample variance
-    if (var < 0) var = 0;
-    var_sum += var / n;  // variance of the pixel mean
+    if (n < 2 || var < 0) var = 0;                                // a pixel of one sample has no variance to measure
+    var_sum += var / n;                                           // variance of the pixel mean
     lum_sum += mean;
     ++count;
   }

@@ -23,8 +23,9 @@
 //                holds the manifest, the names its ids stand for. It resolves to `channels` / 2 ranks of (id,
 //                coverage): the ids by falling count (ties by rising id), each with its count over the pixel's
 //                samples (Cryptomatte's ranking pixel filter with a box filter, Friedman and Jones 2015).
-// Every pixel also has its own sample count (adaptive sampling gives pixels different counts); the film's samples()
-// is the count of a film whose pixels all advance together.
+// Every pixel also has its own sample count (adaptive sampling, adaptive.h, gives pixels different counts), and each
+// pixel's mean is over its own count. The film's samples() is how far the render's sample schedule has gone: every
+// pixel still sampling has that many, a pixel that stopped early fewer.
 #pragma once
 
 #include <cmath>
@@ -78,13 +79,20 @@ class Film {
   int width() const { return width_; }
   int height() const { return height_; }
   size_t pixel_count() const { return static_cast<size_t>(width_) * static_cast<size_t>(height_); }
-  // Samples every pixel has received, for a film whose pixels all advance together (pass by pass).
+  // How far the sample schedule has gone: the samples every pixel of the region received, for a film whose pixels
+  // all advance together (pass by pass); with adaptive sampling, the count of the pixels still sampling.
   uint32_t samples() const { return samples_; }
   // Sets the film's count and every pixel's to `n`.
   void set_samples(uint32_t n);
   // Sets the film's count to `n`, the count of each pixel of the rectangle (x, y, w, h) to `n` and of every other
   // pixel to 0: a film of a region of the image.
   void set_samples(uint32_t n, int x, int y, int w, int h);
+  // Adds `n` to the film's count and to the count of each pixel `active` marks (1; the whole image's size, row-major):
+  // a pass of adaptive sampling.
+  void advance_samples(uint32_t n, const std::vector<uint8_t>& active);
+  // Sets the film's count to `n`, every pixel's left as it is: a schedule that ends early, every pixel having
+  // stopped; a merge of parts of one sample range over different regions (Film::merge added their counts).
+  void set_schedule_samples(uint32_t n) { samples_ = n; }
   uint32_t pixel_samples(int x, int y) const { return pixel_samples_[index(x, y)]; }
   const std::vector<uint32_t>& pixel_sample_counts() const { return pixel_samples_; }
   std::vector<uint32_t>& pixel_sample_counts() { return pixel_samples_; }
@@ -135,10 +143,11 @@ class Film {
   // splat() adds; on the beauty, as splat(): no squared luminance).
   void add_layer_sample_shared(int layer, int x, int y, const float* values);
 
-  // Mean radiance of a pixel.
+  // Mean radiance of a pixel, over its own samples (mean_divisor).
   Rgb pixel(int x, int y) const {
     size_t i = index(x, y);
-    double inv = samples_ > 0 ? 1.0 / (kFixedScale * samples_) : 0.0;
+    const uint32_t n = mean_divisor(i);
+    double inv = n > 0 ? 1.0 / (kFixedScale * n) : 0.0;
     return Rgb(static_cast<float>(static_cast<double>(beauty_.sums[3 * i]) * inv),
                static_cast<float>(static_cast<double>(beauty_.sums[3 * i + 1]) * inv),
                static_cast<float>(static_cast<double>(beauty_.sums[3 * i + 2]) * inv));
@@ -147,7 +156,7 @@ class Film {
   // id counts (a kIds pixel keeps its kMaxIdsPerPixel ids of most samples, ties to the lower id) and for the
   // per-pixel counts; manifests are joined. Throws std::invalid_argument for another layout.
   void merge(const Film& other);
-  // Mean radiance of every pixel over the film's samples(), RGB interleaved, row-major from the top-left.
+  // Mean radiance of every pixel over its own samples (mean_divisor), RGB interleaved, row-major from the top-left.
   std::vector<float> resolve() const;
   // Mean of every pixel of a layer, its channels interleaved: over the pixel's own sample count (0 for a pixel
   // without samples); a distance layer's over the pixel's hits (infinite for a pixel without any); an id layer's
@@ -156,8 +165,11 @@ class Film {
   // resolve_layer of the layer named `name`; throws std::invalid_argument when there is none.
   std::vector<float> resolve_layer(std::string_view name) const;
   // Estimated relative standard error of the image mean luminance: sqrt(mean pixel variance of the mean) divided by
-  // the mean luminance (over pixels whose mean luminance is above a small floor).
+  // the mean luminance, each pixel's variance over its own samples (mean_divisor).
   double relative_error() const;
+  // What pixel i's beauty sums are divided by: its own sample count; the film's samples() for a pixel without samples
+  // of its own (outside the region rendered), which only splats of light paths reach.
+  uint32_t mean_divisor(size_t i) const { return pixel_samples_[i] > 0 ? pixel_samples_[i] : samples_; }
 
   // Raw state of the beauty: 3 fixed-point sums per pixel (RGB), and per-pixel sums of squared luminance (float,
   // only for the noise estimate). The film codec (renderer/film_codec.h) reads and writes every layer's.

@@ -69,6 +69,9 @@ struct RayCounters {
   uint64_t total() const { return camera + bounce + shadow; }
 };
 
+// Which pixels of an image sample in a pass: 1 for those that do, one byte per pixel, row-major from the top left.
+using PixelMask = std::vector<uint8_t>;
+
 // A rectangle of pixels: (x, y) its top-left pixel.
 struct PixelRegion {
   int x = 0, y = 0, width = 0, height = 0;
@@ -126,8 +129,11 @@ class Integrator {
   Integrator& operator=(const Integrator&) = delete;
 
   // Adds sample indices [first_sample, first_sample + count) of every pixel of the region to `film`, without
-  // changing its sample count. Returns early, the film incomplete, once `cancel` is set.
-  virtual void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel) = 0;
+  // changing its sample count; with `active`, of the pixels of the region it marks alone (adaptive sampling,
+  // adaptive.h): an integrator that cannot sample pixels apart (integrator_adaptive_problem) throws
+  // std::invalid_argument. Returns early, the film incomplete, once `cancel` is set.
+  virtual void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel,
+                           const PixelMask* active = nullptr) = 0;
 
   // Whether the film's squared-luminance sums measure the image's noise (Film::relative_error): not when every
   // sample is a splat that lands in some other pixel (light tracing).
@@ -184,6 +190,11 @@ std::string integrator_scene_problem(const std::string& name, const Scene& scene
 // sample where it lands, so it has no first surface per pixel nor a pixel's own samples for a variance; BDPT's pixels
 // take splats from other pixels' light subpaths, so their samples do not give their variance either.
 std::string integrator_aov_problem(const std::string& name, std::string_view aov);
+
+// What keeps the integrator `name` from sampling pixels adaptively (render.adaptive_threshold), or empty: light
+// tracing and BDPT splat light paths onto every pixel, so a pixel's own samples do not measure its error, and their
+// light paths cannot be kept from the pixels that stopped.
+std::string integrator_adaptive_problem(const std::string& name);
 
 // Adds every integrator the renderer ships to `registry` (one line per integrator in integrators/registry.cpp).
 void register_builtin_integrators(IntegratorRegistry& registry);

@@ -91,6 +91,15 @@ const char* denoiser_name(Denoiser denoiser) {
   return name_of(kDenoisers, denoiser);
 }
 
+uint32_t default_min_spp(uint32_t spp) {
+  // Sixteen samples before any pixel may stop: the error estimate is a sample standard deviation, whose own relative
+  // error is about 1 / sqrt(2 (n - 1)), near 18 % at 16 samples, and a pixel whose few paths reach a light only now
+  // and then must have drawn enough of them that all-dark first samples do not stop it. A fixed count rather than a
+  // share of spp keeps what converges early (a flat sky) cheap whatever the budget: spp / 8 would give it 512
+  // samples of a 4096-sample job.
+  return std::min<uint32_t>(16, spp);
+}
+
 std::vector<std::string> film_aovs(const RenderSettings& settings) {
   const std::vector<std::string>& features = denoiser_features(settings.denoise);
   std::vector<std::string> aovs;
@@ -174,6 +183,11 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
   // Read as the other numbers of documents, as floats (fields::number_key): the settings hold what was read.
   s.time_limit_s = number_key(render, "time_limit_s", pointer, 0, 0, 7 * 24 * 3600.0);
   s.noise_target = number_key(render, "noise_target", pointer, 0, 0, 1);
+  s.adaptive_threshold = number_key(render, "adaptive_threshold", pointer, 0, 0, 1);
+  s.min_spp = static_cast<uint32_t>(integer("min_spp", default_min_spp(s.spp), 1, s.spp));
+  if (s.adaptive_threshold > 0)
+    if (std::string problem = integrator_adaptive_problem(s.integrator.name); !problem.empty())
+      throw SceneError(at(pointer, "adaptive_threshold"), problem);
   s.display.exposure_ev = number_key(render, "exposure_ev", pointer, 0, -20, 20);
   s.display.tonemap = named_key(render, "tonemap", pointer, kTonemaps, defaults.display.tonemap);
   s.exr_half = named_key(render, "exr_precision", pointer, kExrPrecisions, defaults.exr_half);
@@ -231,7 +245,9 @@ json render_settings_to_json(const RenderSettings& s) {
                                          {"step", s.frames->step},
                                          {"chunk", s.frames->chunk}}
                                   : json()},
-              {"fps", s.fps}};
+              {"fps", s.fps},
+              {"adaptive_threshold", s.adaptive_threshold},
+              {"min_spp", s.min_spp}};
   // Keys the mapping gained after jobs were first stored are written only where they differ from their defaults:
   // records (and their checkpoints' fingerprints, FNV-1a of this text) of jobs stored before a key existed keep their
   // text byte for byte.
@@ -239,9 +255,11 @@ json render_settings_to_json(const RenderSettings& s) {
                                           {"aovs", json::array()},
                                           {"denoise", denoiser_name(Denoiser::kNone)},
                                           {"frames", nullptr},
-                                          {"fps", kDefaultFps}};
+                                          {"fps", kDefaultFps},
+                                          {"adaptive_threshold", 0.0}};
   for (const auto& [key, fallback] : kLaterKeysDefaults.items())
     if (out[key] == fallback) out.erase(key);
+  if (s.min_spp == default_min_spp(s.spp)) out.erase("min_spp");
   return out;
 }
 

@@ -40,8 +40,12 @@ struct RenderSettings {
   IntegratorSettings integrator;  // which integrator renders, and its settings
   double time_limit_s = 0;        // stop after the pass that crosses this; 0: none
   double noise_target = 0;        // stop when Film::relative_error() falls below; 0: none
-  DisplaySettings display;        // for PNG outputs and previews
-  bool exr_half = true;           // EXR channel precision
+  // Per-pixel adaptive sampling (adaptive.h): a pixel stops once its error estimate and its neighbours' are at most
+  // this; 0: off, every pixel gets spp samples.
+  double adaptive_threshold = 0;
+  uint32_t min_spp = 16;    // with adaptive sampling, the samples every pixel gets before any stops (default_min_spp)
+  DisplaySettings display;  // for PNG outputs and previews
+  bool exr_half = true;     // EXR channel precision
   // The render passes beside the beauty (aov.h), by name, in the order of aov_table(): each once.
   std::vector<std::string> aovs;
   Denoiser denoise = Denoiser::kNone;  // the beauty denoised, the rendered one kept as the layer "noisy"
@@ -73,6 +77,9 @@ struct OutputSpec {
 
 // render.spp when the job does not say (the contract's default).
 constexpr uint32_t kDefaultSpp = 64;
+
+// render.min_spp when the job does not say: 16, or spp when that is fewer (render_settings.cpp says why).
+uint32_t default_min_spp(uint32_t spp);
 
 // The largest settings a server takes; the defaults are the contract's maxima (render.schema.json).
 struct RenderLimits {

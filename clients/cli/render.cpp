@@ -44,6 +44,10 @@ const char* kRenderUsage =
     "  --region X,Y,W,H       render only this pixel rectangle (the image keeps its full size)\n"
     "  --width N, --height N  resolution (override render.width/height)\n"
     "  --time-limit S         stop after the pass that crosses S seconds\n"
+    "  --adaptive-threshold X per-pixel adaptive sampling: a pixel stops once its error estimate and its\n"
+    "                         neighbours' are at most X (render.adaptive_threshold; 0, the default: off)\n"
+    "  --min-spp N            with adaptive sampling, the samples every pixel gets before any stops\n"
+    "                         (render.min_spp; default 16, or spp when fewer)\n"
     "  --threads N            render threads (default: all hardware threads)\n"
     "  --integrator NAME      path | bdpt | light (render.integrator)\n"
     "  --estimator NAME       mis | area | hemisphere (the path tracer's)\n"
@@ -215,6 +219,10 @@ int cmd_render(int argc, char** argv) {
       set("height", parse_integer(a, value()));
     else if (a == "--time-limit")
       set("time_limit_s", parse_number(a, value()));
+    else if (a == "--adaptive-threshold")
+      set("adaptive_threshold", parse_number(a, value()));
+    else if (a == "--min-spp")
+      set("min_spp", parse_integer(a, value()));
     else if (a == "--threads")
       threads = static_cast<int>(parse_integer(a, value()));
     else if (a == "--integrator")
@@ -243,10 +251,12 @@ int cmd_render(int argc, char** argv) {
     else if (a == "-q" || a == "--quiet")
       quiet = true;
     else if (!a.empty() && a[0] == '-')
-      unknown_option(a,
-                     {"--output",  "--spp",        "--samples",   "--region", "--width",     "--height", "--time-limit",
-                      "--threads", "--integrator", "--estimator", "--seed",   "--max-depth", "--aov",    "--denoise",
-                      "--variant", "--time",       "--animation", "--frames", "--quiet",     "--help"});
+      unknown_option(a, {"--output",  "--spp",       "--samples",    "--region",
+                         "--width",   "--height",    "--time-limit", "--adaptive-threshold",
+                         "--min-spp", "--threads",   "--integrator", "--estimator",
+                         "--seed",    "--max-depth", "--aov",        "--denoise",
+                         "--variant", "--time",      "--animation",  "--frames",
+                         "--quiet",   "--help"});
     else if (input.empty())
       input = a;
     else
@@ -622,8 +632,9 @@ int cmd_merge(int argc, char** argv) {
   // Every layer's integer sums, hit counts and per-pixel sample counts: exact in any order.
   merged.film = first.film;
   for (size_t i = 1; i < parts.size(); ++i) merged.film.merge(parts[i].film);
-  // Film::merge counts every part's samples; parts of different regions share a sample range.
-  merged.film.set_samples(merged.sample_count);
+  // Film::merge counts every part's samples; parts of different regions share a sample range. Each pixel's own count
+  // is its parts' (fewer than the range where adaptive sampling stopped it).
+  merged.film.set_schedule_samples(merged.sample_count);
   write_outputs(outputs, merged);
   std::fprintf(stderr, "tessera: merged %zu parts: %dx%d, samples %u..%u\n", parts.size(), merged.width, merged.height,
                merged.first_sample, merged.first_sample + merged.sample_count);

@@ -397,7 +397,9 @@ class BidirectionalIntegrator final : public Integrator {
 
   bool measures_noise() const override { return !light_only_; }
 
-  void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel) override {
+  void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel,
+                   const PixelMask* active) override {
+    if (active) throw std::invalid_argument(integrator_adaptive_problem(light_only_ ? "light" : "bdpt"));
     const AovWriter aovs(film, setup_.crypto.get());
     setup_.pool->parallel_for(tiles_.count(), [&](size_t tile, int w) {
       if (cancel.load(std::memory_order_relaxed)) return;
@@ -713,6 +715,12 @@ std::string integrator_aov_problem(const std::string& name, std::string_view aov
            "their variance; use path";
   if (name == "bdpt") return {};
   return refusal + ": light tracing has no first surface per pixel; use path or bdpt";
+}
+
+std::string integrator_adaptive_problem(const std::string& name) {
+  if (name != "light" && name != "bdpt") return {};
+  return "the " + name + " integrator cannot sample adaptively: its light paths splat onto every pixel, so a " +
+         "pixel's own samples do not measure its error; use path";
 }
 
 void register_bidirectional(IntegratorRegistry& registry) {

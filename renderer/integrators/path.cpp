@@ -399,21 +399,23 @@ class PathIntegrator final : public Integrator {
  public:
   explicit PathIntegrator(const IntegratorSetup& setup) : Integrator(setup) {}
 
-  void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel) override {
+  void render_pass(uint32_t first_sample, uint32_t count, Film& film, const std::atomic<bool>& cancel,
+                   const PixelMask* active) override {
     const AovWriter aovs(film, setup_.crypto.get());
     setup_.pool->parallel_for(tiles_.count(), [&](size_t tile, int w) {
       if (cancel.load(std::memory_order_relaxed)) return;
-      render_tile(tiles_.tile(tile), worker(w), first_sample, count, film, aovs);
+      render_tile(tiles_.tile(tile), worker(w), first_sample, count, film, aovs, active);
     });
   }
 
  private:
+  // `active`, when given, marks the pixels that sample (the others are skipped).
   void render_tile(const PixelRegion& tile, Worker& worker, uint32_t first_sample, uint32_t sample_count, Film& film,
-                   const AovWriter& aovs);
+                   const AovWriter& aovs, const PixelMask* active);
 };
 
 void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32_t first_sample, uint32_t sample_count,
-                                 Film& film, const AovWriter& aovs) {
+                                 Film& film, const AovWriter& aovs, const PixelMask* active) {
   const int x0 = tile.x, y0 = tile.y, x1 = tile.x + tile.width, y1 = tile.y + tile.height;
   ScratchArena& arena = worker.arena;
   // Counted on the stack and added once per tile (Integrator::Worker).
@@ -426,22 +428,30 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
   const bool dispersive = scene.dispersive();
   // Camera rays of up to kGroup neighbouring pixels in a row, at the same sample index, go to Embree as one packet:
   // they are coherent, and a packet traces them several times faster than one by one. Each pixel still gets its
-  // samples in order, and its paths are those it would trace alone (up to Embree's rounding of sphere hits).
+  // samples in order, and its paths are those it would trace alone (up to Embree's rounding of sphere hits). With
+  // adaptive sampling a packet holds the next kGroup pixels of the row that sample, whatever the threads.
   constexpr int kGroup = Accel::kPacketSize;
   const PixelSampler::SeedKeys seed_keys(setup_.seed);
   PixelSampler samplers[kGroup];
   Ray rays[kGroup];
   RayHit hits[kGroup];
   bool found[kGroup];
+  int xs[kGroup];  // the packet's pixels' columns
   for (int y = y0; y < y1; ++y) {
-    for (int gx = x0; gx < x1; gx += kGroup) {
-      const int n = std::min(kGroup, x1 - gx);
-      const uint32_t first_pixel =
-          static_cast<uint32_t>(y) * static_cast<uint32_t>(setup_.width) + static_cast<uint32_t>(gx);
+    const uint32_t row = static_cast<uint32_t>(y) * static_cast<uint32_t>(setup_.width);
+    for (int gx = x0; gx < x1;) {
+      int n = 0;
+      if (!active) {
+        for (; n < kGroup && gx < x1; ++gx) xs[n++] = gx;
+      } else {
+        for (; n < kGroup && gx < x1; ++gx)
+          if ((*active)[row + static_cast<uint32_t>(gx)]) xs[n++] = gx;
+        if (n == 0) continue;
+      }
       for (uint32_t s = first_sample; s < first_sample + sample_count; ++s) {
         for (int i = 0; i < n; ++i) {
           PixelSampler& sampler = samplers[i];
-          sampler = PixelSampler(seed_keys, first_pixel + static_cast<uint32_t>(i), s, setup_.sampler);
+          sampler = PixelSampler(seed_keys, row + static_cast<uint32_t>(xs[i]), s, setup_.sampler);
           Vec2 jitter = sampler.get2d();
           Vec2 lens;
           if (uses_lens)
@@ -449,7 +459,7 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
           else
             sampler.skip2d();
           rays[i] =
-              camera.generate_ray(Vec2(static_cast<float>(gx + i) + jitter.x, static_cast<float>(y) + jitter.y), lens);
+              camera.generate_ray(Vec2(static_cast<float>(xs[i]) + jitter.x, static_cast<float>(y) + jitter.y), lens);
         }
         scene.accel().intersect_packet(rays, n, hits, found);
         for (int i = 0; i < n; ++i) {
@@ -466,10 +476,10 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
             l = Rgb(0);
             light = LightPassSample();  // dropped whole, as the beauty's sample is
           }
-          film.add_sample(gx + i, y, l);
+          film.add_sample(xs[i], y, l);
           if (!aovs.empty()) {
-            aovs.add(film, gx + i, y, s, features, l);
-            if (aovs.wants_light()) aovs.add_light(film, gx + i, y, light);
+            aovs.add(film, xs[i], y, s, features, l);
+            if (aovs.wants_light()) aovs.add_light(film, xs[i], y, light);
           }
         }
       }

@@ -246,7 +246,8 @@ void perform_render(const RenderRequest& request, const RenderEnvironment& env, 
     RenderSession session(scene, settings, *env.pool);
     resume(request, *env.files, settings, hash, session, listener);
     const OutputPipeline outputs(settings, output_spec_from_text(request.outputs));
-    // The samples of this run's last checkpoint; nothing until it writes one (a unit's film must be written under
+    // The pass of this run's last checkpoint (passes, not samples: with adaptive sampling a pass may leave the
+    // mean sample count as it was); nothing until it writes one (a unit's film must be written under
     // the run's own epoch, even when it restored all its samples from another run's checkpoint).
     std::optional<uint32_t> checkpointed;
     StopReason reason;
@@ -261,7 +262,7 @@ void perform_render(const RenderRequest& request, const RenderEnvironment& env, 
         std::string error;
         try {
           write_pass(request, *env.files, outputs, p, film, settings, hash);
-          checkpointed = p.samples_done;
+          checkpointed = p.pass;
         } catch (const std::exception& e) {
           // A missed checkpoint or preview (a full disk) is not worth the render: the last good checkpoint stays,
           // and the next pass writes both again.
@@ -277,7 +278,7 @@ void perform_render(const RenderRequest& request, const RenderEnvironment& env, 
       end.outcome = RunOutcome::kInterrupted;
     } else if (request.unit >= 0) {
       // A unit's film is its last checkpoint; written again if the last pass's could not be.
-      if (checkpointed != progress.samples_done)
+      if (checkpointed != progress.pass)
         env.files->write_unit(request.id, request.unit, request.epoch,
                               encode_checkpoint(session.film(), progress.pass, progress.elapsed_s, hash, settings));
       end.outcome = RunOutcome::kRendered;

@@ -73,6 +73,8 @@ std::string stop_explained(StopReason r) {
       return "its time limit was reached";
     case StopReason::kNoiseTarget:
       return "its noise target was reached";
+    case StopReason::kAdaptiveThreshold:
+      return "adaptive sampling stopped every pixel below its threshold";
     case StopReason::kStopped:
     case StopReason::kCancelled:
       break;

@@ -70,6 +70,20 @@ expect 0 "render samples 0:5 whole" "$TESSERA" render "$job12" "${r[@]}" --sampl
 expect 0 "merge two ranges" "$TESSERA" merge a.tfilm b.tfilm -o two.tfilm
 if same_sums two.tfilm all.tfilm; then ok "two ranges merge into the single render"; else not_ok "two ranges differ"; fi
 expect 0 "a merged film merges again (nothing to add: one part)" "$TESSERA" merge two.tfilm -o again.tfilm
+# Adaptive sampling: each slice decides from its own samples; the merge keeps every pixel's own count (the light,
+# without variance, and its neighbours stop early), the same bits in either order.
+adaptive=(--adaptive-threshold 0.05 --min-spp 2)
+expect 0 "render adaptive samples 0:6" "$TESSERA" render "$job12" "${r[@]}" --samples 0:6 "${adaptive[@]}" -o c.tfilm
+expect 0 "render adaptive samples 6:6" "$TESSERA" render "$job12" "${r[@]}" --samples 6:6 "${adaptive[@]}" -o d.tfilm
+expect 0 "merge adaptive slices" "$TESSERA" merge c.tfilm d.tfilm -o cd.exr -o cd.tfilm
+expect 0 "merge adaptive slices the other way" "$TESSERA" merge d.tfilm c.tfilm -o dc.exr -o dc.tfilm
+if cmp -s cd.exr dc.exr && cmp -s -n 88 cd.tfilm dc.tfilm && cmp -s -i 96 -n $((sums - 96)) cd.tfilm dc.tfilm; then
+  ok "adaptive slices merge to the same bits in either order"
+else not_ok "adaptive slices merged in two orders differ"; fi
+# The per-pixel counts, the film file's last 4 bytes a pixel: not all the range's 12 where pixels stopped.
+counts=$(tail -c $((40 * 32 * 4)) cd.tfilm | od -An -tu4 -v | tr -s ' ' '\n' | sort -un | tr '\n' ' ')
+if [[ $counts != " 12 " && $counts != "12 " ]]; then ok "the merged film keeps each pixel's count ($counts)"; else
+  not_ok "every pixel of the merged adaptive film counts 12 samples"; fi
 if same_sums again.tfilm all.tfilm; then ok "a merge of one part is that part"; else not_ok "re-merge differs"; fi
 
 # --- render passes: layers of the EXR, every one of a merge bit for bit the single render's ---------------------------

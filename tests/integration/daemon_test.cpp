@@ -222,6 +222,28 @@ TEST_F(DaemonTest, WritesCryptomatteLayersAndTheirLooks) {
   }
 }
 
+TEST_F(DaemonTest, AnAdaptiveJobEndsWhenEveryPixelHasStopped) {
+  // A threshold of 1: no pixel's error (a standard error at most its mean, over the mean's square root below 1) is
+  // above it, so every pixel stops at the first decision point, min_spp.
+  json doc = cornell_job(32, 64);
+  doc["render"]["adaptive_threshold"] = 1;
+  doc["render"]["min_spp"] = 4;
+  doc["render"]["aovs"] = {"sample_count"};
+  const std::string id = submit(*client_, doc);
+  ASSERT_FALSE(id.empty());
+  const json done =
+      wait_for(*client_, id, [](const json& s) { return in_state(s, "succeeded") || in_state(s, "failed"); });
+  ASSERT_TRUE(in_state(done, "succeeded")) << done.dump();
+  auto e = proto::contract_schemas().validate(done, "job-status.schema.json");
+  EXPECT_FALSE(e) << e->pointer << " " << e->message;
+  EXPECT_EQ(done["stop_reason"], "adaptive_threshold");
+  EXPECT_EQ(done["progress"]["samples_done"], 4);  // the mean over the pixels
+  EXPECT_EQ(done["render"]["adaptive_threshold"], 1.0);
+  EXPECT_EQ(done["render"]["min_spp"], 4);
+  const ImageData exr = decode(fetch(*client_, "/v1/jobs/" + id + "/result.exr"), dir_.path() / "a.exr");
+  EXPECT_EQ(exr.channels, 4);
+}
+
 TEST_F(DaemonTest, PreviewWhileRunningThenCancel) {
   const std::string id = submit(*client_, long_cornell_job());
   ASSERT_FALSE(id.empty());
@@ -354,6 +376,16 @@ std::vector<BadRequest> bad_requests() {
                    {"op":"add","path":"/render/aovs","value":["albedo"]}])")
            .dump(),
        422, "/render/aovs/0"},
+      {"adaptive threshold above 1", json_type,
+       patched(R"([{"op":"add","path":"/render/adaptive_threshold","value":1.5}])").dump(), 422,
+       "/render/adaptive_threshold"},
+      {"min_spp above spp", json_type, patched(R"([{"op":"add","path":"/render/min_spp","value":17}])").dump(), 422,
+       "/render/min_spp"},
+      {"adaptive sampling with bdpt", json_type,
+       patched(R"([{"op":"add","path":"/render/integrator","value":"bdpt"},
+                   {"op":"add","path":"/render/adaptive_threshold","value":0.01}])")
+           .dump(),
+       422, "/render/adaptive_threshold"},
       {"unknown kind", json_type, patched(R"([{"op":"replace","path":"/kind","value":"video"}])").dump(), 422, "/kind"},
       {"not JSON at all", json_type, "this is not JSON", 400, ""},
       {"truncated JSON", json_type, cornell_job(64, 16).dump().substr(0, 100), 400, std::nullopt},

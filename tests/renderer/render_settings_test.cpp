@@ -76,12 +76,16 @@ TEST(RenderSettingsMapping, TheNormalisedFormIsTheSchemasFieldsAndDefaults) {
   EXPECT_FALSE(normalised.contains("max_volume_depth"));
   EXPECT_FALSE(normalised.contains("aovs"));
   EXPECT_FALSE(normalised.contains("denoise"));
+  EXPECT_FALSE(normalised.contains("adaptive_threshold"));
+  EXPECT_FALSE(normalised.contains("min_spp"));
   normalised["max_volume_depth"] = RenderSettings{}.integrator.max_volume_depth;
   normalised["aovs"] = json::array();
   normalised["denoise"] = "none";
   EXPECT_FALSE(normalised.contains("fps"));
   EXPECT_FALSE(normalised.contains("frames"));
   normalised["fps"] = kDefaultFps;
+  normalised["adaptive_threshold"] = 0.0;
+  normalised["min_spp"] = 16;
   EXPECT_FALSE(properties["frames"].contains("default"));
   EXPECT_EQ(normalised.size() + 1, properties.size()) << normalised.dump();
   for (const auto& [key, property] : properties.items()) {
@@ -112,6 +116,49 @@ TEST(RenderSettingsMapping, RefusalsNameTheFieldAndTheNames) {
   RenderLimits limits;
   limits.max_spp = 100;
   EXPECT_THROW(render_settings_from_json({{"spp", 101}}, "/render", limits), SceneError);
+}
+
+TEST(RenderSettingsMapping, AdaptiveSamplingRoundTripsAndIsWrittenOnlyWhereSet) {
+  expect_round_trip({{"adaptive_threshold", 0.01}});
+  expect_round_trip({{"adaptive_threshold", 1}, {"min_spp", 4}});
+  expect_round_trip({{"adaptive_threshold", 0.05}, {"spp", 1000}, {"min_spp", 1000}});
+  EXPECT_EQ(read({{"adaptive_threshold", 0.01}}).adaptive_threshold, static_cast<double>(0.01f));
+  // min_spp: 16 by default, spp when that is fewer; written only where it is not its default.
+  EXPECT_EQ(read(json::object()).min_spp, 16u);
+  EXPECT_EQ(read({{"spp", 8}}).min_spp, 8u);
+  EXPECT_FALSE(render_settings_to_json(read({{"spp", 8}})).contains("min_spp"));
+  EXPECT_EQ(render_settings_to_json(read({{"min_spp", 32}})).value("min_spp", 0), 32);
+  EXPECT_EQ(render_settings_to_json(read({{"adaptive_threshold", 0.5}})).value("adaptive_threshold", 0.0), 0.5);
+  // Any integrator takes the threshold 0 (off).
+  EXPECT_EQ(read({{"integrator", "bdpt"}, {"adaptive_threshold", 0}}).adaptive_threshold, 0);
+}
+
+TEST(RenderSettingsMapping, AdaptiveSamplingOutOfRangeOrWithALightPathIntegratorIsRefusedAtItsField) {
+  auto pointer = [](const json& render) -> std::string {
+    try {
+      read(render);
+    } catch (const SceneError& e) {
+      return e.pointer();
+    }
+    return "accepted";
+  };
+  EXPECT_EQ(pointer({{"adaptive_threshold", -0.01}}), "/render/adaptive_threshold");
+  EXPECT_EQ(pointer({{"adaptive_threshold", 1.5}}), "/render/adaptive_threshold");
+  EXPECT_EQ(pointer({{"adaptive_threshold", "0.01"}}), "/render/adaptive_threshold");
+  EXPECT_EQ(pointer({{"adaptive_threshold", nullptr}}), "/render/adaptive_threshold");
+  EXPECT_EQ(pointer({{"min_spp", 0}}), "/render/min_spp");
+  EXPECT_EQ(pointer({{"min_spp", 65}}), "/render/min_spp");  // above the default spp, 64
+  EXPECT_EQ(pointer({{"spp", 100}, {"min_spp", 101}}), "/render/min_spp");
+  EXPECT_EQ(pointer({{"min_spp", 2.5}}), "/render/min_spp");
+  EXPECT_EQ(pointer({{"spp", 100}, {"min_spp", 100}}), "accepted");
+  for (const char* integrator : {"bdpt", "light"}) {
+    EXPECT_EQ(pointer({{"integrator", integrator}, {"adaptive_threshold", 0.01}}), "/render/adaptive_threshold");
+    try {
+      read({{"integrator", integrator}, {"adaptive_threshold", 0.01}});
+    } catch (const SceneError& e) {
+      EXPECT_NE(std::string(e.what()).find("splat"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(OutputSpecMapping, EveryChoiceRoundTripsInItsNormalisedOrder) {
