@@ -14,8 +14,7 @@
 namespace tessera {
 
 class Material;
-class Environment;
-class Material;
+struct Environment;
 struct Bounds;
 struct Mesh;
 struct Sphere;
