@@ -40,14 +40,20 @@ float id_float(uint32_t bits) {
 
 Ids ids_of(const std::vector<std::string>& object_names, const std::vector<std::string>& material_names) {
   Ids ids;
-  for (const std::string& name : object_names) {
-    ids.object.push_back(id_of(name));
-    ids.object_manifest.emplace(name, ids.object.back());
-  }
-  for (const std::string& name : material_names) {
-    ids.material.push_back(id_of(name));
-    ids.material_manifest.emplace(name, ids.material.back());
-  }
+  auto add = [](const std::vector<std::string>& names, std::vector<uint32_t>& by_number,
+                std::map<std::string, uint32_t>& manifest) {
+    for (const std::string& full : names) {
+      // A name is kept to kMaxNameBytes (cut before a UTF-8 continuation byte): an asset's names are not bounded,
+      // and every name is in the manifest of each checkpoint and EXR.
+      size_t length = std::min(full.size(), kMaxNameBytes);
+      while (length > 0 && length < full.size() && (static_cast<unsigned char>(full[length]) & 0xc0) == 0x80) --length;
+      const std::string name = full.substr(0, length);
+      by_number.push_back(id_of(name));
+      manifest.emplace(name, by_number.back());
+    }
+  };
+  add(object_names, ids.object, ids.object_manifest);
+  add(material_names, ids.material, ids.material_manifest);
   return ids;
 }
 

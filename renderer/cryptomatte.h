@@ -10,6 +10,7 @@
 // object of name → the id's float bits in 8 hexadecimal digits).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <map>
 #include <string>
@@ -21,6 +22,8 @@ namespace tessera::cryptomatte {
 
 // The ranks an image holds of each type: the specification's suggested default of 6, three RGBA layers.
 inline constexpr int kRanks = 6;
+// The longest name an id is made of, in bytes: longer ones are cut (ids_of).
+inline constexpr size_t kMaxNameBytes = 256;
 
 // MurmurHash3_x86_32 of the name's bytes, seed 0.
 uint32_t hash(std::string_view name);
@@ -33,7 +36,7 @@ inline uint32_t id_of(std::string_view name) {
 float id_float(uint32_t bits);
 
 // The ids of a scene's objects and materials, by their numbers (SurfaceInteraction::object, material_index), and the
-// manifests that name them.
+// manifests that name them; names longer than kMaxNameBytes are cut to that.
 struct Ids {
   std::vector<uint32_t> object, material;
   std::map<std::string, uint32_t> object_manifest, material_manifest;

@@ -62,6 +62,17 @@ TEST(Cryptomatte, IdsAreTheSpecificationsHashes) {
                                       "CryptoMaterial02.G", "CryptoMaterial02.B", "CryptoMaterial02.A"}));
 }
 
+// An asset's names are not bounded: an id is made of the name's first 256 bytes, cut before a UTF-8 continuation
+// byte, and the manifest names it so.
+TEST(Cryptomatte, LongNamesAreCutToTheirFirst256Bytes) {
+  const std::string long_name = std::string(255, 'a') + "\xc3\xa9" + std::string(100, 'b');  // é across byte 256
+  const cryptomatte::Ids ids = cryptomatte::ids_of({long_name, "short"}, {});
+  const std::string cut(255, 'a');
+  EXPECT_EQ(ids.object[0], cryptomatte::id_of(cut));
+  EXPECT_EQ(ids.object_manifest.count(cut), 1u);
+  EXPECT_EQ(ids.object[1], cryptomatte::id_of("short"));
+}
+
 // A film of one id layer, `samples` samples of random ids from `ids` in each of its pixels.
 Film random_id_film(uint32_t seed, uint32_t samples, uint32_t ids) {
   Film film(5, 4);
