@@ -197,33 +197,47 @@ TEST(Workers, ARenderAboveTheWorkerMemoryLimitFailsNamingIt) {
 
 // An upload is checked in a worker process of its own: a check that crashes (here: killed with SIGSEGV while it
 // starts) makes the upload a 422 naming the file and the crash, and the daemon goes on taking uploads.
-TEST(Workers, AnUploadWhoseCheckCrashesIsRefusedAndTheDaemonGoesOn) {
-  TempDir dir;
-  Daemon daemon(dir.path() / "data", kArgs);
-  auto c = daemon.client();
-  const std::string gltf = read_text(fs::path(TESSERA_SOURCE_DIR) / "examples/duck/Duck.glb");
-  httplib::MultipartFormDataItems items = {{"file", gltf, "Duck.glb", "model/gltf-binary"}};
-  int crashed_status = 0;
-  std::string crashed_body;
+// The Duck uploaded to `daemon`, its check worker sent `signal` once it is seen.
+struct SignalledUpload {
+  bool checker_seen = false;
+  int status = 0;
+  std::string body;
+};
+SignalledUpload upload_signalling_the_check(Daemon& daemon, const httplib::MultipartFormDataItems& items, int signal) {
+  SignalledUpload result;
   std::thread upload([&] {
     if (auto res = daemon.client()->Post("/v1/assets", items)) {
-      crashed_status = res->status;
-      crashed_body = res->body;
+      result.status = res->status;
+      result.body = res->body;
     }
   });
   pid_t checker = 0;
-  const bool found = eventually(
+  result.checker_seen = eventually(
       [&] {
         for (pid_t child : children_of(daemon.pid()))
           if (command_line(child).find("--check-worker") != std::string::npos) checker = child;
         return checker > 0;
       },
       30);
-  if (found) kill(checker, SIGSEGV);
+  if (result.checker_seen) kill(checker, signal);
   upload.join();
-  ASSERT_TRUE(found) << "no check worker was seen";
-  EXPECT_EQ(crashed_status, 422) << crashed_body;
-  EXPECT_NE(crashed_body.find("Duck.glb: checking it crashed the loader (SIGSEGV)"), std::string::npos) << crashed_body;
+  return result;
+}
+
+httplib::MultipartFormDataItems duck_upload() {
+  return {
+      {"file", read_text(fs::path(TESSERA_SOURCE_DIR) / "examples/duck/Duck.glb"), "Duck.glb", "model/gltf-binary"}};
+}
+
+TEST(Workers, AnUploadWhoseCheckCrashesIsRefusedAndTheDaemonGoesOn) {
+  TempDir dir;
+  Daemon daemon(dir.path() / "data", kArgs);
+  auto c = daemon.client();
+  const httplib::MultipartFormDataItems items = duck_upload();
+  const SignalledUpload crashed = upload_signalling_the_check(daemon, items, SIGSEGV);
+  ASSERT_TRUE(crashed.checker_seen) << "no check worker was seen";
+  EXPECT_EQ(crashed.status, 422) << crashed.body;
+  EXPECT_NE(crashed.body.find("Duck.glb: checking it crashed the loader (SIGSEGV)"), std::string::npos) << crashed.body;
   auto again = c->Post("/v1/assets", items);
   ASSERT_TRUE(again);
   EXPECT_EQ(again->status, 201) << again->body;
@@ -236,31 +250,12 @@ TEST(Workers, AnUploadWhoseCheckNeverEndsIsRefusedInBoundedTime) {
   std::vector<std::string> args = kArgs;
   args.insert(args.end(), {"--asset-check-cpu-s", "1"});
   Daemon daemon(dir.path() / "data", args);
-  const std::string gltf = read_text(fs::path(TESSERA_SOURCE_DIR) / "examples/duck/Duck.glb");
-  httplib::MultipartFormDataItems items = {{"file", gltf, "Duck.glb", "model/gltf-binary"}};
-  int status = 0;
-  std::string body;
   const auto start = std::chrono::steady_clock::now();
-  std::thread upload([&] {
-    if (auto res = daemon.client()->Post("/v1/assets", items)) {
-      status = res->status;
-      body = res->body;
-    }
-  });
-  pid_t checker = 0;
-  const bool found = eventually(
-      [&] {
-        for (pid_t child : children_of(daemon.pid()))
-          if (command_line(child).find("--check-worker") != std::string::npos) checker = child;
-        return checker > 0;
-      },
-      30);
-  if (found) kill(checker, SIGSTOP);
-  upload.join();
+  const SignalledUpload stopped = upload_signalling_the_check(daemon, duck_upload(), SIGSTOP);
   const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  ASSERT_TRUE(found) << "no check worker was seen";
-  EXPECT_EQ(status, 422) << body;
-  EXPECT_NE(body.find("checking it took more than 2 s"), std::string::npos) << body;
+  ASSERT_TRUE(stopped.checker_seen) << "no check worker was seen";
+  EXPECT_EQ(stopped.status, 422) << stopped.body;
+  EXPECT_NE(stopped.body.find("checking it took more than 2 s"), std::string::npos) << stopped.body;
   EXPECT_LT(waited, 30) << "the upload waited " << waited << " s";
 }
 
