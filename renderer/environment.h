@@ -79,6 +79,23 @@ struct Environment {
     }
     return map->lighting(to_map(dir), pdf_dir) * color * intensity;
   }
+  // Samples a direction towards the environment, with density *pdf_dir (solid angle): by the map's luminance, or
+  // uniformly on the sphere without a map; *le_out receives the radiance arriving from it, read from the sampled texel
+  // rather than looked up again (PBR 4th ed. §12.5.2, image infinite lights). Light sampling and light emission (for
+  // light tracing and BDPT) both draw their environment directions here.
+  Vec3 sample_direction(Vec2 u, float* pdf_dir, Rgb* le_out) const {
+    if (!map) {
+      *pdf_dir = uniform_sphere_pdf();
+      *le_out = color * intensity;
+      return sample_uniform_sphere(u);
+    }
+    Rgb le;
+    const Vec3 wi = from_map(map->sample(u, pdf_dir, &le));
+    *le_out = le * color * intensity;
+    return wi;
+  }
+  // The density with which sample_direction() draws `dir`.
+  float direction_pdf(const Vec3& dir) const { return map ? map->pdf(to_map(dir)) : uniform_sphere_pdf(); }
   bool black() const { return intensity == 0 || is_black(color); }
   Rgb average() const { return map ? map->average() * color * intensity : color * intensity; }
 

@@ -190,19 +190,8 @@ bool LightSet::sample(const Vec3& p, float u_select, Vec2 u, LightSample* out) c
       return true;
     }
     case Kind::kEnvironment: {
-      const Environment& env = (*env_);
-      Vec3 wi;
       float pdf_dir;
-      if (env.map) {
-        // The radiance read where the direction was sampled, not looked up again from the direction.
-        Rgb le;
-        wi = env.from_map(env.map->sample(u, &pdf_dir, &le));
-        out->radiance = le * env.color * env.intensity;
-      } else {
-        wi = sample_uniform_sphere(u);
-        pdf_dir = uniform_sphere_pdf();
-        out->radiance = env.color * env.intensity;
-      }
+      const Vec3 wi = env_->sample_direction(u, &pdf_dir, &out->radiance);
       if (!(pdf_dir > 0)) return false;
       out->wi = wi;
       out->dist = kInfinity;
@@ -368,18 +357,8 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, LightEmis
       break;
     }
     case Kind::kEnvironment: {
-      const Environment& env = (*env_);
-      Vec3 wi;  // towards the environment
       float pdf_dir = 0;
-      if (env.map) {
-        Rgb le;
-        wi = env.from_map(env.map->sample(u_dir, &pdf_dir, &le));
-        out->radiance = le * env.color * env.intensity;
-      } else {
-        wi = sample_uniform_sphere(u_dir);
-        pdf_dir = uniform_sphere_pdf();
-        out->radiance = env.color * env.intensity;
-      }
+      const Vec3 wi = env_->sample_direction(u_dir, &pdf_dir, &out->radiance);  // towards the environment
       out->ray.dir = -wi;
       out->ray.origin = disc_origin(-wi, u_pos);
       out->n = -wi;
@@ -426,9 +405,8 @@ void LightSet::emission_pdf(uint32_t light, const Vec3& n, const Vec3& dir, floa
       return;
     }
     case Kind::kEnvironment: {
-      const Environment& env = (*env_);
       *pdf_pos = pmf * disc_pdf();
-      *pdf_dir = env.map ? env.map->pdf(env.to_map(-dir)) : uniform_sphere_pdf();
+      *pdf_dir = env_->direction_pdf(-dir);
       return;
     }
   }
