@@ -6,7 +6,7 @@
 
 #include "proto/asset_path.h"
 #include "proto/did_you_mean.h"
-#include "renderer/gltf_loader.h"
+#include "renderer/gltf/loader.h"
 #include "renderer/json_fields.h"
 #include "renderer/scene_error.h"
 #include "renderer/thread_pool.h"

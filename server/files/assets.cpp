@@ -10,8 +10,8 @@
 #include <system_error>
 
 #include "proto/asset_path.h"
-#include "renderer/gltf_container.h"
-#include "renderer/gltf_loader.h"
+#include "renderer/gltf/container.h"
+#include "renderer/gltf/loader.h"
 #include "renderer/scene_error.h"
 #include "renderer/scene_loader.h"
 #include "server/base/file_io.h"

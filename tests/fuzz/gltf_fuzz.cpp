@@ -6,8 +6,8 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "renderer/gltf_container.h"
-#include "renderer/gltf_loader.h"
+#include "renderer/gltf/container.h"
+#include "renderer/gltf/loader.h"
 #include "renderer/scene_error.h"
 #include "renderer/thread_pool.h"
 #include "tests/fuzz/fuzz_files.h"

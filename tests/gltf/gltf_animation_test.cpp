@@ -11,7 +11,7 @@
 #include <numbers>
 #include <optional>
 
-#include "renderer/gltf_internal.h"
+#include "renderer/gltf/internal.h"
 #include "renderer/job.h"
 #include "renderer/session.h"
 #include "renderer/thread_pool.h"

@@ -14,7 +14,7 @@
 #include <cstdlib>
 #include <random>
 
-#include "renderer/gltf_loader.h"
+#include "renderer/gltf/loader.h"
 #include "renderer/job.h"
 #include "renderer/scene_error.h"
 #include "renderer/session.h"

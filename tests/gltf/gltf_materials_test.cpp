@@ -4,7 +4,7 @@
 
 #include <unistd.h>
 
-#include "renderer/gltf_internal.h"
+#include "renderer/gltf/internal.h"
 #include "renderer/job.h"
 #include "tests/renderer/gltf_fixture.h"
 

@@ -15,8 +15,8 @@
 #include <stop_token>
 #include <thread>
 
-#include "renderer/gltf_container.h"
-#include "renderer/gltf_loader.h"
+#include "renderer/gltf/container.h"
+#include "renderer/gltf/loader.h"
 #include "renderer/job.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"

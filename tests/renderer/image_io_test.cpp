@@ -10,7 +10,7 @@
 
 #include <OpenImageIO/imageio.h>
 
-#include "renderer/gltf_loader.h"
+#include "renderer/gltf/loader.h"
 #include "renderer/image_io.h"
 #include "renderer/output.h"
 #include "tests/renderer/gltf_fixture.h"

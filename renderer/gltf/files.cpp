@@ -1,4 +1,4 @@
-// Reading a glTF asset: its container (.gltf JSON or .glb, renderer/gltf_container.h), the files it names, confined
+// Reading a glTF asset: its container (.gltf JSON or .glb, renderer/gltf/container.h), the files it names, confined
 // to its own folder (proto/asset_path.h), the extensions it requires, and its images.
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
@@ -10,8 +10,8 @@
 #include <string_view>
 
 #include "proto/asset_path.h"
-#include "renderer/gltf_container.h"
-#include "renderer/gltf_internal.h"
+#include "renderer/gltf/container.h"
+#include "renderer/gltf/internal.h"
 #include "renderer/image_input.h"
 #include "renderer/image_io.h"
 #include "renderer/thread_pool.h"

@@ -1,9 +1,9 @@
-// import_gltf: the asset read (gltf_files.cpp), its materials made (gltf_materials.cpp), its nodes posed
-// (gltf_animation.cpp), its scene graph walked (gltf_nodes.cpp) and its meshes built on the way (gltf_meshes.cpp); the
-// parts share renderer/gltf_internal.h.
-#include "renderer/gltf_loader.h"
+// import_gltf: the asset read (gltf/files.cpp), its materials made (gltf/materials.cpp), its nodes posed
+// (gltf/animation.cpp), its scene graph walked (gltf/nodes.cpp) and its meshes built on the way (gltf/meshes.cpp); the
+// parts share renderer/gltf/internal.h.
+#include "renderer/gltf/loader.h"
 
-#include "renderer/gltf_internal.h"
+#include "renderer/gltf/internal.h"
 
 namespace tessera {
 

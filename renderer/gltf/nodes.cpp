@@ -1,10 +1,10 @@
 // The glTF scene graph: which nodes a scene holds, their transforms in a pose (glTF 2.0, 3.5; as stated, or animated
-// by gltf_animation.cpp), meshes placed and instanced (shared meshes, EXT_mesh_gpu_instancing), skins posed by their
+// by gltf/animation.cpp), meshes placed and instanced (shared meshes, EXT_mesh_gpu_instancing), skins posed by their
 // joints, cameras and KHR_lights_punctual lights.
 #include <cmath>
 #include <functional>
 
-#include "renderer/gltf_internal.h"
+#include "renderer/gltf/internal.h"
 
 namespace tessera::gltf {
 

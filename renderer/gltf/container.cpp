@@ -1,4 +1,4 @@
-#include "renderer/gltf_container.h"
+#include "renderer/gltf/container.h"
 
 #include <cstdint>
 #include <cstring>

@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "proto/did_you_mean.h"
-#include "renderer/gltf_internal.h"
+#include "renderer/gltf/internal.h"
 #include "renderer/material.h"
 
 namespace tessera::gltf {

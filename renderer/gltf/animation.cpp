@@ -1,13 +1,13 @@
 // glTF animations (glTF 2.0, 3.11 "Animations"): an animation's channels and their samplers' keyframes read once,
 // then evaluated at any time into a Pose (every node's local transform and morph weights) that the scene graph is
-// walked with (gltf_nodes.cpp), so that skins, cameras and lights follow their animated nodes.
+// walked with (gltf/nodes.cpp), so that skins, cameras and lights follow their animated nodes.
 #include <algorithm>
 #include <cmath>
 #include <map>
 #include <tuple>
 
 #include "proto/did_you_mean.h"
-#include "renderer/gltf_internal.h"
+#include "renderer/gltf/internal.h"
 
 namespace tessera::gltf {
 

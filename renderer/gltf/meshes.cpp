@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cstring>
 
-#include "renderer/gltf_internal.h"
+#include "renderer/gltf/internal.h"
 
 namespace tessera::gltf {
 

@@ -1,7 +1,7 @@
-// The parts of the glTF importer (import_gltf, renderer/gltf_loader.h), one file each by concern: reading the asset
-// (gltf_files.cpp: container, confined URIs, extensions, images), materials (gltf_materials.cpp), animations
-// (gltf_animation.cpp: keyframes, interpolation, poses), meshes (gltf_meshes.cpp: accessors, morph targets, skins)
-// and nodes (gltf_nodes.cpp: the scene graph, instancing, cameras, lights). Internal to the renderer.
+// The parts of the glTF importer (import_gltf, renderer/gltf/loader.h), one file each by concern: reading the asset
+// (gltf/files.cpp: container, confined URIs, extensions, images), materials (gltf/materials.cpp), animations
+// (gltf/animation.cpp: keyframes, interpolation, poses), meshes (gltf/meshes.cpp: accessors, morph targets, skins)
+// and nodes (gltf/nodes.cpp: the scene graph, instancing, cameras, lights). Internal to the renderer.
 #pragma once
 
 #include <tiny_gltf.h>
@@ -19,7 +19,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "renderer/gltf_loader.h"
+#include "renderer/gltf/loader.h"
 #include "renderer/math.h"
 #include "renderer/scene.h"
 #include "renderer/scene_error.h"
@@ -84,7 +84,7 @@ struct Import {
 // An object's "extensions" as stored by tinygltf (its original JSON text), or {} when absent or unreadable.
 json parse_extensions(const std::string& text);
 
-// ---- gltf_files.cpp ----
+// ---- gltf/files.cpp ----
 
 // Reads the asset at import.path into import.doc and import.model: the container's framing, every URI confined to
 // the asset's folder (proto/asset_path.h), the required extensions supported (unsupported used ones are warnings),
@@ -94,13 +94,13 @@ void read_asset(Import& import);
 // Decodes the model's images (in parallel; headers only with options.headers_only) as "image<i>" for materials.
 std::map<std::string, std::shared_ptr<const ImagePixels>> decode_images(Import& import);
 
-// ---- gltf_compression.cpp ----
+// ---- gltf/compression.cpp ----
 
 // Decodes EXT_meshopt_compression buffer views and KHR_draco_mesh_compression primitives in import.model into
 // buffers of their own, which the views and the primitives' accessors then read. Throws SceneError.
 void decode_compressed_geometry(Import& import);
 
-// ---- gltf_materials.cpp ----
+// ---- gltf/materials.cpp ----
 
 struct Materials {
   std::vector<uint32_t> index;        // scene material of each glTF material
@@ -125,7 +125,7 @@ void apply_variant(Import& import);
 // Makes the glTF materials (replaced by the job's of the same name) in the scene, textures from `images`.
 Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<const ImagePixels>> images);
 
-// ---- gltf_meshes.cpp ----
+// ---- gltf/meshes.cpp ----
 
 // Reads accessors with every offset checked against the bytes that exist; SceneError at `pointer` otherwise.
 class AccessorReader {
@@ -162,7 +162,7 @@ std::vector<Mesh> build_meshes(Import& import, const AccessorReader& reader, Mat
                                const TransformD& world, const std::vector<TransformD>* joints = nullptr,
                                const std::vector<double>* weights = nullptr);
 
-// ---- gltf_animation.cpp ----
+// ---- gltf/animation.cpp ----
 
 // A node's local transform as the asset states it (glTF 2.0, 3.5.2 "Transformations"): a matrix, or a translation, a
 // rotation (a unit quaternion x, y, z, w) and a scale, the properties animations target.
@@ -226,7 +226,7 @@ std::optional<Animation> chosen_animation(Import& import);
 // do not match the specification (times not increasing, an output count that does not fit the input's).
 Animation read_animation(Import& import, const AccessorReader& reader, int index);
 
-// ---- gltf_nodes.cpp ----
+// ---- gltf/nodes.cpp ----
 
 // The root nodes of the default scene (or, without scenes, every node that is nobody's child), after checking that
 // walking them makes at most options.max_instances node instances.

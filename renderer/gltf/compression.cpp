@@ -7,7 +7,7 @@
 
 #include <cstring>
 
-#include "renderer/gltf_internal.h"
+#include "renderer/gltf/internal.h"
 
 namespace tessera::gltf {
 
