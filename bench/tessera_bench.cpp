@@ -31,6 +31,7 @@
 #include "renderer/sampling.h"
 #include "renderer/scene.h"
 #include "renderer/session.h"
+#include "renderer/thread_pool.h"
 
 // Counting allocator: every operator new of the program (the render threads' included) bumps one counter.
 std::atomic<uint64_t> g_allocations{0};

@@ -1,8 +1,6 @@
 #include "renderer/accel.h"
 
 #include <embree3/rtcore.h>
-#include <pmmintrin.h>
-#include <xmmintrin.h>
 
 #include <cmath>
 #include <cstring>
@@ -14,11 +12,6 @@
 #include "renderer/sampler.h"
 
 namespace tessera {
-
-void enable_flush_to_zero() {
-  _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-  _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
-}
 
 namespace {
 

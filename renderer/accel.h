@@ -52,7 +52,4 @@ class Accel {
   std::unique_ptr<Impl> impl_;
 };
 
-// Sets flush-to-zero and denormals-are-zero on the calling thread, as Embree asks of every thread that traces rays.
-void enable_flush_to_zero();
-
 }  // namespace tessera

@@ -4,7 +4,8 @@
 #include <atomic>
 #include <exception>
 
-#include "renderer/accel.h"
+#include <pmmintrin.h>
+#include <xmmintrin.h>
 
 namespace tessera {
 
@@ -16,6 +17,11 @@ unsigned hardware_threads() {
 }
 
 }  // namespace
+
+void enable_flush_to_zero() {
+  _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+  _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+}
 
 struct ThreadPool::Batch {
   const std::function<void(size_t, int)>* fn;

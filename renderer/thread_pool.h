@@ -53,5 +53,8 @@ void run_in_parallel(size_t count, const std::function<void(size_t)>& fn, unsign
 // At most `helpers` threads, across the process, help run_in_parallel calls at once (default: one per hardware
 // thread but one); a daemon sets it from its --threads.
 void limit_parallel_helpers(int helpers);
+// Sets flush-to-zero and denormals-are-zero on the calling thread, as Embree asks of every thread that traces rays
+// (Embree 3 API reference, "Performance Recommendations"); the pool's threads set it when they start.
+void enable_flush_to_zero();
 
 }  // namespace tessera
