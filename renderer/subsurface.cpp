@@ -24,7 +24,7 @@ std::shared_ptr<const Medium> subsurface_medium(const SubsurfaceParams& p) {
     sigma_s[c] = static_cast<float>(alpha * sigma_t);
     sigma_a[c] = static_cast<float>((1 - alpha) * sigma_t);
   }
-  return std::make_shared<HomogeneousMedium>(sigma_a, sigma_s, p.anisotropy);
+  return std::make_shared<HomogeneousMedium>(sigma_a, sigma_s, p.anisotropy, true);
 }
 
 SubsurfaceParams read_subsurface(const nlohmann::json& j, const std::string& pointer, bool with_weight) {

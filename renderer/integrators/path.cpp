@@ -221,8 +221,12 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         prev_pdf = ps.pdf;
         prev_p = p;
         if (depth + volume_depth >= settings.rr_start_depth) {
+          // In a material's subsurface volume the walk is rouletted on its throughput alone: a floor on the
+          // probability of ending it (kept elsewhere so that paths end even where nothing absorbs) would weight the
+          // walks that survive hundreds of scatterings by 1 / 0.95^n, fireflies; max_volume_depth bounds the walk.
+          // Cycles' random walk likewise ends a walk by its throughput (Chiang, Kutz and Burley 2016, §4).
           const float u_rr = sampler.get1d();
-          const float q = std::max(0.05f, 1 - max_component(throughput) * eta_scale);
+          const float q = std::max(current->subsurface() ? 0.0f : 0.05f, 1 - max_component(throughput) * eta_scale);
           if (u_rr < q) break;
           throughput /= 1 - q;
         } else {

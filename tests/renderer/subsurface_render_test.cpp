@@ -150,7 +150,7 @@ json box(const Vec3& lo, const Vec3& hi, const std::string& material) {
 // 2 int_0^1 r(mu) mu dmu, with r(mu) the radiance a camera sees at cos mu from the normal (by reciprocity the plane
 // albedo at incidence mu), integrated by 3-point Gauss–Legendre quadrature in mu^2 (exact for r of degree 5 in mu^2).
 // The inversion inverts van de Hulst's fit of this albedo: the renders agree with A within 0.02 (the fit's accuracy)
-// at A = 0.2, 0.5, 0.8 (measured 0.198, 0.497, 0.799), the quadrature's standard error a quarter of that or less.
+// at A = 0.2, 0.5, 0.8 (measured 0.198, 0.497, 0.799), the quadrature's standard error a tenth of that or less.
 TEST(Subsurface, ThickSlabReflectsSubsurfaceColor) {
   // Gauss–Legendre nodes and weights on [0, 1] for the variable x = mu^2 (dx = 2 mu dmu).
   const double nodes[3] = {0.5 - std::sqrt(0.15), 0.5, 0.5 + std::sqrt(0.15)};
@@ -178,7 +178,9 @@ TEST(Subsurface, ThickSlabReflectsSubsurfaceColor) {
     }
     const double se = std::sqrt(var);
     std::printf("A %.1f: spherical albedo %.4f +- %.4f\n", a, albedo, se);
-    EXPECT_LT(se, 0.005) << a;
+    // The walk's roulette without a floor (path.cpp) keeps the error small: with the floor of 0.05 per scattering
+    // the same renders had a standard error of 0.0044 at A = 0.8.
+    EXPECT_LT(se, 0.002) << a;
     EXPECT_NEAR(albedo, a, 0.02) << a;
   }
 }
