@@ -13,19 +13,14 @@
 #include "renderer/job.h"
 #include "renderer/scene_error.h"
 #include "renderer/session.h"
+#include "tests/renderer/test_util.h"
 
 namespace tessera {
 namespace {
 
 using nlohmann::json;
 
-std::vector<float> render(const json& scene_doc, const RenderSettings& settings) {
-  auto scene = load_scene(scene_doc, "/scene", SceneLoadOptions{});
-  ThreadPool pool(0);
-  RenderSession session(scene, settings, pool);
-  session.run();
-  return session.film().resolve();
-}
+using test::render_document;
 
 // Random walks in a dense medium take many steps and, behind glass, many internal reflections: the limits are raised
 // so that no path is cut short (cutting one loses its light).
@@ -98,7 +93,7 @@ TEST(Subsurface, WhiteFurnaceVanishes) {
        {"subsurface_radius_scale", 1}},
   };
   for (const json& material : materials) {
-    const std::vector<float> img = render(sphere_scene(material), settings(24, 512, 7));
+    const std::vector<float> img = render_document(sphere_scene(material), settings(24, 512, 7));
     for (int c = 0; c < 3; ++c) {
       const Mean m = pixel_mean(img, c);
       std::printf("%s channel %d: %.5f +- %.5f\n", material.dump().c_str(), c, m.mean, m.se);
@@ -114,7 +109,7 @@ TEST(Subsurface, WhiteFurnaceVanishes) {
 TEST(Subsurface, DarkerColourDarkerObject) {
   double previous = 2, previous_se = 0;
   for (double a : {1.0, 0.8, 0.5, 0.2}) {
-    const Mean m = pixel_mean(render(sphere_scene(subsurface(a, 1.4)), settings(24, 64, 11)), 1);
+    const Mean m = pixel_mean(render_document(sphere_scene(subsurface(a, 1.4)), settings(24, 64, 11)), 1);
     std::printf("subsurface_color %.1f: %.4f +- %.4f\n", a, m.mean, m.se);
     EXPECT_LT(m.mean + 4 * std::hypot(m.se, previous_se), previous) << a;
     previous = m.mean;
@@ -171,7 +166,7 @@ TEST(Subsurface, ThickSlabReflectsSubsurfaceColor) {
           {"camera", {{"from", {sin_t, mu, 0}}, {"to", {0, 0, 0}}, {"fov_deg", 2}}},
           {"environment", {{"color", 1.0}}},
       };
-      const Mean m = pixel_mean(render(scene, settings(32, 128, 100 + k)), 1);
+      const Mean m = pixel_mean(render_document(scene, settings(32, 128, 100 + k)), 1);
       std::printf("A %.1f, mu %.3f: r %.4f +- %.4f\n", a, mu, m.mean, m.se);
       albedo += weights[k] * m.mean;
       var += weights[k] * weights[k] * m.se * m.se;
@@ -190,60 +185,53 @@ TEST(Subsurface, ThickSlabReflectsSubsurfaceColor) {
 TEST(Subsurface, BadInputNamesTheField) {
   const json good = sphere_scene(subsurface(0.5, 1.4));
   EXPECT_NO_THROW(load_scene(good, "/scene", SceneLoadOptions{}));
-  auto expect_error = [](const json& doc, const std::string& pointer, const std::string& words = "") {
-    try {
-      load_scene(doc, "/scene", SceneLoadOptions{});
-      ADD_FAILURE() << "no error for " << pointer;
-    } catch (const SceneError& e) {
-      EXPECT_EQ(e.pointer(), pointer) << e.what();
-      EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
-    }
-  };
   const std::string mp = "/scene/materials/skin";
   auto with = [&](const std::string& key, const json& value) {
     json doc = good;
     doc["materials"]["skin"][key] = value;
     return doc;
   };
-  expect_error(with("subsurface_color", -0.1), mp + "/subsurface_color");
-  expect_error(with("subsurface_color", {0.5, 1.2, 0.5}), mp + "/subsurface_color/1");
-  expect_error(with("subsurface_radius", 0), mp + "/subsurface_radius");
-  expect_error(with("subsurface_radius", -1), mp + "/subsurface_radius");
-  expect_error(with("subsurface_radius", std::numeric_limits<double>::infinity()), mp + "/subsurface_radius");
-  expect_error(with("subsurface_radius_scale", {1, 0, 1}), mp + "/subsurface_radius_scale/1");
-  expect_error(with("subsurface_radius_scale", {1, 1, -2}), mp + "/subsurface_radius_scale/2");
+  test::expect_scene_error(with("subsurface_color", -0.1), mp + "/subsurface_color");
+  test::expect_scene_error(with("subsurface_color", {0.5, 1.2, 0.5}), mp + "/subsurface_color/1");
+  test::expect_scene_error(with("subsurface_radius", 0), mp + "/subsurface_radius");
+  test::expect_scene_error(with("subsurface_radius", -1), mp + "/subsurface_radius");
+  test::expect_scene_error(with("subsurface_radius", std::numeric_limits<double>::infinity()),
+                           mp + "/subsurface_radius");
+  test::expect_scene_error(with("subsurface_radius_scale", {1, 0, 1}), mp + "/subsurface_radius_scale/1");
+  test::expect_scene_error(with("subsurface_radius_scale", {1, 1, -2}), mp + "/subsurface_radius_scale/2");
   for (double g : {1.0, -1.0, 1.5})
-    expect_error(with("subsurface_scatter_anisotropy", g), mp + "/subsurface_scatter_anisotropy", "between -1");
-  expect_error(with("attenuation_color", 0.5), mp + "/attenuation_color", "subsurface");
-  expect_error(with("attenuation_distance", 2), mp + "/attenuation_distance", "subsurface");
+    test::expect_scene_error(with("subsurface_scatter_anisotropy", g), mp + "/subsurface_scatter_anisotropy",
+                             "between -1");
+  test::expect_scene_error(with("attenuation_color", 0.5), mp + "/attenuation_color", "subsurface");
+  test::expect_scene_error(with("attenuation_distance", 2), mp + "/attenuation_distance", "subsurface");
   // An object has one interior: the material's, or its own medium.
   json both = good;
   both["objects"][0]["medium"] = {{"sigma_s", 1}};
-  expect_error(both, "/scene/objects/0/medium", "subsurface");
+  test::expect_scene_error(both, "/scene/objects/0/medium", "subsurface");
   // gltf_pbr's subsurface.
   json pbr = good;
   pbr["materials"]["skin"] = {{"type", "gltf_pbr"}, {"metallic", 0}, {"subsurface_weight", 1.5}};
-  expect_error(pbr, mp + "/subsurface_weight");
+  test::expect_scene_error(pbr, mp + "/subsurface_weight");
   pbr["materials"]["skin"]["subsurface_weight"] = 0.5;
   EXPECT_TRUE(load_scene(pbr, "/scene", SceneLoadOptions{})->has_scattering_media());
   pbr["materials"]["skin"]["subsurface_radius"] = -0.5;
-  expect_error(pbr, mp + "/subsurface_radius");
+  test::expect_scene_error(pbr, mp + "/subsurface_radius");
   pbr["materials"]["skin"].erase("subsurface_radius");
   pbr["materials"]["skin"]["attenuation_color"] = 0.5;
-  expect_error(pbr, mp + "/attenuation_color", "subsurface");
+  test::expect_scene_error(pbr, mp + "/attenuation_color", "subsurface");
   pbr["materials"]["skin"].erase("attenuation_color");
   pbr["materials"]["skin"]["ior"] = 1.0;
   pbr["materials"]["skin"]["thin_walled"] = false;
-  expect_error(pbr, mp + "/ior", "subsurface");
+  test::expect_scene_error(pbr, mp + "/ior", "subsurface");
   pbr["materials"]["skin"].erase("ior");
   pbr["objects"][0]["medium"] = {{"sigma_s", 1}};
-  expect_error(pbr, "/scene/objects/0/medium", "subsurface");
+  test::expect_scene_error(pbr, "/scene/objects/0/medium", "subsurface");
   // Thin-walled, the subsurface is diffuse transmission: no interior, no scattering medium.
   pbr["objects"][0].erase("medium");
   pbr["materials"]["skin"]["thin_walled"] = true;
   EXPECT_FALSE(load_scene(pbr, "/scene", SceneLoadOptions{})->has_scattering_media());
   pbr["materials"]["skin"]["diffuse_transmission"] = 0.5;
-  expect_error(pbr, mp + "/subsurface_weight", "diffuse_transmission");
+  test::expect_scene_error(pbr, mp + "/subsurface_weight", "diffuse_transmission");
 
   for (const std::string name : {"bdpt", "light"}) {
     const json job = {{"scene", good}, {"render", {{"integrator", name}, {"width", 8}, {"height", 8}}}};
