@@ -202,7 +202,11 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         if (features && !features->shaded) note_shading(*features, throughput, nullptr, Vec3(0), wo_world);
         straight = false;
         const HenyeyGreenstein phase = current->phase();
-        const bool sample_light = use_light_sampling && !lights.empty();
+        // A shadow ray from inside an object's medium crosses the object's boundary; when no surface of the scene is
+        // index-matched, every boundary blocks it, so the light sample would add nothing: it is not taken (its
+        // numbers are spent all the same). A random walk under glass then traces one ray per step, not two.
+        const bool sample_light =
+            use_light_sampling && !lights.empty() && (scene.index_matched() || current == medium.outside());
         const auto [u_light_select, u_light] = light_numbers(sampler, sample_light);
         sampler.skip1d();  // a lobe choice: the phase function has one lobe
         const PhaseSample ps = phase.sample(wo_world, sampler.get2d());
