@@ -1,10 +1,13 @@
 """Blender (Cycles, CPU) side of bench/subsurface.sh: a UV sphere of radius 1 with a Principled BSDF that is all
-random-walk subsurface (Subsurface 1, method RANDOM_WALK) under a uniform grey world, seen by a camera on +z. Renders
-at 1 sample and at SPP samples and prints the difference of the two times, as bench/cycles_render.py does.
+random-walk subsurface (Subsurface 1, method RANDOM_WALK) under a uniform grey world, seen by a camera on +z. Times
+it as bench/cycles_common.py does.
 Usage: blender -b --factory-startup --python cycles_subsurface.py -- OUT.exr SIZE SPP BOUNCES THREADS COLOR RADIUS
        IOR ROUGHNESS"""
-import sys, time
+import os, sys
 import bpy
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import cycles_common  # noqa: E402
 
 a = sys.argv[sys.argv.index("--") + 1:]
 out, size, spp, bounces, threads = a[0], int(a[1]), int(a[2]), int(a[3]), int(a[4])
@@ -38,30 +41,5 @@ world.use_nodes = True
 world.node_tree.nodes["Background"].inputs[0].default_value = (0.8, 0.8, 0.8, 1)
 world.node_tree.nodes["Background"].inputs[1].default_value = 1.0
 scene.world = world
-scene.render.engine = "CYCLES"
-c = scene.cycles
-c.device = "CPU"
-c.use_denoising = False
-c.use_adaptive_sampling = False
-c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = bounces
-c.caustics_reflective = c.caustics_refractive = True
-c.sample_clamp_direct = c.sample_clamp_indirect = 0
-c.pixel_filter_type = "BOX"
-c.filter_width = 1.0
-scene.render.threads_mode = "FIXED"
-scene.render.threads = threads
-scene.render.resolution_x = scene.render.resolution_y = size
-scene.render.resolution_percentage = 100
-scene.render.use_persistent_data = False
-scene.render.image_settings.file_format = "OPEN_EXR"
-scene.render.image_settings.color_depth = "32"
-scene.render.filepath = out
-c.samples = 1
-t = time.time()
-bpy.ops.render.render(write_still=False)
-t_one = time.time() - t
-c.samples = spp
-t = time.time()
-bpy.ops.render.render(write_still=True)
-t_all = time.time() - t
-print("CYCLES_RENDER_SECONDS %.3f" % ((t_all - t_one) * spp / max(spp - 1, 1)))
+cycles_common.configure(scene, size, size, bounces, threads, out)
+cycles_common.time_render(scene, spp)
