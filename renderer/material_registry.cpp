@@ -64,6 +64,12 @@ std::unique_ptr<Material> MaterialRegistry::create(const nlohmann::json& params,
   }
   material->normal_scale = params::number(params, "normal_scale", pointer, 1.0f, 0.0f, 10.0f);
   if (params.contains("attenuation_distance") || params.contains("attenuation_color")) {
+    // A model that defines its interior (subsurface parameters) has no room for a second one.
+    if (material->interior)
+      throw SceneError(
+          pointer + (params.contains("attenuation_color") ? "/attenuation_color" : "/attenuation_distance"),
+          "this material's subsurface parameters define its interior medium: attenuation_color and "
+          "attenuation_distance (an absorbing interior) cannot be given with them");
     const float distance = params::number(params, "attenuation_distance", pointer, 1.0f, 1e-6f, 1e9f);
     const Rgb color = params::rgb(params, "attenuation_color", pointer, Rgb(1), 1e-6f, 1.0f);
     const double rgb[3] = {color.x, color.y, color.z};

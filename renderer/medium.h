@@ -39,6 +39,12 @@ class Medium {
   virtual FreeFlight sample_free_flight(float t_max, const Rgb& throughput, float u) const = 0;
   // The phase function at a scattering event.
   virtual HenyeyGreenstein phase() const = 0;
+  // True for the interior of a subsurface material (subsurface.h): dense, bright and entered through its surface;
+  // the path tracer random-walks in it without the Russian roulette floor it keeps elsewhere.
+  bool subsurface() const { return subsurface_; }
+
+ protected:
+  bool subsurface_ = false;
 };
 
 // A medium of the same coefficients everywhere: sigma_a and sigma_s per scene unit and per channel, and a
@@ -53,8 +59,10 @@ class Medium {
 // probabilities, as long as the mixture density is positive wherever a channel's integrand is.
 class HomogeneousMedium final : public Medium {
  public:
-  explicit HomogeneousMedium(const Rgb& sigma_a, const Rgb& sigma_s = Rgb(0), float g = 0)
-      : sigma_a_(sigma_a), sigma_s_(sigma_s), sigma_t_(sigma_a + sigma_s), g_(g) {}
+  explicit HomogeneousMedium(const Rgb& sigma_a, const Rgb& sigma_s = Rgb(0), float g = 0, bool subsurface = false)
+      : sigma_a_(sigma_a), sigma_s_(sigma_s), sigma_t_(sigma_a + sigma_s), g_(g) {
+    subsurface_ = subsurface;
+  }
   const Rgb& sigma_a() const { return sigma_a_; }
   const Rgb& sigma_s() const { return sigma_s_; }
   const Rgb& sigma_t() const { return sigma_t_; }

@@ -329,6 +329,11 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
       const std::string& name = obj["material"].get_ref<const std::string&>();
       const json& material_doc = (*material_docs)[name];
       const std::string type = material_doc.value("type", std::string());
+      if (scene->materials[material]->interior && !material_doc.contains("attenuation_color") &&
+          !material_doc.contains("attenuation_distance"))
+        throw SceneError(mp, "the material \"" + name +
+                                 "\" has subsurface parameters, an interior medium of its own: give the object a "
+                                 "medium or the material subsurface parameters, not both");
       if (type != "dielectric" && type != "interface")
         throw SceneError(at(p, "material"),
                          "the boundary of a medium must be a \"dielectric\" or \"interface\" material; \"" + name +

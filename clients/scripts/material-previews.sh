@@ -37,6 +37,7 @@ previews=(
   'gltf_pbr {"type": "gltf_pbr", "base_color": [0.9, 0.6, 0.2], "metallic": 0.0, "roughness": 0.45, "clearcoat": 1.0, "clearcoat_roughness": 0.05}'
   'mix {"type": "mix", "a": {"type": "lambert", "albedo": [0.7, 0.7, 0.65]}, "b": {"type": "conductor", "metal": "gold", "roughness": 0.15}, "weight": {"checker": {"a": 0, "b": 1, "scale": 8}}}'
   'two_sided {"type": "two_sided", "material": {"type": "plastic", "diffuse": [0.6, 0.5, 0.1], "roughness": 0.2}}'
+  'subsurface {"type": "subsurface", "subsurface_color": [0.9, 0.75, 0.5], "subsurface_radius": 0.3, "subsurface_radius_scale": [1, 0.8, 0.6], "ior": 1.45, "roughness": 0.1}'
 )
 
 for entry in "${previews[@]}"; do

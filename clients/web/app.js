@@ -3,7 +3,7 @@
 import { api, allowed, ApiError, getBlob, getToken, onConnection, setToken, TERMINAL } from "./api.js";
 import { CLIENT_EXAMPLES, examplesFrom } from "./examples.js";
 import { cryptomatteOfPass, decodeExr, ExrError } from "./exr.js";
-import { materialForm, NOT_ON_PREVIEW_STAGE } from "./materials.js";
+import { MATERIAL_PRESETS, materialForm, NOT_ON_PREVIEW_STAGE } from "./materials.js";
 import { ImageViewer } from "./viewer.js";
 
 const $ = (sel) => document.querySelector(sel);
@@ -387,7 +387,23 @@ function buildMaterialForm() {
   currentMaterialForm = model ? materialForm(model) : null;
   $("#material-params").replaceChildren(...(currentMaterialForm ? [currentMaterialForm.element] : []));
 }
-$("#material-type").addEventListener("change", buildMaterialForm);
+$("#material-type").addEventListener("change", () => {
+  $("#material-preset").value = "";
+  buildMaterialForm();
+});
+// Presets: the model chosen, then its parameters set on the form.
+for (const preset of MATERIAL_PRESETS) {
+  const o = document.createElement("option");
+  o.value = o.textContent = preset.name;
+  $("#material-preset").append(o);
+}
+$("#material-preset").addEventListener("change", () => {
+  const preset = MATERIAL_PRESETS.find((p) => p.name === $("#material-preset").value);
+  if (!preset || !materialModels.some((m) => m.type === preset.material.type)) return;
+  $("#material-type").value = preset.material.type;
+  buildMaterialForm();
+  currentMaterialForm.set(preset.material);
+});
 
 // Uploads
 function uploadFiles() {

@@ -26,6 +26,40 @@ export const PRIMARY_PARAMETERS = [
 // that is not drawn (it only marks where an object's medium begins, in a scene job).
 export const NOT_ON_PREVIEW_STAGE = ["interface"];
 
+// Presets the material tab offers: a model and its parameters, shown on the form as if typed. The subsurface ones have
+// an index-matched surface (ior 1), behind which every scattering samples the lights (README, "Subsurface scattering");
+// mean free paths are for the preview stage's spheres of radius 1.
+export const MATERIAL_PRESETS = [
+  {
+    name: "Skin",
+    material: {
+      type: "subsurface", ior: 1, subsurface_color: [0.78, 0.52, 0.42], subsurface_radius: 0.08,
+      subsurface_radius_scale: [1, 0.4, 0.2],
+    },
+  },
+  {
+    name: "Wax",
+    material: {
+      type: "subsurface", ior: 1, subsurface_color: [0.9, 0.78, 0.55], subsurface_radius: 0.25,
+      subsurface_radius_scale: [1, 0.85, 0.6],
+    },
+  },
+  {
+    name: "Jade",
+    material: {
+      type: "subsurface", ior: 1, subsurface_color: [0.45, 0.75, 0.5], subsurface_radius: 0.5,
+      subsurface_radius_scale: [0.7, 1, 0.8], subsurface_scatter_anisotropy: 0.3,
+    },
+  },
+  {
+    name: "Marble",
+    material: {
+      type: "subsurface", ior: 1, subsurface_color: [0.92, 0.91, 0.88], subsurface_radius: 0.12,
+      subsurface_radius_scale: [1, 0.95, 0.9],
+    },
+  },
+];
+
 let uid = 0;
 const nextId = (name) => `mat-${name}-${++uid}`;
 

@@ -34,6 +34,10 @@ inline float power_cosine_pdf(float cos_theta, float exponent) {
   return cos_theta > 0 ? (exponent + 1) * kInv2Pi * std::pow(cos_theta, exponent) : 0.0f;
 }
 
+// The `interface` material (interface.cpp): an index-matched boundary that is not drawn, for models whose surface is
+// one.
+std::unique_ptr<Material> make_interface_material();
+
 // Roughness parameters of a microfacet model: "distribution" ("ggx" | "beckmann"), "roughness" (isotropic alpha)
 // or "alpha_x" / "alpha_y" (anisotropic, along the tangent / bitangent), texture-able.
 struct RoughnessParams {

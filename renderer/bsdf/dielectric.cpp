@@ -18,6 +18,7 @@
 #include "renderer/bsdf/rough_dielectric.h"
 #include "renderer/scene_error.h"
 #include "renderer/spectrum.h"
+#include "renderer/subsurface.h"
 
 namespace tessera {
 
@@ -233,11 +234,31 @@ MaterialFactory dielectric_factory(bool thin) {
   };
 }
 
+// The `subsurface` material: the scattering medium of its subsurface parameters (subsurface.h) behind a dielectric
+// boundary, smooth or rough as a `dielectric`'s, untinted; at ior 1 the boundary is index-matched, an `interface`
+// (what the subsurface parameters are defined against: their slab reflects subsurface_color).
+std::unique_ptr<Material> make_subsurface(const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
+  const SubsurfaceParams sss = read_subsurface(j, ptr, false);
+  const float ior = params::number(j, "ior", ptr, 1.5f, 1.0f, 4.0f);
+  std::unique_ptr<Material> m;
+  if (ior == 1) {
+    m = make_interface_material();
+  } else {
+    RgbParam white;
+    white.value = Rgb(1);
+    m = std::make_unique<DielectricMaterial>(false, read_roughness(j, ptr, ctx, 0.0f, false), keep_refracting(ior),
+                                             0.0f, white, white);
+  }
+  m->interior = subsurface_medium(sss);
+  return m;
+}
+
 }  // namespace
 
 void register_dielectric(MaterialRegistry& registry) {
   registry.add("dielectric", dielectric_factory(false));
   registry.add("thin_dielectric", dielectric_factory(true));
+  registry.add("subsurface", make_subsurface);
 }
 
 }  // namespace tessera

@@ -75,12 +75,17 @@
 // every angle bounds the film lobe's albedo from above, so W takes E_s of mix(f0_d, f0', iridescence), with f0' the
 // least such f0 over seven angles (cos 1 to 0.1) per channel: energy is lost, not gained, where the film reflects
 // less than its bound. The lobe probabilities keep Schlick's Fresnel (they are sampling weights only).
+// Subsurface (OpenPBR's subsurface lobe; subsurface.h): a solid's dielectric base is mix(mix(diffuse, subsurface,
+// subsurface_weight), translucent, transmission); the subsurface share refracts, untinted, through the transmission
+// lobe's interface into the interior medium, where the path tracer random-walks until it leaves. The two refracting
+// shares are one lobe of weight t + (1 - t) subsurface_weight, tinted by their weighted mean colour.
 #include "renderer/bsdf/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/bsdf/rough_dielectric.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"
 #include "renderer/spectrum.h"
+#include "renderer/subsurface.h"
 #include "renderer/thread_pool.h"
 
 namespace tessera {
@@ -243,6 +248,9 @@ struct GltfLobes {
   Rgb f0_d{0.04f, 0.04f, 0.04f};
   float f90_d = 1;
   float transmission = 0;
+  // The transmission lobe's tint: the base colour, or with subsurface its mix with the untinted interface into the
+  // subsurface volume (whose colour is the medium's).
+  Rgb transmission_color{1, 1, 1};
   float alpha_t = 1;   // the transmission lobe's
   bool solid = false;  // transmission through a dielectric volume (refracting), not a thin wall
   float eta = 1.5f;    // the volume's IOR, for solid transmission
@@ -283,7 +291,7 @@ class GltfPbrBsdf final : public Bsdf {
       // The back side (wo below): the mirrored configuration of the coat seen from behind, normal -c mirrored.
       coat_frame_back_ = Frame::from_normal(Vec3(-c.x, -c.y, c.z));
     }
-    if (solid()) interface_ = RoughDielectric{dist_t_, l.eta, 1.0f, max_component(l.base_color)};
+    if (solid()) interface_ = RoughDielectric{dist_t_, l.eta, 1.0f, max_component(l.transmission_color)};
     f0_albedo_ = l.f0_d;
     if (l.iridescence > 0 && l.metallic < 1) {
       const Rgb bound = l.film_f0_bound.x >= 0
@@ -348,7 +356,7 @@ class GltfPbrBsdf final : public Bsdf {
     const float m = l_.metallic;
     const Rgb diffuse = l_.base_color * ((1 - m) * (1 - l_.transmission) * (1 - l_.diffuse_transmission)) +
                         l_.diffuse_transmission_color * ((1 - m) * (1 - l_.transmission) * l_.diffuse_transmission);
-    return {diffuse, lerp_rgb(f0_albedo_, l_.base_color, m), l_.base_color * ((1 - m) * l_.transmission)};
+    return {diffuse, lerp_rgb(f0_albedo_, l_.base_color, m), l_.transmission_color * ((1 - m) * l_.transmission)};
   }
 
  private:
@@ -431,7 +439,7 @@ class GltfPbrBsdf final : public Bsdf {
       bool transmitted;
       const float fi = interface_.eval(wo_in, wi_in, &transmitted);
       const float share = (1 - m) * l_.transmission;
-      f = (transmitted ? l_.base_color : Rgb(1)) * (share * fi);
+      f = (transmitted ? l_.transmission_color : Rgb(1)) * (share * fi);
       if (pdf_out) *pdf_out = lobes_at(wo, wo_in.z < 0)[2] * interface_.pdf(wo_in, wi_in);
     }
     Vec3 h;
@@ -457,7 +465,7 @@ class GltfPbrBsdf final : public Bsdf {
       if (l_.iridescence > 0) fd = lerp_rgb(fd, film_fresnel(l_.f0_d, vh), l_.iridescence);
       const float fd_max = max_component(fd);
       if (transmit) {
-        f = l_.base_color * ((1 - m) * l_.transmission * (1 - fd_max) * dv);
+        f = l_.transmission_color * ((1 - m) * l_.transmission * (1 - fd_max) * dv);
       } else {
         lobes_at(wo, wo_in.z < 0);  // fills cache_.albedo_o
         const float w = (1 - cache_.albedo_o) * (1 - specular_albedo(wr.z)) / (1 - specular_average_);
@@ -542,10 +550,10 @@ class GltfPbrBsdf final : public Bsdf {
       // The interface reflects and transmits: its share of the surface, by what it reflects and what it passes.
       p[1] =
           (1 - fc) * ((1 - m) * (1 - t) * luminance(fd) + m * luminance(fresnel_schlick(l_.base_color, Rgb(1), wo.z)));
-      p[2] = (1 - fc) * (1 - m) * t * (fd_max + (1 - fd_max) * base);
+      p[2] = (1 - fc) * (1 - m) * t * (fd_max + (1 - fd_max) * luminance(l_.transmission_color));
     } else {
       p[1] = (1 - fc) * ((1 - m) * luminance(fd) + m * luminance(fresnel_schlick(l_.base_color, Rgb(1), wo.z)));
-      p[2] = (1 - fc) * (1 - m) * t * (1 - fd_max) * base;
+      p[2] = (1 - fc) * (1 - m) * t * (1 - fd_max) * luminance(l_.transmission_color);
     }
     p[3] = fc;
     p[4] = 0;
@@ -625,8 +633,9 @@ class GltfPbrMaterial final : public Material {
   float f0_ior = 0.04f;
   float transmission_roughness_scale = 1;  // clamp(2 ior - 2, 0, 1)
   float ior = 1.5f;
-  bool solid = false;    // "thin_walled": false, and an index that refracts
-  float dispersion = 0;  // KHR_materials_dispersion: 20 / V_d, a solid's only (Material::dispersive)
+  bool solid = false;           // "thin_walled": false, and an index that refracts
+  float subsurface_weight = 0;  // a solid's share of the dielectric base that is its subsurface volume (interior)
+  float dispersion = 0;         // KHR_materials_dispersion: 20 / V_d, a solid's only (Material::dispersive)
   // The film's f0 bound (film_f0_bound), worked out once where nothing it depends on varies over the surface.
   Rgb film_bound{-1, -1, -1};
   // metallic's and roughness's textures as one RGB lookup, when they read channels of the same image.
@@ -672,6 +681,14 @@ class GltfPbrMaterial final : public Material {
     }
     l.f0_d = dielectric_f0(f0, sp, &l.f90_d);
     l.transmission = clamp(transmission.eval(sp), 0.0f, 1.0f);
+    l.transmission_color = l.base_color;
+    if (subsurface_weight > 0) {
+      // OpenPBR's dielectric base: mix(mix(diffuse, subsurface, subsurface_weight), translucent, transmission). The
+      // subsurface share refracts through the same interface into the material's interior medium, untinted.
+      const float t = l.transmission, w = (1 - t) * subsurface_weight;
+      l.transmission = t + w;
+      l.transmission_color = (l.base_color * t + Rgb(w)) / l.transmission;
+    }
     l.solid = solid;
     l.eta = eta;
     l.clearcoat = clamp(clearcoat.eval(sp), 0.0f, 1.0f);
@@ -715,6 +732,29 @@ class GltfPbrMaterial final : public Material {
   }
 };
 
+// The subsurface lobe of a gltf_pbr with subsurface_weight above 0: a solid's interior becomes the subsurface medium
+// (subsurface.h), entered through the transmission lobe's interface. A thin-walled surface has no interior: its
+// subsurface falls back to diffuse transmission of subsurface_color (as glTF's KHR_materials_volume_scatter does
+// without KHR_materials_volume).
+void read_subsurface_lobe(const nlohmann::json& j, const std::string& ptr, const SubsurfaceParams& sss,
+                          bool thin_walled, GltfPbrMaterial& m) {
+  if (thin_walled) {
+    if (j.contains("diffuse_transmission") || j.contains("diffuse_transmission_color"))
+      throw SceneError(ptr + "/subsurface_weight",
+                       "a thin-walled surface's subsurface is diffuse transmission of subsurface_color: give "
+                       "diffuse_transmission or subsurface_weight, not both");
+    m.diffuse_transmission.value = sss.weight;
+    m.diffuse_transmission_color.value = sss.color;
+    return;
+  }
+  if (!m.solid)
+    throw SceneError(ptr + "/ior",
+                     "subsurface on a solid gltf_pbr is entered by refraction and needs an ior above 1.001; the "
+                     "subsurface material has an index-matched boundary (ior 1)");
+  m.subsurface_weight = sss.weight;
+  m.interior = subsurface_medium(sss);
+}
+
 }  // namespace
 
 void register_gltf_pbr(MaterialRegistry& registry) {
@@ -733,7 +773,10 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     m->ior = ior;
     // An index within 0.1 % of 1 bends rays by less than a few hundredths of a degree and makes the refraction half
     // vector (Walter 2007, eq. 16) degenerate: such a volume is drawn thin-walled.
-    m->solid = !params::boolean(j, "thin_walled", ptr, true) && ior > 1.001f;
+    // Subsurface makes a solid unless the surface is said to be thin-walled.
+    const SubsurfaceParams sss = read_subsurface(j, ptr, true);
+    const bool thin_walled = params::boolean(j, "thin_walled", ptr, !(sss.weight > 0));
+    m->solid = !thin_walled && ior > 1.001f;
     // Dispersion parts the colours of light refracted through a solid; a thin wall lets light out as it came in.
     m->dispersion = params::number(j, "dispersion", ptr, 0.0f, 0.0f, 100.0f);
     m->dispersive = m->solid && m->dispersion > 0;
@@ -746,6 +789,7 @@ void register_gltf_pbr(MaterialRegistry& registry) {
     m->sheen_roughness = params::float_param(j, "sheen_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
     m->diffuse_transmission = params::float_param(j, "diffuse_transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);
     m->diffuse_transmission_color = params::rgb_param(j, "diffuse_transmission_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
+    if (sss.weight > 0) read_subsurface_lobe(j, ptr, sss, thin_walled, *m);
     m->iridescence = params::float_param(j, "iridescence", ptr, 0.0f, 0.0f, 1.0f, ctx);
     m->iridescence_ior = params::number(j, "iridescence_ior", ptr, 1.3f, 1.0f, 4.0f);
     m->iridescence_thickness = params::float_param(j, "iridescence_thickness", ptr, 1.0f, 0.0f, 1.0f, ctx);

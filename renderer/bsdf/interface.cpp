@@ -3,7 +3,7 @@
 // Physically Based Rendering, 4th ed., §11.4). It is not drawn: it only marks where a medium begins and ends. Its BSDF
 // is the delta transmission straight on, f = delta(wi + wo) / |cos theta_i|; the path tracer steps through such
 // surfaces without a bounce (Material::index_matched), the other integrators see a specular transmission.
-#include "renderer/material.h"
+#include "renderer/bsdf/common.h"
 
 namespace tessera {
 namespace {
@@ -33,9 +33,13 @@ class InterfaceMaterial final : public Material {
 
 }  // namespace
 
+std::unique_ptr<Material> make_interface_material() {
+  return std::make_unique<InterfaceMaterial>();
+}
+
 void register_interface(MaterialRegistry& registry) {
   registry.add("interface", [](const nlohmann::json&, const std::string&, const MaterialContext&) {
-    return std::make_unique<InterfaceMaterial>();
+    return make_interface_material();
   });
 }
 

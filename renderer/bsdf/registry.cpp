@@ -7,7 +7,7 @@ void register_lambert(MaterialRegistry& registry);  // lambert, emission
 void register_phong(MaterialRegistry& registry);    // phong, blinn_phong, phong_classic, blinn_phong_classic
 void register_cook_torrance(MaterialRegistry& registry);
 void register_ward(MaterialRegistry& registry);
-void register_dielectric(MaterialRegistry& registry);  // dielectric, thin_dielectric
+void register_dielectric(MaterialRegistry& registry);  // dielectric, thin_dielectric, subsurface
 void register_conductor(MaterialRegistry& registry);
 void register_plastic(MaterialRegistry& registry);
 void register_gltf_pbr(MaterialRegistry& registry);

@@ -202,7 +202,11 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         if (features && !features->shaded) note_shading(*features, throughput, nullptr, Vec3(0), wo_world);
         straight = false;
         const HenyeyGreenstein phase = current->phase();
-        const bool sample_light = use_light_sampling && !lights.empty();
+        // A shadow ray from inside an object's medium crosses the object's boundary; when no surface of the scene is
+        // index-matched, every boundary blocks it, so the light sample would add nothing: it is not taken (its
+        // numbers are spent all the same). A random walk under glass then traces one ray per step, not two.
+        const bool sample_light =
+            use_light_sampling && !lights.empty() && (scene.index_matched() || current == medium.outside());
         const auto [u_light_select, u_light] = light_numbers(sampler, sample_light);
         sampler.skip1d();  // a lobe choice: the phase function has one lobe
         const PhaseSample ps = phase.sample(wo_world, sampler.get2d());
@@ -221,8 +225,12 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         prev_pdf = ps.pdf;
         prev_p = p;
         if (depth + volume_depth >= settings.rr_start_depth) {
+          // In a material's subsurface volume the walk is rouletted on its throughput alone: a floor on the
+          // probability of ending it (kept elsewhere so that paths end even where nothing absorbs) would weight the
+          // walks that survive hundreds of scatterings by 1 / 0.95^n, fireflies; max_volume_depth bounds the walk.
+          // Cycles' random walk likewise ends a walk by its throughput (Chiang, Kutz and Burley 2016, §4).
           const float u_rr = sampler.get1d();
-          const float q = std::max(0.05f, 1 - max_component(throughput) * eta_scale);
+          const float q = std::max(current->subsurface() ? 0.0f : 0.05f, 1 - max_component(throughput) * eta_scale);
           if (u_rr < q) break;
           throughput /= 1 - q;
         } else {

@@ -70,6 +70,17 @@ const std::vector<BsdfCase>& bsdf_cases() {
         {"base_color", {0.9, 0.7, 0.5}},
         {"thin_walled", false}},
        true},
+      // Subsurface: a solid whose refracting lobe is the transmission's share tinted by the base colour and the
+      // subsurface share untinted (the subsurface volume's colour is the medium's).
+      {"gltf_subsurface",
+       {{"type", "gltf_pbr"},
+        {"metallic", 0},
+        {"roughness", 0.4},
+        {"transmission", 0.3},
+        {"subsurface_weight", 0.6},
+        {"ior", 1.4},
+        {"base_color", {0.8, 0.3, 0.2}}},
+       true},
       {"gltf_clearcoat_specular",
        {{"type", "gltf_pbr"},
         {"metallic", 0},

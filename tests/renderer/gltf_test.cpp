@@ -738,6 +738,24 @@ TEST(GltfHostile, RequiredUnsupportedExtensionFailsOptionalWarns) {
   EXPECT_NE(imp.warnings[0].find("EXT_unknown_thing"), std::string::npos);
 }
 
+// glTF's subsurface drafts are not read (their mapping of the multiple-scattering colour is still changing): an asset
+// that requires one is refused naming it, rather than rendered without its scattering; one that only uses it warns.
+TEST(GltfHostile, SubsurfaceDraftsAreRefusedWhenRequired) {
+  for (const char* name : {"KHR_materials_scatter", "KHR_materials_volume_scatter"}) {
+    GltfBuilder b = one_triangle();
+    b.doc["extensionsUsed"] = {name, "KHR_materials_volume"};
+    b.doc["extensionsRequired"] = {name};
+    b.write(fixture_dir(), "scatter_required");
+    expect_refused(fixture_dir() / "scatter_required.gltf", name);
+    b.doc.erase("extensionsRequired");
+    b.write(fixture_dir(), "scatter_used");
+    Scene scene;
+    GltfImport imp = import_gltf(fixture_dir() / "scatter_used.gltf", "/scene/gltf", scene, {});
+    ASSERT_EQ(imp.warnings.size(), 1u) << name;
+    EXPECT_NE(imp.warnings[0].find(name), std::string::npos) << imp.warnings[0];
+  }
+}
+
 // The public sample assets of examples/ import without warnings and render something; an animated one (the spinning
 // cube) posed at a time, since without one the warning that its animation is not applied is right.
 TEST(Gltf, SampleAssetsRenderWithoutWarnings) {

@@ -18,13 +18,7 @@ namespace {
 
 using nlohmann::json;
 
-std::vector<float> render(const json& scene_doc, const RenderSettings& settings) {
-  auto scene = load_scene(scene_doc, "/scene", SceneLoadOptions{});
-  ThreadPool pool(0);
-  RenderSession session(scene, settings, pool);
-  session.run();
-  return session.film().resolve();
-}
+using test::render_document;
 
 RenderSettings settings(int size, uint32_t spp, Estimator e, uint64_t seed, int max_depth = 16) {
   RenderSettings s;
@@ -73,7 +67,7 @@ TEST(Media, WhiteFurnaceVanishes) {
   const Estimator estimators[] = {Estimator::kHemisphere, Estimator::kArea, Estimator::kMis};
   for (const json& medium : media) {
     for (Estimator e : estimators) {
-      const Rgb mean = mean_color(render(furnace_scene(medium), settings(24, 1024, e, 3, 0)));
+      const Rgb mean = mean_color(render_document(furnace_scene(medium), settings(24, 1024, e, 3, 0)));
       std::printf("%s %s: %.4f %.4f %.4f\n", medium.dump().c_str(), estimator_name(e), mean.x, mean.y, mean.z);
       for (int c = 0; c < 3; ++c)
         EXPECT_NEAR(mean[c], 1.0, 0.005) << medium.dump() << ", " << estimator_name(e) << ", channel " << c;
@@ -85,7 +79,7 @@ TEST(Media, WhiteFurnaceVanishes) {
 TEST(Media, VolumeDepthLimitsCrossingsAndScattering) {
   RenderSettings s = settings(16, 16, Estimator::kMis, 5, 8);
   s.integrator.max_volume_depth = 0;
-  const std::vector<float> img = render(furnace_scene({{"sigma_s", 1.0}}), s);
+  const std::vector<float> img = render_document(furnace_scene({{"sigma_s", 1.0}}), s);
   const float* centre = &img[(8 * 16 + 8) * 3];
   EXPECT_EQ(centre[1], 0.0f);
 }
@@ -105,7 +99,7 @@ TEST(Media, SceneMediumAttenuatesAndHidesTheSky) {
       {"environment", {{"color", 1.0}}},
       {"medium", {{"sigma_a", {0.1, 0.3, 0.0}}}},
   };
-  const Rgb mean = mean_color(render(scene, settings(8, 4, Estimator::kMis, 1)));
+  const Rgb mean = mean_color(render_document(scene, settings(8, 4, Estimator::kMis, 1)));
   // The square is head-on, the pixels' rays slightly oblique: at most 20/2 degrees off, a path 1.5 % longer.
   EXPECT_NEAR(mean.x, 2 * std::exp(-0.1 * d), 0.01);
   EXPECT_NEAR(mean.y, 2 * std::exp(-0.3 * d), 0.01);
@@ -113,7 +107,7 @@ TEST(Media, SceneMediumAttenuatesAndHidesTheSky) {
   json sky_only = scene;
   sky_only["camera"]["to"] = {0, 0, 1};
   EXPECT_TRUE(load_scene(sky_only, "/scene", SceneLoadOptions{})->warnings.empty());
-  const Rgb sky = mean_color(render(sky_only, settings(8, 4, Estimator::kMis, 1)));
+  const Rgb sky = mean_color(render_document(sky_only, settings(8, 4, Estimator::kMis, 1)));
   EXPECT_EQ(sky.x, 0.0f);
   EXPECT_EQ(sky.y, 0.0f);
   EXPECT_NEAR(sky.z, 1.0, 1e-5);  // the channel the fog does not absorb
@@ -125,7 +119,7 @@ TEST(Media, SceneMediumAttenuatesAndHidesTheSky) {
 // Region means of K independent renders and their standard errors.
 test::RegionStats estimate(const json& scene, Estimator e, int size, int regions, int runs, uint32_t spp) {
   return test::grid_region_stats(runs, size, regions, [&](int k) {
-    return render(scene, settings(size, spp, e, 500 + 7919 * k + 104729 * static_cast<uint64_t>(e), 16));
+    return render_document(scene, settings(size, spp, e, 500 + 7919 * k + 104729 * static_cast<uint64_t>(e), 16));
   });
 }
 
@@ -181,48 +175,39 @@ TEST(Media, EstimatorsAgreeOnScatteringSpheres) {
 TEST(Media, BadInputNamesTheField) {
   const json good = furnace_scene({{"sigma_a", 0.1}, {"sigma_s", 1.0}, {"g", 0.2}});
   EXPECT_NO_THROW(load_scene(good, "/scene", SceneLoadOptions{}));
-  auto expect_error = [](const json& doc, const std::string& pointer, const std::string& words = "") {
-    try {
-      load_scene(doc, "/scene", SceneLoadOptions{});
-      ADD_FAILURE() << "no error for " << pointer;
-    } catch (const SceneError& e) {
-      EXPECT_EQ(e.pointer(), pointer) << e.what();
-      EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
-    }
-  };
   json bad = good;
   bad["objects"][0]["medium"]["sigma_a"] = -0.1;
-  expect_error(bad, "/scene/objects/0/medium/sigma_a");
+  test::expect_scene_error(bad, "/scene/objects/0/medium/sigma_a");
   bad = good;
   bad["objects"][0]["medium"]["sigma_s"] = {1, -2, 1};
-  expect_error(bad, "/scene/objects/0/medium/sigma_s/1");
+  test::expect_scene_error(bad, "/scene/objects/0/medium/sigma_s/1");
   for (double g : {1.0, -1.0, 1.5}) {
     bad = good;
     bad["objects"][0]["medium"]["g"] = g;
-    expect_error(bad, "/scene/objects/0/medium/g", "between -1 and 1");
+    test::expect_scene_error(bad, "/scene/objects/0/medium/g", "between -1 and 1");
   }
   bad = good;
   bad["objects"][0]["medium"]["sigma_t"] = 1;
-  expect_error(bad, "/scene/objects/0/medium/sigma_t");
+  test::expect_scene_error(bad, "/scene/objects/0/medium/sigma_t");
   bad = good;
   bad["objects"][0]["medium"] = 3;
-  expect_error(bad, "/scene/objects/0/medium");
+  test::expect_scene_error(bad, "/scene/objects/0/medium");
   bad = good;
   bad["objects"][0] = {{"shape", "rectangle"}, {"corner", {0, 0, 0}},    {"edge1", {1, 0, 0}},
                        {"edge2", {0, 1, 0}},   {"material", "boundary"}, {"medium", {{"sigma_s", 1}}}};
-  expect_error(bad, "/scene/objects/0/medium", "rectangle");
+  test::expect_scene_error(bad, "/scene/objects/0/medium", "rectangle");
   bad = good;
   bad["materials"]["boundary"] = {{"type", "dielectric"}, {"attenuation_color", {0.5, 0.5, 0.5}}};
-  expect_error(bad, "/scene/objects/0/medium", "attenuation");
+  test::expect_scene_error(bad, "/scene/objects/0/medium", "attenuation");
   bad = good;
   bad["materials"]["boundary"] = {{"type", "lambert"}};
-  expect_error(bad, "/scene/objects/0/material", "dielectric");
+  test::expect_scene_error(bad, "/scene/objects/0/material", "dielectric");
   bad = good;
   bad["medium"] = {{"g", -2}};
-  expect_error(bad, "/scene/medium/g");
+  test::expect_scene_error(bad, "/scene/medium/g");
   bad = good;
   bad["medium"] = {{"sigma_a", {0, 0, -1}}};
-  expect_error(bad, "/scene/medium/sigma_a/2");
+  test::expect_scene_error(bad, "/scene/medium/sigma_a/2");
   // Light tracing and BDPT have no medium vertices yet: a job that asks for them on a scattering medium is refused
   // at its integrator, and a medium that only absorbs is still rendered.
   for (const std::string name : {"bdpt", "light"}) {

@@ -4,11 +4,39 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <string>
 #include <vector>
 
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
 #include "renderer/math.h"
+#include "renderer/scene_error.h"
+#include "renderer/scene_loader.h"
+#include "renderer/session.h"
 
 namespace tessera::test {
+
+// Expects loading `doc` (at pointer "/scene") to fail at `pointer` with a message that holds `words`, as a 422 names
+// the field.
+inline void expect_scene_error(const nlohmann::json& doc, const std::string& pointer, const std::string& words = "") {
+  try {
+    load_scene(doc, "/scene", SceneLoadOptions{});
+    ADD_FAILURE() << "no error for " << pointer;
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.pointer(), pointer) << e.what();
+    EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+  }
+}
+
+// A scene document rendered with `settings` on every core: the film's resolved RGB.
+inline std::vector<float> render_document(const nlohmann::json& scene_doc, const RenderSettings& settings) {
+  auto scene = load_scene(scene_doc, "/scene", SceneLoadOptions{});
+  ThreadPool pool(0);
+  RenderSession session(scene, settings, pool);
+  session.run();
+  return session.film().resolve();
+}
 
 // Regularised upper incomplete gamma Q(a, x), for the chi-square survival function (Numerical Recipes 6.2).
 inline double gamma_q(double a, double x) {
