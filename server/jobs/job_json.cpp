@@ -4,6 +4,7 @@
 
 #include "renderer/render_settings.h"
 #include "server/base/time_format.h"
+#include "server/jobs/render_work.h"
 
 namespace tessera::server {
 
@@ -64,6 +65,43 @@ json units_json(const std::vector<UnitRecord>& units, int64_t now) {
   return {{"total", units.size()}, {"done", done}, {"queued", queued}, {"running", running}, {"done_by_node", nodes}};
 }
 
+// The frames of a frame range job (render_work.h: renders_frames), bounded whatever the range's length: counts, and
+// the frames done, running and failed as ranges of frame numbers [first, last] (every step-th frame between them). A
+// range renders its frames in order and a run skips those done before (FrameRangeRender), so the frames done are the
+// first ones, as many as its progress counts whole frames of samples: a frame's samples are counted once its files
+// are written. A running job renders the next; a failed job failed on it.
+json frames_json(const JobRecord& job, const RenderSettings& settings, const JobProgress& p, const std::string& self) {
+  const FrameRange& range = *settings.frames;
+  const uint64_t total = frame_count(range);
+  uint64_t done = settings.spp ? std::min<uint64_t>(p.samples_done / settings.spp, total) : 0;
+  if (job.state == JobState::kSucceeded) done = total;
+  auto frame = [&](uint64_t i) { return range.start + static_cast<int64_t>(i) * range.step; };
+  auto ranges_from = [&](uint64_t first, uint64_t count) {
+    json out = json::array();
+    if (count > 0) out.push_back({frame(first), frame(first + count - 1)});
+    return out;
+  };
+  const bool next = done < total;
+  const bool running = next && job.state == JobState::kRunning;
+  const bool failed = next && job.state == JobState::kFailed;
+  const std::string pattern = self + "/frames/{frame}/result.";
+  json links = json::object();
+  if (output_spec_from_text(job.outputs).png) links["result_png"] = pattern + "png";
+  if (output_spec_from_text(job.outputs).exr) links["result_exr"] = pattern + "exr";
+  return {{"start", range.start},
+          {"end", range.end},
+          {"step", range.step},
+          {"total", total},
+          {"done", done},
+          {"running", running ? 1 : 0},
+          {"failed", failed ? 1 : 0},
+          {"done_ranges", ranges_from(0, done)},
+          {"running_ranges", ranges_from(done, running ? 1 : 0)},
+          {"failed_ranges", ranges_from(done, failed ? 1 : 0)},
+          {"latest", done > 0 ? json(frame(done - 1)) : json(nullptr)},
+          {"links", links}};
+}
+
 }  // namespace
 
 json job_status_json(const JobRecord& job, const std::optional<JobProgress>& live, std::optional<int> queue_position,
@@ -109,12 +147,17 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
   } catch (const std::runtime_error&) {
     spec.png = spec.exr = false;
   }
+  json frames = nullptr;
   try {
-    render = render_settings_status_json(render_settings_from_text(job.settings));
+    const RenderSettings settings = render_settings_from_text(job.settings);
+    render = render_settings_status_json(settings);
+    if (renders_frames(settings)) frames = frames_json(job, settings, p, self);
   } catch (const std::runtime_error&) {
   }
-  // A job cancelled after a pass has the image of its last complete pass as its (partial) results.
-  if (job.state == JobState::kSucceeded || (job.state == JobState::kCancelled && p.samples_done > 0)) {
+  // A job cancelled after a pass has the image of its last complete pass as its (partial) results. A frame range's
+  // results are its frames' (frames.links).
+  if (frames.is_null() &&
+      (job.state == JobState::kSucceeded || (job.state == JobState::kCancelled && p.samples_done > 0))) {
     if (spec.png) links["result_png"] = self + "/result.png";
     if (spec.exr) links["result_exr"] = self + "/result.exr";
     // Each render pass's PNG, by the pass's name.
@@ -152,6 +195,7 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
         {"eta_s", p.eta_s ? json(*p.eta_s) : json(nullptr)},
         {"samples_per_s", p.samples_per_s}}},
       {"units", split ? units_json(units, now) : json(nullptr)},
+      {"frames", frames},
       {"stop_reason", text_or_null(stop_reason)},
       {"error", text_or_null(job.error)},
       {"outputs", outputs},

@@ -1,6 +1,7 @@
 #include "server/jobs/job_service.h"
 
 #include <algorithm>
+#include <charconv>
 #include <filesystem>
 
 #include "proto/contract.h"
@@ -172,7 +173,12 @@ std::variant<Submitted, Problem> JobService::submit(const Caller& caller, Submit
     job.document = accepted.document.dump();
     job.settings = render_settings_text(accepted.settings);
     job.outputs = output_spec_text(accepted.outputs);
-    job.progress.samples_total = accepted.settings.spp;
+    // A frame range counts every frame's samples (render_work.h: FrameRangeRender reports its progress so).
+    job.progress.samples_total =
+        renders_frames(accepted.settings)
+            ? static_cast<uint32_t>(std::min<uint64_t>(
+                  uint64_t{accepted.settings.spp} * frame_count(*accepted.settings.frames), UINT32_MAX))
+            : accepted.settings.spp;
     // On a store several nodes share, a large job is split into units they render at once (work_units.h).
     job.units = store_.splits_jobs() ? unit_count(accepted.settings, options_.unit_pixel_samples) : 1;
     job.owner = caller.name;
@@ -280,6 +286,23 @@ std::unique_ptr<FileReader> JobService::job_log(const JobRecord& job) {
 
 namespace {
 
+// The frame range of a job that renders one (render_work.h: renders_frames); nothing otherwise.
+std::optional<FrameRange> frame_range_of(const JobRecord& job) {
+  try {
+    const RenderSettings settings = render_settings_from_text(job.settings);
+    if (renders_frames(settings)) return settings.frames;
+  } catch (const std::runtime_error&) {
+    // A record whose settings cannot be read renders nothing that can be served.
+  }
+  return std::nullopt;
+}
+
+// "1-48" or "1-48 step 2".
+std::string describe_range(const FrameRange& range) {
+  return std::to_string(range.start) + "-" + std::to_string(range.end) +
+         (range.step > 1 ? " step " + std::to_string(range.step) : "");
+}
+
 // Why a job has no results yet, or nothing: a cancelled job keeps the image of its last complete pass, if it had one
 // (partial results).
 std::optional<Problem> results_not_ready(const JobRecord& job) {
@@ -293,6 +316,11 @@ std::optional<Problem> results_not_ready(const JobRecord& job) {
 }  // namespace
 
 std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobRecord& job, JobFile file) {
+  if (auto range = frame_range_of(job))
+    return Problem{409,
+                   "the job renders frames " + describe_range(*range) + ": each frame has its results, at /v1/jobs/" +
+                       job.id + "/frames/{frame}/" + job_file_name(file),
+                   std::nullopt};
   if (auto problem = results_not_ready(job)) return *problem;
   const std::string format = file == JobFile::kResultExr ? "exr" : "png";
   bool asked = false;
@@ -306,7 +334,49 @@ std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobR
   return published_result(job, file);
 }
 
+std::variant<std::unique_ptr<FileReader>, Problem> JobService::frame_result(const JobRecord& job,
+                                                                            std::string_view frame, JobFile file,
+                                                                            std::string_view pass) {
+  const auto range = frame_range_of(job);
+  if (!range) return Problem{404, "the job renders no frame range (render.frames)", std::nullopt};
+  int64_t f = 0;
+  const auto [end, ec] = std::from_chars(frame.data(), frame.data() + frame.size(), f);
+  const bool in_range = ec == std::errc() && end == frame.data() + frame.size() && f >= range->start &&
+                        f <= range->end && (f - range->start) % range->step == 0;
+  if (!in_range)
+    return Problem{404, "frame " + std::string(frame) + " is not one of the job's frames " + describe_range(*range),
+                   std::nullopt};
+  JobFile wanted = file;
+  bool asked = false;
+  try {
+    if (!pass.empty()) {
+      const std::vector<std::string> aovs = render_settings_from_text(job.settings).aovs;
+      const auto f_pass = pass_file(pass);
+      asked = f_pass && std::find(aovs.begin(), aovs.end(), pass) != aovs.end();
+      if (f_pass) wanted = *f_pass;
+    } else {
+      const OutputSpec outputs = output_spec_from_text(job.outputs);
+      asked = file == JobFile::kResultExr ? outputs.exr : outputs.png;
+    }
+  } catch (const std::runtime_error&) {
+    // A record that cannot be read asked for nothing that can be served.
+  }
+  if (!asked)
+    return Problem{
+        404,
+        std::string("the job did not ask for ") + (pass.empty() ? std::string(job_file_name(file)) : std::string(pass)),
+        std::nullopt};
+  if (auto reader = files_.open_frame(job.id, wanted, f, frame_padding(*range))) return reader;
+  return Problem{404, "frame " + std::to_string(f) + " is not done (the job is " + job_state_name(job.state) + ")",
+                 std::nullopt};
+}
+
 std::variant<std::unique_ptr<FileReader>, Problem> JobService::pass(const JobRecord& job, std::string_view name) {
+  if (auto range = frame_range_of(job))
+    return Problem{409,
+                   "the job renders frames " + describe_range(*range) + ": each frame has its passes, at /v1/jobs/" +
+                       job.id + "/frames/{frame}/aovs/" + std::string(name) + ".png",
+                   std::nullopt};
   std::vector<std::string> aovs;
   try {
     aovs = render_settings_from_text(job.settings).aovs;
@@ -457,7 +527,8 @@ JobService::Outcome JobService::requeue(const std::string& id) {
     // From scratch: nothing of the last run survives.
     for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng}) files_.remove(id, f);
     for (JobFile f : kResultFiles) files_.remove(id, f);
-    files_.remove_units(id);  // a split job's units start over too (the store forgot their checkpoints)
+    files_.remove_units(id);   // a split job's units start over too (the store forgot their checkpoints)
+    files_.remove_frames(id);  // and a frame range's frames
   }
   log(LogLevel::kInfo, "job requeued", {{"job", id}});
   log_.add(id, "requeued by a client: the render starts over");

@@ -367,6 +367,13 @@ struct Scheduler::Run {
   OutputPipeline outputs;
   uint32_t samples_counted = 0;  // the samples per pixel counted in SchedulerHooks::samples_rendered
   bool ended = false;
+  std::optional<int64_t> frame;  // of a frame range: the frame under way, which the log lines of its passes name
+
+  // "frame 12: " while a frame of a range renders, "unit 3: " for a unit of a split job; empty otherwise.
+  std::string who() const {
+    if (frame) return "frame " + std::to_string(*frame) + ": ";
+    return is_unit() ? printf_string("unit %d: ", record.unit + 1) : std::string();
+  }
 
   Run(RenderSlot& s, const JobRecord& r, const RenderRequest& request)
       : slot(s), record(r), settings(run_settings(request)), outputs(settings, output_spec_from_text(r.outputs)) {}
@@ -390,6 +397,10 @@ class Scheduler::RunReport final : public RunListener {
   }
   void pass(const RenderProgress& progress, const std::string& write_error) override {
     scheduler_.publish_pass(run_, progress, write_error);
+  }
+  void frame(int64_t frame, const std::string& event) override {
+    run_.frame = frame;
+    scheduler_.log_.add(run_.id(), run_.who() + event);
   }
   void ended(const RunEnd& end) override {
     run_.ended = true;
@@ -434,9 +445,13 @@ void Scheduler::end_run_reported(Run& run, const RunEnd& end) {
     case RunOutcome::kFailed:
       record_failure(slot, end.error, end.progress.elapsed_s, end.input_refused);
       return;
-    case RunOutcome::kCrashed:
-      end_crashed(slot, run.record, end);
+    case RunOutcome::kCrashed: {
+      // A frame range's run died rendering a frame: its error names the frame.
+      RunEnd named = end;
+      if (run.frame) named.error = run.who() + end.error;
+      end_crashed(slot, run.record, named);
       return;
+    }
   }
 }
 
@@ -464,6 +479,15 @@ void Scheduler::log_start(const Run& run) {
                            record.unit + 1, record.units, static_cast<unsigned>(s.first_sample),
                            static_cast<unsigned>(s.first_sample + s.spp), s.width, s.height, s.integrator.name.c_str(),
                            runner_->threads(), static_cast<long long>(run.slot.epoch), runner_->where()));
+  else if (renders_frames(s))
+    log_.add(
+        record.id,
+        printf_string("rendering frames %lld..%lld step %lld (%llu frames) of %dx%d, %u spp, integrator "
+                      "%s, on %d threads %s",
+                      static_cast<long long>(s.frames->start), static_cast<long long>(s.frames->end),
+                      static_cast<long long>(s.frames->step), static_cast<unsigned long long>(frame_count(*s.frames)),
+                      s.width, s.height, static_cast<unsigned>(s.spp), s.integrator.name.c_str(), runner_->threads(),
+                      runner_->where()));
   else
     log_.add(record.id, printf_string("rendering %dx%d, %u spp, integrator %s, on %d threads %s", s.width, s.height,
                                       static_cast<unsigned>(s.spp), s.integrator.name.c_str(), runner_->threads(),
@@ -484,8 +508,7 @@ void Scheduler::publish_pass(Run& run, const RenderProgress& p, const std::strin
     // unit's. A pass whose files could not be written (a full disk) is not worth the render: the last good
     // checkpoint stays, and the next pass writes both again.
     if (!write_error.empty()) throw std::runtime_error(write_error);
-    log_.add(id, printf_string("%spass %u: %u/%u spp, %.2f s, %.3g samples/s",
-                               run.is_unit() ? printf_string("unit %d: ", run.record.unit + 1).c_str() : "",
+    log_.add(id, printf_string("%spass %u: %u/%u spp, %.2f s, %.3g samples/s", run.who().c_str(),
                                static_cast<unsigned>(p.pass), static_cast<unsigned>(p.samples_done),
                                static_cast<unsigned>(p.samples_total), p.elapsed_s, p.samples_per_s));
     // The store, then the status: what a client reads of the job while it renders is never ahead of what the store
@@ -748,9 +771,14 @@ void Scheduler::resumed(Run& run, const std::optional<RenderProgress>& restored,
   }
   log(LogLevel::kInfo, "job resumed from its checkpoint",
       {{"job", id}, {"samples_done", restored->samples_done}, {"passes", restored->pass}});
-  log_.add(id, printf_string("%sresuming from its checkpoint at %u spp (%u passes)",
-                             takeover.empty() ? "" : takeover.c_str(), static_cast<unsigned>(restored->samples_done),
-                             static_cast<unsigned>(restored->pass)));
+  if (renders_frames(run.settings))
+    log_.add(id, printf_string("%sresuming: %u of its %llu frames were rendered by earlier runs and are kept",
+                               takeover.c_str(), static_cast<unsigned>(restored->samples_done / run.settings.spp),
+                               static_cast<unsigned long long>(frame_count(*run.settings.frames))));
+  else
+    log_.add(id, printf_string("%sresuming from its checkpoint at %u spp (%u passes)",
+                               takeover.empty() ? "" : takeover.c_str(), static_cast<unsigned>(restored->samples_done),
+                               static_cast<unsigned>(restored->pass)));
   const JobProgress progress = to_job_progress(*restored);
   {
     std::lock_guard lock(mutex_);

@@ -7,7 +7,11 @@ namespace tessera::server {
 
 int unit_count(const RenderSettings& settings, uint64_t unit_pixel_samples) {
   if (unit_pixel_samples == 0) return 1;
-  if (settings.time_limit_s > 0 || settings.noise_target > 0) return 1;
+  // A render that stops on time or noise, or stops pixels adaptively (each pixel's stop depends on all the samples
+  // before it, so sample ranges rendered apart would stop differently than one render of them all), renders whole.
+  if (settings.time_limit_s > 0 || settings.noise_target > 0 || settings.adaptive_threshold > 0) return 1;
+  // A frame range is rendered frame by frame in one run (server/jobs/render_work.h: renders_frames).
+  if (settings.frames && frame_count(*settings.frames) > 1) return 1;
   // In double: width x height x spp may pass 2^64; the unit count only needs to be about right.
   const double units = std::ceil(static_cast<double>(settings.width) * static_cast<double>(settings.height) *
                                  static_cast<double>(settings.spp) / static_cast<double>(unit_pixel_samples));

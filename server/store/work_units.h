@@ -6,8 +6,10 @@
 // seconds on one thread (2 x 10^7 by default: the path-traced Cornell box runs at 3-6 x 10^5 pixel samples per second
 // per thread on the 2-vCPU machine we measured, bench/cluster_scaling.sh; nodes of many threads want it larger), and a
 // job is split into ceil(width x height x spp / unit_pixel_samples) units,
-// at most one per sample. A job that stops on a time limit or a noise target is one unit: its stop is a property of
-// the whole render, not of a sample range. Samples are spread evenly, the first units taking one more when the
+// at most one per sample. A job that stops on a time limit or a noise target, or samples adaptively
+// (render.adaptive_threshold), is one unit: its stop is a property of the whole render, not of a sample range, and an
+// adaptive image is then the same bits on one node and on a cluster. A frame range is one unit too (rendered frame by
+// frame). Samples are spread evenly, the first units taking one more when the
 // division leaves a remainder.
 #pragma once
 
