@@ -19,6 +19,24 @@ using nlohmann::json;
 
 namespace {
 
+// The frame range of a job that renders one (work_units.h: renders_frames); nothing otherwise.
+std::optional<FrameRange> frame_range_of(const JobRecord& job) {
+  try {
+    const RenderSettings settings = render_settings_from_text(job.settings);
+    if (renders_frames(settings)) return settings.frames;
+  } catch (const std::runtime_error&) {
+    // A record whose settings cannot be read renders nothing that can be served.
+  }
+  return std::nullopt;
+}
+
+// "1-48" or "1-48 step 2".
+std::string describe_range(const FrameRange& range) {
+  return std::to_string(range.start) + "-" + std::to_string(range.end) +
+         (range.step > 1 ? " step " + std::to_string(range.step) : "");
+}
+
+
 Problem priority_needs_admin(int priority, int max_user_priority) {
   return Problem{403,
                  "priority " + std::to_string(priority) + " is above " + std::to_string(max_user_priority) +
@@ -173,14 +191,10 @@ std::variant<Submitted, Problem> JobService::submit(const Caller& caller, Submit
     job.document = accepted.document.dump();
     job.settings = render_settings_text(accepted.settings);
     job.outputs = output_spec_text(accepted.outputs);
-    // A frame range counts every frame's samples (render_work.h: FrameRangeRender reports its progress so).
-    job.progress.samples_total =
-        renders_frames(accepted.settings)
-            ? static_cast<uint32_t>(std::min<uint64_t>(
-                  uint64_t{accepted.settings.spp} * frame_count(*accepted.settings.frames), UINT32_MAX))
-            : accepted.settings.spp;
-    // On a store several nodes share, a large job is split into units they render at once (work_units.h).
-    job.units = store_.splits_jobs() ? unit_count(accepted.settings, options_.unit_pixel_samples) : 1;
+    job.progress.samples_total = job_samples_total(accepted.settings);
+    // A frame range is split into units of frames on every store; on a store several nodes share, a large still is
+    // split into units of samples they render at once (work_units.h).
+    job.units = job_units(accepted.settings, store_.splits_jobs() ? options_.unit_pixel_samples : 0);
     job.owner = caller.name;
     job.warnings = json(accepted.warnings).dump();
     job.idempotency_key = key;
@@ -242,7 +256,7 @@ json JobService::status(const JobRecord& job) {
   if (job.state == JobState::kQueued) position = store_.queue_position(job.id);
   // A split job's units (a store that splits jobs; empty for a job rendered whole).
   std::vector<UnitRecord> units;
-  if (store_.splits_jobs()) units = store_.units(job.id);
+  if (store_.splits_jobs() || frame_range_of(job)) units = store_.units(job.id);
   return job_status_json(job, scheduler_.live_progress(job.id), position, units, now_ms());
 }
 
@@ -285,23 +299,6 @@ std::unique_ptr<FileReader> JobService::job_log(const JobRecord& job) {
 }
 
 namespace {
-
-// The frame range of a job that renders one (render_work.h: renders_frames); nothing otherwise.
-std::optional<FrameRange> frame_range_of(const JobRecord& job) {
-  try {
-    const RenderSettings settings = render_settings_from_text(job.settings);
-    if (renders_frames(settings)) return settings.frames;
-  } catch (const std::runtime_error&) {
-    // A record whose settings cannot be read renders nothing that can be served.
-  }
-  return std::nullopt;
-}
-
-// "1-48" or "1-48 step 2".
-std::string describe_range(const FrameRange& range) {
-  return std::to_string(range.start) + "-" + std::to_string(range.end) +
-         (range.step > 1 ? " step " + std::to_string(range.step) : "");
-}
 
 // Why a job has no results yet, or nothing: a cancelled job keeps the image of its last complete pass, if it had one
 // (partial results).

@@ -63,17 +63,14 @@ RenderRequest render_request_from_json(const json& j) {
   return r;
 }
 
-bool renders_frames(const RenderSettings& settings) {
-  return settings.frames && frame_count(*settings.frames) > 1;
-}
-
 JobFile frame_done_file(const OutputSpec& outputs) {
   return outputs.exr ? JobFile::kResultExr : JobFile::kResultPng;
 }
 
 RenderSettings run_settings(const RenderRequest& request) {
   RenderSettings s = render_settings_from_text(request.settings);
-  if (request.unit >= 0) {
+  // A unit of a frame range renders whole frames (work_units.h).
+  if (request.unit >= 0 && !renders_frames(s)) {
     // One unit: its range of the job's sample indices (work_units.h).
     s.first_sample += request.unit_first_sample;
     s.job_spp = s.spp;  // every unit's rays have the whole job's texture footprints
@@ -248,7 +245,7 @@ class FrameRangeRender {
         spec_(output_spec_from_text(request.outputs)),
         outputs_(settings_, spec_),
         document_(json::parse(request.document)),
-        frames_(frame_numbers(*settings_.frames)),
+        frames_(request.unit >= 0 ? unit_frames(settings_, request.unit) : frame_numbers(*settings_.frames)),
         padding_(frame_padding(*settings_.frames)) {}
 
   RunEnd run() {

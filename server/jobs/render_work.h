@@ -24,6 +24,7 @@
 #include "renderer/thread_pool.h"
 #include "server/files/job_files.h"
 #include "server/store/job_store.h"
+#include "server/store/work_units.h"
 
 namespace tessera::server {
 
@@ -125,10 +126,9 @@ class RunListener {
   virtual void ended(const RunEnd& end) = 0;
 };
 
-// A frame range job (render.frames of more than one frame): each frame is the still at its time (renderer/frames.h),
-// rendered whole with the job's seed and written as numbered files (JobFiles::write_frame); a range of one frame is
-// that still, rendered as one.
-bool renders_frames(const RenderSettings& settings);
+// A frame range job (work_units.h: renders_frames): each frame is the still at its time (renderer/frames.h), rendered
+// whole with the job's seed and written as numbered files (JobFiles::write_frame); a run renders the frames of its
+// unit (unit_frames), or all of them for a range of one unit.
 // How many times a run renders a frame that fails before the job fails naming it.
 inline constexpr int kFrameAttempts = 3;
 // The file whose presence says a frame is done: written after the frame's other files, so the frame's EXR when the

@@ -191,9 +191,14 @@ constexpr const char* kMigration6 = R"sql(
   ALTER TABLE tessera_units ADD COLUMN renewed_at BIGINT;
 )sql";
 
+// Version 7: the lost runs of each unit (JobRecord::unit_lost_runs): a frame of a range is retried on its own count.
+constexpr const char* kMigration7 = R"sql(
+  ALTER TABLE tessera_units ADD COLUMN lost_runs INTEGER NOT NULL DEFAULT 0;
+)sql";
+
 const std::vector<const char*>& PostgresJobStore::migrations() {
-  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2, kMigration3,
-                                                       kMigration4, kMigration5, kMigration6};
+  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2, kMigration3, kMigration4,
+                                                       kMigration5, kMigration6, kMigration7};
   return kMigrations;
 }
 
@@ -259,7 +264,7 @@ void PostgresJobStore::create(const JobRecord& job) {
       // The sample ranges, then the merge; numbers this store computed, the id a parameter.
       std::string values;
       int idx = 0;
-      for (const SampleRange& r : split_samples(job.progress.samples_total, units))
+      for (const SampleRange& r : unit_sample_ranges(job.settings, job.progress.samples_total, units))
         values += "($1," + std::to_string(idx++) + "," + std::to_string(r.first) + "," + std::to_string(r.count) + "),";
       values += "($1," + std::to_string(units) + ",0,0)";
       exec("INSERT INTO tessera_units (job_id, idx, first_sample, samples) VALUES " + values, {job.id});
@@ -355,15 +360,16 @@ std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms, int64_t le
       JobRecord record = j.record(true);
       Result u = exec(
           "UPDATE tessera_units SET state = 'running', epoch = $3, node = $4, renewed_at = $5::bigint, "
-          "lease_expires_at = $5::bigint + $6::bigint WHERE job_id = $1 AND idx = $2 RETURNING first_sample, samples, "
-          "checkpoint_epoch, "
-          "(SELECT units FROM tessera_jobs WHERE id = $1)",
-          {job_id, idx, to_text(record.epoch), node_, now, lease});
+          "lease_expires_at = $5::bigint + $6::bigint, lost_runs = lost_runs + $7::int WHERE job_id = $1 AND idx = $2 "
+          "RETURNING first_sample, samples, checkpoint_epoch, (SELECT units FROM tessera_jobs WHERE id = $1), "
+          "lost_runs",
+          {job_id, idx, to_text(record.epoch), node_, now, lease, lost});
       record.unit = static_cast<int>(std::strtol(idx.c_str(), nullptr, 10));
       record.unit_first_sample = static_cast<uint32_t>(u.int64(0));
       record.unit_samples = static_cast<uint32_t>(u.int64(1));
       record.unit_checkpoint_epoch = u.int64(2);
       record.units = static_cast<int>(u.int64(3));
+      record.unit_lost_runs = static_cast<int>(u.int64(4));
       record.node = node_;
       if (unit.text(5) == "running") record.taken_over_from = unit.text(6);
       return record;
@@ -483,7 +489,7 @@ bool PostgresJobStore::move(const std::string& id, JobState to, int64_t now_ms, 
     // Back to the queue from an end (a requeue): its units start over too. From paused (a resume) they are kept.
     exec(
         "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL, passes = 0, "
-        "samples_done = 0, elapsed_s = 0, samples_per_s = 0, checkpoint_epoch = 0, finished_at = NULL "
+        "samples_done = 0, elapsed_s = 0, samples_per_s = 0, checkpoint_epoch = 0, finished_at = NULL, lost_runs = 0 "
         "WHERE job_id = $1 AND (SELECT state FROM tessera_jobs WHERE id = $1) IN (" +
             sql_terminal_states() + ") AND (SELECT state FROM tessera_jobs WHERE id = $1) IN (" + from_states + ")",
         {id});
@@ -652,8 +658,8 @@ int PostgresJobStore::requeue_running() {
       "'running' AND node = $1)",
       {node_});
   const int units = exec(
-                        "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL "
-                        "WHERE state = 'running' AND node = $1",
+                        "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL, "
+                        "lost_runs = lost_runs + 1 WHERE state = 'running' AND node = $1",
                         {node_})
                         .affected();
   return units +
