@@ -111,7 +111,8 @@ json frames_json(const JobRecord& job, const RenderSettings& settings, const Job
     json& list = lists[seg.kind];
     // Consecutive segments of one kind make one range.
     if (!list.empty() && i > 0 && segments[i - 1].kind == seg.kind &&
-        segments[i - 1].first + segments[i - 1].count == seg.first) {
+        segments[i - 1].first + segments[i - 1].count == seg.first &&
+        list.back()[1] == frame(segments[i - 1].first + segments[i - 1].count - 1)) {
       list.back()[1] = frame(seg.first + seg.count - 1);
     } else if (list.size() < kMaxFrameRanges) {
       list.push_back({frame(seg.first), frame(seg.first + seg.count - 1)});

@@ -227,6 +227,33 @@ RunEnd failed(std::string message, bool input_refused, const RenderProgress& pro
   return end;
 }
 
+// A load for a run: the scene `load(options)` reads, stopped by any request of `control` (a load has no pass to
+// finish); its seconds, to `load_s`.
+std::shared_ptr<const Scene> load_for_run(
+    const RenderEnvironment& env, RunControl& control, double& load_s,
+    const std::function<std::shared_ptr<const Scene>(const SceneLoadOptions&)>& load) {
+  std::stop_source load_stop;
+  auto attached = control.attach([&](bool) { load_stop.request_stop(); });
+  SceneLoadOptions options;
+  options.resolve_asset = env.resolve_asset;
+  options.max_gltf_instances = env.max_gltf_instances;
+  options.stop = load_stop.get_token();
+  const auto load_start = std::chrono::steady_clock::now();
+  auto scene = load(options);
+  load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count();
+  return scene;
+}
+
+// While it lives, a stop request of `control` ends `session` after its pass under way, a cancel within a tile's time.
+RunControl::Attachment attach_session(RunControl& control, RenderSession& session) {
+  return control.attach([&session](bool cancel) {
+    if (cancel)
+      session.cancel();
+    else
+      session.stop();
+  });
+}
+
 // A frame range, frame by frame in order (renderer/frames.h). A frame whose files exist was rendered by an earlier run
 // (this job's, before its daemon stopped or its worker died) and is not rendered again. Each frame is loaded at its
 // time and rendered whole from sample 0 with the job's seed, so that its image is the still of that time, bit for
@@ -312,19 +339,12 @@ class FrameRangeRender {
   }
 
   std::shared_ptr<const Scene> load(int64_t frame) {
-    std::stop_source load_stop;
-    auto attached = control_.attach([&](bool) { load_stop.request_stop(); });
-    SceneLoadOptions options;
-    options.resolve_asset = env_.resolve_asset;
-    options.max_gltf_instances = env_.max_gltf_instances;
-    options.stop = load_stop.get_token();
-    const auto load_start = std::chrono::steady_clock::now();
-    auto scene = load_frame_scene(document_, settings_, frame, options);
-    if (!loaded_) {
-      listener_.loaded(scene->warnings,
-                       std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count());
-      loaded_ = true;
-    }
+    double load_s = 0;
+    auto scene = load_for_run(env_, control_, load_s, [&](const SceneLoadOptions& options) {
+      return load_frame_scene(document_, settings_, frame, options);
+    });
+    if (!loaded_) listener_.loaded(scene->warnings, load_s);
+    loaded_ = true;
     return scene;
   }
 
@@ -338,12 +358,7 @@ class FrameRangeRender {
     const uint32_t passes_base = progress_.pass;
     StopReason reason;
     {
-      auto attached = control_.attach([&](bool cancel) {
-        if (cancel)
-          session.cancel();
-        else
-          session.stop();
-      });
+      auto attached = attach_session(control_, session);
       reason = session.run([&](const RenderProgress& p, const Film&) {
         progress_.pass = passes_base + p.pass;
         progress_.samples_done = base + p.samples_done;
@@ -412,20 +427,11 @@ void perform_render(const RenderRequest& request, const RenderEnvironment& env, 
       return;
     }
     const uint64_t hash = run_settings_hash(request);
-    std::stop_source load_stop;
-    std::shared_ptr<const Scene> scene;
-    {
-      // Any request ends a load: it has no pass to finish.
-      auto attached = control.attach([&](bool) { load_stop.request_stop(); });
-      SceneLoadOptions options;
-      options.resolve_asset = env.resolve_asset;
-      options.max_gltf_instances = env.max_gltf_instances;
-      options.stop = load_stop.get_token();
-      const auto load_start = std::chrono::steady_clock::now();
-      scene = load_job_scene(json::parse(request.document), settings, options);
-      listener.loaded(scene->warnings,
-                      std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count());
-    }
+    double load_s = 0;
+    const std::shared_ptr<const Scene> scene = load_for_run(env, control, load_s, [&](const SceneLoadOptions& options) {
+      return load_job_scene(json::parse(request.document), settings, options);
+    });
+    listener.loaded(scene->warnings, load_s);
     RenderSession session(scene, settings, *env.pool);
     resume(request, *env.files, settings, hash, session, listener);
     const OutputPipeline outputs(settings, output_spec_from_text(request.outputs));
@@ -435,12 +441,7 @@ void perform_render(const RenderRequest& request, const RenderEnvironment& env, 
     std::optional<uint32_t> checkpointed;
     StopReason reason;
     {
-      auto attached = control.attach([&](bool cancel) {
-        if (cancel)
-          session.cancel();
-        else
-          session.stop();
-      });
+      auto attached = attach_session(control, session);
       reason = session.run([&](const RenderProgress& p, const Film& film) {
         std::string error;
         try {

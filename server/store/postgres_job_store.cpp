@@ -622,31 +622,12 @@ bool PostgresJobStore::remove(const std::string& id, std::optional<int64_t> only
 
 std::vector<UnitRecord> PostgresJobStore::units(const std::string& id) {
   std::lock_guard lock(mutex_);
-  Result r = exec(
-      "SELECT u.idx, u.first_sample, u.samples, u.state, u.checkpoint_epoch, COALESCE(u.node, ''), u.samples_done, "
-      "u.elapsed_s, u.samples_per_s, COALESCE(u.renewed_at, 0), COALESCE(u.lease_expires_at, 0) FROM tessera_units u "
-      "JOIN tessera_jobs j ON j.id = u.job_id WHERE u.job_id = $1 "
-      "AND u.idx < j.units ORDER BY u.idx",
-      {id});
+  Result r = exec(std::string("SELECT ") + kUnitColumns +
+                      " FROM tessera_units u JOIN tessera_jobs j ON j.id = u.job_id WHERE u.job_id = $1 AND u.idx < "
+                      "j.units ORDER BY u.idx",
+                  {id});
   std::vector<UnitRecord> out;
-  for (int i = 0; i < r.rows(); ++i) {
-    r.at(i);
-    UnitRecord& u = out.emplace_back();
-    u.index = static_cast<int>(r.int64(0));
-    u.first_sample = static_cast<uint32_t>(r.int64(1));
-    u.samples = static_cast<uint32_t>(r.int64(2));
-    u.done = r.text(3) == "done";
-    u.running = r.text(3) == "running";
-    u.checkpoint_epoch = r.int64(4);
-    u.node = r.text(5);
-    u.samples_done = static_cast<uint32_t>(r.int64(6));
-    u.elapsed_s = r.real(7);
-    u.samples_per_s = r.real(8);
-    if (u.running) {
-      u.renewed_at_ms = r.int64(9);
-      u.lease_expires_at_ms = r.int64(10);
-    }
-  }
+  for (int i = 0; i < r.rows(); ++i) out.push_back(read_unit_record(r.at(i)));
   return out;
 }
 

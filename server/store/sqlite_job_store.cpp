@@ -732,28 +732,12 @@ int SqliteJobStore::requeue_running() {
 std::vector<UnitRecord> SqliteJobStore::units(const std::string& id) {
   std::lock_guard lock(mutex_);
   Statement s(*this,
-              "SELECT u.idx, u.first_sample, u.samples, u.state, u.checkpoint_epoch, COALESCE(u.node, ''), "
-              "u.samples_done, u.elapsed_s, u.samples_per_s, COALESCE(u.renewed_at, 0), COALESCE(u.lease_expires_at, "
-              "0) FROM units u JOIN jobs j ON j.id = u.job_id WHERE u.job_id = ?1 AND u.idx < j.units ORDER BY u.idx");
+              std::string("SELECT ") + kUnitColumns +
+                  " FROM units u JOIN jobs j ON j.id = u.job_id WHERE u.job_id = ?1 AND u.idx < j.units ORDER BY "
+                  "u.idx");
   s.bind(1, id);
   std::vector<UnitRecord> out;
-  while (s.step()) {
-    UnitRecord& u = out.emplace_back();
-    u.index = static_cast<int>(s.int64(0));
-    u.first_sample = static_cast<uint32_t>(s.int64(1));
-    u.samples = static_cast<uint32_t>(s.int64(2));
-    u.done = s.text(3) == "done";
-    u.running = s.text(3) == "running";
-    u.checkpoint_epoch = s.int64(4);
-    u.node = s.text(5);
-    u.samples_done = static_cast<uint32_t>(s.int64(6));
-    u.elapsed_s = s.real(7);
-    u.samples_per_s = s.real(8);
-    if (u.running) {
-      u.renewed_at_ms = s.int64(9);
-      u.lease_expires_at_ms = s.int64(10);
-    }
-  }
+  while (s.step()) out.push_back(read_unit_record(s));
   return out;
 }
 

@@ -12,6 +12,8 @@
 #include <vector>
 
 #include "tests/integration/daemon.h"
+#include "tests/integration/daemon_client.h"
+#include "tests/integration/node_cluster.h"
 #include "tests/server/postgres_cluster.h"
 #include "tests/server/test_util.h"
 
@@ -22,15 +24,6 @@ using nlohmann::json;
 namespace fs = std::filesystem;
 
 constexpr int kFrames = 24;
-
-std::string submit(httplib::Client& c, const json& doc) {
-  auto res = c.Post("/v1/jobs", doc.dump(), "application/json");
-  if (!res || res->status != 202) {
-    ADD_FAILURE() << "submission refused: " << (res ? res->body : "no answer");
-    return "";
-  }
-  return json::parse(res->body).value("id", "");
-}
 
 json status_of(httplib::Client& c, const std::string& id) {
   auto res = c.Get("/v1/jobs/" + id);
@@ -69,29 +62,7 @@ const std::vector<std::string>& one_node_frames() {
   return frames;
 }
 
-class Cluster {
- public:
-  Cluster() : pg_(PostgresCluster::shared()), uri_(pg_.create_database()) {
-    for (const char* name : {"n1", "n2", "n3"})
-      nodes_.push_back(std::make_unique<Daemon>(
-          dir_.path() / "shared",
-          std::vector<std::string>{"--store", uri_, "--node", name, "--lease-s", "2", "--threads", "1"}));
-  }
-  Daemon& node(int i) { return *nodes_[i]; }
-  std::string sql(const std::string& query) { return pg_.psql(PostgresCluster::database_of(uri_), query); }
-  std::string logs() {
-    std::string out;
-    for (auto& n : nodes_)
-      if (n) out += n->log();
-    return out;
-  }
-
- private:
-  TempDir dir_;
-  PostgresCluster& pg_;
-  std::string uri_;
-  std::vector<std::unique_ptr<Daemon>> nodes_;
-};
+using Cluster = NodeCluster;
 
 // How many times each frame started rendering, from the job's log.
 std::map<int, int> renders_per_frame(const std::string& log) {

@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "tests/integration/daemon.h"
+#include "tests/integration/daemon_client.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server::test {
@@ -22,52 +23,6 @@ using nlohmann::json;
 namespace fs = std::filesystem;
 
 const std::vector<std::string> kArgs = {"--threads", "2", "--max-jobs", "1", "--log-level", "debug"};
-
-std::string submit(httplib::Client& c, const json& doc) {
-  auto res = c.Post("/v1/jobs", doc.dump(), "application/json");
-  if (!res || res->status != 202) {
-    ADD_FAILURE() << "not accepted: " << (res ? res->body : "no answer");
-    return "";
-  }
-  return json::parse(res->body).value("id", "");
-}
-
-json get_job(httplib::Client& c, const std::string& id) {
-  auto res = c.Get("/v1/jobs/" + id);
-  if (!res || res->status != 200) return json();
-  return json::parse(res->body);
-}
-
-std::string state_of(httplib::Client& c, const std::string& id) {
-  return get_job(c, id).value("state", "");
-}
-
-std::string fetch(httplib::Client& c, const std::string& path) {
-  auto res = c.Get(path);
-  EXPECT_TRUE(res && res->status == 200) << path << ": " << (res ? res->body : "no answer");
-  return res ? res->body : "";
-}
-
-// The children of `parent` (/proc/PID/stat: the parent's pid is the fourth field, after the parenthesised name).
-std::vector<pid_t> children_of(pid_t parent) {
-  std::vector<pid_t> out;
-  std::error_code ec;
-  for (const auto& entry : fs::directory_iterator("/proc", ec)) {
-    const std::string name = entry.path().filename().string();
-    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
-    std::ifstream in(entry.path() / "stat");
-    std::string stat;
-    std::getline(in, stat);
-    const size_t close = stat.rfind(')');
-    if (close == std::string::npos) continue;
-    std::istringstream rest(stat.substr(close + 2));
-    char state;
-    pid_t ppid = 0;
-    rest >> state >> ppid;
-    if (ppid == parent && state != 'Z') out.push_back(std::stoi(name));
-  }
-  return out;
-}
 
 std::string upload_cube(httplib::Client& c) {
   const std::string bytes = read_text(fs::path(TESSERA_SOURCE_DIR) / "examples/spinning_cube/SpinningCube.glb");

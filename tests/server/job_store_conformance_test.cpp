@@ -674,5 +674,35 @@ TYPED_TEST(JobStoreConformance, AFrameRangesUnitsAreClaimedLeasedAndEndedFrameBy
   EXPECT_TRUE(std::none_of(again.begin(), again.end(), [](const UnitRecord& u) { return u.done || u.running; }));
 }
 
+// The per-owner cap counts a frame range's units as runs: a 2,000-frame range of one owner, at the cap, does not
+// hold back another owner's still submitted after it.
+TYPED_TEST(JobStoreConformance, AnOwnersCapCountsFrameUnitsSoALongRangeDoesNotStarveAnotherOwner) {
+  JobStore& store = this->store;
+  JobRecord range = make_job(0, 1);
+  range.owner = "alice";
+  range.settings = R"({"width":8,"height":8,"spp":1,"frames":{"start":1,"end":2000,"step":1,"chunk":1}})";
+  range.units = 2000;
+  range.progress.samples_total = 2000;
+  store.create(range);
+  JobRecord still = make_job(0, 2);
+  still.owner = "bob";
+  store.create(still);
+  auto first = store.claim_next(10, 1000, 2);
+  auto second = store.claim_next(10, 1000, 2);
+  ASSERT_TRUE(first && second);
+  EXPECT_EQ(first->id, range.id);
+  EXPECT_EQ(second->id, range.id);
+  // Alice holds two runs (two frames): Bob's still is next, before her third frame.
+  auto third = store.claim_next(10, 1000, 2);
+  ASSERT_TRUE(third);
+  EXPECT_EQ(third->id, still.id);
+  EXPECT_FALSE(store.claim_next(10, 1000, 2));  // Alice at her cap, Bob's only job running
+  EXPECT_TRUE(store.end_run(range.id, first->epoch, JobState::kSucceeded, 11));
+  auto next = store.claim_next(12, 1000, 2);
+  ASSERT_TRUE(next);
+  EXPECT_EQ(next->id, range.id);
+  EXPECT_EQ(next->unit, 2);
+}
+
 }  // namespace
 }  // namespace tessera::server
