@@ -36,7 +36,6 @@ std::string describe_range(const FrameRange& range) {
          (range.step > 1 ? " step " + std::to_string(range.step) : "");
 }
 
-
 Problem priority_needs_admin(int priority, int max_user_priority) {
   return Problem{403,
                  "priority " + std::to_string(priority) + " is above " + std::to_string(max_user_priority) +
