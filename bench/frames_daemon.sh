@@ -3,7 +3,8 @@
 # rendered by one tesserad (SQLite), from its submission to its last frame, against the same range rendered locally
 # by `tessera render --frames` (bench/frames.sh): what the daemon adds a frame (its worker process, the job's files
 # and progress, the status a frame).
-#   bench/frames_daemon.sh         (env: BUILD=build WIDTH=640 HEIGHT=360 SPP=16 FRAMES=1-48 THREADS=<all>)
+#   bench/frames_daemon.sh         (env: BUILD=build WIDTH=640 HEIGHT=360 SPP=16 FRAMES=1-48 CHUNK=1 THREADS=<all>
+#                                   LOCAL=1: 0 skips the local range)
 # Figures, not a test: run it on an otherwise idle machine.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -12,7 +13,7 @@ tesserad=$build/server/tesserad
 tessera=$build/clients/cli/tessera
 [[ -x $tesserad && -x $tessera ]] || { echo "frames_daemon: build $tesserad and $tessera first" >&2; exit 2; }
 command -v curl >/dev/null || { echo "frames_daemon: needs curl" >&2; exit 2; }
-width=${WIDTH:-640}; height=${HEIGHT:-360}; spp=${SPP:-16}; frames=${FRAMES:-1-48}
+width=${WIDTH:-640}; height=${HEIGHT:-360}; spp=${SPP:-16}; frames=${FRAMES:-1-48}; chunk=${CHUNK:-1}
 start=${frames%-*}; end=${frames#*-}
 threads=${THREADS:-$(nproc)}
 work=$(mktemp -d)
@@ -39,12 +40,12 @@ url=${url%/}
 field() { python3 -c 'import json,sys; d=json.load(sys.stdin); print(eval("d"+sys.argv[1]))' "$1"; }
 asset=$(curl -sS -X POST --data-binary @examples/spinning_cube/SpinningCube.glb -H 'Content-Type: model/gltf-binary' \
   "$url/v1/assets?name=SpinningCube.glb" | field '["id"]')
-job=$(python3 - "$asset" "$width" "$height" "$spp" "$start" "$end" <<'PY'
+job=$(python3 - "$asset" "$width" "$height" "$spp" "$start" "$end" "$chunk" <<'PY'
 import json, sys
-asset, w, h, spp, start, end = sys.argv[1:]
+asset, w, h, spp, start, end, chunk = sys.argv[1:]
 doc = json.load(open("examples/spinning_cube/job.json"))
 doc["scene"]["gltf"] = asset
-doc["render"].update(width=int(w), height=int(h), spp=int(spp), frames={"start": int(start), "end": int(end)})
+doc["render"].update(width=int(w), height=int(h), spp=int(spp), frames={"start": int(start), "end": int(end), "chunk": int(chunk)})
 print(json.dumps(doc))
 PY
 )
@@ -59,8 +60,9 @@ done
 t1=$(date +%s.%N)
 n=$(curl -sS "$url/v1/jobs/$id" | field '["frames"]["done"]')
 wall=$(echo "$t1 - $t0" | bc -l)
-printf 'daemon, one node: %d frames at %sx%s, %s spp: %.1f s from submission to the last frame, %.2f s a frame, %.0f frames/hour\n' \
-  "$n" "$width" "$height" "$spp" "$wall" "$(echo "$wall / $n" | bc -l)" "$(echo "3600 * $n / $wall" | bc -l)"
+printf 'daemon, one node, chunk %s: %d frames at %sx%s, %s spp: %.1f s from submission to the last frame, %.2f s a frame, %.0f frames/hour\n' \
+  "$chunk" "$n" "$width" "$height" "$spp" "$wall" "$(echo "$wall / $n" | bc -l)" "$(echo "3600 * $n / $wall" | bc -l)"
+[[ ${LOCAL:-1} == 0 ]] && exit 0
 t0=$(date +%s.%N)
 "$tessera" render examples/spinning_cube/job.json --frames "$frames" --width "$width" --height "$height" --spp "$spp" \
   --threads "$threads" -q -o "$work/local.png"
