@@ -78,6 +78,17 @@ JobRecord read_job_record(const Row& row, bool with_document) {
   return r;
 }
 
+// How many runs of the owner `owner_sql` names hold a live lease at the time `now_sql` names (a placeholder: $1, ?1):
+// jobs rendered whole, and work units, in the tables `jobs` and `units` of a store (the per-owner cap of claim_next).
+inline std::string sql_live_runs_of(const std::string& jobs, const std::string& units, const std::string& owner_sql,
+                                    const std::string& now_sql) {
+  return "((SELECT count(*) FROM " + jobs + " r WHERE r.owner = " + owner_sql +
+         " AND r.units = 1 AND r.state = 'running' AND r.lease_expires_at >= " + now_sql +
+         ") + (SELECT count(*) FROM " + units + " ru JOIN " + jobs +
+         " rj ON rj.id = ru.job_id WHERE rj.owner = " + owner_sql +
+         " AND ru.state = 'running' AND ru.lease_expires_at >= " + now_sql + "))";
+}
+
 // The columns of a unit row (table alias u) read_unit_record() reads, in its order.
 inline constexpr const char* kUnitColumns =
     "u.idx, u.first_sample, u.samples, u.state, u.checkpoint_epoch, COALESCE(u.node, ''), u.samples_done, "

@@ -275,12 +275,9 @@ void PostgresJobStore::create(const JobRecord& job) {
 
 namespace {
 
-// How many runs of the owner `owner_sql` names hold a live lease at $1: jobs rendered whole, and work units.
+// How many runs of the owner `owner_sql` names hold a live lease at $1 (job_store_sql.h).
 std::string live_runs_of(const std::string& owner_sql) {
-  return "((SELECT count(*) FROM tessera_jobs r WHERE r.owner = " + owner_sql +
-         " AND r.units = 1 AND r.state = 'running' AND r.lease_expires_at >= $1) + (SELECT count(*) FROM "
-         "tessera_units ru JOIN tessera_jobs rj ON rj.id = ru.job_id WHERE rj.owner = " +
-         owner_sql + " AND ru.state = 'running' AND ru.lease_expires_at >= $1))";
+  return sql_live_runs_of("tessera_jobs", "tessera_units", owner_sql, "$1");
 }
 
 // pg_advisory_xact_lock's first key for an owner's claims (the second is the hash of the owner): "tess" in ASCII. The

@@ -327,12 +327,9 @@ void SqliteJobStore::create(const JobRecord& job) {
 
 namespace {
 
-// How many runs of the owner `owner_sql` names hold a live lease at ?1: jobs rendered whole, and work units.
+// How many runs of the owner `owner_sql` names hold a live lease at ?1 (job_store_sql.h).
 std::string live_runs_of(const std::string& owner_sql) {
-  return "((SELECT count(*) FROM jobs r WHERE r.owner = " + owner_sql +
-         " AND r.units = 1 AND r.state = 'running' AND r.lease_expires_at >= ?1) + (SELECT count(*) FROM units ru "
-         "JOIN jobs rj ON rj.id = ru.job_id WHERE rj.owner = " +
-         owner_sql + " AND ru.state = 'running' AND ru.lease_expires_at >= ?1))";
+  return sql_live_runs_of("jobs", "units", owner_sql, "?1");
 }
 
 }  // namespace
