@@ -59,7 +59,9 @@ TEST(FrameRanges, EveryFrameIsTheStillAtItsTimeServedPerFrame) {
   Daemon daemon(data, kArgs);
   auto c = daemon.client();
   const std::string asset = upload_cube(*c);
-  const std::string id = submit(*c, cube_job(asset, 64, 36, 2, {{"start", 1}, {"end", 11}, {"step", 2}}));
+  json range = cube_job(asset, 64, 36, 2, {{"start", 1}, {"end", 11}, {"step", 2}});
+  range["render"]["aovs"] = {"albedo"};
+  const std::string id = submit(*c, range);
   ASSERT_TRUE(eventually([&] { return state_of(*c, id) == "succeeded"; }, 240)) << daemon.log();
   const json done = get_job(*c, id);
   const json& frames = done["frames"];
@@ -71,6 +73,7 @@ TEST(FrameRanges, EveryFrameIsTheStillAtItsTimeServedPerFrame) {
   const std::string log = fetch(*c, "/v1/jobs/" + id + "/log");
   for (int f = 1; f <= 11; f += 2) {
     json still = cube_job(asset, 64, 36, 2, nullptr);
+    still["render"]["aovs"] = {"albedo"};
     still["scene"]["time"] = f / 24.0;
     const std::string still_id = submit(*c, still);
     ASSERT_TRUE(eventually([&] { return state_of(*c, still_id) == "succeeded"; }, 120)) << daemon.log();
@@ -79,6 +82,7 @@ TEST(FrameRanges, EveryFrameIsTheStillAtItsTimeServedPerFrame) {
     EXPECT_FALSE(exr.empty());
     EXPECT_TRUE(exr == fetch(*c, "/v1/jobs/" + still_id + "/result.exr")) << "frame " << f << " is not its still";
     EXPECT_TRUE(fetch(*c, frame + "/result.png") == fetch(*c, "/v1/jobs/" + still_id + "/result.png"));
+    EXPECT_TRUE(fetch(*c, frame + "/aovs/albedo.png") == fetch(*c, "/v1/jobs/" + still_id + "/aovs/albedo.png"));
     char name[32];
     std::snprintf(name, sizeof name, "result.%04d.exr", f);
     EXPECT_TRUE(read_text(data / "jobs" / id / name) == exr) << name;
@@ -91,6 +95,12 @@ TEST(FrameRanges, EveryFrameIsTheStillAtItsTimeServedPerFrame) {
     EXPECT_EQ(res->get_header_value("Content-Type"), "application/problem+json");
     EXPECT_NE(res->body.find("not one of the job's frames 1-11 step 2"), std::string::npos) << res->body;
   }
+  auto no_pass = c->Get("/v1/jobs/" + id + "/frames/1/aovs/normal.png");
+  ASSERT_TRUE(no_pass);
+  EXPECT_EQ(no_pass->status, 404) << no_pass->body;
+  auto whole_pass = c->Get("/v1/jobs/" + id + "/aovs/albedo.png");
+  ASSERT_TRUE(whole_pass);
+  EXPECT_EQ(whole_pass->status, 409) << whole_pass->body;
   auto whole = c->Get("/v1/jobs/" + id + "/result.exr");
   ASSERT_TRUE(whole);
   EXPECT_EQ(whole->status, 409) << whole->body;
