@@ -254,8 +254,9 @@ RunControl::Attachment attach_session(RunControl& control, RenderSession& sessio
   });
 }
 
-// A frame range, frame by frame in order (renderer/frames.h). A frame whose files exist was rendered by an earlier run
-// (this job's, before its daemon stopped or its worker died) and is not rendered again. Each frame is loaded at its
+// The frames of a run of a frame range, in order (renderer/frames.h): its unit's (work_units.h: unit_frames), or every
+// frame of a range of one unit. A frame whose files exist was rendered by an earlier run (of its unit, before that
+// run's daemon stopped or its worker died) and is not rendered again. Each frame is loaded at its
 // time and rendered whole from sample 0 with the job's seed, so that its image is the still of that time, bit for
 // bit; its outputs are written under their numbered names, the job's preview becomes its PNG, and the job's progress
 // counts every frame's samples. A frame that fails is rendered again, up to kFrameAttempts times; a frame the
