@@ -18,6 +18,7 @@
 
 #include "clients/cli/cli_common.h"
 #include "proto/asset_path.h"
+#include "renderer/frames.h"
 
 namespace {
 
@@ -144,6 +145,12 @@ std::string progress_line(const json& job) {
                 job.value("state", "?").c_str(), frac * 100, p.value("samples_done", 0), p.value("samples_total", 0),
                 p.value("passes", 0), p.value("elapsed_s", 0.0), eta.c_str(), p.value("samples_per_s", 0.0));
   std::string line = buf;
+  // A frame range: its frames done of all, and the one rendering.
+  if (const json& f = job.value("frames", json()); f.is_object()) {
+    line += "  frames " + std::to_string(f.value("done", 0)) + "/" + std::to_string(f.value("total", 0));
+    if (const json& r = f.value("running_ranges", json::array()); !r.empty())
+      line += " (rendering " + r[0][0].dump() + ")";
+  }
   if (job.contains("stop_reason") && job["stop_reason"].is_string())
     line += "  stopped by " + job["stop_reason"].get<std::string>();
   if (job.contains("error") && job["error"].is_string()) line += "  error: " + job["error"].get<std::string>();
@@ -492,8 +499,55 @@ const char* kFetchUsage =
     "usage: tessera fetch ID [-d DIR] [-o FILE.png|FILE.exr ...] [--url URL] [--token T]\n"
     "Downloads a finished job's results: to the -o files, else every output the job has into DIR (default .) as\n"
     "ID.png and ID.exr. A job cancelled after a pass has the image of that pass as its (partial) results.\n"
+    "A frame range job's results are its frames done, each output numbered (ID.0001.png, FILE.0001.exr), with one\n"
+    "progress line.\n"
     "Exit code 75 while the job has not finished yet, 1 when it has no results (it failed, or was cancelled before\n"
     "its first pass).\n";
+
+// The frames done of a frame range job (its status's frames.done_ranges): each output of each frame, to the -o files
+// numbered as renderer/frames.h numbers a sequence, else to DIR/ID.<frame>.<ext>. One progress line, on stderr.
+int fetch_frames(const Remote& remote, httplib::Client& client, const std::string& id, const json& job,
+                 const std::string& dir, std::vector<std::string> outputs) {
+  const json& f = job["frames"];
+  const tessera::FrameRange range{f.value("start", int64_t{0}), f.value("end", int64_t{0}), f.value("step", int64_t{1}),
+                                  1};
+  const int padding = tessera::frame_padding(range);
+  if (outputs.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) fatal("cannot make the directory " + dir + ": " + ec.message());
+    for (const json& o : job.value("outputs", json::array()))
+      if (o.is_string()) outputs.push_back((std::filesystem::path(dir) / (id + "." + o.get<std::string>())).string());
+  }
+  std::vector<int64_t> frames;
+  for (const json& r : f.value("done_ranges", json::array()))
+    for (int64_t n = r[0].get<int64_t>(); n <= r[1].get<int64_t>(); n += range.step) frames.push_back(n);
+  if (frames.empty()) {
+    if (!is_terminal(job.value("state", ""))) retry("job " + id + " has no frame done yet");
+    fatal("job " + id + " " + job.value("state", "") + ": none of its frames is done");
+  }
+  for (const std::string& out : outputs)
+    for (int64_t n : frames) check_writable(tessera::frame_path(out, n, padding).string());
+  size_t fetched = 0;
+  for (int64_t n : frames) {
+    for (const std::string& out : outputs) {
+      const std::string ext = lower_extension(out).substr(1);
+      auto res = client.Get((job_path(id) + "/frames/" + std::to_string(n) + "/result." + ext).c_str());
+      if (!res || res->status != 200) http_failure(remote, res, "fetch frame " + std::to_string(n) + " " + ext);
+      write_file_atomic(tessera::frame_path(out, n, padding).string(), res->body);
+    }
+    ++fetched;
+    std::fprintf(stderr, "\rtessera: fetched %zu/%zu frames (frame %lld)", fetched, frames.size(),
+                 static_cast<long long>(n));
+  }
+  std::fprintf(stderr, "\n");
+  for (const std::string& out : outputs)
+    std::printf("%s\n", tessera::frame_path(out, frames.front(), padding).string().c_str());
+  if (frames.size() < static_cast<size_t>(f.value("total", 0)))
+    std::fprintf(stderr, "tessera: job %s %s: %zu of its %d frames are done\n", id.c_str(),
+                 job.value("state", "").c_str(), frames.size(), f.value("total", 0));
+  return kExitOk;
+}
 
 int cmd_fetch(std::vector<std::string> args) {
   Remote remote = remote_options(&args);
@@ -521,6 +575,7 @@ int cmd_fetch(std::vector<std::string> args) {
   auto client = remote.client();
   const json job = expect_json(remote, client->Get(job_path(id).c_str()), "fetch");
   const std::string state = job.value("state", "");
+  if (job.value("frames", json()).is_object()) return fetch_frames(remote, *client, id, job, dir, outputs);
   if (!is_terminal(state)) retry("job " + id + " is " + state + ": results exist once it has succeeded");
   // The status links the results there are: a succeeded job's outputs, and the image of the last complete pass of a
   // job cancelled after one (its partial results).

@@ -16,6 +16,7 @@
 
 #include "renderer/aov.h"
 #include "renderer/byte_fields.h"
+#include "renderer/frames.h"
 #include "server/base/file_io.h"
 #include "server/base/job_id.h"
 
@@ -216,7 +217,40 @@ void DirectoryJobFiles::discard_staged(const std::string& id, JobFile f, int64_t
 }
 
 std::unique_ptr<FileReader> DirectoryJobFiles::open(const std::string& id, JobFile f) const {
-  const int fd = ::open(path(id, f).c_str(), O_RDONLY | O_CLOEXEC);
+  return open_path(path(id, f));
+}
+
+void DirectoryJobFiles::write_frame(const std::string& id, JobFile f, int64_t frame, int width,
+                                    std::string_view bytes) const {
+  publish_path(frame_path(path(id, f), frame, width), job_file_name(f), bytes);
+}
+
+std::unique_ptr<FileReader> DirectoryJobFiles::open_frame(const std::string& id, JobFile f, int64_t frame,
+                                                          int width) const {
+  return open_path(frame_path(path(id, f), frame, width));
+}
+
+void DirectoryJobFiles::remove_frames(const std::string& id) const {
+  // A frame file is a result file's name with a frame number before its extension (frame_path): result.0012.exr.
+  auto is_frame_of = [](const std::string& name, const fs::path& result) {
+    const std::string stem = result.stem().string() + ".", ext = result.extension().string();
+    if (name.size() <= stem.size() + ext.size() || !name.starts_with(stem) || !name.ends_with(ext)) return false;
+    const std::string number = name.substr(stem.size(), name.size() - stem.size() - ext.size());
+    return number.find_first_not_of("-0123456789") == std::string::npos;
+  };
+  std::error_code ec;
+  for (fs::directory_iterator it(dir(id), ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (std::any_of(kResultFiles.begin(), kResultFiles.end(),
+                    [&](JobFile f) { return is_frame_of(name, job_file_name(f)); })) {
+      std::error_code ignored;
+      fs::remove(it->path(), ignored);
+    }
+  }
+}
+
+std::unique_ptr<FileReader> DirectoryJobFiles::open_path(const fs::path& file) const {
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return nullptr;
   struct stat st {};
   if (::fstat(fd, &st) != 0) {

@@ -96,6 +96,16 @@ class JobFiles {
   virtual std::optional<std::string> read_unit(const std::string& id, int unit, int64_t epoch) const = 0;
   // Every unit file of the job (a job requeued from scratch, or merged).
   virtual void remove_units(const std::string& id) const = 0;
+
+  // The file `f` of frame `frame` of a frame range (renderer/frames.h: frame_path), its number written with `width`
+  // characters: result.0012.exr. Written as write() writes, and not fenced by a run's epoch: every run of a frame
+  // renders the same bits (the job's seed, the frame's time), so a run that lost its lease writes what its successor
+  // writes. Nothing when it does not exist.
+  virtual void write_frame(const std::string& id, JobFile f, int64_t frame, int width,
+                           std::string_view bytes) const = 0;
+  virtual std::unique_ptr<FileReader> open_frame(const std::string& id, JobFile f, int64_t frame, int width) const = 0;
+  // Every frame file of the job (a job requeued from scratch).
+  virtual void remove_frames(const std::string& id) const = 0;
 };
 
 // The files in the data directory (of one machine, or a volume every node mounts).
@@ -128,8 +138,13 @@ class DirectoryJobFiles final : public JobFiles {
   void write_unit(const std::string& id, int unit, int64_t epoch, std::string_view bytes) const override;
   std::optional<std::string> read_unit(const std::string& id, int unit, int64_t epoch) const override;
   void remove_units(const std::string& id) const override;
+  // <data>/jobs/<id>/result.<frame>.exr
+  void write_frame(const std::string& id, JobFile f, int64_t frame, int width, std::string_view bytes) const override;
+  std::unique_ptr<FileReader> open_frame(const std::string& id, JobFile f, int64_t frame, int width) const override;
+  void remove_frames(const std::string& id) const override;
 
  private:
+  std::unique_ptr<FileReader> open_path(const std::filesystem::path& path) const;
   // Temp file beside `final_path`, fsync, rename, fsync of the folder; `name` is the file's for messages.
   void publish_path(const std::filesystem::path& final_path, const char* name, std::string_view bytes) const;
   std::filesystem::path unit_path(const std::string& id, int unit, int64_t epoch) const;

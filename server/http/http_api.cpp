@@ -340,6 +340,21 @@ void get_pass(ApiContext& ctx, const Request& req, Response& res) {
   send_file_or_problem(req, res, ctx.jobs.pass(*job, req.matches[2].str()), "image/png");
 }
 
+// A frame of a frame range job: its output, or one of its render passes as PNG.
+void get_frame_result(ApiContext& ctx, JobFile file, const Request& req, Response& res) {
+  auto job = find_job(ctx, req, res);
+  if (!job) return;
+  send_file_or_problem(req, res, ctx.jobs.frame_result(*job, req.matches[2].str(), file), job_file_media_type(file));
+}
+
+void get_frame_pass(ApiContext& ctx, const Request& req, Response& res) {
+  auto job = find_job(ctx, req, res);
+  if (!job) return;
+  send_file_or_problem(req, res,
+                       ctx.jobs.frame_result(*job, req.matches[2].str(), JobFile::kResultPng, req.matches[3].str()),
+                       "image/png");
+}
+
 // The document the job was accepted with, as JSON: what a client needs to submit it again.
 void get_document(ApiContext& ctx, const Request& req, Response& res) {
   auto job = find_job(ctx, req, res);
@@ -591,6 +606,12 @@ std::vector<Route> routes(ApiContext* ctx) {
        [ctx](const Request& q, Response& r) { get_result(*ctx, JobFile::kResultExr, q, r); }},
       {"GET", "/v1/jobs/{id}/aovs/{name}.png", job + "/aovs/([^/]{1,64})\\.png",
        [ctx](const Request& q, Response& r) { get_pass(*ctx, q, r); }},
+      {"GET", "/v1/jobs/{id}/frames/{frame}/result.png", job + "/frames/([^/]{1,32})/result\\.png",
+       [ctx](const Request& q, Response& r) { get_frame_result(*ctx, JobFile::kResultPng, q, r); }},
+      {"GET", "/v1/jobs/{id}/frames/{frame}/result.exr", job + "/frames/([^/]{1,32})/result\\.exr",
+       [ctx](const Request& q, Response& r) { get_frame_result(*ctx, JobFile::kResultExr, q, r); }},
+      {"GET", "/v1/jobs/{id}/frames/{frame}/aovs/{name}.png", job + "/frames/([^/]{1,32})/aovs/([^/]{1,64})\\.png",
+       [ctx](const Request& q, Response& r) { get_frame_pass(*ctx, q, r); }},
       {"GET", "/v1/events", "/v1/events",
        [ctx](const Request& q, Response& r) { stream_events(*ctx, q, r, std::nullopt); }},
       {"POST", "/v1/assets", "/v1/assets", [ctx](const Request& q, Response& r) { post_asset(*ctx, q, r); }},

@@ -4,6 +4,7 @@
 
 #include "renderer/render_settings.h"
 #include "server/base/time_format.h"
+#include "server/jobs/render_work.h"
 
 namespace tessera::server {
 
@@ -64,6 +65,82 @@ json units_json(const std::vector<UnitRecord>& units, int64_t now) {
   return {{"total", units.size()}, {"done", done}, {"queued", queued}, {"running", running}, {"done_by_node", nodes}};
 }
 
+// The frames of a frame range job (work_units.h: renders_frames), bounded whatever the range's length: counts, and the
+// frames done, running and failed as ranges of frame numbers [first, last] (every step-th frame between them), at most
+// kMaxFrameRanges of each. A range of units has each unit's frames in its unit's state (a unit still running when its
+// job failed is the one that failed it). A range rendered whole renders its frames in order and a run skips those
+// done before, so the frames done are the first ones, as many as its progress counts whole frames of samples; a
+// running job renders the next, and a failed job failed on it.
+constexpr size_t kMaxFrameRanges = 64;
+
+json frames_json(const JobRecord& job, const RenderSettings& settings, const JobProgress& p,
+                 const std::vector<UnitRecord>& units, const std::string& self) {
+  const FrameRange& range = *settings.frames;
+  const uint64_t total = frame_count(range);
+  enum Kind { kDone, kRunning, kFailed, kWaiting };
+  struct Segment {
+    Kind kind;
+    uint64_t first, count;  // frame indices in the range
+  };
+  std::vector<Segment> segments;
+  const bool failed_job = job.state == JobState::kFailed;
+  if (units.empty()) {
+    uint64_t done = settings.spp ? std::min<uint64_t>(p.samples_done / settings.spp, total) : 0;
+    if (job.state == JobState::kSucceeded) done = total;
+    segments.push_back({kDone, 0, done});
+    if (done < total && (job.state == JobState::kRunning || failed_job))
+      segments.push_back({failed_job ? kFailed : kRunning, done, 1});
+  } else {
+    const uint64_t chunk = static_cast<uint64_t>(std::max<int64_t>(range.chunk, 1));
+    for (const UnitRecord& u : units) {
+      const Kind kind = u.done ? kDone : u.running ? (failed_job ? kFailed : kRunning) : kWaiting;
+      const uint64_t first = static_cast<uint64_t>(u.index) * chunk;
+      if (first < total) segments.push_back({kind, first, std::min(chunk, total - first)});
+    }
+  }
+  uint64_t counts[4] = {0, 0, 0, 0};
+  json lists[3] = {json::array(), json::array(), json::array()};
+  bool truncated = false;
+  auto frame = [&](uint64_t i) { return range.start + static_cast<int64_t>(i) * range.step; };
+  std::optional<uint64_t> last_done;
+  for (size_t i = 0; i < segments.size(); ++i) {
+    const Segment& seg = segments[i];
+    counts[seg.kind] += seg.count;
+    if (seg.kind == kWaiting || seg.count == 0) continue;
+    if (seg.kind == kDone) last_done = std::max(last_done.value_or(0), seg.first + seg.count - 1);
+    json& list = lists[seg.kind];
+    // Consecutive segments of one kind make one range.
+    if (!list.empty() && i > 0 && segments[i - 1].kind == seg.kind &&
+        segments[i - 1].first + segments[i - 1].count == seg.first &&
+        list.back()[1] == frame(segments[i - 1].first + segments[i - 1].count - 1)) {
+      list.back()[1] = frame(seg.first + seg.count - 1);
+    } else if (list.size() < kMaxFrameRanges) {
+      list.push_back({frame(seg.first), frame(seg.first + seg.count - 1)});
+    } else {
+      truncated = true;
+    }
+  }
+  const std::string pattern = self + "/frames/{frame}/result.";
+  json links = json::object();
+  const OutputSpec spec = output_spec_from_text(job.outputs);
+  if (spec.png) links["result_png"] = pattern + "png";
+  if (spec.exr) links["result_exr"] = pattern + "exr";
+  return {{"start", range.start},
+          {"end", range.end},
+          {"step", range.step},
+          {"chunk", range.chunk},
+          {"total", total},
+          {"done", counts[kDone]},
+          {"running", counts[kRunning]},
+          {"failed", counts[kFailed]},
+          {"done_ranges", lists[kDone]},
+          {"running_ranges", lists[kRunning]},
+          {"failed_ranges", lists[kFailed]},
+          {"ranges_truncated", truncated},
+          {"last_done", last_done ? json(frame(*last_done)) : json(nullptr)},
+          {"links", links}};
+}
+
 }  // namespace
 
 json job_status_json(const JobRecord& job, const std::optional<JobProgress>& live, std::optional<int> queue_position,
@@ -109,12 +186,17 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
   } catch (const std::runtime_error&) {
     spec.png = spec.exr = false;
   }
+  json frames = nullptr;
   try {
-    render = render_settings_status_json(render_settings_from_text(job.settings));
+    const RenderSettings settings = render_settings_from_text(job.settings);
+    render = render_settings_status_json(settings);
+    if (renders_frames(settings)) frames = frames_json(job, settings, p, units, self);
   } catch (const std::runtime_error&) {
   }
-  // A job cancelled after a pass has the image of its last complete pass as its (partial) results.
-  if (job.state == JobState::kSucceeded || (job.state == JobState::kCancelled && p.samples_done > 0)) {
+  // A job cancelled after a pass has the image of its last complete pass as its (partial) results. A frame range's
+  // results are its frames' (frames.links).
+  if (frames.is_null() &&
+      (job.state == JobState::kSucceeded || (job.state == JobState::kCancelled && p.samples_done > 0))) {
     if (spec.png) links["result_png"] = self + "/result.png";
     if (spec.exr) links["result_exr"] = self + "/result.exr";
     // Each render pass's PNG, by the pass's name.
@@ -152,6 +234,7 @@ json job_status_json(const JobRecord& job, const std::optional<JobProgress>& liv
         {"eta_s", p.eta_s ? json(*p.eta_s) : json(nullptr)},
         {"samples_per_s", p.samples_per_s}}},
       {"units", split ? units_json(units, now) : json(nullptr)},
+      {"frames", frames},
       {"stop_reason", text_or_null(stop_reason)},
       {"error", text_or_null(job.error)},
       {"outputs", outputs},

@@ -1,6 +1,7 @@
 #include "server/jobs/job_service.h"
 
 #include <algorithm>
+#include <charconv>
 #include <filesystem>
 
 #include "proto/contract.h"
@@ -17,6 +18,23 @@ namespace tessera::server {
 using nlohmann::json;
 
 namespace {
+
+// The frame range of a job that renders one (work_units.h: renders_frames); nothing otherwise.
+std::optional<FrameRange> frame_range_of(const JobRecord& job) {
+  try {
+    const RenderSettings settings = render_settings_from_text(job.settings);
+    if (renders_frames(settings)) return settings.frames;
+  } catch (const std::runtime_error&) {
+    // A record whose settings cannot be read renders nothing that can be served.
+  }
+  return std::nullopt;
+}
+
+// "1-48" or "1-48 step 2".
+std::string describe_range(const FrameRange& range) {
+  return std::to_string(range.start) + "-" + std::to_string(range.end) +
+         (range.step > 1 ? " step " + std::to_string(range.step) : "");
+}
 
 Problem priority_needs_admin(int priority, int max_user_priority) {
   return Problem{403,
@@ -172,9 +190,10 @@ std::variant<Submitted, Problem> JobService::submit(const Caller& caller, Submit
     job.document = accepted.document.dump();
     job.settings = render_settings_text(accepted.settings);
     job.outputs = output_spec_text(accepted.outputs);
-    job.progress.samples_total = accepted.settings.spp;
-    // On a store several nodes share, a large job is split into units they render at once (work_units.h).
-    job.units = store_.splits_jobs() ? unit_count(accepted.settings, options_.unit_pixel_samples) : 1;
+    job.progress.samples_total = job_samples_total(accepted.settings);
+    // A frame range is split into units of frames on every store; on a store several nodes share, a large still is
+    // split into units of samples they render at once (work_units.h).
+    job.units = job_units(accepted.settings, store_.splits_jobs() ? options_.unit_pixel_samples : 0);
     job.owner = caller.name;
     job.warnings = json(accepted.warnings).dump();
     job.idempotency_key = key;
@@ -236,7 +255,7 @@ json JobService::status(const JobRecord& job) {
   if (job.state == JobState::kQueued) position = store_.queue_position(job.id);
   // A split job's units (a store that splits jobs; empty for a job rendered whole).
   std::vector<UnitRecord> units;
-  if (store_.splits_jobs()) units = store_.units(job.id);
+  if (store_.splits_jobs() || frame_range_of(job)) units = store_.units(job.id);
   return job_status_json(job, scheduler_.live_progress(job.id), position, units, now_ms());
 }
 
@@ -293,6 +312,11 @@ std::optional<Problem> results_not_ready(const JobRecord& job) {
 }  // namespace
 
 std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobRecord& job, JobFile file) {
+  if (auto range = frame_range_of(job))
+    return Problem{409,
+                   "the job renders frames " + describe_range(*range) + ": each frame has its results, at /v1/jobs/" +
+                       job.id + "/frames/{frame}/" + job_file_name(file),
+                   std::nullopt};
   if (auto problem = results_not_ready(job)) return *problem;
   const std::string format = file == JobFile::kResultExr ? "exr" : "png";
   bool asked = false;
@@ -306,7 +330,49 @@ std::variant<std::unique_ptr<FileReader>, Problem> JobService::result(const JobR
   return published_result(job, file);
 }
 
+std::variant<std::unique_ptr<FileReader>, Problem> JobService::frame_result(const JobRecord& job,
+                                                                            std::string_view frame, JobFile file,
+                                                                            std::string_view pass) {
+  const auto range = frame_range_of(job);
+  if (!range) return Problem{404, "the job renders no frame range (render.frames)", std::nullopt};
+  int64_t f = 0;
+  const auto [end, ec] = std::from_chars(frame.data(), frame.data() + frame.size(), f);
+  const bool in_range = ec == std::errc() && end == frame.data() + frame.size() && f >= range->start &&
+                        f <= range->end && (f - range->start) % range->step == 0;
+  if (!in_range)
+    return Problem{404, "frame " + std::string(frame) + " is not one of the job's frames " + describe_range(*range),
+                   std::nullopt};
+  JobFile wanted = file;
+  bool asked = false;
+  try {
+    if (!pass.empty()) {
+      const std::vector<std::string> aovs = render_settings_from_text(job.settings).aovs;
+      const auto f_pass = pass_file(pass);
+      asked = f_pass && std::find(aovs.begin(), aovs.end(), pass) != aovs.end();
+      if (f_pass) wanted = *f_pass;
+    } else {
+      const OutputSpec outputs = output_spec_from_text(job.outputs);
+      asked = file == JobFile::kResultExr ? outputs.exr : outputs.png;
+    }
+  } catch (const std::runtime_error&) {
+    // A record that cannot be read asked for nothing that can be served.
+  }
+  if (!asked)
+    return Problem{
+        404,
+        std::string("the job did not ask for ") + (pass.empty() ? std::string(job_file_name(file)) : std::string(pass)),
+        std::nullopt};
+  if (auto reader = files_.open_frame(job.id, wanted, f, frame_padding(*range))) return reader;
+  return Problem{404, "frame " + std::to_string(f) + " is not done (the job is " + job_state_name(job.state) + ")",
+                 std::nullopt};
+}
+
 std::variant<std::unique_ptr<FileReader>, Problem> JobService::pass(const JobRecord& job, std::string_view name) {
+  if (auto range = frame_range_of(job))
+    return Problem{409,
+                   "the job renders frames " + describe_range(*range) + ": each frame has its passes, at /v1/jobs/" +
+                       job.id + "/frames/{frame}/aovs/" + std::string(name) + ".png",
+                   std::nullopt};
   std::vector<std::string> aovs;
   try {
     aovs = render_settings_from_text(job.settings).aovs;
@@ -457,7 +523,8 @@ JobService::Outcome JobService::requeue(const std::string& id) {
     // From scratch: nothing of the last run survives.
     for (JobFile f : {JobFile::kCheckpoint, JobFile::kPreviewPng}) files_.remove(id, f);
     for (JobFile f : kResultFiles) files_.remove(id, f);
-    files_.remove_units(id);  // a split job's units start over too (the store forgot their checkpoints)
+    files_.remove_units(id);   // a split job's units start over too (the store forgot their checkpoints)
+    files_.remove_frames(id);  // and a frame range's frames
   }
   log(LogLevel::kInfo, "job requeued", {{"job", id}});
   log_.add(id, "requeued by a client: the render starts over");

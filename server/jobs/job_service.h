@@ -103,6 +103,11 @@ class JobService {
   // A finished job's render pass `name` (render.aovs) as PNG, or why there is none (404 naming the job's passes for
   // a pass it did not ask for).
   std::variant<std::unique_ptr<FileReader>, Problem> pass(const JobRecord& job, std::string_view name);
+  // Frame `frame` (its number as the path gives it) of a frame range job: its output `file` (kResultPng,
+  // kResultExr) or, with `pass`, that render pass's PNG; 404 naming the range for a frame not in it (or not a frame
+  // number), for a frame not done yet, and for a job that renders no range.
+  std::variant<std::unique_ptr<FileReader>, Problem> frame_result(const JobRecord& job, std::string_view frame,
+                                                                  JobFile file, std::string_view pass = {});
 
   // Cancel, pause, resume or requeue (409 with the state table's reason when the job's state does not allow it; 429
   // when resuming or requeueing would queue more of the owner's jobs than --max-queued-per-user).

@@ -1,11 +1,13 @@
 #include "server/jobs/render_work.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <new>
 
 #include <nlohmann/json.hpp>
 
+#include "renderer/frames.h"
 #include "renderer/job.h"
 #include "renderer/output.h"
 #include "renderer/scene.h"
@@ -61,9 +63,14 @@ RenderRequest render_request_from_json(const json& j) {
   return r;
 }
 
+JobFile frame_done_file(const OutputSpec& outputs) {
+  return outputs.exr ? JobFile::kResultExr : JobFile::kResultPng;
+}
+
 RenderSettings run_settings(const RenderRequest& request) {
   RenderSettings s = render_settings_from_text(request.settings);
-  if (request.unit >= 0) {
+  // A unit of a frame range renders whole frames (work_units.h).
+  if (request.unit >= 0 && !renders_frames(s)) {
     // One unit: its range of the job's sample indices (work_units.h).
     s.first_sample += request.unit_first_sample;
     s.job_spp = s.spp;  // every unit's rays have the whole job's texture footprints
@@ -220,6 +227,194 @@ RunEnd failed(std::string message, bool input_refused, const RenderProgress& pro
   return end;
 }
 
+// A load for a run: the scene `load(options)` reads, stopped by any request of `control` (a load has no pass to
+// finish); its seconds, to `load_s`.
+std::shared_ptr<const Scene> load_for_run(
+    const RenderEnvironment& env, RunControl& control, double& load_s,
+    const std::function<std::shared_ptr<const Scene>(const SceneLoadOptions&)>& load) {
+  std::stop_source load_stop;
+  auto attached = control.attach([&](bool) { load_stop.request_stop(); });
+  SceneLoadOptions options;
+  options.resolve_asset = env.resolve_asset;
+  options.max_gltf_instances = env.max_gltf_instances;
+  options.stop = load_stop.get_token();
+  const auto load_start = std::chrono::steady_clock::now();
+  auto scene = load(options);
+  load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count();
+  return scene;
+}
+
+// While it lives, a stop request of `control` ends `session` after its pass under way, a cancel within a tile's time.
+RunControl::Attachment attach_session(RunControl& control, RenderSession& session) {
+  return control.attach([&session](bool cancel) {
+    if (cancel)
+      session.cancel();
+    else
+      session.stop();
+  });
+}
+
+// The frames of a run of a frame range, in order (renderer/frames.h): its unit's (work_units.h: unit_frames), or every
+// frame of a range of one unit. A frame whose files exist was rendered by an earlier run (of its unit, before that
+// run's daemon stopped or its worker died) and is not rendered again. Each frame is loaded at its
+// time and rendered whole from sample 0 with the job's seed, so that its image is the still of that time, bit for
+// bit; its outputs are written under their numbered names, the job's preview becomes its PNG, and the job's progress
+// counts every frame's samples. A frame that fails is rendered again, up to kFrameAttempts times; a frame the
+// renderer refuses (its input) or that fails every attempt fails the run, naming the frame.
+class FrameRangeRender {
+ public:
+  FrameRangeRender(const RenderRequest& request, const RenderEnvironment& env, RunControl& control,
+                   RunListener& listener)
+      : request_(request),
+        env_(env),
+        control_(control),
+        listener_(listener),
+        settings_(run_settings(request)),
+        spec_(output_spec_from_text(request.outputs)),
+        outputs_(settings_, spec_),
+        document_(json::parse(request.document)),
+        frames_(request.unit >= 0 ? unit_frames(settings_, request.unit) : frame_numbers(*settings_.frames)),
+        padding_(frame_padding(*settings_.frames)) {}
+
+  RunEnd run() {
+    RunEnd end;
+    const uint32_t done_before = count_done();
+    progress_.samples_total =
+        static_cast<uint32_t>(std::min<uint64_t>(uint64_t{settings_.spp} * frames_.size(), UINT32_MAX));
+    progress_.samples_done = done_before * settings_.spp;
+    samples_before_ = progress_.samples_done;
+    listener_.resumed(done_before ? std::optional<RenderProgress>(progress_) : std::nullopt, false);
+    for (int64_t frame : frames_) {
+      if (done(frame)) continue;
+      std::string error;
+      bool input_refused = false;
+      for (int attempt = 1; attempt <= kFrameAttempts; ++attempt) {
+        error.clear();
+        try {
+          const StopReason reason = render_frame(frame);
+          if (reason == StopReason::kStopped || reason == StopReason::kCancelled) {
+            end.outcome = RunOutcome::kInterrupted;
+            end.reason = reason;
+            end.progress = progress_;
+            return end;
+          }
+          break;
+        } catch (const LoadStopped&) {
+          throw;
+        } catch (const SceneError& e) {
+          error = e.pointer().empty() ? e.what() : e.pointer() + ": " + e.what();
+          input_refused = true;
+          break;
+        } catch (const std::exception& e) {
+          error = e.what();
+          listener_.frame(frame, printf_frame_failure(attempt, error));
+        }
+      }
+      if (!error.empty()) {
+        end.outcome = RunOutcome::kFailed;
+        end.error = "frame " + std::to_string(frame) + ": " + error;
+        end.input_refused = input_refused;
+        end.progress = progress_;
+        return end;
+      }
+    }
+    end.outcome = RunOutcome::kRendered;
+    end.reason = StopReason::kSamples;
+    end.progress = progress_;
+    end.progress.eta_s = 0;
+    end.written = " " + std::to_string(frames_.size()) + " frames";
+    return end;
+  }
+
+ private:
+  static std::string printf_frame_failure(int attempt, const std::string& error) {
+    return "failed (attempt " + std::to_string(attempt) + " of " + std::to_string(kFrameAttempts) + "): " + error +
+           (attempt < kFrameAttempts ? "; rendering it again" : "");
+  }
+
+  bool done(int64_t frame) const {
+    return env_.files->open_frame(request_.id, frame_done_file(spec_), frame, padding_) != nullptr;
+  }
+  uint32_t count_done() const {
+    return static_cast<uint32_t>(std::count_if(frames_.begin(), frames_.end(), [&](int64_t f) { return done(f); }));
+  }
+
+  std::shared_ptr<const Scene> load(int64_t frame) {
+    double load_s = 0;
+    auto scene = load_for_run(env_, control_, load_s, [&](const SceneLoadOptions& options) {
+      return load_frame_scene(document_, settings_, frame, options);
+    });
+    if (!loaded_) listener_.loaded(scene->warnings, load_s);
+    loaded_ = true;
+    return scene;
+  }
+
+  // One frame: its passes reported as the job's progress over all frames; its files written once it is whole.
+  StopReason render_frame(int64_t frame) {
+    listener_.frame(frame,
+                    "rendering at " + std::to_string(frame_time(frame, settings_.fps, 0)) + " s of its animation");
+    RenderSession session(load(frame), settings_, *env_.pool);
+    const uint32_t base = progress_.samples_done;
+    const double elapsed_base = progress_.elapsed_s;
+    const uint32_t passes_base = progress_.pass;
+    StopReason reason;
+    {
+      auto attached = attach_session(control_, session);
+      reason = session.run([&](const RenderProgress& p, const Film&) {
+        progress_.pass = passes_base + p.pass;
+        progress_.samples_done = base + p.samples_done;
+        progress_.elapsed_s = elapsed_base + p.elapsed_s;
+        progress_.samples_per_s = p.samples_per_s;
+        const double rendered = static_cast<double>(progress_.samples_done - samples_before_);
+        progress_.eta_s = rendered > 0 ? progress_.elapsed_s / rendered *
+                                             static_cast<double>(progress_.samples_total - progress_.samples_done)
+                                       : 0;
+        listener_.pass(progress_, "");
+      });
+    }
+    if (reason == StopReason::kStopped || reason == StopReason::kCancelled) {
+      progress_.samples_done = base;
+      return reason;
+    }
+    write_frame(frame, outputs_.image(session.film()));
+    progress_.samples_done = base + settings_.spp;
+    listener_.frame(frame, "done in " + std::to_string(session.progress().elapsed_s) + " s");
+    return reason;
+  }
+
+  // Its passes' PNGs and the formats other than the one that marks it done, then that one, then the preview.
+  void write_frame(int64_t frame, const Image& image) {
+    const JobFile last = frame_done_file(spec_);
+    std::optional<std::string> last_bytes;
+    outputs_.publish_passes(image, [&](std::string_view pass, std::string_view png) {
+      if (const auto f = pass_file(pass)) env_.files->write_frame(request_.id, *f, frame, padding_, png);
+    });
+    outputs_.publish(image, [&](ImageFormat format, std::string_view bytes) {
+      const JobFile f = result_file(format);
+      if (f == last)
+        last_bytes.emplace(bytes);
+      else
+        env_.files->write_frame(request_.id, f, frame, padding_, bytes);
+    });
+    if (last_bytes) env_.files->write_frame(request_.id, last, frame, padding_, *last_bytes);
+    env_.files->write(request_.id, JobFile::kPreviewPng, outputs_.preview_png(image));
+  }
+
+  const RenderRequest& request_;
+  const RenderEnvironment& env_;
+  RunControl& control_;
+  RunListener& listener_;
+  const RenderSettings settings_;
+  const OutputSpec spec_;
+  const OutputPipeline outputs_;
+  const json document_;
+  const std::vector<int64_t> frames_;
+  const int padding_;
+  RenderProgress progress_;
+  uint32_t samples_before_ = 0;  // of the frames earlier runs rendered
+  bool loaded_ = false;
+};
+
 }  // namespace
 
 void perform_render(const RenderRequest& request, const RenderEnvironment& env, RunControl& control,
@@ -228,21 +423,16 @@ void perform_render(const RenderRequest& request, const RenderEnvironment& env, 
   RunEnd end;
   try {
     const RenderSettings settings = run_settings(request);
-    const uint64_t hash = run_settings_hash(request);
-    std::stop_source load_stop;
-    std::shared_ptr<const Scene> scene;
-    {
-      // Any request ends a load: it has no pass to finish.
-      auto attached = control.attach([&](bool) { load_stop.request_stop(); });
-      SceneLoadOptions options;
-      options.resolve_asset = env.resolve_asset;
-      options.max_gltf_instances = env.max_gltf_instances;
-      options.stop = load_stop.get_token();
-      const auto load_start = std::chrono::steady_clock::now();
-      scene = load_job_scene(json::parse(request.document), settings, options);
-      listener.loaded(scene->warnings,
-                      std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count());
+    if (renders_frames(settings)) {
+      listener.ended(FrameRangeRender(request, env, control, listener).run());
+      return;
     }
+    const uint64_t hash = run_settings_hash(request);
+    double load_s = 0;
+    const std::shared_ptr<const Scene> scene = load_for_run(env, control, load_s, [&](const SceneLoadOptions& options) {
+      return load_job_scene(json::parse(request.document), settings, options);
+    });
+    listener.loaded(scene->warnings, load_s);
     RenderSession session(scene, settings, *env.pool);
     resume(request, *env.files, settings, hash, session, listener);
     const OutputPipeline outputs(settings, output_spec_from_text(request.outputs));
@@ -252,12 +442,7 @@ void perform_render(const RenderRequest& request, const RenderEnvironment& env, 
     std::optional<uint32_t> checkpointed;
     StopReason reason;
     {
-      auto attached = control.attach([&](bool cancel) {
-        if (cancel)
-          session.cancel();
-        else
-          session.stop();
-      });
+      auto attached = attach_session(control, session);
       reason = session.run([&](const RenderProgress& p, const Film& film) {
         std::string error;
         try {

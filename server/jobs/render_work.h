@@ -24,6 +24,7 @@
 #include "renderer/thread_pool.h"
 #include "server/files/job_files.h"
 #include "server/store/job_store.h"
+#include "server/store/work_units.h"
 
 namespace tessera::server {
 
@@ -119,8 +120,20 @@ class RunListener {
   virtual void resumed(const std::optional<RenderProgress>& restored, bool unusable) = 0;
   // A pass ended and its checkpoint and preview were written; `write_error` says why they were not, when not.
   virtual void pass(const RenderProgress& progress, const std::string& write_error) = 0;
+  // A frame of a frame range (render_frames) started, ended or failed: `event` says which, for the job's log; the
+  // passes reported after it are that frame's.
+  virtual void frame(int64_t /*frame*/, const std::string& /*event*/) {}
   virtual void ended(const RunEnd& end) = 0;
 };
+
+// A frame range job (work_units.h: renders_frames): each frame is the still at its time (renderer/frames.h), rendered
+// whole with the job's seed and written as numbered files (JobFiles::write_frame); a run renders the frames of its
+// unit (unit_frames), or all of them for a range of one unit.
+// How many times a run renders a frame that fails before the job fails naming it.
+inline constexpr int kFrameAttempts = 3;
+// The file whose presence says a frame is done: written after the frame's other files, so the frame's EXR when the
+// job asks for one, else its PNG.
+JobFile frame_done_file(const OutputSpec& outputs);
 
 // What a render needs of the process that runs it.
 struct RenderEnvironment {

@@ -56,6 +56,13 @@ class Scheduler::RenderSlot {
 
 namespace {
 
+// "frames 5-8" (consecutive numbers of the range), "frame 5".
+std::string describe_frames(const std::vector<int64_t>& frames) {
+  if (frames.empty()) return "no frames";
+  if (frames.size() == 1) return "frame " + std::to_string(frames.front());
+  return "frames " + std::to_string(frames.front()) + "-" + std::to_string(frames.back());
+}
+
 // printf into a std::string, for the lines of a job's log.
 template <typename... Args>
 std::string printf_string(const char* pattern, Args... args) {
@@ -326,13 +333,19 @@ void Scheduler::run_job(const std::shared_ptr<RenderSlot>& slot, const JobRecord
   // winding down cannot bring back the files of a job that was deleted meanwhile.
   files_.prepare(record.id);
   notify_state(record.id);
-  if (record.lost_runs > options_.crash_retries) {
+  // A frame of a range is retried on its unit's count of lost runs (work_units.h), a job on its own.
+  const bool frames = renders_frames(render_settings_from_text(record.settings));
+  if ((frames && record.unit >= 0 ? record.unit_lost_runs : record.lost_runs) > options_.crash_retries) {
     fail_lost_too_often(*slot, record);
   } else if (record.unit >= 0 && record.unit >= record.units) {
     try {
-      merge_units(*slot, record);
+      if (frames)
+        finish_frames(*slot, record);
+      else
+        merge_units(*slot, record);
     } catch (const std::exception& e) {
-      record_failure(*slot, std::string("cannot merge its units: ") + e.what(), 0, false);
+      record_failure(*slot, std::string(frames ? "cannot finish its frames: " : "cannot merge its units: ") + e.what(),
+                     0, false);
     }
   } else {
     render_run(*slot, record);
@@ -367,6 +380,13 @@ struct Scheduler::Run {
   OutputPipeline outputs;
   uint32_t samples_counted = 0;  // the samples per pixel counted in SchedulerHooks::samples_rendered
   bool ended = false;
+  std::optional<int64_t> frame;  // of a frame range: the frame under way, which the log lines of its passes name
+
+  // "frame 12: " while a frame of a range renders, "unit 3: " for a unit of a split job; empty otherwise.
+  std::string who() const {
+    if (frame) return "frame " + std::to_string(*frame) + ": ";
+    return is_unit() ? printf_string("unit %d: ", record.unit + 1) : std::string();
+  }
 
   Run(RenderSlot& s, const JobRecord& r, const RenderRequest& request)
       : slot(s), record(r), settings(run_settings(request)), outputs(settings, output_spec_from_text(r.outputs)) {}
@@ -390,6 +410,10 @@ class Scheduler::RunReport final : public RunListener {
   }
   void pass(const RenderProgress& progress, const std::string& write_error) override {
     scheduler_.publish_pass(run_, progress, write_error);
+  }
+  void frame(int64_t frame, const std::string& event) override {
+    run_.frame = frame;
+    scheduler_.log_.add(run_.id(), run_.who() + event);
   }
   void ended(const RunEnd& end) override {
     run_.ended = true;
@@ -434,9 +458,13 @@ void Scheduler::end_run_reported(Run& run, const RunEnd& end) {
     case RunOutcome::kFailed:
       record_failure(slot, end.error, end.progress.elapsed_s, end.input_refused);
       return;
-    case RunOutcome::kCrashed:
-      end_crashed(slot, run.record, end);
+    case RunOutcome::kCrashed: {
+      // A frame range's run died rendering a frame: its error names the frame.
+      RunEnd named = end;
+      if (run.frame) named.error = run.who() + end.error;
+      end_crashed(slot, run.record, named);
       return;
+    }
   }
 }
 
@@ -457,13 +485,29 @@ void Scheduler::log_start(const Run& run) {
   const JobRecord& record = run.record;
   log(LogLevel::kInfo, "job started",
       {{"job", record.id}, {"samples_done", run.samples_counted}, {"unit", record.unit}, {"where", runner_->where()}});
-  if (run.is_unit())
+  if (run.is_unit() && renders_frames(s))
+    log_.add(record.id,
+             printf_string("unit %d of %d: rendering %s of %dx%d, %u spp, integrator %s, on %d threads "
+                           "(epoch %lld, %s)",
+                           record.unit + 1, record.units, describe_frames(unit_frames(s, record.unit)).c_str(), s.width,
+                           s.height, static_cast<unsigned>(s.spp), s.integrator.name.c_str(), runner_->threads(),
+                           static_cast<long long>(run.slot.epoch), runner_->where()));
+  else if (run.is_unit())
     log_.add(record.id,
              printf_string("unit %d of %d: rendering samples %u..%u of %dx%d, integrator %s, on %d threads (epoch "
                            "%lld, %s)",
                            record.unit + 1, record.units, static_cast<unsigned>(s.first_sample),
                            static_cast<unsigned>(s.first_sample + s.spp), s.width, s.height, s.integrator.name.c_str(),
                            runner_->threads(), static_cast<long long>(run.slot.epoch), runner_->where()));
+  else if (renders_frames(s))
+    log_.add(
+        record.id,
+        printf_string("rendering frames %lld..%lld step %lld (%llu frames) of %dx%d, %u spp, integrator "
+                      "%s, on %d threads %s",
+                      static_cast<long long>(s.frames->start), static_cast<long long>(s.frames->end),
+                      static_cast<long long>(s.frames->step), static_cast<unsigned long long>(frame_count(*s.frames)),
+                      s.width, s.height, static_cast<unsigned>(s.spp), s.integrator.name.c_str(), runner_->threads(),
+                      runner_->where()));
   else
     log_.add(record.id, printf_string("rendering %dx%d, %u spp, integrator %s, on %d threads %s", s.width, s.height,
                                       static_cast<unsigned>(s.spp), s.integrator.name.c_str(), runner_->threads(),
@@ -484,8 +528,7 @@ void Scheduler::publish_pass(Run& run, const RenderProgress& p, const std::strin
     // unit's. A pass whose files could not be written (a full disk) is not worth the render: the last good
     // checkpoint stays, and the next pass writes both again.
     if (!write_error.empty()) throw std::runtime_error(write_error);
-    log_.add(id, printf_string("%spass %u: %u/%u spp, %.2f s, %.3g samples/s",
-                               run.is_unit() ? printf_string("unit %d: ", run.record.unit + 1).c_str() : "",
+    log_.add(id, printf_string("%spass %u: %u/%u spp, %.2f s, %.3g samples/s", run.who().c_str(),
                                static_cast<unsigned>(p.pass), static_cast<unsigned>(p.samples_done),
                                static_cast<unsigned>(p.samples_total), p.elapsed_s, p.samples_per_s));
     // The store, then the status: what a client reads of the job while it renders is never ahead of what the store
@@ -605,12 +648,18 @@ void Scheduler::end_unit(Run& run, const RunEnd& end) {
   const JobRecord& record = run.record;
   const RenderSettings& s = run.settings;
   const RenderProgress& p = end.progress;
-  log_.add(id, printf_string("unit %d of %d done: samples %u..%u in %.2f s", record.unit + 1, record.units,
-                             static_cast<unsigned>(s.first_sample), static_cast<unsigned>(s.first_sample + s.spp),
-                             p.elapsed_s));
+  const bool frames = renders_frames(s);
+  if (frames)
+    log_.add(id, printf_string("unit %d of %d done: %s in %.2f s", record.unit + 1, record.units,
+                               describe_frames(unit_frames(s, record.unit)).c_str(), p.elapsed_s));
+  else
+    log_.add(id, printf_string("unit %d of %d done: samples %u..%u in %.2f s", record.unit + 1, record.units,
+                               static_cast<unsigned>(s.first_sample), static_cast<unsigned>(s.first_sample + s.spp),
+                               p.elapsed_s));
   if (!record_end(run.slot, [&] { return store_.end_run(id, run.slot.epoch, JobState::kSucceeded, now_ms()); })) return;
   log(LogLevel::kInfo, "unit done",
       {{"job", id}, {"unit", record.unit}, {"epoch", run.slot.epoch}, {"elapsed_s", p.elapsed_s}});
+  if (frames) return;  // its frames' preview was written with them
   // The preview refines as units finish: the merge of those done so far, when 1, 2, 4, 8, ... are done, so that the
   // films all previews read stay under twice those of the job's merge (a merge reads every done unit's film; after
   // each unit, a job of n units would read n^2 / 2). Best effort.
@@ -748,9 +797,15 @@ void Scheduler::resumed(Run& run, const std::optional<RenderProgress>& restored,
   }
   log(LogLevel::kInfo, "job resumed from its checkpoint",
       {{"job", id}, {"samples_done", restored->samples_done}, {"passes", restored->pass}});
-  log_.add(id, printf_string("%sresuming from its checkpoint at %u spp (%u passes)",
-                             takeover.empty() ? "" : takeover.c_str(), static_cast<unsigned>(restored->samples_done),
-                             static_cast<unsigned>(restored->pass)));
+  if (renders_frames(run.settings))
+    log_.add(id, printf_string("%sresuming: %u of its %zu frames were rendered by earlier runs and are kept",
+                               takeover.c_str(), static_cast<unsigned>(restored->samples_done / run.settings.spp),
+                               record.unit >= 0 ? unit_frames(run.settings, record.unit).size()
+                                                : static_cast<size_t>(frame_count(*run.settings.frames))));
+  else
+    log_.add(id, printf_string("%sresuming from its checkpoint at %u spp (%u passes)",
+                               takeover.empty() ? "" : takeover.c_str(), static_cast<unsigned>(restored->samples_done),
+                               static_cast<unsigned>(restored->pass)));
   const JobProgress progress = to_job_progress(*restored);
   {
     std::lock_guard lock(mutex_);
@@ -785,12 +840,14 @@ void Scheduler::end_crashed(RenderSlot& slot, const JobRecord& record, const Run
     end_interrupted(slot, record, end.progress.samples_done);
     return;
   }
-  const int lost = record.lost_runs + 1;
+  // A unit of a frame range counts its own lost runs; any other run, its job's.
+  const bool frame_unit = record.unit >= 0 && renders_frames(render_settings_from_text(record.settings));
+  const int lost = (frame_unit ? record.unit_lost_runs : record.lost_runs) + 1;
   if (lost > options_.crash_retries) {
     record_failure(slot,
-                   end.error + printf_string(" (%d runs of this job were lost, more than the %d retries allowed: "
+                   end.error + printf_string(" (%d runs of this %s were lost, more than the %d retries allowed: "
                                              "--crash-retries)",
-                                             lost, options_.crash_retries),
+                                             lost, frame_unit ? "unit" : "job", options_.crash_retries),
                    end.progress.elapsed_s, true);
     return;
   }
@@ -810,6 +867,16 @@ void Scheduler::end_crashed(RenderSlot& slot, const JobRecord& record, const Run
 }
 
 void Scheduler::fail_lost_too_often(RenderSlot& slot, const JobRecord& record) {
+  const RenderSettings settings = render_settings_from_text(record.settings);
+  if (record.unit >= 0 && renders_frames(settings)) {
+    record_failure(slot,
+                   printf_string("%s: the renderer stopped %d times while rendering it (its process crashed or was "
+                                 "killed, or its node stopped), more than the %d retries allowed (--crash-retries)",
+                                 describe_frames(unit_frames(settings, record.unit)).c_str(), record.unit_lost_runs,
+                                 options_.crash_retries),
+                   0, true);
+    return;
+  }
   record_failure(slot,
                  printf_string("the renderer stopped %d times while rendering this job (its process crashed or was "
                                "killed: the scene may crash the renderer), more than the %d retries allowed "
@@ -892,6 +959,21 @@ void Scheduler::merge_units(RenderSlot& slot, const JobRecord& record) {
     files_.remove_units(id);
     log(LogLevel::kInfo, "job succeeded", {{"job", id}, {"units", record.units}, {"merge_s", merge_s}});
   }
+}
+
+void Scheduler::finish_frames(RenderSlot& slot, const JobRecord& record) {
+  const std::string& id = record.id;
+  const RenderSettings settings = render_settings_from_text(record.settings);
+  const OutputSpec spec = output_spec_from_text(record.outputs);
+  const int padding = frame_padding(*settings.frames);
+  for (int64_t frame : frame_numbers(*settings.frames))
+    if (!files_.open_frame(id, frame_done_file(spec), frame, padding))
+      throw std::runtime_error("frame " + std::to_string(frame) + "'s " + job_file_name(frame_done_file(spec)) +
+                               " is missing from the data directory");
+  log_.add(id, printf_string("succeeded: its %llu frames are done, in %d units",
+                             static_cast<unsigned long long>(frame_count(*settings.frames)), record.units));
+  if (record_terminal(slot, JobState::kSucceeded, 0, stop_reason_name(StopReason::kSamples)))
+    log(LogLevel::kInfo, "job succeeded", {{"job", id}, {"units", record.units}});
 }
 
 std::vector<Scheduler::RenderSlot*> Scheduler::slots_locked(const std::string& id) const {

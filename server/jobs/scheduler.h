@@ -199,6 +199,8 @@ class Scheduler {
   // A split job's units rendered: merges their films (each a unit's authoritative checkpoint) into the job's outputs
   // and records its end (the merge unit's run, fenced by its epoch).
   void merge_units(RenderSlot& slot, const JobRecord& record);
+  // The end unit of a frame range: every frame's files are there; the job succeeds.
+  void finish_frames(RenderSlot& slot, const JobRecord& record);
   // After the end of a run that staged its outputs: published when the store took that end (`recorded`, or read back
   // when it is unknown), removed when it refused it.
   void publish_outputs(RenderSlot& slot, bool recorded);

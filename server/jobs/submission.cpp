@@ -7,7 +7,6 @@
 
 #include "proto/contract.h"
 #include "renderer/aov.h"
-#include "renderer/frames.h"
 #include "renderer/job.h"
 #include "renderer/scene.h"
 #include "renderer/scene_error.h"
@@ -205,14 +204,6 @@ std::variant<AcceptedJob, Problem> check_job_document(json document, const Submi
   } catch (const LoadStopped&) {
     return stopping_problem();
   }
-  // A range of one frame is the still at its time (load_job_scene); longer ranges are rendered by the command line
-  // until the daemon makes each frame a work unit.
-  if (const auto& frames = render_job.settings.frames; frames && frame_count(*frames) > 1)
-    return Problem{422,
-                   "a frame range is rendered by `tessera render --frames` for now: submit one job per frame, with "
-                   "scene.time at the frame's time (frame / render.fps), or a range of one frame (this one holds " +
-                       std::to_string(frame_count(*frames)) + ")",
-                   "/render/frames"};
   if (auto problem = check_work(render_job, limits.max_work)) return *problem;
   if (auto problem = check_film(render_job.settings, limits.max_film_bytes)) return *problem;
   if (render_job.scene) job.warnings = render_job.scene->warnings;

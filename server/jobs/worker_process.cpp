@@ -87,6 +87,8 @@ class ReportReader {
       if (auto it = j.find("pass"); it != j.end()) {
         last_progress_ = render_progress_from_json(it->at("progress"));
         listener_.pass(last_progress_, it->at("write_error").get<std::string>());
+      } else if (auto it = j.find("frame"); it != j.end()) {
+        listener_.frame(it->at("frame").get<int64_t>(), it->at("event").get<std::string>());
       } else if (auto it = j.find("loaded"); it != j.end()) {
         listener_.loaded(it->at("warnings").get<std::vector<std::string>>(), it->at("load_s").get<double>());
       } else if (auto it = j.find("resumed"); it != j.end()) {
@@ -338,6 +340,9 @@ class ReportWriter final : public RunListener {
   }
   void pass(const RenderProgress& progress, const std::string& write_error) override {
     send({{"pass", {{"progress", render_progress_to_json(progress)}, {"write_error", write_error}}}});
+  }
+  void frame(int64_t frame, const std::string& event) override {
+    send({{"frame", {{"frame", frame}, {"event", event}}}});
   }
   void ended(const RunEnd& end) override { send({{"ended", run_end_to_json(end)}}); }
 

@@ -67,6 +67,9 @@ struct JobRecord {
   uint32_t unit_first_sample = 0;
   uint32_t unit_samples = 0;
   int64_t unit_checkpoint_epoch = 0;
+  // The runs of the claimed unit that were lost (as lost_runs counts the job's): a frame of a range is retried on its
+  // own count, so that the frames of a long range do not share one.
+  int unit_lost_runs = 0;
 
   // It failed because the renderer refused its input (job_state.h): running it again would fail the same way.
   bool input_refused() const { return state == JobState::kFailed && stop_reason == kInputRefused; }
@@ -173,11 +176,12 @@ class JobStore {
   // Puts jobs left running by a previous process back in the queue, each counting a lost run; returns how many.
   virtual int requeue_running() = 0;
 
-  // Work units (JobRecord::units). A store that splits jobs creates a job's units with it (job.units of them, their
-  // samples as split_samples() spreads them, and the merge unit), claims them in claim_next() as it claims jobs, and
+  // Work units (JobRecord::units). A store creates a job's units with it when job.units > 1 (job.units of them, their
+  // samples as unit_sample_ranges() gives them, and the merge unit: a frame range's units on every store, a still's
+  // sample ranges on a store that splits jobs), claims them in claim_next() as it claims jobs, and
   // fences each unit run by its epoch in renew_lease(), update_progress() (which also records the run's checkpoint as
   // the unit's authoritative one) and end_run() (succeeded: the unit is done; the merge unit's end is the job's).
-  // A store that does not split renders every job whole.
+  // A store that does not split stills renders every still whole.
   virtual bool splits_jobs() const { return false; }
   // The units of a job (not its merge unit), by index; empty for a job rendered whole.
   virtual std::vector<UnitRecord> units(const std::string& /*id*/) { return {}; }

@@ -78,4 +78,41 @@ JobRecord read_job_record(const Row& row, bool with_document) {
   return r;
 }
 
+// How many runs of the owner `owner_sql` names hold a live lease at the time `now_sql` names (a placeholder: $1, ?1):
+// jobs rendered whole, and work units, in the tables `jobs` and `units` of a store (the per-owner cap of claim_next).
+inline std::string sql_live_runs_of(const std::string& jobs, const std::string& units, const std::string& owner_sql,
+                                    const std::string& now_sql) {
+  return "((SELECT count(*) FROM " + jobs + " r WHERE r.owner = " + owner_sql +
+         " AND r.units = 1 AND r.state = 'running' AND r.lease_expires_at >= " + now_sql +
+         ") + (SELECT count(*) FROM " + units + " ru JOIN " + jobs +
+         " rj ON rj.id = ru.job_id WHERE rj.owner = " + owner_sql +
+         " AND ru.state = 'running' AND ru.lease_expires_at >= " + now_sql + "))";
+}
+
+// The columns of a unit row (table alias u) read_unit_record() reads, in its order.
+inline constexpr const char* kUnitColumns =
+    "u.idx, u.first_sample, u.samples, u.state, u.checkpoint_epoch, COALESCE(u.node, ''), u.samples_done, "
+    "u.elapsed_s, u.samples_per_s, COALESCE(u.renewed_at, 0), COALESCE(u.lease_expires_at, 0)";
+
+// A unit from a row of kUnitColumns; `Row` as read_job_record()'s.
+template <typename Row>
+UnitRecord read_unit_record(const Row& row) {
+  UnitRecord u;
+  u.index = static_cast<int>(row.int64(0));
+  u.first_sample = static_cast<uint32_t>(row.int64(1));
+  u.samples = static_cast<uint32_t>(row.int64(2));
+  u.done = row.text(3) == "done";
+  u.running = row.text(3) == "running";
+  u.checkpoint_epoch = row.int64(4);
+  u.node = row.text(5);
+  u.samples_done = static_cast<uint32_t>(row.int64(6));
+  u.elapsed_s = row.real(7);
+  u.samples_per_s = row.real(8);
+  if (u.running) {
+    u.renewed_at_ms = row.int64(9);
+    u.lease_expires_at_ms = row.int64(10);
+  }
+  return u;
+}
+
 }  // namespace tessera::server

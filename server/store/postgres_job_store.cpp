@@ -191,9 +191,14 @@ constexpr const char* kMigration6 = R"sql(
   ALTER TABLE tessera_units ADD COLUMN renewed_at BIGINT;
 )sql";
 
+// Version 7: the lost runs of each unit (JobRecord::unit_lost_runs): a frame of a range is retried on its own count.
+constexpr const char* kMigration7 = R"sql(
+  ALTER TABLE tessera_units ADD COLUMN lost_runs INTEGER NOT NULL DEFAULT 0;
+)sql";
+
 const std::vector<const char*>& PostgresJobStore::migrations() {
-  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2, kMigration3,
-                                                       kMigration4, kMigration5, kMigration6};
+  static const std::vector<const char*> kMigrations = {kMigration1, kMigration2, kMigration3, kMigration4,
+                                                       kMigration5, kMigration6, kMigration7};
   return kMigrations;
 }
 
@@ -259,7 +264,7 @@ void PostgresJobStore::create(const JobRecord& job) {
       // The sample ranges, then the merge; numbers this store computed, the id a parameter.
       std::string values;
       int idx = 0;
-      for (const SampleRange& r : split_samples(job.progress.samples_total, units))
+      for (const SampleRange& r : unit_sample_ranges(job.settings, job.progress.samples_total, units))
         values += "($1," + std::to_string(idx++) + "," + std::to_string(r.first) + "," + std::to_string(r.count) + "),";
       values += "($1," + std::to_string(units) + ",0,0)";
       exec("INSERT INTO tessera_units (job_id, idx, first_sample, samples) VALUES " + values, {job.id});
@@ -270,12 +275,9 @@ void PostgresJobStore::create(const JobRecord& job) {
 
 namespace {
 
-// How many runs of the owner `owner_sql` names hold a live lease at $1: jobs rendered whole, and work units.
+// How many runs of the owner `owner_sql` names hold a live lease at $1 (job_store_sql.h).
 std::string live_runs_of(const std::string& owner_sql) {
-  return "((SELECT count(*) FROM tessera_jobs r WHERE r.owner = " + owner_sql +
-         " AND r.units = 1 AND r.state = 'running' AND r.lease_expires_at >= $1) + (SELECT count(*) FROM "
-         "tessera_units ru JOIN tessera_jobs rj ON rj.id = ru.job_id WHERE rj.owner = " +
-         owner_sql + " AND ru.state = 'running' AND ru.lease_expires_at >= $1))";
+  return sql_live_runs_of("tessera_jobs", "tessera_units", owner_sql, "$1");
 }
 
 // pg_advisory_xact_lock's first key for an owner's claims (the second is the hash of the owner): "tess" in ASCII. The
@@ -355,15 +357,16 @@ std::optional<JobRecord> PostgresJobStore::claim_next(int64_t now_ms, int64_t le
       JobRecord record = j.record(true);
       Result u = exec(
           "UPDATE tessera_units SET state = 'running', epoch = $3, node = $4, renewed_at = $5::bigint, "
-          "lease_expires_at = $5::bigint + $6::bigint WHERE job_id = $1 AND idx = $2 RETURNING first_sample, samples, "
-          "checkpoint_epoch, "
-          "(SELECT units FROM tessera_jobs WHERE id = $1)",
-          {job_id, idx, to_text(record.epoch), node_, now, lease});
+          "lease_expires_at = $5::bigint + $6::bigint, lost_runs = lost_runs + $7::int WHERE job_id = $1 AND idx = $2 "
+          "RETURNING first_sample, samples, checkpoint_epoch, (SELECT units FROM tessera_jobs WHERE id = $1), "
+          "lost_runs",
+          {job_id, idx, to_text(record.epoch), node_, now, lease, lost});
       record.unit = static_cast<int>(std::strtol(idx.c_str(), nullptr, 10));
       record.unit_first_sample = static_cast<uint32_t>(u.int64(0));
       record.unit_samples = static_cast<uint32_t>(u.int64(1));
       record.unit_checkpoint_epoch = u.int64(2);
       record.units = static_cast<int>(u.int64(3));
+      record.unit_lost_runs = static_cast<int>(u.int64(4));
       record.node = node_;
       if (unit.text(5) == "running") record.taken_over_from = unit.text(6);
       return record;
@@ -483,7 +486,7 @@ bool PostgresJobStore::move(const std::string& id, JobState to, int64_t now_ms, 
     // Back to the queue from an end (a requeue): its units start over too. From paused (a resume) they are kept.
     exec(
         "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL, passes = 0, "
-        "samples_done = 0, elapsed_s = 0, samples_per_s = 0, checkpoint_epoch = 0, finished_at = NULL "
+        "samples_done = 0, elapsed_s = 0, samples_per_s = 0, checkpoint_epoch = 0, finished_at = NULL, lost_runs = 0 "
         "WHERE job_id = $1 AND (SELECT state FROM tessera_jobs WHERE id = $1) IN (" +
             sql_terminal_states() + ") AND (SELECT state FROM tessera_jobs WHERE id = $1) IN (" + from_states + ")",
         {id});
@@ -616,31 +619,12 @@ bool PostgresJobStore::remove(const std::string& id, std::optional<int64_t> only
 
 std::vector<UnitRecord> PostgresJobStore::units(const std::string& id) {
   std::lock_guard lock(mutex_);
-  Result r = exec(
-      "SELECT u.idx, u.first_sample, u.samples, u.state, u.checkpoint_epoch, COALESCE(u.node, ''), u.samples_done, "
-      "u.elapsed_s, u.samples_per_s, COALESCE(u.renewed_at, 0), COALESCE(u.lease_expires_at, 0) FROM tessera_units u "
-      "JOIN tessera_jobs j ON j.id = u.job_id WHERE u.job_id = $1 "
-      "AND u.idx < j.units ORDER BY u.idx",
-      {id});
+  Result r = exec(std::string("SELECT ") + kUnitColumns +
+                      " FROM tessera_units u JOIN tessera_jobs j ON j.id = u.job_id WHERE u.job_id = $1 AND u.idx < "
+                      "j.units ORDER BY u.idx",
+                  {id});
   std::vector<UnitRecord> out;
-  for (int i = 0; i < r.rows(); ++i) {
-    r.at(i);
-    UnitRecord& u = out.emplace_back();
-    u.index = static_cast<int>(r.int64(0));
-    u.first_sample = static_cast<uint32_t>(r.int64(1));
-    u.samples = static_cast<uint32_t>(r.int64(2));
-    u.done = r.text(3) == "done";
-    u.running = r.text(3) == "running";
-    u.checkpoint_epoch = r.int64(4);
-    u.node = r.text(5);
-    u.samples_done = static_cast<uint32_t>(r.int64(6));
-    u.elapsed_s = r.real(7);
-    u.samples_per_s = r.real(8);
-    if (u.running) {
-      u.renewed_at_ms = r.int64(9);
-      u.lease_expires_at_ms = r.int64(10);
-    }
-  }
+  for (int i = 0; i < r.rows(); ++i) out.push_back(read_unit_record(r.at(i)));
   return out;
 }
 
@@ -652,8 +636,8 @@ int PostgresJobStore::requeue_running() {
       "'running' AND node = $1)",
       {node_});
   const int units = exec(
-                        "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL "
-                        "WHERE state = 'running' AND node = $1",
+                        "UPDATE tessera_units SET state = 'queued', node = NULL, lease_expires_at = NULL, "
+                        "lost_runs = lost_runs + 1 WHERE state = 'running' AND node = $1",
                         {node_})
                         .affected();
   return units +

@@ -6,6 +6,7 @@
 
 #include "server/base/file_io.h"
 #include "server/store/job_store_sql.h"
+#include "server/store/work_units.h"
 
 namespace tessera::server {
 
@@ -233,7 +234,48 @@ void SqliteJobStore::migrate() {
       exec("ALTER TABLE jobs ADD COLUMN lost_runs INTEGER NOT NULL DEFAULT 0");
       exec("INSERT INTO schema_version (version) VALUES (5)");
     }
+    if (version < 6) {
+      // Version 6: work units (work_units.h), as PostgresJobStore's tessera_units: a job of units > 1 has one row
+      // per unit and one more, its end (idx = units, no samples), claimable once the others are done. A unit run's
+      // epoch comes from its job's epoch counter.
+      exec("ALTER TABLE jobs ADD COLUMN units INTEGER NOT NULL DEFAULT 1");
+      exec(R"sql(
+        CREATE TABLE units (
+          job_id TEXT NOT NULL REFERENCES jobs (id) ON DELETE CASCADE,
+          idx INTEGER NOT NULL,
+          first_sample INTEGER NOT NULL,
+          samples INTEGER NOT NULL,
+          state TEXT NOT NULL DEFAULT 'queued' CHECK (state IN ('queued','running','done')),
+          epoch INTEGER NOT NULL DEFAULT 0,
+          node TEXT,
+          lease_expires_at INTEGER,
+          renewed_at INTEGER,
+          passes INTEGER NOT NULL DEFAULT 0,
+          samples_done INTEGER NOT NULL DEFAULT 0,
+          elapsed_s REAL NOT NULL DEFAULT 0,
+          samples_per_s REAL NOT NULL DEFAULT 0,
+          checkpoint_epoch INTEGER NOT NULL DEFAULT 0,
+          finished_at INTEGER,
+          lost_runs INTEGER NOT NULL DEFAULT 0,
+          PRIMARY KEY (job_id, idx)
+        ))sql");
+      exec("CREATE INDEX units_claim ON units (state, job_id)");
+      exec("INSERT INTO schema_version (version) VALUES (6)");
+    }
     exec("COMMIT");
+  } catch (...) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    throw;
+  }
+}
+
+template <typename F>
+auto SqliteJobStore::in_transaction(F&& body) {
+  exec("BEGIN IMMEDIATE");
+  try {
+    auto out = body();
+    exec("COMMIT");
+    return out;
   } catch (...) {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
     throw;
@@ -242,53 +284,174 @@ void SqliteJobStore::migrate() {
 
 void SqliteJobStore::create(const JobRecord& job) {
   std::lock_guard lock(mutex_);
-  Statement s(*this,
-              "INSERT INTO jobs (id, kind, state, priority, created_at, document, settings, outputs, samples_total, "
-              "owner, warnings, idempotency_key, request_hash, name) "
-              "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14)");
-  s.bind(1, job.id);
-  s.bind(2, job.kind);
-  s.bind(3, std::string(job_state_name(JobState::kQueued)));
-  s.bind(4, static_cast<int64_t>(job.priority));
-  s.bind(5, job.created_at_ms);
-  s.bind(6, job.document);
-  s.bind(7, job.settings);
-  s.bind(8, job.outputs);
-  s.bind(9, static_cast<int64_t>(job.progress.samples_total));
-  s.bind(10, job.owner);
-  s.bind(11, job.warnings.empty() ? std::string("[]") : job.warnings);
-  s.bind_text_or_null(12, job.idempotency_key);
-  s.bind_text_or_null(13, job.request_hash);
-  s.bind(14, job.name);
-  s.step();
+  const int units = std::max(job.units, 1);
+  in_transaction([&] {
+    {
+      Statement s(
+          *this,
+          "INSERT INTO jobs (id, kind, state, priority, created_at, document, settings, outputs, samples_total, "
+          "owner, warnings, idempotency_key, request_hash, name, units) "
+          "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15)");
+      s.bind(1, job.id);
+      s.bind(2, job.kind);
+      s.bind(3, std::string(job_state_name(JobState::kQueued)));
+      s.bind(4, static_cast<int64_t>(job.priority));
+      s.bind(5, job.created_at_ms);
+      s.bind(6, job.document);
+      s.bind(7, job.settings);
+      s.bind(8, job.outputs);
+      s.bind(9, static_cast<int64_t>(job.progress.samples_total));
+      s.bind(10, job.owner);
+      s.bind(11, job.warnings.empty() ? std::string("[]") : job.warnings);
+      s.bind_text_or_null(12, job.idempotency_key);
+      s.bind_text_or_null(13, job.request_hash);
+      s.bind(14, job.name);
+      s.bind(15, static_cast<int64_t>(units));
+      s.step();
+    }
+    if (units > 1) {
+      // Its units, then the end (idx = units, no samples).
+      const std::vector<SampleRange> ranges = unit_sample_ranges(job.settings, job.progress.samples_total, units);
+      for (int idx = 0; idx <= units; ++idx) {
+        Statement u(*this, "INSERT INTO units (job_id, idx, first_sample, samples) VALUES (?1, ?2, ?3, ?4)");
+        u.bind(1, job.id);
+        u.bind(2, static_cast<int64_t>(idx));
+        u.bind(3, static_cast<int64_t>(idx < units ? ranges[static_cast<size_t>(idx)].first : 0));
+        u.bind(4, static_cast<int64_t>(idx < units ? ranges[static_cast<size_t>(idx)].count : 0));
+        u.step();
+      }
+    }
+    return 0;
+  });
 }
+
+namespace {
+
+// How many runs of the owner `owner_sql` names hold a live lease at ?1 (job_store_sql.h).
+std::string live_runs_of(const std::string& owner_sql) {
+  return sql_live_runs_of("jobs", "units", owner_sql, "?1");
+}
+
+}  // namespace
 
 std::optional<JobRecord> SqliteJobStore::claim_next(int64_t now_ms, int64_t lease_ms, int max_running_per_owner) {
   std::lock_guard lock(mutex_);
-  // One statement, so two daemons sharing the file can never claim the same job, nor an owner's runs pass the cap
-  // (the write lock serialises the statements).
-  Statement s(*this,
-              std::string("UPDATE jobs SET state = 'running', started_at = ?1, passes = 0, samples_done = 0, "
-                          "elapsed_s = 0, eta_s = NULL, samples_per_s = 0, epoch = epoch + 1, "
-                          "lease_expires_at = ?1 + ?2, lost_runs = lost_runs + (state = 'running') "
-                          "WHERE seq = (SELECT seq FROM jobs c WHERE (c.state = 'queued' OR (c.state = 'running' "
-                          "AND c.lease_expires_at < ?1)) AND (?3 <= 0 OR (SELECT count(*) FROM jobs r WHERE "
-                          "r.owner = c.owner AND r.state = 'running' AND r.lease_expires_at >= ?1) < ?3) "
-                          "ORDER BY c.priority DESC, c.seq LIMIT 1) RETURNING ") +
-                  kJobColumns + ", document");
-  s.bind(1, now_ms);
-  s.bind(2, lease_ms);
-  s.bind(3, static_cast<int64_t>(max_running_per_owner));
-  if (!s.step()) return std::nullopt;
-  JobRecord r = s.record(true);
-  while (s.step()) {
+  // One write transaction, so two daemons sharing the file can never claim the same job or unit, nor an owner's runs
+  // pass the cap (the write lock serialises them). As PostgresJobStore: the first job rendered whole and the first
+  // unit, each by priority then age, queued or running under a lease that expired (a unit's end only once the others
+  // are done), and the better of the two taken.
+  return in_transaction([&]() -> std::optional<JobRecord> {
+    std::optional<int64_t> whole_seq, whole_priority;
+    {
+      Statement w(*this,
+                  "SELECT seq, priority FROM jobs c WHERE c.units = 1 AND (c.state = 'queued' OR (c.state = "
+                  "'running' AND c.lease_expires_at < ?1)) AND (?2 <= 0 OR " +
+                      live_runs_of("c.owner") + " < ?2) ORDER BY c.priority DESC, c.seq LIMIT 1");
+      w.bind(1, now_ms);
+      w.bind(2, static_cast<int64_t>(max_running_per_owner));
+      if (w.step()) {
+        whole_seq = w.int64(0);
+        whole_priority = w.int64(1);
+      }
+    }
+    std::string unit_job;
+    int64_t unit_idx = 0, unit_seq = 0, unit_priority = 0;
+    bool unit_lost = false, have_unit = false;
+    {
+      Statement u(*this,
+                  "SELECT u.job_id, u.idx, j.seq, j.priority, u.state FROM units u JOIN jobs j ON j.id = u.job_id "
+                  "WHERE j.state IN ('queued', 'running') AND (u.state = 'queued' OR (u.state = 'running' AND "
+                  "u.lease_expires_at < ?1)) AND (u.idx < j.units OR NOT EXISTS (SELECT 1 FROM units d WHERE "
+                  "d.job_id = u.job_id AND d.idx < j.units AND d.state <> 'done')) AND (?2 <= 0 OR " +
+                      live_runs_of("j.owner") + " < ?2) ORDER BY j.priority DESC, j.seq, u.idx LIMIT 1");
+      u.bind(1, now_ms);
+      u.bind(2, static_cast<int64_t>(max_running_per_owner));
+      if (u.step()) {
+        have_unit = true;
+        unit_job = u.text(0);
+        unit_idx = u.int64(1);
+        unit_seq = u.int64(2);
+        unit_priority = u.int64(3);
+        unit_lost = u.text(4) == "running";
+      }
+    }
+    bool take_unit = have_unit;
+    if (have_unit && whole_seq)
+      take_unit = unit_priority > *whole_priority || (unit_priority == *whole_priority && unit_seq < *whole_seq);
+    if (take_unit) return std::optional<JobRecord>(claim_unit(unit_job, unit_idx, unit_lost, now_ms, lease_ms));
+    if (!whole_seq) return std::optional<JobRecord>();
+    Statement s(*this, std::string("UPDATE jobs SET state = 'running', started_at = ?1, passes = 0, samples_done = 0, "
+                                   "elapsed_s = 0, eta_s = NULL, samples_per_s = 0, epoch = epoch + 1, "
+                                   "lease_expires_at = ?1 + ?2, lost_runs = lost_runs + (state = 'running') "
+                                   "WHERE seq = ?3 RETURNING ") +
+                           kJobColumns + ", document");
+    s.bind(1, now_ms);
+    s.bind(2, lease_ms);
+    s.bind(3, *whole_seq);
+    if (!s.step()) return std::optional<JobRecord>();
+    JobRecord r = s.record(true);
+    while (s.step()) {
+    }
+    return std::optional<JobRecord>(std::move(r));
+  });
+}
+
+JobRecord SqliteJobStore::claim_unit(const std::string& job_id, int64_t idx, bool lost, int64_t now_ms,
+                                     int64_t lease_ms) {
+  // The job's epoch counter hands out the unit run's fencing token; the job runs from its first unit's claim. A unit
+  // taken over from a run whose lease expired is a lost run of its job, and of the unit.
+  JobRecord record;
+  {
+    Statement j(*this, std::string("UPDATE jobs SET epoch = epoch + 1, state = 'running', started_at = "
+                                   "COALESCE(started_at, ?2), lost_runs = lost_runs + ?3 WHERE id = ?1 RETURNING ") +
+                           kJobColumns + ", document");
+    j.bind(1, job_id);
+    j.bind(2, now_ms);
+    j.bind(3, static_cast<int64_t>(lost));
+    if (!j.step()) throw JobStoreError("job store: the job of a unit claimed is gone", false);
+    record = j.record(true);
+    while (j.step()) {
+    }
   }
-  return r;
+  Statement u(*this,
+              "UPDATE units SET state = 'running', epoch = ?3, node = '', renewed_at = ?4, lease_expires_at = ?4 + ?5, "
+              "lost_runs = lost_runs + ?6 WHERE job_id = ?1 AND idx = ?2 RETURNING first_sample, samples, "
+              "checkpoint_epoch, (SELECT units FROM jobs WHERE id = ?1), lost_runs");
+  u.bind(1, job_id);
+  u.bind(2, idx);
+  u.bind(3, record.epoch);
+  u.bind(4, now_ms);
+  u.bind(5, lease_ms);
+  u.bind(6, static_cast<int64_t>(lost));
+  if (!u.step()) throw JobStoreError("job store: a unit claimed is gone", false);
+  record.unit = static_cast<int>(idx);
+  record.unit_first_sample = static_cast<uint32_t>(u.int64(0));
+  record.unit_samples = static_cast<uint32_t>(u.int64(1));
+  record.unit_checkpoint_epoch = u.int64(2);
+  record.units = static_cast<int>(u.int64(3));
+  record.unit_lost_runs = static_cast<int>(u.int64(4));
+  while (u.step()) {
+  }
+  return record;
 }
 
 bool SqliteJobStore::renew_lease(const std::string& id, int64_t epoch, int64_t now_ms, int64_t lease_ms) {
   std::lock_guard lock(mutex_);
-  Statement s(*this, "UPDATE jobs SET lease_expires_at = ?3 + ?4 WHERE id = ?1 AND state = 'running' AND epoch = ?2");
+  // A unit run of a running job, or a job rendered whole: (id, epoch) names one of them at most.
+  {
+    Statement u(*this,
+                "UPDATE units SET renewed_at = ?3, lease_expires_at = ?3 + ?4 WHERE job_id = ?1 AND epoch = ?2 AND "
+                "state = 'running' AND (SELECT state FROM jobs WHERE id = ?1) = 'running'");
+    u.bind(1, id);
+    u.bind(2, epoch);
+    u.bind(3, now_ms);
+    u.bind(4, lease_ms);
+    u.step();
+    if (sqlite3_changes(db_) > 0) return true;
+  }
+  Statement s(*this,
+              "UPDATE jobs SET lease_expires_at = ?3 + ?4 WHERE id = ?1 AND state = 'running' AND epoch = ?2 AND "
+              "units = 1");
   s.bind(1, id);
   s.bind(2, epoch);
   s.bind(3, now_ms);
@@ -299,9 +462,27 @@ bool SqliteJobStore::renew_lease(const std::string& id, int64_t epoch, int64_t n
 
 bool SqliteJobStore::update_progress(const std::string& id, int64_t epoch, const JobProgress& p) {
   std::lock_guard lock(mutex_);
+  // A unit run: its own row (the checkpoint it just wrote becomes the unit's), then the job's progress over its units.
+  const bool unit = in_transaction([&] {
+    Statement u(*this,
+                "UPDATE units SET passes = ?2, samples_done = ?3, elapsed_s = ?4, samples_per_s = ?5, "
+                "checkpoint_epoch = ?6 WHERE job_id = ?1 AND epoch = ?6 AND state = 'running' AND (SELECT state FROM "
+                "jobs WHERE id = ?1) = 'running'");
+    u.bind(1, id);
+    u.bind(2, static_cast<int64_t>(p.passes));
+    u.bind(3, static_cast<int64_t>(p.samples_done));
+    u.bind(4, p.elapsed_s);
+    u.bind(5, p.samples_per_s);
+    u.bind(6, epoch);
+    u.step();
+    if (sqlite3_changes(db_) == 0) return false;
+    aggregate_units(id);
+    return true;
+  });
+  if (unit) return true;
   Statement s(*this,
               "UPDATE jobs SET passes = ?2, samples_done = ?3, samples_total = ?4, elapsed_s = ?5, eta_s = ?6, "
-              "samples_per_s = ?7 WHERE id = ?1 AND state = 'running' AND epoch = ?8");
+              "samples_per_s = ?7 WHERE id = ?1 AND state = 'running' AND epoch = ?8 AND units = 1");
   s.bind(1, id);
   s.bind(2, static_cast<int64_t>(p.passes));
   s.bind(3, static_cast<int64_t>(p.samples_done));
@@ -314,6 +495,19 @@ bool SqliteJobStore::update_progress(const std::string& id, int64_t epoch, const
   return sqlite3_changes(db_) > 0;
 }
 
+void SqliteJobStore::aggregate_units(const std::string& id) {
+  Statement s(
+      *this,
+      "UPDATE jobs SET passes = a.passes, samples_done = a.done, elapsed_s = a.elapsed, samples_per_s = a.rate, "
+      "eta_s = CASE WHEN a.spp_rate > 0 THEN max(jobs.samples_total - a.done, 0) / a.spp_rate END FROM "
+      "(SELECT COALESCE(SUM(passes), 0) AS passes, COALESCE(SUM(samples_done), 0) AS done, "
+      "COALESCE(SUM(elapsed_s), 0) AS elapsed, COALESCE(SUM(samples_per_s) FILTER (WHERE state = 'running'), "
+      "0) AS rate, COALESCE(SUM(samples_done / elapsed_s) FILTER (WHERE state = 'running' AND elapsed_s > 0), "
+      "0) AS spp_rate FROM units WHERE job_id = ?1) AS a WHERE jobs.id = ?1 AND jobs.state = 'running'");
+  s.bind(1, id);
+  s.step();
+}
+
 bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                                 const std::string& error, std::optional<JobState> only_from) {
   std::lock_guard lock(mutex_);
@@ -323,14 +517,67 @@ bool SqliteJobStore::transition(const std::string& id, JobState to, int64_t now_
 bool SqliteJobStore::end_run(const std::string& id, int64_t epoch, JobState to, int64_t now_ms,
                              const std::string& stop_reason, const std::string& error) {
   std::lock_guard lock(mutex_);
-  return move(id, to, now_ms, stop_reason, error, sql_states_into(to, JobState::kRunning), epoch);
+  return in_transaction([&] {
+    // A unit run of this epoch, of a job still running?
+    int64_t idx = -1, units = 0;
+    {
+      Statement u(*this,
+                  "SELECT u.idx, j.units FROM units u JOIN jobs j ON j.id = u.job_id WHERE u.job_id = ?1 AND "
+                  "u.epoch = ?2 AND u.state = 'running' AND j.state = 'running'");
+      u.bind(1, id);
+      u.bind(2, epoch);
+      if (u.step()) {
+        idx = u.int64(0);
+        units = u.int64(1);
+      }
+    }
+    if (idx < 0) return move(id, to, now_ms, stop_reason, error, sql_states_into(to, JobState::kRunning), epoch);
+    if (to == JobState::kQueued) {
+      // Stopping: the unit waits for the next claim, its checkpoint kept.
+      Statement q(*this,
+                  "UPDATE units SET state = 'queued', node = NULL, lease_expires_at = NULL WHERE job_id = ?1 AND "
+                  "idx = ?2");
+      q.bind(1, id);
+      q.bind(2, idx);
+      q.step();
+      return true;
+    }
+    if (to == JobState::kSucceeded) {
+      Statement d(*this,
+                  "UPDATE units SET state = 'done', lease_expires_at = NULL, finished_at = ?3, samples_done = samples, "
+                  "checkpoint_epoch = epoch WHERE job_id = ?1 AND idx = ?2");
+      d.bind(1, id);
+      d.bind(2, idx);
+      d.bind(3, now_ms);
+      d.step();
+      if (idx < units) {
+        aggregate_units(id);
+        return true;
+      }
+    }
+    // The end unit's success, or a failure, pause or cancel by the run of a unit: the job's move.
+    return move(id, to, now_ms, stop_reason, error, sql_states_into(to, JobState::kRunning), std::nullopt);
+  });
 }
 
 bool SqliteJobStore::move(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
                           const std::string& error, const std::string& from_states, std::optional<int64_t> epoch) {
   if (from_states.empty()) return false;
   // Out of running, the lease ends with the run.
-  const std::string where = " WHERE id = ?1 AND state IN (" + from_states + ")" + (epoch ? " AND epoch = ?6" : "");
+  // A run's epoch fences a job rendered whole; a unit's run is fenced by its unit row (end_run).
+  const std::string where =
+      " WHERE id = ?1 AND state IN (" + from_states + ")" + (epoch ? " AND epoch = ?6 AND units = 1" : "");
+  if (to == JobState::kQueued) {
+    // Back to the queue from an end (a requeue): its units start over too. From paused (a resume) they are kept.
+    Statement u(
+        *this,
+        "UPDATE units SET state = 'queued', node = NULL, lease_expires_at = NULL, passes = 0, samples_done = 0, "
+        "elapsed_s = 0, samples_per_s = 0, checkpoint_epoch = 0, finished_at = NULL, lost_runs = 0 WHERE "
+        "job_id = ?1 AND (SELECT state FROM jobs WHERE id = ?1) IN (" +
+            sql_terminal_states() + ") AND (SELECT state FROM jobs WHERE id = ?1) IN (" + from_states + ")");
+    u.bind(1, id);
+    u.step();
+  }
   std::string sql;
   if (to == JobState::kQueued) {
     sql =
@@ -358,7 +605,16 @@ bool SqliteJobStore::move(const std::string& id, JobState to, int64_t now_ms, co
   }
   if (epoch) s.bind(6, *epoch);
   s.step();
-  return sqlite3_changes(db_) > 0;
+  const bool moved = sqlite3_changes(db_) > 0;
+  if (moved && to == JobState::kPaused) {
+    // Its units' runs end with it (their renewals now fail): each waits, with its checkpoint, for the resume.
+    Statement u(*this,
+                "UPDATE units SET state = 'queued', node = NULL, lease_expires_at = NULL WHERE job_id = ?1 AND "
+                "state = 'running'");
+    u.bind(1, id);
+    u.step();
+  }
+  return moved;
 }
 
 bool SqliteJobStore::set_priority(const std::string& id, int priority) {
@@ -453,12 +709,33 @@ bool SqliteJobStore::remove(const std::string& id, std::optional<int64_t> only_f
 
 int SqliteJobStore::requeue_running() {
   std::lock_guard lock(mutex_);
+  // The units left running wait for the next claim, each counting a lost run (as their jobs do, below).
+  int units = 0;
+  {
+    Statement u(*this,
+                "UPDATE units SET state = 'queued', node = NULL, lease_expires_at = NULL, lost_runs = lost_runs + 1 "
+                "WHERE state = 'running'");
+    u.step();
+    units = sqlite3_changes(db_);
+  }
   Statement s(*this,
               "UPDATE jobs SET state = 'queued', started_at = NULL, passes = 0, samples_done = 0, elapsed_s = 0, "
               "eta_s = NULL, samples_per_s = 0, lease_expires_at = NULL, node = '', lost_runs = lost_runs + 1 "
               "WHERE state = 'running'");
   s.step();
-  return sqlite3_changes(db_);
+  return units + sqlite3_changes(db_);
+}
+
+std::vector<UnitRecord> SqliteJobStore::units(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  Statement s(*this,
+              std::string("SELECT ") + kUnitColumns +
+                  " FROM units u JOIN jobs j ON j.id = u.job_id WHERE u.job_id = ?1 AND u.idx < j.units ORDER BY "
+                  "u.idx");
+  s.bind(1, id);
+  std::vector<UnitRecord> out;
+  while (s.step()) out.push_back(read_unit_record(s));
+  return out;
 }
 
 }  // namespace tessera::server

@@ -40,8 +40,9 @@ class SqliteJobStore final : public JobStore {
   std::vector<JobRecord> list(const JobFilter& filter) override;
   bool remove(const std::string& id, std::optional<int64_t> only_finished_before_ms = std::nullopt) override;
   int requeue_running() override;
+  std::vector<UnitRecord> units(const std::string& id) override;
 
-  static constexpr int kSchemaVersion = 5;
+  static constexpr int kSchemaVersion = 6;
 
  private:
   class Statement;
@@ -53,6 +54,13 @@ class SqliteJobStore final : public JobStore {
   bool move(const std::string& id, JobState to, int64_t now_ms, const std::string& stop_reason,
             const std::string& error, const std::string& from_states, std::optional<int64_t> epoch);
   void exec(const char* sql);
+  // Runs `body` in one write transaction (BEGIN IMMEDIATE): a claim, an end, a creation of units.
+  template <typename F>
+  auto in_transaction(F&& body);
+  // Claims unit `idx` of job `job_id` (`lost`: taken over from a run whose lease expired), in claim_next().
+  JobRecord claim_unit(const std::string& job_id, int64_t idx, bool lost, int64_t now_ms, int64_t lease_ms);
+  // The progress of a job of units over all its units (as PostgresJobStore::aggregate_units).
+  void aggregate_units(const std::string& id);
   void migrate();
   void close();
 

@@ -516,6 +516,17 @@ PY
   expect 0 "tessera fetch" "$TESSERA" fetch "$id" -d fetched
   png_signature "fetched/$id.png" && ok "fetch wrote a PNG" || not_ok "fetched PNG has no PNG signature"
   [[ -s fetched/$id.exr ]] && ok "fetch wrote the EXR" || not_ok "no EXR fetched"
+  # A frame range: submit --watch shows its frames done; fetch downloads every frame numbered, one progress line.
+  mkdir -p range && cp "$repo/examples/spinning_cube/SpinningCube.glb" range/ &&
+    python3 -c 'import json, sys; d = json.load(open(sys.argv[1])); d["render"].update(width=16, height=9, spp=1, frames={"start": 1, "end": 3}); d["outputs"] = ["png"]; json.dump(d, open("range/job.json", "w"))' \
+      "$repo/examples/spinning_cube/job.json"
+  expect 0 "submit a frame range and watch it" "$TESSERA" submit range/job.json --watch
+  grep -q "frames 3/3" "$tmp/out" && ok "watch shows the frames done" || not_ok "watch said: $(tail -2 "$tmp/out")"
+  range_id=$(grep -o '[0-9a-f]\{32\}' "$tmp/out" | head -1)
+  expect 0 "fetch a frame range" "$TESSERA" fetch "$range_id" -d frames
+  [[ $(ls frames | grep -c "^$range_id\.000[123]\.png$") == 3 ]] && ok "fetch wrote the 3 frames numbered" \
+    || not_ok "fetch wrote: $(ls frames)"
+  grep -q "fetched 3/3 frames" "$tmp/err" && ok "fetch shows its progress" || not_ok "fetch said: $(cat "$tmp/err")"
   expect 1 "fetch refuses an unwritable output before downloading" "$TESSERA" fetch "$id" -o /nonexistent/x.png
   grep -qF "cannot write /nonexistent/x.png" "$tmp/err" && ok "fetch names the output" \
     || not_ok "fetch said: $(cat "$tmp/err")"

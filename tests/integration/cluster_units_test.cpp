@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "tests/integration/daemon.h"
+#include "tests/integration/node_cluster.h"
 #include "tests/server/postgres_cluster.h"
 #include "tests/server/test_util.h"
 
@@ -66,29 +67,8 @@ const std::string& one_node_exr() {
   return exr;
 }
 
-class Cluster {
- public:
-  Cluster() : pg_(PostgresCluster::shared()), uri_(pg_.create_database()) {
-    for (const char* name : {"n1", "n2", "n3"})
-      nodes_.push_back(std::make_unique<Daemon>(
-          dir_.path() / "shared",
-          std::vector<std::string>{"--store", uri_, "--node", name, "--lease-s", "2", "--threads", "1",
-                                   "--unit-pixel-samples", kUnitPixelSamples}));
-  }
-  Daemon& node(int i) { return *nodes_[i]; }
-  std::string sql(const std::string& query) { return pg_.psql(PostgresCluster::database_of(uri_), query); }
-  std::string logs() {
-    std::string out;
-    for (auto& n : nodes_)
-      if (n) out += n->log();
-    return out;
-  }
-
- private:
-  TempDir dir_;
-  PostgresCluster& pg_;
-  std::string uri_;
-  std::vector<std::unique_ptr<Daemon>> nodes_;
+struct Cluster : NodeCluster {
+  Cluster() : NodeCluster({"--unit-pixel-samples", kUnitPixelSamples}) {}
 };
 
 TEST(ClusterUnits, AJobSplitAcrossThreeNodesIsByteIdenticalToTheOneNodeRender) {

@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "tests/integration/daemon.h"
+#include "tests/integration/daemon_client.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server::test {
@@ -22,21 +23,6 @@ namespace fs = std::filesystem;
 
 const std::vector<std::string> kArgs = {"--threads", "2", "--max-jobs", "1", "--log-level", "debug"};
 
-std::string submit(httplib::Client& c, const json& doc) {
-  auto res = c.Post("/v1/jobs", doc.dump(), "application/json");
-  if (!res || res->status != 202) {
-    ADD_FAILURE() << "not accepted: " << (res ? res->body : "no answer");
-    return "";
-  }
-  return json::parse(res->body).value("id", "");
-}
-
-json get_job(httplib::Client& c, const std::string& id) {
-  auto res = c.Get("/v1/jobs/" + id);
-  if (!res || res->status != 200) return json();
-  return json::parse(res->body);
-}
-
 bool eventually(const std::function<bool()>& done, double timeout_s) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   while (std::chrono::steady_clock::now() < deadline) {
@@ -44,31 +30,6 @@ bool eventually(const std::function<bool()>& done, double timeout_s) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   return false;
-}
-
-std::string state_of(httplib::Client& c, const std::string& id) {
-  return get_job(c, id).value("state", "");
-}
-
-// The children of `parent` (/proc/PID/stat: the parent's pid is the fourth field, after the parenthesised name).
-std::vector<pid_t> children_of(pid_t parent) {
-  std::vector<pid_t> out;
-  std::error_code ec;
-  for (const auto& entry : fs::directory_iterator("/proc", ec)) {
-    const std::string name = entry.path().filename().string();
-    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
-    std::ifstream in(entry.path() / "stat");
-    std::string stat;
-    std::getline(in, stat);
-    const size_t close = stat.rfind(')');
-    if (close == std::string::npos) continue;
-    std::istringstream rest(stat.substr(close + 2));
-    char state;
-    pid_t ppid = 0;
-    rest >> state >> ppid;
-    if (ppid == parent && state != 'Z') out.push_back(std::stoi(name));
-  }
-  return out;
 }
 
 // A process's command line, its arguments joined by spaces.
@@ -94,12 +55,6 @@ pid_t worker_after_a_pass(Daemon& daemon, httplib::Client& c, const std::string&
       60);
   EXPECT_TRUE(found) << "no worker rendering job " << id << ": " << get_job(c, id).dump();
   return found ? worker : 0;
-}
-
-std::string fetch(httplib::Client& c, const std::string& path) {
-  auto res = c.Get(path);
-  EXPECT_TRUE(res && res->status == 200) << path << ": " << (res ? res->body : "no answer");
-  return res ? res->body : "";
 }
 
 // A scene that crashes the renderer (here: its worker aborts, as Embree's assertions and Draco's do) fails its job

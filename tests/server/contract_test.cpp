@@ -108,6 +108,49 @@ TEST(Contract, JobStatusMatchesItsSchema) {
   EXPECT_EQ(done["progress"]["fraction"], 1.0);
 }
 
+// A frame range's status: its frames by state as ranges of frame numbers, merged across consecutive units and
+// bounded (a list of more than 64 ranges is cut and says so), its frames' result links, and no job-wide result link.
+TEST(Contract, AFrameRangesStatusListsItsFramesAsBoundedRanges) {
+  JobRecord r;
+  r.id = new_job_id();
+  r.kind = "scene";
+  r.state = JobState::kRunning;
+  r.created_at_ms = 1714560000000;
+  r.started_at_ms = r.created_at_ms;
+  r.settings = R"({"width":64,"height":36,"spp":2,"max_depth":8,"integrator":"path","estimator":"mis","seed":1,)"
+               R"("frames":{"start":10,"end":10008,"step":2,"chunk":1}})";
+  r.outputs = R"(["png","exr"])";
+  r.progress.samples_total = 2 * 5000;
+  // 5000 units: every third done, unit 1 running, the rest waiting.
+  std::vector<UnitRecord> units(5000);
+  for (int i = 0; i < 5000; ++i) {
+    units[static_cast<size_t>(i)].index = i;
+    units[static_cast<size_t>(i)].samples = 2;
+    units[static_cast<size_t>(i)].done = i % 3 == 0 || i < 4;
+  }
+  units[4].done = false;
+  units[4].running = true;
+  units[4].node = "n1";
+  json status = job_status_json(r, std::nullopt, std::nullopt, units, r.created_at_ms + 1000);
+  auto e = proto::contract_schemas().validate(status, "job-status.schema.json");
+  EXPECT_FALSE(e) << e->pointer << " " << e->message;
+  const json& frames = status["frames"];
+  EXPECT_EQ(frames["total"], 5000);
+  EXPECT_EQ(frames["running"], 1);
+  EXPECT_EQ(frames["running_ranges"], json::parse("[[18, 18]]"));
+  EXPECT_EQ(frames["done_ranges"][0], json::parse("[10, 16]"));  // units 0-3: frames 10, 12, 14, 16
+  EXPECT_EQ(frames["done_ranges"].size(), 64u);
+  EXPECT_EQ(frames["ranges_truncated"], true);
+  EXPECT_EQ(frames["last_done"], 10 + 2 * 4998);
+  EXPECT_EQ(frames["links"]["result_exr"], "/v1/jobs/" + r.id + "/frames/{frame}/result.exr");
+  EXPECT_LT(status.dump().size(), 4096u);
+  // Failed: the unit that was running is the frame that failed.
+  r.state = JobState::kFailed;
+  status = job_status_json(r, std::nullopt, std::nullopt, units, r.created_at_ms + 1000);
+  EXPECT_EQ(status["frames"]["failed_ranges"], json::parse("[[18, 18]]"));
+  EXPECT_FALSE(status["links"].contains("result_exr"));
+}
+
 // A split job one of whose nodes stopped renewing its unit's lease: the status says which unit waits, and for how
 // long, and its ETA counts that wait and the unit's rest at the rate it rendered, where the store's ETA (from the
 // rates of the units running) did not.

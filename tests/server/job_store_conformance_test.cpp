@@ -603,5 +603,106 @@ TYPED_TEST(JobStoreConformance, LostRunsAreCountedOnceEach) {
   EXPECT_EQ(store->get(job.id)->lost_runs, 0);
 }
 
+// A frame range's units (work_units.h), alike on every store: each frame a unit of its own claimed in frame order,
+// fenced by its run's epoch, its samples spp; the end unit claimable only once every frame is done, and its end the
+// job's. A unit whose lease expired is taken over counting a lost run of its own; the job's progress sums its units.
+TYPED_TEST(JobStoreConformance, AFrameRangesUnitsAreClaimedLeasedAndEndedFrameByFrame) {
+  JobStore& store = this->store;
+  JobRecord job = make_job(0, 1);
+  job.settings = R"({"width":8,"height":8,"spp":4,"frames":{"start":1,"end":3,"step":1,"chunk":1}})";
+  job.units = 3;
+  job.progress.samples_total = 12;
+  store.create(job);
+  ASSERT_EQ(store.units(job.id).size(), 3u);
+  EXPECT_EQ(store.units(job.id)[2].samples, 4u);
+  auto first = store.claim_next(10, 1000);
+  auto second = store.claim_next(10, 1000);
+  ASSERT_TRUE(first && second);
+  EXPECT_EQ(first->unit, 0);
+  EXPECT_EQ(second->unit, 1);
+  EXPECT_EQ(first->units, 3);
+  EXPECT_NE(first->epoch, second->epoch);
+  EXPECT_EQ(store.get(job.id)->state, JobState::kRunning);
+  // Frame 1's run reports progress and ends; a stale epoch is fenced.
+  JobProgress p;
+  p.samples_done = 2;
+  p.samples_total = 4;
+  EXPECT_TRUE(store.update_progress(job.id, first->epoch, p));
+  EXPECT_FALSE(store.update_progress(job.id, first->epoch + 100, p));
+  EXPECT_TRUE(store.end_run(job.id, first->epoch, JobState::kSucceeded, 11));
+  EXPECT_EQ(store.get(job.id)->progress.samples_done, 4u);
+  EXPECT_FALSE(store.end_run(job.id, first->epoch, JobState::kSucceeded, 11));
+  // Frame 2's node stops renewing: past its lease, the next claim takes frame 2 over (a lost run of that unit) before
+  // frame 3.
+  auto taken = store.claim_next(2000, 1000);
+  ASSERT_TRUE(taken);
+  EXPECT_EQ(taken->unit, 1);
+  EXPECT_EQ(taken->unit_lost_runs, 1);
+  EXPECT_FALSE(store.renew_lease(job.id, second->epoch, 2001, 1000));
+  EXPECT_TRUE(store.renew_lease(job.id, taken->epoch, 2001, 1000));
+  EXPECT_TRUE(store.end_run(job.id, taken->epoch, JobState::kSucceeded, 2002));
+  // The end unit waits for frame 3.
+  auto third = store.claim_next(2003, 1000);
+  ASSERT_TRUE(third);
+  EXPECT_EQ(third->unit, 2);
+  EXPECT_FALSE(store.claim_next(2003, 1000));
+  EXPECT_TRUE(store.end_run(job.id, third->epoch, JobState::kSucceeded, 2004));
+  const std::vector<UnitRecord> units = store.units(job.id);
+  EXPECT_TRUE(std::all_of(units.begin(), units.end(), [](const UnitRecord& u) { return u.done; }));
+  auto end = store.claim_next(2005, 1000);
+  ASSERT_TRUE(end);
+  EXPECT_EQ(end->unit, 3);
+  EXPECT_TRUE(store.end_run(job.id, end->epoch, JobState::kSucceeded, 2006, "samples"));
+  EXPECT_EQ(store.get(job.id)->state, JobState::kSucceeded);
+  // A unit's failure is its job's; a requeue then starts every frame over.
+  JobRecord other = make_job(0, 2);
+  other.settings = job.settings;
+  other.units = 3;
+  other.progress.samples_total = 12;
+  store.create(other);
+  auto done = store.claim_next(3000, 1000);
+  ASSERT_TRUE(done && done->id == other.id);
+  EXPECT_TRUE(store.end_run(other.id, done->epoch, JobState::kSucceeded, 3001));
+  auto failing = store.claim_next(3002, 1000);
+  ASSERT_TRUE(failing && failing->id == other.id);
+  EXPECT_EQ(failing->unit_lost_runs, 0);
+  EXPECT_TRUE(store.end_run(other.id, failing->epoch, JobState::kFailed, 3003, "", "frame 2: broken"));
+  EXPECT_EQ(store.get(other.id)->state, JobState::kFailed);
+  EXPECT_EQ(store.get(other.id)->error, "frame 2: broken");
+  EXPECT_TRUE(store.transition(other.id, JobState::kQueued, 3004));
+  const std::vector<UnitRecord> again = store.units(other.id);
+  EXPECT_TRUE(std::none_of(again.begin(), again.end(), [](const UnitRecord& u) { return u.done || u.running; }));
+}
+
+// The per-owner cap counts a frame range's units as runs: a 2,000-frame range of one owner, at the cap, does not
+// hold back another owner's still submitted after it.
+TYPED_TEST(JobStoreConformance, AnOwnersCapCountsFrameUnitsSoALongRangeDoesNotStarveAnotherOwner) {
+  JobStore& store = this->store;
+  JobRecord range = make_job(0, 1);
+  range.owner = "alice";
+  range.settings = R"({"width":8,"height":8,"spp":1,"frames":{"start":1,"end":2000,"step":1,"chunk":1}})";
+  range.units = 2000;
+  range.progress.samples_total = 2000;
+  store.create(range);
+  JobRecord still = make_job(0, 2);
+  still.owner = "bob";
+  store.create(still);
+  auto first = store.claim_next(10, 1000, 2);
+  auto second = store.claim_next(10, 1000, 2);
+  ASSERT_TRUE(first && second);
+  EXPECT_EQ(first->id, range.id);
+  EXPECT_EQ(second->id, range.id);
+  // Alice holds two runs (two frames): Bob's still is next, before her third frame.
+  auto third = store.claim_next(10, 1000, 2);
+  ASSERT_TRUE(third);
+  EXPECT_EQ(third->id, still.id);
+  EXPECT_FALSE(store.claim_next(10, 1000, 2));  // Alice at her cap, Bob's only job running
+  EXPECT_TRUE(store.end_run(range.id, first->epoch, JobState::kSucceeded, 11));
+  auto next = store.claim_next(12, 1000, 2);
+  ASSERT_TRUE(next);
+  EXPECT_EQ(next->id, range.id);
+  EXPECT_EQ(next->unit, 2);
+}
+
 }  // namespace
 }  // namespace tessera::server

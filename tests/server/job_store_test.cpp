@@ -24,13 +24,14 @@ TEST(SqliteJobStore, KeepsTheJobsNameAndGivesOlderJobsAnEmptyOne) {
   // The file as a daemon of schema version 2 left it: no name column.
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open(file.c_str(), &db), SQLITE_OK);
-  ASSERT_EQ(sqlite3_exec(db,
-                         "ALTER TABLE jobs DROP COLUMN name; ALTER TABLE jobs DROP COLUMN epoch; "
-                         "ALTER TABLE jobs DROP COLUMN lease_expires_at; ALTER TABLE jobs DROP COLUMN node; "
-                         "ALTER TABLE jobs DROP COLUMN lost_runs; "
-                         "DELETE FROM schema_version WHERE version >= 3",
-                         nullptr, nullptr, nullptr),
-            SQLITE_OK)
+  ASSERT_EQ(
+      sqlite3_exec(db,
+                   "ALTER TABLE jobs DROP COLUMN name; ALTER TABLE jobs DROP COLUMN epoch; "
+                   "ALTER TABLE jobs DROP COLUMN lease_expires_at; ALTER TABLE jobs DROP COLUMN node; "
+                   "ALTER TABLE jobs DROP COLUMN lost_runs; DROP TABLE units; ALTER TABLE jobs DROP COLUMN units; "
+                   "DELETE FROM schema_version WHERE version >= 3",
+                   nullptr, nullptr, nullptr),
+      SQLITE_OK)
       << sqlite3_errmsg(db);
   sqlite3_close(db);
   SqliteJobStore store(file);

@@ -29,6 +29,16 @@ TEST(WorkUnits, AJobThatStopsOnTimeOrNoiseIsOneUnit) {
   EXPECT_EQ(units(R"({"width":100,"height":100,"spp":64,"noise_target":0.01})", 1000), 1);
 }
 
+// An adaptive job renders whole, so that its image (where each pixel stopped) is the same bits on one node and on a
+// cluster; a frame range renders frame by frame, never split into sample ranges.
+TEST(WorkUnits, AnAdaptiveJobAndAFrameRangeAreOneUnit) {
+  EXPECT_EQ(units(R"({"width":100,"height":100,"spp":64,"adaptive_threshold":0.05})", 1000), 1);
+  EXPECT_EQ(units(R"({"width":100,"height":100,"spp":64,"frames":{"start":1,"end":48,"step":1,"chunk":1}})", 1000), 1);
+  // A range of one frame is the still at its time, split as a still is.
+  EXPECT_EQ(units(R"({"width":100,"height":100,"spp":64,"frames":{"start":12,"end":12,"step":1,"chunk":1}})", 1000),
+            64);
+}
+
 TEST(WorkUnits, SampleRangesAreContiguousAndCoverTheBudget) {
   const auto ranges = split_samples(10, 4);
   ASSERT_EQ(ranges.size(), 4u);
