@@ -78,6 +78,7 @@ const std::vector<BsdfCase>& bsdf_cases() {
         {"roughness", 0.4},
         {"transmission", 0.3},
         {"subsurface_weight", 0.6},
+        {"thin_walled", false},
         {"ior", 1.4},
         {"base_color", {0.8, 0.3, 0.2}}},
        true},
