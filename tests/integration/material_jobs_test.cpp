@@ -1,5 +1,6 @@
 // Material jobs over HTTP: every model the daemon lists renders on the preview stage; a row of materials renders;
-// a parameter out of range is a 422 naming the field; a material job's render passes are layers of its EXR and PNGs.
+// a parameter out of range is a 422 naming the field; a material job's render passes are layers of its EXR and PNGs;
+// a preview samples adaptively and is denoised unless the job says otherwise.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -7,6 +8,7 @@
 #include <thread>
 
 #include "renderer/image_io.h"
+#include "renderer/render_settings.h"
 #include "tests/integration/daemon.h"
 #include "tests/server/test_util.h"
 
@@ -130,13 +132,56 @@ TEST_F(MaterialJobs, RenderPassesAreLayersOfTheExrAndPngs) {
   }
   const ImageData image = read_image(file);
   EXPECT_EQ(image.width, 32);
-  EXPECT_EQ(image.channels, 9);
+  EXPECT_EQ(image.channels, 12);  // R, G, B, the two passes, and the preview's denoiser's noisy.R, .G, .B
 
   for (const std::string pass : {"albedo", "normal"}) {
     auto png = client_->Get("/v1/jobs/" + id + "/aovs/" + pass + ".png");
     ASSERT_TRUE(png);
     EXPECT_EQ(png->status, 200) << pass << ": " << png->body;
     EXPECT_EQ(png->body.substr(1, 3), "PNG") << pass;
+  }
+}
+
+// A material preview samples adaptively and is denoised unless its document says otherwise: without those settings the
+// job stops by its threshold at a mean below spp, and its EXR holds the rendered image as noisy.R, .G, .B beside the
+// denoised one; with adaptive_threshold 0 and denoise none every pixel gets spp samples and the EXR holds R, G, B.
+TEST_F(MaterialJobs, APreviewIsAdaptiveAndDenoisedUnlessTheJobSaysOtherwise) {
+  const json size = {{"width", 24}, {"height", 24}, {"spp", 256}};
+  json off = size;
+  off["adaptive_threshold"] = 0;
+  off["denoise"] = "none";
+  struct Case {
+    json render;
+    std::string stop_reason, denoise;
+    int channels;
+  };
+  for (const Case& c : {Case{size, "adaptive_threshold", "regression", 6}, Case{off, "samples", "none", 3}}) {
+    const json job = {{"kind", "material"}, {"material", {{"type", "lambert"}}}, {"render", c.render}};
+    auto r = client_->Post("/v1/jobs", job.dump(), "application/json");
+    ASSERT_TRUE(r);
+    ASSERT_EQ(r->status, 202) << r->body;
+    const std::string id = json::parse(r->body)["id"];
+    const json status = wait_until_done(*client_, id);
+    ASSERT_EQ(status.value("state", ""), "succeeded") << status.dump();
+    EXPECT_EQ(status["stop_reason"], c.stop_reason) << status.dump();
+    EXPECT_EQ(status["render"].value("denoise", "none"), c.denoise);  // "none" is left out, as a default
+    const json& p = status["progress"];
+    if (c.stop_reason == "samples") {
+      EXPECT_EQ(status["render"].value("adaptive_threshold", 0.0), 0.0);
+      EXPECT_EQ(p["samples_done"], 256);
+    } else {
+      EXPECT_FLOAT_EQ(status["render"]["adaptive_threshold"].get<double>(), kPreviewAdaptiveThreshold);
+      EXPECT_LT(p["samples_done"].get<double>(), 256) << p.dump();
+    }
+    auto exr = client_->Get("/v1/jobs/" + id + "/result.exr");
+    ASSERT_TRUE(exr);
+    ASSERT_EQ(exr->status, 200);
+    const std::string file = (dir_.path() / (id + ".exr")).string();
+    {
+      std::ofstream out(file, std::ios::binary);
+      out.write(exr->body.data(), static_cast<std::streamsize>(exr->body.size()));
+    }
+    EXPECT_EQ(read_image(file).channels, c.channels) << c.render.dump();
   }
 }
 
