@@ -43,6 +43,29 @@ class MaterialJobs : public testing::Test {
   void TearDown() override {
     if (HasFailure() && daemon_) std::fprintf(stderr, "--- tesserad log ---\n%s\n", daemon_->log().c_str());
   }
+  // Submits `job` and follows it to its end: its last status (a failure is added where it is not accepted).
+  json render(const json& job) {
+    auto r = client_->Post("/v1/jobs", job.dump(), "application/json");
+    if (!r || r->status != 202) {
+      ADD_FAILURE() << "not accepted: " << (r ? r->body : "no answer");
+      return json::object();
+    }
+    return wait_until_done(*client_, json::parse(r->body)["id"]);
+  }
+  // The result.exr of job `id`, as OpenImageIO reads it.
+  ImageData result_exr(const std::string& id) {
+    auto exr = client_->Get("/v1/jobs/" + id + "/result.exr");
+    if (!exr || exr->status != 200) {
+      ADD_FAILURE() << "no result.exr for " << id;
+      return {};
+    }
+    const std::string file = (dir_.path() / (id + ".exr")).string();
+    {
+      std::ofstream out(file, std::ios::binary);
+      out.write(exr->body.data(), static_cast<std::streamsize>(exr->body.size()));
+    }
+    return read_image(file);
+  }
   TempDir dir_;
   std::unique_ptr<Daemon> daemon_;
   std::unique_ptr<httplib::Client> client_;
@@ -114,23 +137,12 @@ TEST_F(MaterialJobs, RenderPassesAreLayersOfTheExrAndPngs) {
   json job = {{"kind", "material"},
               {"material", {{"type", "conductor"}, {"metal", "gold"}, {"roughness", 0.3}}},
               {"render", {{"width", 32}, {"height", 24}, {"spp", 4}, {"aovs", {"albedo", "normal"}}}}};
-  auto r = client_->Post("/v1/jobs", job.dump(), "application/json");
-  ASSERT_TRUE(r);
-  ASSERT_EQ(r->status, 202) << r->body;
-  const std::string id = json::parse(r->body)["id"];
-  const json status = wait_until_done(*client_, id);
+  const json status = render(job);
   ASSERT_EQ(status.value("state", ""), "succeeded") << status.dump();
   EXPECT_EQ(status["render"]["aovs"], json({"albedo", "normal"}));
+  const std::string id = status["id"];
 
-  auto exr = client_->Get("/v1/jobs/" + id + "/result.exr");
-  ASSERT_TRUE(exr);
-  ASSERT_EQ(exr->status, 200);
-  const std::string file = (dir_.path() / "result.exr").string();
-  {
-    std::ofstream out(file, std::ios::binary);
-    out.write(exr->body.data(), static_cast<std::streamsize>(exr->body.size()));
-  }
-  const ImageData image = read_image(file);
+  const ImageData image = result_exr(id);
   EXPECT_EQ(image.width, 32);
   EXPECT_EQ(image.channels, 12);  // R, G, B, the two passes, and the preview's denoiser's noisy.R, .G, .B
 
@@ -157,11 +169,7 @@ TEST_F(MaterialJobs, APreviewIsAdaptiveAndDenoisedUnlessTheJobSaysOtherwise) {
   };
   for (const Case& c : {Case{size, "adaptive_threshold", "regression", 6}, Case{off, "samples", "none", 3}}) {
     const json job = {{"kind", "material"}, {"material", {{"type", "lambert"}}}, {"render", c.render}};
-    auto r = client_->Post("/v1/jobs", job.dump(), "application/json");
-    ASSERT_TRUE(r);
-    ASSERT_EQ(r->status, 202) << r->body;
-    const std::string id = json::parse(r->body)["id"];
-    const json status = wait_until_done(*client_, id);
+    const json status = render(job);
     ASSERT_EQ(status.value("state", ""), "succeeded") << status.dump();
     EXPECT_EQ(status["stop_reason"], c.stop_reason) << status.dump();
     EXPECT_EQ(status["render"].value("denoise", "none"), c.denoise);  // "none" is left out, as a default
@@ -173,15 +181,7 @@ TEST_F(MaterialJobs, APreviewIsAdaptiveAndDenoisedUnlessTheJobSaysOtherwise) {
       EXPECT_FLOAT_EQ(status["render"]["adaptive_threshold"].get<double>(), kPreviewAdaptiveThreshold);
       EXPECT_LT(p["samples_done"].get<double>(), 256) << p.dump();
     }
-    auto exr = client_->Get("/v1/jobs/" + id + "/result.exr");
-    ASSERT_TRUE(exr);
-    ASSERT_EQ(exr->status, 200);
-    const std::string file = (dir_.path() / (id + ".exr")).string();
-    {
-      std::ofstream out(file, std::ios::binary);
-      out.write(exr->body.data(), static_cast<std::streamsize>(exr->body.size()));
-    }
-    EXPECT_EQ(read_image(file).channels, c.channels) << c.render.dump();
+    EXPECT_EQ(result_exr(status["id"]).channels, c.channels) << c.render.dump();
   }
 }
 
