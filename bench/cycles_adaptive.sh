@@ -22,7 +22,7 @@
 #   SIZE=256 RUNS=3 bench/cycles_adaptive.sh [SCENE.glb ...]   (needs: apt-get install blender python3-numpy
 #                                                               openimageio-tools)
 #   env: BUILD=build BOUNCES=8 MAX_SPP=4096 MIN_SPP=16 CYCLES_THRESHOLD=0.01 START=0.04 WORLD=0.8 DENOISE=1
-#        THREADS=<all> SCENES_DIR=/work/shared/scenes
+#        THREADS=<all> SCENES_DIR=../shared/scenes (beside the checkout)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SIZE=${SIZE:-256}
@@ -35,7 +35,7 @@ START=${START:-0.04}
 WORLD=${WORLD:-0.8}
 DENOISE=${DENOISE:-1}
 THREADS=${THREADS:-$(nproc)}
-SCENES_DIR=${SCENES_DIR:-/work/shared/scenes}
+SCENES_DIR=${SCENES_DIR:-../shared/scenes}
 TESSERA=${BUILD:-build}/clients/cli/tessera
 command -v blender >/dev/null || { echo "cycles_adaptive: blender is not installed" >&2; exit 2; }
 command -v oiiotool >/dev/null || { echo "cycles_adaptive: oiiotool not found (openimageio-tools)" >&2; exit 2; }
