@@ -94,7 +94,8 @@ tessera_point() {
 }
 
 # time_to_noise GLTF WORLD NOISE [OPTIONS...]: tessera's seconds to reach NOISE, interpolated (log-log) between the
-# two thresholds whose noises bracket it; prints "seconds threshold-range mean-spp-range"
+# two thresholds whose noises bracket it; prints "seconds threshold-range mean-spp-range" (an upper bound where even
+# min_spp everywhere is below the noise)
 time_to_noise() {
   local gltf=$1 world=$2 target=$3
   shift 3
@@ -118,7 +119,10 @@ time_to_noise() {
     # Noisier than the target: a lower threshold; cleaner: a higher one.
     th=$(awk -v th="$th" -v n="$n" -v c="$target" 'BEGIN { printf "%.6g", (n > c ? th / 2 : th * 2) }')
   done
-  echo "nan - -"
+  # Never bracketed: cleaner than the target even where every pixel stops at min_spp (the denoiser can be); the
+  # last render's time is then an upper bound, its thresholds marked with ">=".
+  read -r th t n m <<<"$prev"
+  if awk -v n="$n" -v c="$target" 'BEGIN { exit !(n <= c) }'; then echo "$t >=$th $m"; else echo "nan - -"; fi
 }
 
 median() { sort -g | awk '{ v[NR] = $1 } END { print NR % 2 ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2 }'; }
