@@ -38,16 +38,7 @@ render() {
     sed -n 's/.*, \([0-9]*\) spp in \([0-9.]*\)s .*/\2 \1/p'
 }
 
-# noise A.exr B.exr: RMS of the clamped difference over sqrt(2), relative to the clamped image's mean
-noise() {
-  local sq mean
-  sq=$(oiiotool "$1" --ch R,G,B --clamp:min=0:max=1 "$2" --ch R,G,B --clamp:min=0:max=1 --sub --dup --mul \
-    --printstats 2>&1 | sed -n 's/.*Stats Avg: \([-0-9.e]*\) \([-0-9.e]*\) \([-0-9.e]*\).*/\1 \2 \3/p')
-  mean=$(oiiotool "$1" --ch R,G,B --clamp:min=0:max=1 --printstats 2>&1 |
-    sed -n 's/.*Stats Avg: \([-0-9.e]*\) \([-0-9.e]*\) \([-0-9.e]*\).*/\1 \2 \3/p')
-  awk -v sq="$sq" -v mean="$mean" 'BEGIN { split(sq, s); split(mean, m);
-    printf "%.6g\n", sqrt((s[1] + s[2] + s[3]) / 3 / 2) / ((m[1] + m[2] + m[3]) / 3) }'
-}
+source bench/noise.sh
 
 # measure SCENE NAME OPTIONS...: "seconds noise spp" of two seeds (the mean seconds and mean spp)
 measure() {

@@ -7,12 +7,16 @@ import time
 import bpy
 
 
-def configure(scene, width, height, bounces, threads, out, seed=1):
+def configure(scene, width, height, bounces, threads, out, seed=1, threshold=0.0, min_samples=0):
+    """threshold > 0 turns Cycles' adaptive sampling on at that noise threshold (Blender's default is 0.01), with
+    min_samples (0: Cycles' automatic choice, its default)."""
     scene.render.engine = "CYCLES"
     c = scene.cycles
     c.device = "CPU"
     c.use_denoising = False
-    c.use_adaptive_sampling = False
+    c.use_adaptive_sampling = threshold > 0
+    c.adaptive_threshold = threshold
+    c.adaptive_min_samples = min_samples
     c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = bounces
     c.transparent_max_bounces = bounces
     c.caustics_reflective = c.caustics_refractive = True
@@ -29,7 +33,8 @@ def configure(scene, width, height, bounces, threads, out, seed=1):
     scene.render.filepath = out
 
 
-def time_render(scene, spp):
+def time_render(scene, spp, adaptive=False):
+    """Uniform sampling: the time of SPP - 1 samples scaled to SPP; adaptive sampling: the render less its setup."""
     c = scene.cycles
     c.samples = 1
     t = time.time()
@@ -39,4 +44,5 @@ def time_render(scene, spp):
     t = time.time()
     bpy.ops.render.render(write_still=True)
     t_all = time.time() - t
-    print("CYCLES_RENDER_SECONDS %.3f" % ((t_all - t_one) * spp / max(spp - 1, 1)))
+    scale = 1.0 if adaptive else spp / max(spp - 1, 1)
+    print("CYCLES_RENDER_SECONDS %.3f" % ((t_all - t_one) * scale))

@@ -23,12 +23,15 @@ std::string kind_of(const json& job) {
 }  // namespace
 
 RenderJob load_job(const json& job, const JobLoadOptions& options) {
-  kind_of(job);
+  const std::string kind = kind_of(job);
   RenderJob out;
   if (auto outputs = job.find("outputs"); outputs != job.end())
     out.outputs = output_spec_from_json(*outputs, "/outputs");
   auto render = job.find("render");
-  out.settings = render_settings_from_json(render == job.end() ? json() : *render, "/render", options.limits);
+  const json given = render == job.end() ? json() : *render;
+  // A material preview samples adaptively and is denoised unless its document says otherwise.
+  out.settings =
+      render_settings_from_json(kind == "material" ? with_preview_defaults(given) : given, "/render", options.limits);
   out.scene = load_job_scene(job, out.settings, options.scene);
   return out;
 }

@@ -26,7 +26,8 @@ struct JobLoadOptions {
   RenderLimits limits;
 };
 
-// Reads the whole job ("render" and "outputs" through render_settings.h) and builds its scene (BVH included).
+// Reads the whole job ("render" and "outputs" through render_settings.h; a material job's "render" with the preview's
+// defaults, with_preview_defaults) and builds its scene (BVH included).
 RenderJob load_job(const nlohmann::json& job, const JobLoadOptions& options);
 // Builds the scene of a job whose settings were read before (a job record's): its "scene", or its material(s) on the
 // preview stage, framed for the settings' image size; checks that the settings' integrator can render it. A job with

@@ -223,6 +223,22 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
   return s;
 }
 
+json with_preview_defaults(const json& render) {
+  if (!render.is_null() && !render.is_object()) return render;  // refused by render_settings_from_json, naming it
+  json out = render.is_null() ? json::object() : render;
+  const auto given = out.find("integrator");
+  if (given != out.end() && !given->is_string()) return out;
+  const std::string integrator = given == out.end() ? IntegratorSettings{}.name : given->get<std::string>();
+  if (!out.contains("adaptive_threshold") && integrator_adaptive_problem(integrator).empty())
+    out["adaptive_threshold"] = kPreviewAdaptiveThreshold;
+  const auto& features = denoiser_features(Denoiser::kRegression);
+  const bool feeds_denoiser = std::all_of(features.begin(), features.end(), [&](const std::string& feature) {
+    return integrator_aov_problem(integrator, feature).empty();
+  });
+  if (!out.contains("denoise") && feeds_denoiser) out["denoise"] = denoiser_name(Denoiser::kRegression);
+  return out;
+}
+
 json render_settings_to_json(const RenderSettings& s) {
   json out = {{"width", s.width},
               {"height", s.height},

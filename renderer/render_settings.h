@@ -99,6 +99,14 @@ std::vector<std::string> film_aovs(const RenderSettings& settings);
 // for none at all. Throws SceneError naming the field.
 RenderSettings render_settings_from_json(const nlohmann::json& render, const std::string& pointer,
                                          const RenderLimits& limits);
+// The settings a material preview (a "material" job) takes where its document leaves them out: adaptive sampling at
+// kPreviewAdaptiveThreshold and the regression denoiser, as far as the document's integrator can do them (path; bdpt
+// and light neither): a preview is looked at within a second (the threshold's measured cost and gain: README, Material
+// jobs). `render` is the document's "render"
+// (null: none); the result is the "render" to read with render_settings_from_json, so the job's settings hold both
+// explicitly and its stored record keeps them whatever the defaults become.
+inline constexpr double kPreviewAdaptiveThreshold = 0.05;
+nlohmann::json with_preview_defaults(const nlohmann::json& render);
 // The normalised form: every field a document can set, defaults filled in (but max_volume_depth, aovs, denoise, frames
 // and fps only where they are not their defaults, so that records written before they existed keep their text).
 nlohmann::json render_settings_to_json(const RenderSettings& settings);

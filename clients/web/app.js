@@ -43,9 +43,19 @@ const shortId = (id) => id.slice(0, 8);
 // A job as people call it: its name and the 8 digits of its id that the command line takes.
 const jobLabel = (job) => (job.name ? `${job.name} (${shortId(job.id)})` : shortId(job.id));
 
+// "37/1024 spp", or for a job sampled adaptively (render.adaptive_threshold), whose samples_done is the mean over its
+// pixels and samples_total the most any pixel gets: "mean 37 of at most 1024 spp".
+const adaptive = (job) => job.render?.adaptive_threshold > 0;
+function samplesText(job, unit = "spp") {
+  const p = job.progress || {};
+  return adaptive(job)
+    ? `mean ${p.samples_done ?? 0} of at most ${p.samples_total ?? 0} ${unit}`
+    : `${p.samples_done ?? 0}/${p.samples_total ?? 0} ${unit}`;
+}
+
 function progressText(job) {
   const p = job.progress || {};
-  const parts = [`${p.samples_done ?? 0}/${p.samples_total ?? 0} spp`];
+  const parts = [samplesText(job)];
   if (job.state === "running" && p.eta_s !== null && p.eta_s !== undefined) parts.push(`ETA ${fmtSeconds(p.eta_s)}`);
   if (job.state === "queued" && job.queue_position) parts.push(`#${job.queue_position} in queue`);
   if (job.stop_reason && job.stop_reason !== "samples") parts.push(`stopped by ${job.stop_reason.replace("_", " ")}`);
@@ -215,20 +225,30 @@ function listExamples() {
   if (examples.some((ex) => ex.id === keep)) exampleSelect.value = keep;
 }
 listExamples();
-// The render settings the form chooses from a list (the contract's enums), by their control.
+// The render settings the form chooses from a list (the contract's enums), by their control. A third element names
+// the choice (value "") that sends nothing, leaving the setting to the job's kind: a material preview samples
+// adaptively and denoises by default, a scene does not (README, Material jobs).
 const SELECT_SETTINGS = [
   ["#integrator", "integrator"],
   ["#estimator", "estimator"],
   ["#sampler", "sampler"],
   ["#tonemap", "tonemap"],
   ["#exr-precision", "exr_precision"],
-  ["#denoise", "denoise"],
+  ["#denoise", "denoise", "default"],
+];
+// The render settings typed as numbers that may be left empty: sent only when given, as the job's kind has a default
+// for them. Their limits are the contract's (render.schema.json), set when it has been read.
+const OPTIONAL_NUMBER_SETTINGS = [
+  ["#time-limit", "time_limit_s"],
+  ["#noise-target", "noise_target"],
+  ["#adaptive-threshold", "adaptive_threshold"],
+  ["#min-spp", "min_spp"],
 ];
 // The render settings of a document in the form; a setting the document leaves out shows its default (the
 // contract's, render.schema.json).
 const RENDER_DEFAULTS = {
   width: 512, height: 512, spp: 64, max_depth: 8, integrator: "path", estimator: "mis", seed: 0,
-  sampler: "sobol", exposure_ev: 0, tonemap: "clamp", exr_precision: "half", denoise: "none",
+  sampler: "sobol", exposure_ev: 0, tonemap: "clamp", exr_precision: "half",
 };
 // The render passes picked (render.aovs): one checkbox per pass the contract lists (render.schema.json, aovs.items),
 // built when it has been read; the choice a document brings before then is kept for it.
@@ -266,13 +286,12 @@ function fillRenderFields(render = {}, outputs = ["png", "exr"]) {
   $("#width").value = r.width;
   $("#height").value = r.height;
   $("#spp").value = r.spp;
-  $("#time-limit").value = r.time_limit_s || "";
-  $("#noise-target").value = r.noise_target || "";
+  for (const [sel, key] of OPTIONAL_NUMBER_SETTINGS) $(sel).value = r[key] ?? "";
   $("#max-depth").value = r.max_depth;
   $("#seed").value = r.seed;
   $("#exposure-ev").value = r.exposure_ev;
-  for (const [sel, key] of SELECT_SETTINGS) {
-    const value = r[key];
+  for (const [sel, key, unset] of SELECT_SETTINGS) {
+    const value = r[key] ?? (unset === undefined ? undefined : "");
     const select = $(sel);
     if (![...select.options].some((o) => o.value === value)) select.append(new Option(value, value));
     select.value = value;
@@ -325,10 +344,12 @@ function renderSettings(base = {}) {
   render.spp = int("#spp");
   render.max_depth = int("#max-depth");
   render.seed = int("#seed");
-  optional("#time-limit", "time_limit_s");
-  optional("#noise-target", "noise_target");
+  for (const [sel, key] of OPTIONAL_NUMBER_SETTINGS) optional(sel, key);
   render.exposure_ev = number("#exposure-ev");
-  for (const [sel, key] of SELECT_SETTINGS) render[key] = $(sel).value;
+  for (const [sel, key] of SELECT_SETTINGS) {
+    if ($(sel).value) render[key] = $(sel).value;
+    else delete render[key];
+  }
   // The passes in the contract's order; none picked sends none.
   const boxes = aovBoxes();
   if (boxes.length) {
@@ -932,6 +953,7 @@ async function loadResult(job) {
     const image = await resultImage(job);
     if (seq !== previewSeq || job.id !== selectedId) return;
     viewer.show(image, { keepView: true });
+    offerNoisyCompare(image);
     $("#viewer").dataset.pass = job.state === "succeeded" ? "final" : "partial";
     $("#viewer").dataset.aov = "beauty";
     $("#aov-view").value = "";
@@ -1002,6 +1024,7 @@ function updateCompareChoices() {
   if (select.value !== keep && keep) viewer.compare(null);
 }
 $("#compare").addEventListener("change", async (e) => {
+  $("#compare-noisy").setAttribute("aria-pressed", "false");
   const id = e.target.value;
   const job = jobs.find((j) => j.id === id);
   if (!job) return viewer.compare(null);
@@ -1013,6 +1036,23 @@ $("#compare").addEventListener("change", async (e) => {
   }
 });
 
+// A denoised job's result holds the image as rendered as the layer "noisy" (R, G, B) beside the denoised beauty:
+// one click compares the two, the denoised image as A (left of the wipe), the noisy one as B.
+let noisyImage = null;
+function offerNoisyCompare(image) {
+  const noisy = image.layers?.noisy;
+  const rgb = noisy && ["R", "G", "B"].every((c, i) => noisy.channels[i] === c) && noisy.channels.length === 3;
+  noisyImage = rgb ? { width: image.width, height: image.height, rgb: noisy.values } : null;
+  $("#compare-noisy").hidden = !noisyImage;
+  $("#compare-noisy").setAttribute("aria-pressed", "false");
+}
+$("#compare-noisy").addEventListener("click", (e) => {
+  const on = e.currentTarget.getAttribute("aria-pressed") !== "true" && noisyImage;
+  $("#compare").value = "";
+  e.currentTarget.setAttribute("aria-pressed", String(Boolean(on)));
+  viewer.compare(on ? noisyImage : null);
+});
+
 function select(id) {
   if (id === selectedId) return;
   selectedId = id;
@@ -1022,6 +1062,9 @@ function select(id) {
   delete $("#viewer").dataset.pass;
   delete $("#viewer").dataset.aov;
   $("#compare").value = "";
+  noisyImage = null;
+  $("#compare-noisy").hidden = true;
+  $("#compare-noisy").setAttribute("aria-pressed", "false");
   $("#aov-view").value = "";
   delete $("#aov-view").dataset.signature;
   $("#aov-view-group").hidden = true;
@@ -1109,7 +1152,9 @@ function showJob(job) {
   stat(dl, "Id", job.id);
   stat(dl, "Kind", job.kind);
   if (r.width) stat(dl, "Resolution", `${r.width} × ${r.height}`);
-  stat(dl, "Samples", `${p.samples_done ?? 0} / ${p.samples_total ?? 0} per pixel`);
+  stat(dl, "Samples", samplesText(job, "per pixel"));
+  if (adaptive(job)) stat(dl, "Adaptive threshold", r.min_spp ? `${r.adaptive_threshold}, min ${r.min_spp} spp` : `${r.adaptive_threshold}`);
+  if (r.denoise && r.denoise !== "none") stat(dl, "Denoiser", r.denoise);
   stat(dl, "Passes", String(p.passes ?? 0));
   stat(dl, "Elapsed", fmtSeconds(p.elapsed_s));
   // A job split into work units: the render time of all its nodes together, and where its units are.
@@ -1133,7 +1178,7 @@ function showJob(job) {
   if (job.stop_reason) stat(dl, "Stopped by", job.stop_reason.replace("_", " "));
   for (const w of job.warnings || []) stat(dl, "Warning", w);
   $("#preview-caption").textContent = p.passes
-    ? `Pass ${p.passes} · ${p.samples_done} spp${
+    ? `Pass ${p.passes} · ${adaptive(job) ? "mean " : ""}${p.samples_done} spp${
       job.state === "cancelled" ? " · partial: cancelled" : TERMINAL.has(job.state) ? " · final" : ""}`
     : job.state === "queued"
       ? "Waiting in the queue"
@@ -1366,14 +1411,20 @@ async function loadRenderSchema() {
   buildAovPicker(renderSchema.properties?.aovs?.items?.enum);
   // The form's choices are the contract's (an integrator added to the daemon appears here), with the labels the
   // page has for those it knows.
-  for (const [sel, key] of SELECT_SETTINGS) {
+  for (const [sel, key, unset] of SELECT_SETTINGS) {
     const values = renderSchema.properties?.[key]?.enum;
     if (!values) continue;
     const form = $(sel);
     const chosen = form.value;
     const labels = new Map([...form.options].map((o) => [o.value, o.textContent]));
-    form.replaceChildren(...values.map((v) => new Option(labels.get(v) || v, v)));
-    form.value = values.includes(chosen) ? chosen : renderSchema.properties[key].default ?? values[0];
+    const choices = unset === undefined ? values : ["", ...values];
+    form.replaceChildren(...choices.map((v) => new Option(labels.get(v) || v || unset, v)));
+    form.value = choices.includes(chosen) ? chosen : renderSchema.properties[key].default ?? values[0];
+  }
+  for (const [sel, key] of OPTIONAL_NUMBER_SETTINGS) {
+    const { minimum, maximum } = renderSchema.properties?.[key] || {};
+    if (minimum !== undefined) $(sel).min = minimum;
+    if (maximum !== undefined) $(sel).max = maximum;
   }
 }
 

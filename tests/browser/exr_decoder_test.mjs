@@ -110,7 +110,7 @@ test("tessera-render's EXR with render passes: every layer", async () => {
     JSON.stringify({
       kind: "material",
       material: { type: "conductor", metal: "copper", roughness: 0.2 },
-      render: { width: 24, height: 18, spp: 4, aovs },
+      render: { width: 24, height: 18, spp: 4, aovs, denoise: "none" },
     }),
   );
   const out = path.join(tmp, "render-aovs.exr");

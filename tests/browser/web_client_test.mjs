@@ -6,7 +6,8 @@
 // the glTF tab and a cancelled job's partial image; what users reported: the Name cleared after a submit and on a
 // change of tab, one error banner, the material form's common parameters first and the rest under Advanced, Fit at
 // most 1:1, the delete confirmation naming the job, the icon, every example of proto/examples, and the title (and a
-// notification) when a job ends while the tab is hidden; render passes picked in the form and shown in the viewer. Any failed step fails the test.
+// notification) when a job ends while the tab is hidden; render passes picked in the form and shown in the viewer;
+// adaptive sampling set in the form and a denoised job's denoised/noisy compare. Any failed step fails the test.
 //
 // node --test tests/browser/web_client_test.mjs   with   TESSERAD=path/to/tesserad  ARTIFACTS=dir
 //   (CTest passes both; CHROMIUM overrides /usr/bin/chromium)
@@ -692,7 +693,7 @@ test("the denoiser is chosen in the form and sent as render.denoise", async () =
   const schema = await (await page.request.get(`${baseUrl}/v1/schemas/render.schema.json`)).json();
   await page.locator('#denoise option[value="regression"]').waitFor({ state: "attached" });
   const denoisers = await page.locator("#denoise option").evaluateAll((os) => os.map((o) => o.value));
-  assert.deepEqual(denoisers, schema.properties.denoise.enum);
+  assert.deepEqual(denoisers, ["", ...schema.properties.denoise.enum]);
   await page.getByRole("tab", { name: "Example" }).click();
   await page.getByLabel("Example scene").selectOption("material");
   await page.getByLabel("Width").fill("48");
@@ -704,7 +705,93 @@ test("the denoiser is chosen in the form and sent as render.denoise", async () =
   assert.equal(job.status.state, "succeeded", job.status.error);
   assert.equal(job.sent.render.denoise, "regression");
   assert.equal(job.status.render.denoise, "regression");
-  await page.getByLabel("Denoiser").selectOption("none");
+  await page.getByLabel("Denoiser").selectOption("");
+});
+
+// Adaptive sampling: the form's threshold and min samples carry the contract's limits (render.schema.json) and reach
+// the job; the job view tells the mean samples per pixel. A denoised job's viewer offers one click to wipe between
+// the denoised image (A, left: the daemon's PNG) and the image as rendered (B, right: the EXR's "noisy" layer).
+test("adaptive sampling is set in the form, and a denoised job compares denoised against noisy", async (t) => {
+  await page.setViewportSize({ width: 1440, height: 1000 });
+  await page.goto(`${baseUrl}/`);
+  await page.locator('#connection[data-state="online"]').waitFor();
+  const schema = await (await page.request.get(`${baseUrl}/v1/schemas/render.schema.json`)).json();
+  let job;
+
+  await t.test("the threshold and min samples take the contract's limits and reach the job", async () => {
+    for (const [label, key] of [["Adaptive threshold", "adaptive_threshold"], ["Adaptive min samples", "min_spp"]]) {
+      const input = page.getByLabel(label);
+      await page.waitForFunction((sel) => document.querySelector(sel).max !== "", `#${await input.getAttribute("id")}`);
+      assert.equal(Number(await input.getAttribute("min")), schema.properties[key].minimum, `${label} min`);
+      assert.equal(Number(await input.getAttribute("max")), schema.properties[key].maximum, `${label} max`);
+    }
+    await page.getByRole("tab", { name: "Example" }).click();
+    await page.getByLabel("Example scene").selectOption("material");
+    await page.getByLabel("Width").fill("48");
+    await page.getByLabel("Height").fill("40");
+    await page.getByLabel("Samples per pixel").fill("64");
+    await page.getByLabel("Integrator").selectOption("path");
+    // 0.25: a float holds it exactly (the settings read numbers as floats, and the status shows what they hold).
+    await page.getByLabel("Adaptive threshold").fill("0.25");
+    await page.getByLabel("Adaptive min samples").fill("8");
+    await page.getByLabel("Denoiser").selectOption("regression");
+    job = await submitFromForm();
+    assert.equal(job.status.state, "succeeded", job.status.error);
+    for (const [k, v] of Object.entries({ adaptive_threshold: 0.25, min_spp: 8, denoise: "regression" })) {
+      assert.equal(job.sent.render[k], v, `the form sent render.${k}`);
+      assert.equal(job.status.render[k], v, `the job renders with ${k} ${v}`);
+    }
+    for (const label of ["Adaptive threshold", "Adaptive min samples"]) await page.getByLabel(label).fill("");
+    await page.getByLabel("Denoiser").selectOption("");
+  });
+
+  await t.test("the job view gives the mean samples per pixel of an adaptive job", async () => {
+    await page.locator(`#jobs tr[data-id="${job.status.id}"] button.link`).click();
+    await page.locator('#viewer[data-source="linear"][data-pass="final"]').waitFor();
+    const p = job.status.progress;
+    assert.ok(p.samples_done < p.samples_total, `mean ${p.samples_done} of ${p.samples_total} spp`);
+    await page.locator("#job-stats", { hasText: `mean ${p.samples_done} of at most ${p.samples_total} per pixel` })
+      .waitFor();
+  });
+
+  await t.test("one click wipes between the denoised image and the noisy one", async () => {
+    const button = page.getByRole("button", { name: "Denoised | noisy" });
+    await button.waitFor();
+    await page.getByRole("button", { name: "1:1" }).click();
+    await button.click();
+    await page.locator('#viewer[data-compare="on"]').waitFor();
+    assert.equal(await button.getAttribute("aria-pressed"), "true");
+    const view = await viewState();
+    const pixels = await canvasPixels();
+    const split = Math.round(pixels.width / 2);
+    const denoised = await pngPixels(`${baseUrl}/v1/jobs/${job.status.id}/result.png`);
+    const left = largestDifference(pixels, denoised, view, (cx) => cx < split - 2);
+    const right = largestDifference(pixels, denoised, view, (cx) => cx > split + 2);
+    assert.ok(left <= 1, `left of the split differs from the denoised PNG by ${left}`);
+    assert.ok(right > 1, "right of the split shows the denoised image, not the noisy one");
+    // The readout gives B's values from the EXR's noisy layer.
+    const exr = await (await page.request.get(`${baseUrl}/v1/jobs/${job.status.id}/result.exr`)).body();
+    const noisyR = exrChannel(exr, "noisy.R");
+    const box = await page.locator("#viewer canvas").boundingBox();
+    await page.mouse.move(box.x + view.x + 30.5, box.y + view.y + 20.5);
+    const text = await page.locator("#viewer .readout").textContent();
+    const m = text.match(/· B R (\S+)/);
+    assert.ok(m, `readout "${text}"`);
+    const want = noisyR.get("30 20");
+    assert.ok(Math.abs(Number(m[1]) - want) <= 1e-3 * Math.max(1e-3, Math.abs(want)), `B R ${m[1]}, not ${want}`);
+    await button.click();
+    await page.locator('#viewer[data-compare="off"]').waitFor();
+  });
+
+  await t.test("a job without the denoiser offers no such compare", async () => {
+    const plain = await renderThroughApi({ kind: "material", material: { type: "lambert" },
+      render: { width: 16, height: 16, spp: 4, denoise: "none" } });
+    assert.equal(plain.status.state, "succeeded");
+    await page.locator(`#jobs tr[data-id="${plain.status.id}"] button.link`).click();
+    await page.locator('#viewer[data-source="linear"][data-pass="final"]').waitFor();
+    assert.ok(await page.locator("#compare-noisy").isHidden(), "the compare button shows for a job without noisy");
+  });
+  assert.deepEqual(pageErrors, []);
 });
 
 // A glTF whose texture has a valid PNG header and undecodable pixels: accepted (headers are checked at upload),

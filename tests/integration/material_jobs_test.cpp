@@ -1,5 +1,6 @@
 // Material jobs over HTTP: every model the daemon lists renders on the preview stage; a row of materials renders;
-// a parameter out of range is a 422 naming the field; a material job's render passes are layers of its EXR and PNGs.
+// a parameter out of range is a 422 naming the field; a material job's render passes are layers of its EXR and PNGs;
+// a preview samples adaptively and is denoised unless the job says otherwise.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -7,6 +8,7 @@
 #include <thread>
 
 #include "renderer/image_io.h"
+#include "renderer/render_settings.h"
 #include "tests/integration/daemon.h"
 #include "tests/server/test_util.h"
 
@@ -40,6 +42,29 @@ class MaterialJobs : public testing::Test {
   }
   void TearDown() override {
     if (HasFailure() && daemon_) std::fprintf(stderr, "--- tesserad log ---\n%s\n", daemon_->log().c_str());
+  }
+  // Submits `job` and follows it to its end: its last status (a failure is added where it is not accepted).
+  json render(const json& job) {
+    auto r = client_->Post("/v1/jobs", job.dump(), "application/json");
+    if (!r || r->status != 202) {
+      ADD_FAILURE() << "not accepted: " << (r ? r->body : "no answer");
+      return json::object();
+    }
+    return wait_until_done(*client_, json::parse(r->body)["id"]);
+  }
+  // The result.exr of job `id`, as OpenImageIO reads it.
+  ImageData result_exr(const std::string& id) {
+    auto exr = client_->Get("/v1/jobs/" + id + "/result.exr");
+    if (!exr || exr->status != 200) {
+      ADD_FAILURE() << "no result.exr for " << id;
+      return {};
+    }
+    const std::string file = (dir_.path() / (id + ".exr")).string();
+    {
+      std::ofstream out(file, std::ios::binary);
+      out.write(exr->body.data(), static_cast<std::streamsize>(exr->body.size()));
+    }
+    return read_image(file);
   }
   TempDir dir_;
   std::unique_ptr<Daemon> daemon_;
@@ -112,31 +137,51 @@ TEST_F(MaterialJobs, RenderPassesAreLayersOfTheExrAndPngs) {
   json job = {{"kind", "material"},
               {"material", {{"type", "conductor"}, {"metal", "gold"}, {"roughness", 0.3}}},
               {"render", {{"width", 32}, {"height", 24}, {"spp", 4}, {"aovs", {"albedo", "normal"}}}}};
-  auto r = client_->Post("/v1/jobs", job.dump(), "application/json");
-  ASSERT_TRUE(r);
-  ASSERT_EQ(r->status, 202) << r->body;
-  const std::string id = json::parse(r->body)["id"];
-  const json status = wait_until_done(*client_, id);
+  const json status = render(job);
   ASSERT_EQ(status.value("state", ""), "succeeded") << status.dump();
   EXPECT_EQ(status["render"]["aovs"], json({"albedo", "normal"}));
+  const std::string id = status["id"];
 
-  auto exr = client_->Get("/v1/jobs/" + id + "/result.exr");
-  ASSERT_TRUE(exr);
-  ASSERT_EQ(exr->status, 200);
-  const std::string file = (dir_.path() / "result.exr").string();
-  {
-    std::ofstream out(file, std::ios::binary);
-    out.write(exr->body.data(), static_cast<std::streamsize>(exr->body.size()));
-  }
-  const ImageData image = read_image(file);
+  const ImageData image = result_exr(id);
   EXPECT_EQ(image.width, 32);
-  EXPECT_EQ(image.channels, 9);
+  EXPECT_EQ(image.channels, 12);  // R, G, B, the two passes, and the preview's denoiser's noisy.R, .G, .B
 
   for (const std::string pass : {"albedo", "normal"}) {
     auto png = client_->Get("/v1/jobs/" + id + "/aovs/" + pass + ".png");
     ASSERT_TRUE(png);
     EXPECT_EQ(png->status, 200) << pass << ": " << png->body;
     EXPECT_EQ(png->body.substr(1, 3), "PNG") << pass;
+  }
+}
+
+// A material preview samples adaptively and is denoised unless its document says otherwise: without those settings the
+// job stops by its threshold at a mean below spp, and its EXR holds the rendered image as noisy.R, .G, .B beside the
+// denoised one; with adaptive_threshold 0 and denoise none every pixel gets spp samples and the EXR holds R, G, B.
+TEST_F(MaterialJobs, APreviewIsAdaptiveAndDenoisedUnlessTheJobSaysOtherwise) {
+  const json size = {{"width", 24}, {"height", 24}, {"spp", 256}};
+  json off = size;
+  off["adaptive_threshold"] = 0;
+  off["denoise"] = "none";
+  struct Case {
+    json render;
+    std::string stop_reason, denoise;
+    int channels;
+  };
+  for (const Case& c : {Case{size, "adaptive_threshold", "regression", 6}, Case{off, "samples", "none", 3}}) {
+    const json job = {{"kind", "material"}, {"material", {{"type", "lambert"}}}, {"render", c.render}};
+    const json status = render(job);
+    ASSERT_EQ(status.value("state", ""), "succeeded") << status.dump();
+    EXPECT_EQ(status["stop_reason"], c.stop_reason) << status.dump();
+    EXPECT_EQ(status["render"].value("denoise", "none"), c.denoise);  // "none" is left out, as a default
+    const json& p = status["progress"];
+    if (c.stop_reason == "samples") {
+      EXPECT_EQ(status["render"].value("adaptive_threshold", 0.0), 0.0);
+      EXPECT_EQ(p["samples_done"], 256);
+    } else {
+      EXPECT_FLOAT_EQ(status["render"]["adaptive_threshold"].get<double>(), kPreviewAdaptiveThreshold);
+      EXPECT_LT(p["samples_done"].get<double>(), 256) << p.dump();
+    }
+    EXPECT_EQ(result_exr(status["id"]).channels, c.channels) << c.render.dump();
   }
 }
 

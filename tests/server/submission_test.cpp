@@ -213,6 +213,43 @@ TEST(Submission, RefusesADenoiserByName) {
   EXPECT_TRUE(std::get_if<AcceptedJob>(&r));
 }
 
+// A material job previews with adaptive sampling and the denoiser unless its document sets them; the settings hold
+// them explicitly, so the record's text keeps them whatever the defaults become. A scene job keeps both off, and an
+// integrator that can do neither (bdpt) previews without them rather than being refused.
+TEST(Submission, AMaterialJobPreviewsAdaptiveAndDenoisedUnlessItSaysOtherwise) {
+  const json material = {{"kind", "material"}, {"material", {{"type", "lambert"}}}};
+  auto accepted = [](const json& doc) {
+    auto r = check_submission("application/json", doc.dump(), {});
+    if (auto* job = std::get_if<AcceptedJob>(&r)) return *job;
+    ADD_FAILURE() << doc.dump() << ": " << std::get<Problem>(r).detail;
+    return AcceptedJob{};
+  };
+  const AcceptedJob preview = accepted(material);
+  EXPECT_FLOAT_EQ(preview.settings.adaptive_threshold, kPreviewAdaptiveThreshold);
+  EXPECT_EQ(preview.settings.denoise, Denoiser::kRegression);
+  const RenderSettings stored = render_settings_from_text(render_settings_text(preview.settings));
+  EXPECT_FLOAT_EQ(stored.adaptive_threshold, kPreviewAdaptiveThreshold);
+  EXPECT_EQ(stored.denoise, Denoiser::kRegression);
+
+  json explicit_off = material;
+  explicit_off["render"] = {{"adaptive_threshold", 0}, {"denoise", "none"}, {"spp", 32}};
+  const AcceptedJob off = accepted(explicit_off);
+  EXPECT_EQ(off.settings.adaptive_threshold, 0);
+  EXPECT_EQ(off.settings.denoise, Denoiser::kNone);
+  EXPECT_EQ(off.settings.spp, 32u);
+  EXPECT_EQ(render_settings_from_text(render_settings_text(off.settings)).adaptive_threshold, 0);
+
+  json bdpt = material;
+  bdpt["render"] = {{"integrator", "bdpt"}};
+  const AcceptedJob splatting = accepted(bdpt);
+  EXPECT_EQ(splatting.settings.adaptive_threshold, 0);
+  EXPECT_EQ(splatting.settings.denoise, Denoiser::kNone);
+
+  const AcceptedJob scene = accepted(test::cornell_job());
+  EXPECT_EQ(scene.settings.adaptive_threshold, 0);
+  EXPECT_EQ(scene.settings.denoise, Denoiser::kNone);
+}
+
 TEST(Submission, ConfiguredLimitsNameTheField) {
   SubmissionLimits limits;
   limits.render.max_width = 256;
