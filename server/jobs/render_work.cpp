@@ -278,14 +278,18 @@ class FrameRangeRender {
 
   RunEnd run() {
     RunEnd end;
-    const uint32_t done_before = count_done();
+    // Which frames earlier runs finished, looked up once: one open of a file a frame.
+    std::vector<bool> finished(frames_.size());
+    for (size_t i = 0; i < frames_.size(); ++i) finished[i] = done(frames_[i]);
+    const auto done_before = static_cast<uint32_t>(std::count(finished.begin(), finished.end(), true));
     progress_.samples_total =
         static_cast<uint32_t>(std::min<uint64_t>(uint64_t{settings_.spp} * frames_.size(), UINT32_MAX));
     progress_.samples_done = done_before * settings_.spp;
     samples_before_ = progress_.samples_done;
     listener_.resumed(done_before ? std::optional<RenderProgress>(progress_) : std::nullopt, false);
-    for (int64_t frame : frames_) {
-      if (done(frame)) continue;
+    for (size_t i = 0; i < frames_.size(); ++i) {
+      if (finished[i]) continue;
+      const int64_t frame = frames_[i];
       std::string error;
       bool input_refused = false;
       for (int attempt = 1; attempt <= kFrameAttempts; ++attempt) {
@@ -307,7 +311,7 @@ class FrameRangeRender {
           break;
         } catch (const std::exception& e) {
           error = e.what();
-          listener_.frame(frame, printf_frame_failure(attempt, error));
+          listener_.frame(frame, failure_line(attempt, error));
         }
       }
       if (!error.empty()) {
@@ -327,16 +331,13 @@ class FrameRangeRender {
   }
 
  private:
-  static std::string printf_frame_failure(int attempt, const std::string& error) {
+  static std::string failure_line(int attempt, const std::string& error) {
     return "failed (attempt " + std::to_string(attempt) + " of " + std::to_string(kFrameAttempts) + "): " + error +
            (attempt < kFrameAttempts ? "; rendering it again" : "");
   }
 
   bool done(int64_t frame) const {
     return env_.files->open_frame(request_.id, frame_done_file(spec_), frame, padding_) != nullptr;
-  }
-  uint32_t count_done() const {
-    return static_cast<uint32_t>(std::count_if(frames_.begin(), frames_.end(), [&](int64_t f) { return done(f); }));
   }
 
   std::shared_ptr<const Scene> load(int64_t frame) {
