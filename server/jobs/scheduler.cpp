@@ -595,9 +595,12 @@ void Scheduler::end_interrupted(RenderSlot& slot, const JobRecord& record, uint3
   }
   if (deleted)
     log(LogLevel::kInfo, "job deleted while rendering", {{"job", record.id}});
-  else if (settled)
+  else if (settled) {
+    // A pass's checkpoint written while the service cancelled would outlive the job's own removal of it: the render,
+    // the last writer, removes it again once it has stopped.
+    if (*settled == StopSignal::kCancel && record.unit < 0) files_.remove(record.id, JobFile::kCheckpoint);
     log_settled(record, *settled, samples_done);
-  else if (lease_lost)
+  } else if (lease_lost)
     end_taken_away(record.id, samples_done);
   else
     end_stopping(slot, record.id, samples_done);

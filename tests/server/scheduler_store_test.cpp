@@ -414,8 +414,8 @@ TEST_F(SchedulerStoreFailure, AJobStoredWithTheEarlierSettingsTextRunsAndResumes
 }
 
 // A client's cancel of a job rendering here is the job service's to decide and record: the job is cancelled, with its
-// partial results and without its checkpoint, when the call returns, and the render only receives the stop signal:
-// it winds down and records no end of its own.
+// partial results, when the call returns, and the render only receives the stop signal: it winds down and records no
+// end of its own. No checkpoint survives, not even one whose pass was being written while the service removed it.
 TEST_F(SchedulerStoreFailure, TheServiceRecordsACancelAndTheRenderOnlyStops) {
   auto scheduler = make_scheduler(1ms);
   auto service = make_service(*scheduler);
@@ -433,9 +433,9 @@ TEST_F(SchedulerStoreFailure, TheServiceRecordsACancelAndTheRenderOnlyStops) {
   const ActionTaken& taken = std::get<ActionTaken>(answer);
   EXPECT_EQ(taken.job.state, JobState::kCancelled);
   EXPECT_TRUE(files_.read(id, JobFile::kResultPng));  // the image of its last complete pass
-  EXPECT_FALSE(fs::exists(files_.path(id, JobFile::kCheckpoint)));
 
   ASSERT_TRUE(test::eventually([&] { return scheduler->running_count() == 0; }, 120));
+  EXPECT_FALSE(fs::exists(files_.path(id, JobFile::kCheckpoint)));
   EXPECT_EQ(store_.ends.load(), 0);  // the render recorded nothing
   EXPECT_EQ(state_of(id), JobState::kCancelled);
   EXPECT_EQ(sqlite_.get(id, false)->stop_reason, "cancelled");
