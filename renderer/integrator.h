@@ -51,6 +51,8 @@ struct IntegratorSettings {
   // Maximum number of scattering events in media and crossings of index-matched boundaries along a path (they do not
   // count towards max_depth; Blender Cycles keeps the same separate limit for volume bounces).
   int max_volume_depth = 256;
+  // Whether walks in subsurface media are guided towards the surface they last met (integrators/guided_walk.h).
+  bool subsurface_guiding = true;
   int rr_start_depth = 3;  // Russian roulette from this many bounces on
   bool operator==(const IntegratorSettings&) const = default;
 };

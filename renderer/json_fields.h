@@ -41,4 +41,12 @@ inline float number_key(const nlohmann::json& obj, const std::string& key, const
   return static_cast<float>(d);
 }
 
+// obj[key], which must be true or false; `fallback` when absent.
+inline bool boolean_key(const nlohmann::json& obj, const std::string& key, const std::string& pointer, bool fallback) {
+  auto it = obj.find(key);
+  if (it == obj.end()) return fallback;
+  if (!it->is_boolean()) throw SceneError(at(pointer, key), "must be true or false");
+  return it->get<bool>();
+}
+
 }  // namespace tessera::fields

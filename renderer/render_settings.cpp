@@ -16,6 +16,7 @@ using nlohmann::json;
 namespace {
 
 using fields::at;
+using fields::boolean_key;
 using fields::number_key;
 
 // A value and the name documents give it: each table is read both ways, and its order is that of the error
@@ -171,6 +172,8 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
   s.integrator.max_depth = static_cast<int>(integer("max_depth", defaults.integrator.max_depth, 0, limits.max_depth));
   s.integrator.max_volume_depth =
       static_cast<int>(integer("max_volume_depth", defaults.integrator.max_volume_depth, 0, limits.max_volume_depth));
+  s.integrator.subsurface_guiding =
+      boolean_key(render, "subsurface_guiding", pointer, defaults.integrator.subsurface_guiding);
   s.seed = static_cast<uint64_t>(integer("seed", 0, 0, (int64_t{1} << 53)));
   if (auto it = render.find("integrator"); it != render.end()) {
     const IntegratorRegistry& integrators = IntegratorRegistry::builtin();
@@ -254,6 +257,7 @@ json render_settings_to_json(const RenderSettings& s) {
               {"tonemap", tonemap_name(s.display.tonemap)},
               {"exr_precision", name_of(kExrPrecisions, s.exr_half)},
               {"max_volume_depth", s.integrator.max_volume_depth},
+              {"subsurface_guiding", s.integrator.subsurface_guiding},
               {"aovs", s.aovs},
               {"denoise", denoiser_name(s.denoise)},
               {"frames", s.frames ? json{{"start", s.frames->start},
@@ -268,6 +272,7 @@ json render_settings_to_json(const RenderSettings& s) {
   // records (and their checkpoints' fingerprints, FNV-1a of this text) of jobs stored before a key existed keep their
   // text byte for byte.
   static const json kLaterKeysDefaults = {{"max_volume_depth", IntegratorSettings{}.max_volume_depth},
+                                          {"subsurface_guiding", IntegratorSettings{}.subsurface_guiding},
                                           {"aovs", json::array()},
                                           {"denoise", denoiser_name(Denoiser::kNone)},
                                           {"frames", nullptr},

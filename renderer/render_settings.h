@@ -107,8 +107,9 @@ RenderSettings render_settings_from_json(const nlohmann::json& render, const std
 // explicitly and its stored record keeps them whatever the defaults become.
 inline constexpr double kPreviewAdaptiveThreshold = 0.05;
 nlohmann::json with_preview_defaults(const nlohmann::json& render);
-// The normalised form: every field a document can set, defaults filled in (but max_volume_depth, aovs, denoise, frames
-// and fps only where they are not their defaults, so that records written before they existed keep their text).
+// The normalised form: every field a document can set, defaults filled in (but max_volume_depth, subsurface_guiding,
+// aovs, denoise, frames and fps only where they are not their defaults, so that records written before they existed
+// keep their text).
 nlohmann::json render_settings_to_json(const RenderSettings& settings);
 // The same as the job status shows it: a stopping rule that is off (time_limit_s, noise_target at 0, the documents'
 // default) is left out, as a document leaves it out, so that it reads as "none" rather than as a limit of zero.

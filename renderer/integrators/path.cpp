@@ -6,6 +6,7 @@
 // Physically Based Rendering, 4th ed., §14.2, with the transmittance of homogeneous media in closed form).
 #include "renderer/aov.h"
 #include "renderer/integrator.h"
+#include "renderer/integrators/guided_walk.h"
 #include "renderer/phase.h"
 #include "renderer/scene.h"
 #include "renderer/spectrum.h"
@@ -80,6 +81,17 @@ Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& b
   return f * ls.radiance * (w / ls.pdf) * tr;
 }
 
+// After a surface event from which the path goes on along `dir`: in a subsurface medium, the walk is guided towards
+// that surface, whose outward normal is the side of `ng` that `dir` leaves; elsewhere, no walk is guided.
+void note_walk_surface(const MediumTracker& medium, const Vec3& ng, const Vec3& dir, std::optional<Vec3>& walk_normal) {
+  if (medium.current() && medium.current()->subsurface()) {
+    const Vec3 n = normalize(ng);
+    walk_normal = dot(dir, n) < 0 ? n : -n;
+  } else {
+    walk_normal.reset();
+  }
+}
+
 // Next-event estimation at a scattering event in a medium, at `p`: the phase function takes the BSDF's place.
 Rgb direct_light_in_medium(const Scene& scene, const Vec3& p, const Vec3& wo_world, const HenyeyGreenstein& phase,
                            bool mis, float u_select, Vec2 u, const MediumTracker& medium, int max_crossings,
@@ -151,6 +163,12 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
   // Scattering events in media and crossings of index-matched boundaries: they are not bounces (depth), and have
   // their own limit, settings.max_volume_depth.
   int volume_depth = 0;
+  // A subsurface walk's guiding (guided_walk.h): the outward normal of the surface it last met, and the step whose
+  // direction a scattering event sampled, which draws the distance of the flight after it.
+  const bool guiding = settings.subsurface_guiding;
+  std::optional<Vec3> walk_normal;
+  std::optional<GuidedWalk> walk;  // the constants of the medium walked in last
+  std::optional<GuidedWalkStep> guided;
   bool camera_segment = true;  // the ray is the camera ray, whose hit `primary` may hold
   // For `features`: whether the path still runs along the camera ray (only index-matched boundaries crossed), and
   // how far it has come along it.
@@ -194,11 +212,22 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       // so it is the one that sampling to the surface would have drawn; a surface found before it takes the
       // crossing's weight, sampled again to that surface with the same number.
       const float u_flight = sampler.get1d();
-      flight = current->sample_free_flight(kInfinity, throughput, u_flight);
+      if (guided) {
+        flight.t = guided->sample_distance(u_flight);
+        flight.scattered = flight.t < kInfinity;
+      } else {
+        flight = current->sample_free_flight(kInfinity, throughput, u_flight);
+      }
       Ray search = ray;
       if (flight.scattered) search.tmax = std::min(ray.tmax, flight.t / dir_length);
       found = scene.intersect(search, &si, &cone);
-      if (found) flight = current->sample_free_flight(si.t * dir_length, throughput, u_flight);
+      if (guided) {
+        if (found) flight = FreeFlight{false, si.t * dir_length, Rgb(1)};
+        flight.weight = guided->weight(flight.t, flight.scattered);
+        guided.reset();
+      } else if (found) {
+        flight = current->sample_free_flight(si.t * dir_length, throughput, u_flight);
+      }
     } else {
       found = scene.intersect(ray, &si, &cone);
     }
@@ -221,8 +250,23 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         const bool sample_light =
             use_light_sampling && !lights.empty() && (scene.index_matched() || current == medium.outside());
         const auto [u_light_select, u_light] = light_numbers(sampler, sample_light);
-        sampler.skip1d();  // a lobe choice: the phase function has one lobe
-        const PhaseSample ps = phase.sample(wo_world, sampler.get2d());
+        // The next direction: from the phase function, whose one lobe needs no choice; or, in a subsurface walk that
+        // has met its surface, by the guided walk's mixture (guided_walk.h), the lobe's number choosing the channel
+        // and the technique, the step's distance then drawn with the same pair.
+        if (guiding && walk_normal && current->subsurface() && (!walk || &walk->medium() != current))
+          if (const auto* homogeneous = dynamic_cast<const HomogeneousMedium*>(current)) walk.emplace(*homogeneous);
+        PhaseSample ps;
+        if (guiding && walk_normal && walk && &walk->medium() == current) {
+          const float u_technique = sampler.get1d();
+          guided.emplace(*walk, *walk_normal, wo_world, throughput, u_technique, sampler.get2d());
+          // Light this direction finds is weighted against the light sample taken here by the phase function's
+          // density, as the light sample is weighted against it: any pair of weights that sums to one keeps both
+          // unbiased (Veach 1997, §9.2.2), whatever density drew the direction.
+          ps = PhaseSample{guided->wi(), guided->phase()};
+        } else {
+          sampler.skip1d();
+          ps = phase.sample(wo_world, sampler.get2d());
+        }
         if (bounces == 0) first = 3;
         if (sample_light) {
           const Rgb c = throughput * direct_light_in_medium(scene, p, wo_world, phase, mis, u_light_select, u_light,
@@ -230,7 +274,8 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
           radiance += c;
           record(c, bounces + 1, false);
         }
-        // Sampled exactly, the phase function's weight p / pdf is 1: the throughput goes on unchanged.
+        // Sampled exactly, the phase function's weight p / pdf is 1: the throughput goes on unchanged (a guided
+        // step weights the direction with its distance, at the next flight).
         if (!(ps.pdf > 0)) break;
         cone.width = cone.width_at(flight.t);
         cone.spread = std::max(cone.spread, 2 / std::sqrt(kPi * ps.pdf));
@@ -305,6 +350,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       ++volume_depth;
       if (features && straight) travelled += si.t * length(ray.dir);
       medium.refract(si.sp.front_face, si.material->interior.get());
+      note_walk_surface(medium, si.sp.ng, ray.dir, walk_normal);
       cone.width = cone.width_at(si.t * length(ray.dir));
       ray.origin = offset_ray_origin(si.sp.p, si.sp.ng, ray.dir);
       ray.tmin = 0;
@@ -385,6 +431,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       eta_scale *= sqr(bs->eta);
       medium.refract(si.sp.front_face, si.material->interior.get());
     }
+    note_walk_surface(medium, si.sp.ng, wi_world, walk_normal);
     // The cone goes on from its width here. A lobe of density p spreads over a solid angle of about 1/p, a cone of
     // full angle 2 / sqrt(pi p): after a diffuse or glossy bounce textures are read as blurred as that lobe sees
     // them. A delta lobe keeps the spread (the surface's curvature is neglected).

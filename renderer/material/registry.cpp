@@ -6,6 +6,8 @@
 #include "proto/asset_path.h"
 #include "proto/did_you_mean.h"
 #include "renderer/material/material.h"
+
+#include "renderer/json_fields.h"
 #include "renderer/scene_error.h"
 
 namespace tessera {
@@ -260,10 +262,7 @@ FloatParam float_param(const nlohmann::json& obj, const std::string& key, const 
 }
 
 bool boolean(const nlohmann::json& obj, const std::string& key, const std::string& pointer, bool fallback) {
-  auto it = obj.find(key);
-  if (it == obj.end()) return fallback;
-  if (!it->is_boolean()) throw SceneError(pointer + "/" + json_pointer_token(key), "must be true or false");
-  return it->get<bool>();
+  return fields::boolean_key(obj, key, pointer, fallback);
 }
 
 std::string string(const nlohmann::json& obj, const std::string& key, const std::string& pointer,

@@ -67,8 +67,8 @@ TEST(RenderSettingsMapping, TheNormalisedFormIsTheSchemasFieldsAndDefaults) {
   std::ifstream in("proto/schemas/render.schema.json");
   ASSERT_TRUE(in) << "run from the source tree";
   const json properties = json::parse(in)["properties"];
-  // max_volume_depth, aovs, denoise and fps are left out at their defaults (the stored records' text, below), written
-  // otherwise; frames, which has no default (a still), is written only when set.
+  // max_volume_depth, subsurface_guiding, aovs, denoise and fps are left out at their defaults (the stored records'
+  // text, below), written otherwise; frames, which has no default (a still), is written only when set.
   RenderSettings deep;
   deep.integrator.max_volume_depth = 7;
   EXPECT_EQ(render_settings_to_json(deep).value("max_volume_depth", 0), 7);
@@ -78,7 +78,9 @@ TEST(RenderSettingsMapping, TheNormalisedFormIsTheSchemasFieldsAndDefaults) {
   EXPECT_FALSE(normalised.contains("denoise"));
   EXPECT_FALSE(normalised.contains("adaptive_threshold"));
   EXPECT_FALSE(normalised.contains("min_spp"));
+  EXPECT_FALSE(normalised.contains("subsurface_guiding"));
   normalised["max_volume_depth"] = RenderSettings{}.integrator.max_volume_depth;
+  normalised["subsurface_guiding"] = true;
   normalised["aovs"] = json::array();
   normalised["denoise"] = "none";
   EXPECT_FALSE(normalised.contains("fps"));
