@@ -98,7 +98,7 @@ export class FrameStrip {
     els.later.addEventListener("click", () => this.page(1));
     els.scrubber.addEventListener("input", () => this.scrub(Number(els.scrubber.value)));
     els.strip.addEventListener("click", (e) => {
-      const b = e.target.closest("[data-frame]");
+      const b = e.target.closest(".frame-thumb");
       if (b && b.dataset.state === "done") this.pick(Number(b.dataset.frame));
     });
   }
