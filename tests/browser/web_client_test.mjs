@@ -277,6 +277,14 @@ async function finished(id) {
     await page.waitForTimeout(100);
   }
 }
+// Clicks "Submit job" and returns the daemon's answer to the page's POST /v1/jobs.
+async function submitResponse() {
+  const [res] = await Promise.all([
+    page.waitForResponse((r) => r.request().method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
+    page.getByRole("button", { name: "Submit job" }).click(),
+  ]);
+  return res;
+}
 // Clicks "Submit job" and returns the document the page sent and the job it made, followed to its end.
 async function submitFromForm() {
   const [req] = await Promise.all([
@@ -1049,10 +1057,7 @@ test("documents are seen and reused, every setting is in the form, and a cancell
     await page.getByLabel("Width").fill("16");
     await page.getByLabel("Height").fill("16");
     await page.getByLabel("Samples per pixel").fill("2");
-    const [res] = await Promise.all([
-      page.waitForResponse((r) => r.request().method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
-      page.getByRole("button", { name: "Submit job" }).click(),
-    ]);
+    const res = await submitResponse();
     assert.equal(res.status(), 202, await res.text());
     const done = await finished((await res.json()).id);
     assert.equal(done.status.state, "succeeded", done.status.error);
@@ -1125,10 +1130,7 @@ test("a frame range is submitted from the form, its strip fills, and it plays", 
     await page.getByLabel("First frame").fill("1");
     await page.getByLabel("Last frame").fill("24");
     await page.getByLabel("Frames per second").fill("12");
-    const [res] = await Promise.all([
-      page.waitForResponse((r) => r.request().method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
-      page.getByRole("button", { name: "Submit job" }).click(),
-    ]);
+    const res = await submitResponse();
     assert.equal(res.status(), 202, await res.text());
     id = (await res.json()).id;
     const doc = await (await page.request.get(`${baseUrl}/v1/jobs/${id}/document`)).json();
@@ -1332,10 +1334,7 @@ test("what users reported: the name, the error banner, the material form and the
     const banners = page.locator("#toasts .toast");
     for (const key of ["width", "height", "spp"]) {
       await page.getByLabel("Job document").fill(`{"kind": "material", "material": {"type": "lambert"}, "render": {"${key}": 0}}`);
-      const [res] = await Promise.all([
-        page.waitForResponse((r) => r.request().method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
-        page.getByRole("button", { name: "Submit job" }).click(),
-      ]);
+      const res = await submitResponse();
       assert.equal(res.status(), 422);
       await banners.filter({ hasText: `/render/${key}` }).waitFor();
       assert.equal(await banners.count(), 1, `after the refused ${key}: ${await banners.allTextContents()}`);
