@@ -22,58 +22,9 @@ for f in "$tesserad" "$claim_load"; do
   [[ -x $f ]] || { echo "cluster_scaling: no $f (cmake -DTESSERA_BUILD_BENCH=ON, then build)" >&2; exit 2; }
 done
 command -v curl >/dev/null || { echo "cluster_scaling: needs curl" >&2; exit 2; }
-bindir=${TESSERA_PG_BINDIR:-$(ls -d /usr/lib/postgresql/*/bin 2>/dev/null | sort -V | tail -1)}
-[[ -x $bindir/initdb ]] || { echo "cluster_scaling: no PostgreSQL server programs (apt install postgresql)" >&2; exit 2; }
-
-work=$(mktemp -d)
-chmod 755 "$work"
-as_pg=()
-[[ $(id -u) == 0 ]] && as_pg=(runuser -u nobody --)
-pids=()
-cleanup() {
-  for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
-  [[ -d $work/pg ]] && "${as_pg[@]}" "$bindir/pg_ctl" -D "$work/pg/data" -m immediate -w stop >/dev/null 2>&1 || true
-  rm -rf "$work"
-}
-trap cleanup EXIT
-trap 'exit 130' INT TERM
-
-mkdir "$work/pg" && chmod 777 "$work/pg"
-"${as_pg[@]}" "$bindir/initdb" -D "$work/pg/data" -U tessera --auth=trust -E UTF8 --locale=C --no-sync >/dev/null
-"${as_pg[@]}" "$bindir/pg_ctl" -D "$work/pg/data" -w -l "$work/pg/server.log" \
-  -o "-k $work/pg -c listen_addresses= -c fsync=off" start >/dev/null
-db=0
-# A fresh database; its URI in $uri.
-new_database() {
-  db=$((db + 1))
-  "${as_pg[@]}" "$bindir/psql" -h "$work/pg" -U tessera -d postgres -qAtc "CREATE DATABASE bench$db" >/dev/null
-  uri="postgresql://tessera@/bench$db?host=$work/pg"
-}
-psql_in() { "${as_pg[@]}" "$bindir/psql" -h "$work/pg" -U tessera -d "bench$db" -qAtc "$1"; }
-
-# Starts a daemon: start NAME DATA_DIR ARGS...; sets $url (of the last one started). Its output in $work/NAME.*.
-start() {
-  local name=$1 dir=$2; shift 2
-  mkdir -p "$dir"
-  : >"$work/$name.out"
-  "$tesserad" --listen 127.0.0.1 --port 0 --data-dir "$dir" --grace-s 2 --log-level info "$@" \
-    >"$work/$name.out" 2>"$work/$name.log" &
-  pids+=($!)
-  url=""
-  for _ in $(seq 100); do
-    url=$(sed -n 's/.*listening on \(http:[^ ]*\).*/\1/p' "$work/$name.out")
-    [[ -n $url ]] && break
-    sleep 0.1
-  done
-  [[ -n $url ]] || { cat "$work/$name.log" >&2; echo "cluster_scaling: tesserad did not start" >&2; exit 1; }
-  url=${url%/}
-}
-stop_all() {
-  for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
-  pids=()
-}
+bench=cluster_scaling
+daemon_args=(--log-level info)
+source bench/postgres_cluster.sh
 
 python3 - "$size" "$spp" >"$work/job.json" <<'PY'
 import json, sys

@@ -37,29 +37,12 @@ for _ in $(seq 100); do
 done
 [[ -n $url ]] || { echo "frames_daemon: the daemon did not start" >&2; cat "$work/err" >&2; exit 1; }
 url=${url%/}
-field() { python3 -c 'import json,sys; d=json.load(sys.stdin); print(eval("d"+sys.argv[1]))' "$1"; }
-asset=$(curl -sS -X POST --data-binary @examples/spinning_cube/SpinningCube.glb -H 'Content-Type: model/gltf-binary' \
-  "$url/v1/assets?name=SpinningCube.glb" | field '["id"]')
-job=$(python3 - "$asset" "$width" "$height" "$spp" "$start" "$end" "$chunk" <<'PY'
-import json, sys
-asset, w, h, spp, start, end, chunk = sys.argv[1:]
-doc = json.load(open("examples/spinning_cube/job.json"))
-doc["scene"]["gltf"] = asset
-doc["render"].update(width=int(w), height=int(h), spp=int(spp), frames={"start": int(start), "end": int(end), "chunk": int(chunk)})
-print(json.dumps(doc))
-PY
-)
-t0=$(date +%s.%N)
-id=$(curl -sS -X POST "$url/v1/jobs" -H 'Content-Type: application/json' -d "$job" | field '["id"]')
-while :; do
-  state=$(curl -sS "$url/v1/jobs/$id" | field '["state"]')
-  [[ $state == succeeded ]] && break
-  [[ $state == failed || $state == cancelled ]] && { echo "frames_daemon: the job $state" >&2; exit 1; }
-  sleep 0.2
-done
-t1=$(date +%s.%N)
+bench=frames_daemon
+start_frame=$start; end_frame=$end
+source bench/frames_range.sh
+read -r id wall <<<"$(run_range "$url")"
+[[ -n $wall ]] || exit 1
 n=$(curl -sS "$url/v1/jobs/$id" | field '["frames"]["done"]')
-wall=$(echo "$t1 - $t0" | bc -l)
 printf 'daemon, one node, chunk %s: %d frames at %sx%s, %s spp: %.1f s from submission to the last frame, %.2f s a frame, %.0f frames/hour\n' \
   "$chunk" "$n" "$width" "$height" "$spp" "$wall" "$(echo "$wall / $n" | bc -l)" "$(echo "3600 * $n / $wall" | bc -l)"
 [[ ${LOCAL:-1} == 0 ]] && exit 0

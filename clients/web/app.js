@@ -3,6 +3,7 @@
 import { api, allowed, ApiError, getBlob, getToken, onConnection, setToken, TERMINAL } from "./api.js";
 import { CLIENT_EXAMPLES, examplesFrom } from "./examples.js";
 import { cryptomatteOfPass, decodeExr, ExrError } from "./exr.js";
+import { FrameStrip, frameState, frameUrl } from "./frames.js";
 import { MATERIAL_PRESETS, materialForm, NOT_ON_PREVIEW_STAGE } from "./materials.js";
 import { ImageViewer } from "./viewer.js";
 
@@ -243,6 +244,14 @@ const OPTIONAL_NUMBER_SETTINGS = [
   ["#noise-target", "noise_target"],
   ["#adaptive-threshold", "adaptive_threshold"],
   ["#min-spp", "min_spp"],
+  ["#fps", "fps"],
+];
+// A frame range (render.frames): its fields by their control; a range is sent when its first and last frames are
+// given. Their limits are the contract's (render.schema.json, frames.properties).
+const FRAME_FIELDS = [
+  ["#frames-start", "start"],
+  ["#frames-end", "end"],
+  ["#frames-step", "step"],
 ];
 // The render settings of a document in the form; a setting the document leaves out shows its default (the
 // contract's, render.schema.json).
@@ -287,6 +296,7 @@ function fillRenderFields(render = {}, outputs = ["png", "exr"]) {
   $("#height").value = r.height;
   $("#spp").value = r.spp;
   for (const [sel, key] of OPTIONAL_NUMBER_SETTINGS) $(sel).value = r[key] ?? "";
+  for (const [sel, key] of FRAME_FIELDS) $(sel).value = r.frames?.[key] ?? "";
   $("#max-depth").value = r.max_depth;
   $("#seed").value = r.seed;
   $("#exposure-ev").value = r.exposure_ev;
@@ -345,6 +355,9 @@ function renderSettings(base = {}) {
   render.max_depth = int("#max-depth");
   render.seed = int("#seed");
   for (const [sel, key] of OPTIONAL_NUMBER_SETTINGS) optional(sel, key);
+  const frames = frameRange(render.frames, int);
+  if (frames) render.frames = frames;
+  else delete render.frames;
   render.exposure_ev = number("#exposure-ev");
   for (const [sel, key] of SELECT_SETTINGS) {
     if ($(sel).value) render[key] = $(sel).value;
@@ -358,6 +371,19 @@ function renderSettings(base = {}) {
     else delete render.aovs;
   }
   return render;
+}
+// The form's frame range: null when its first and last frames are empty; the document's own range keeps what the
+// form has no field for (its chunk).
+function frameRange(base, int) {
+  const given = FRAME_FIELDS.filter(([sel]) => $(sel).value.trim());
+  if (!given.length) return null;
+  const range = { ...(base || {}) };
+  for (const [sel, key] of FRAME_FIELDS) {
+    if ($(sel).value.trim()) range[key] = int(sel);
+    else delete range[key];
+  }
+  if (range.start === undefined || range.end === undefined) throw new Error("A frame range needs its first and last frames");
+  return range;
 }
 // The outputs ticked: at least one.
 function outputSettings() {
@@ -1006,6 +1032,74 @@ async function showPass(job, pass) {
 }
 $("#aov-view").addEventListener("change", (e) => showPass(currentJob, e.target.value));
 
+// A frame range job's frames (frames.js): the strip, the player and the scrubber. While the range renders and the user
+// has picked nothing, the viewer shows the job's preview (its latest finished frame); a frame picked on the strip
+// shows as a finished image (its EXR, else its PNG), a frame the player or the scrubber reaches as its PNG.
+const frameStrip = new FrameStrip(
+  {
+    panel: $("#frames-panel"),
+    strip: $("#frames-strip"),
+    counts: $("#frames-counts"),
+    play: $("#frames-play"),
+    fps: $("#frames-fps"),
+    scrubber: $("#frames-scrubber"),
+    label: $("#frames-label"),
+    earlier: $("#frames-earlier"),
+    later: $("#frames-later"),
+  },
+  (frame, how, bitmap) => showFrame(currentJob, frame, how, bitmap),
+);
+async function frameImage(job, frame) {
+  const outputs = job.outputs || ["png", "exr"];
+  if (outputs.includes("exr")) {
+    try {
+      return await decodeExr(await (await getBlob(frameUrl(job.frames, frame, "exr"))).arrayBuffer());
+    } catch (e) {
+      if (!(e instanceof ExrError) || !outputs.includes("png")) throw e;
+    }
+  }
+  return bitmapImage(await getBlob(frameUrl(job.frames, frame, "png")));
+}
+async function showFrame(job, frame, how, bitmap) {
+  if (!job?.frames) return;
+  const seq = ++previewSeq;
+  // The frame shown stays until the user picks another: the job's later previews do not replace it.
+  resultShown = job.id;
+  try {
+    const image = how === "play" ? { width: bitmap.width, height: bitmap.height, bitmap } : await frameImage(job, frame);
+    if (seq !== previewSeq || job.id !== selectedId) return;
+    viewer.show(image, { keepView: true });
+    $("#viewer").dataset.pass = how === "play" ? "frame" : "final";
+    $("#viewer").dataset.frame = String(frame);
+    $("#preview-placeholder").hidden = true;
+    $("#preview-caption").textContent = captionText(job);
+  } catch (e) {
+    showError(e, `Frame ${frame}`);
+  }
+  updateFrameDownloads(job);
+}
+// The frame shown, downloaded as PNG or EXR (when the job has that output and the frame is done).
+function updateFrameDownloads(job) {
+  const frame = frameStrip.current;
+  for (const ext of ["png", "exr"]) {
+    const ok = Boolean(job?.frames && frame != null && frameState(job.frames, frame) === "done" &&
+      (job.outputs || ["png", "exr"]).includes(ext) && frameUrl(job.frames, frame, ext));
+    $(`#frame-download-${ext}`).disabled = !ok;
+  }
+}
+async function downloadFrame(ext) {
+  const job = currentJob;
+  const frame = frameStrip.current;
+  if (!job?.frames || frame == null) return;
+  try {
+    saveBlob(await getBlob(frameUrl(job.frames, frame, ext)), `tessera-${shortId(job.id)}.frame-${frame}.${ext}`);
+  } catch (e) {
+    showError(e, `Download frame ${frame} ${ext.toUpperCase()}`);
+  }
+}
+$("#frame-download-png").addEventListener("click", () => downloadFrame("png"));
+$("#frame-download-exr").addEventListener("click", () => downloadFrame("exr"));
+
 // The comparison (B) image: another finished job's result.
 function updateCompareChoices() {
   const select = $("#compare");
@@ -1061,6 +1155,8 @@ function select(id) {
   viewer.clear();
   delete $("#viewer").dataset.pass;
   delete $("#viewer").dataset.aov;
+  delete $("#viewer").dataset.frame;
+  frameStrip.update(null);
   $("#compare").value = "";
   noisyImage = null;
   $("#compare-noisy").hidden = true;
@@ -1105,6 +1201,22 @@ function unitsText(u) {
   return parts.join(" · ");
 }
 
+// What the viewer shows: the pass and samples of the preview or result, or for a frame range the frame shown (one
+// picked, played or scrubbed to) or its preview, the latest finished frame.
+function captionText(job) {
+  const p = job.progress || {};
+  const shown = $("#viewer").dataset.frame;
+  if (job.frames && shown !== undefined)
+    return `Frame ${shown}${$("#viewer").dataset.pass === "final" ? " · final" : ""}`;
+  if (job.frames && job.frames.done) return `Preview: the latest finished frame · ${job.frames.done} of ${job.frames.total} frames`;
+  return p.passes
+    ? `Pass ${p.passes} · ${adaptive(job) ? "mean " : ""}${p.samples_done} spp${
+      job.state === "cancelled" ? " · partial: cancelled" : TERMINAL.has(job.state) ? " · final" : ""}`
+    : job.state === "queued"
+      ? "Waiting in the queue"
+      : "";
+}
+
 function stat(dl, name, value) {
   const dt = document.createElement("dt");
   dt.textContent = name;
@@ -1145,6 +1257,8 @@ function showJob(job) {
   if (job.id !== previous?.id) viewer.settings(r.exposure_ev ?? 0, r.tonemap ?? "clamp");
   if (allowed(job, "result")) loadResult(job);
   updatePassChoices(job);
+  frameStrip.update(job);
+  updateFrameDownloads(job);
   refreshLog(job);
   const dl = $("#job-stats");
   dl.replaceChildren();
@@ -1177,12 +1291,7 @@ function showJob(job) {
   if (job.finished_at) stat(dl, "Finished", fmtTime(job.finished_at));
   if (job.stop_reason) stat(dl, "Stopped by", job.stop_reason.replace("_", " "));
   for (const w of job.warnings || []) stat(dl, "Warning", w);
-  $("#preview-caption").textContent = p.passes
-    ? `Pass ${p.passes} · ${adaptive(job) ? "mean " : ""}${p.samples_done} spp${
-      job.state === "cancelled" ? " · partial: cancelled" : TERMINAL.has(job.state) ? " · final" : ""}`
-    : job.state === "queued"
-      ? "Waiting in the queue"
-      : "";
+  $("#preview-caption").textContent = captionText(job);
 
   // Keep the queue row in step without waiting for the next poll.
   const i = jobs.findIndex((j) => j.id === job.id);
@@ -1261,6 +1370,18 @@ async function rerender(job) {
   }
 }
 
+// Saves a fetched file under a name (the browser's download).
+function saveBlob(blob, name) {
+  const url = URL.createObjectURL(blob);
+  const a = document.createElement("a");
+  a.href = url;
+  a.download = name;
+  document.body.append(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 10000);
+}
+
 async function download(ext) {
   if (!currentJob) return;
   const id = currentJob.id;
@@ -1268,15 +1389,8 @@ async function download(ext) {
   b.disabled = true;
   try {
     const blob = await getBlob(`/v1/jobs/${encodeURIComponent(id)}/result.${ext}`);
-    const url = URL.createObjectURL(blob);
-    const a = document.createElement("a");
-    a.href = url;
     // A cancelled job's image is what it rendered before the cancel.
-    a.download = `tessera-${shortId(id)}${currentJob?.state === "cancelled" ? "-partial" : ""}.${ext}`;
-    document.body.append(a);
-    a.click();
-    a.remove();
-    setTimeout(() => URL.revokeObjectURL(url), 10000);
+    saveBlob(blob, `tessera-${shortId(id)}${currentJob?.state === "cancelled" ? "-partial" : ""}.${ext}`);
   } catch (e) {
     showError(e, `Download ${ext.toUpperCase()}`);
   } finally {
@@ -1421,11 +1535,12 @@ async function loadRenderSchema() {
     form.replaceChildren(...choices.map((v) => new Option(labels.get(v) || v || unset, v)));
     form.value = choices.includes(chosen) ? chosen : renderSchema.properties[key].default ?? values[0];
   }
-  for (const [sel, key] of OPTIONAL_NUMBER_SETTINGS) {
-    const { minimum, maximum } = renderSchema.properties?.[key] || {};
+  const limit = (sel, { minimum, maximum } = {}) => {
     if (minimum !== undefined) $(sel).min = minimum;
     if (maximum !== undefined) $(sel).max = maximum;
-  }
+  };
+  for (const [sel, key] of OPTIONAL_NUMBER_SETTINGS) limit(sel, renderSchema.properties?.[key]);
+  for (const [sel, key] of FRAME_FIELDS) limit(sel, renderSchema.properties?.frames?.properties?.[key]);
 }
 
 loadExamples();

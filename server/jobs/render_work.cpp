@@ -340,12 +340,12 @@ class FrameRangeRender {
     return env_.files->open_frame(request_.id, frame_done_file(spec_), frame, padding_) != nullptr;
   }
 
+  // The frame's scene, posed at its time, with its acceleration structure; load_s_ is how long that took.
   std::shared_ptr<const Scene> load(int64_t frame) {
-    double load_s = 0;
-    auto scene = load_for_run(env_, control_, load_s, [&](const SceneLoadOptions& options) {
+    auto scene = load_for_run(env_, control_, load_s_, [&](const SceneLoadOptions& options) {
       return load_frame_scene(document_, settings_, frame, options);
     });
-    if (!loaded_) listener_.loaded(scene->warnings, load_s);
+    if (!loaded_) listener_.loaded(scene->warnings, load_s_);
     loaded_ = true;
     return scene;
   }
@@ -379,7 +379,8 @@ class FrameRangeRender {
     }
     write_frame(frame, outputs_.image(session.film()));
     progress_.samples_done = base + settings_.spp;
-    listener_.frame(frame, "done in " + std::to_string(session.progress().elapsed_s) + " s");
+    listener_.frame(frame, "done in " + std::to_string(session.progress().elapsed_s) + " s (scene load and BVH " +
+                               std::to_string(load_s_) + " s)");
     return reason;
   }
 
@@ -414,6 +415,7 @@ class FrameRangeRender {
   RenderProgress progress_;
   uint32_t samples_before_ = 0;  // of the frames earlier runs rendered
   bool loaded_ = false;
+  double load_s_ = 0;  // of the frame under way
 };
 
 }  // namespace

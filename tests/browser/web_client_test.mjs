@@ -7,7 +7,8 @@
 // change of tab, one error banner, the material form's common parameters first and the rest under Advanced, Fit at
 // most 1:1, the delete confirmation naming the job, the icon, every example of proto/examples, and the title (and a
 // notification) when a job ends while the tab is hidden; render passes picked in the form and shown in the viewer;
-// adaptive sampling set in the form and a denoised job's denoised/noisy compare. Any failed step fails the test.
+// adaptive sampling set in the form and a denoised job's denoised/noisy compare; a frame range submitted from the
+// form, its strip of frames filling, a frame picked and downloaded, and its frames played. Any failed step fails the test.
 //
 // node --test tests/browser/web_client_test.mjs   with   TESSERAD=path/to/tesserad  ARTIFACTS=dir
 //   (CTest passes both; CHROMIUM overrides /usr/bin/chromium)
@@ -275,6 +276,14 @@ async function finished(id) {
     assert.ok(Date.now() < deadline, `job ${id} still ${status.state} after 60 s`);
     await page.waitForTimeout(100);
   }
+}
+// Clicks "Submit job" and returns the daemon's answer to the page's POST /v1/jobs.
+async function submitResponse() {
+  const [res] = await Promise.all([
+    page.waitForResponse((r) => r.request().method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
+    page.getByRole("button", { name: "Submit job" }).click(),
+  ]);
+  return res;
 }
 // Clicks "Submit job" and returns the document the page sent and the job it made, followed to its end.
 async function submitFromForm() {
@@ -1048,10 +1057,7 @@ test("documents are seen and reused, every setting is in the form, and a cancell
     await page.getByLabel("Width").fill("16");
     await page.getByLabel("Height").fill("16");
     await page.getByLabel("Samples per pixel").fill("2");
-    const [res] = await Promise.all([
-      page.waitForResponse((r) => r.request().method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
-      page.getByRole("button", { name: "Submit job" }).click(),
-    ]);
+    const res = await submitResponse();
     assert.equal(res.status(), 202, await res.text());
     const done = await finished((await res.json()).id);
     assert.equal(done.status.state, "succeeded", done.status.error);
@@ -1091,6 +1097,113 @@ test("documents are seen and reused, every setting is in the form, and a cancell
     assert.equal(bytes.readUInt32BE(20), 64);
     assert.match(download.suggestedFilename(), /-partial\.png$/);
     await page.waitForFunction(() => !document.querySelector("#download-exr").disabled);  // the EXR too
+  });
+  assert.deepEqual(pageErrors, []);
+});
+
+// A frame range from the form: the animated spinning cube's frames 1 to 24 from the glTF tab; while it renders the
+// viewer shows its latest frame; the strip fills with thumbnails of the finished frames, a window of 12 that pages;
+// a click shows a frame as a finished image with its downloads; Play steps through the frames at the job's fps and
+// the scrubber picks one.
+test("a frame range is submitted from the form, its strip fills, and it plays", async (t) => {
+  await page.setViewportSize({ width: 1440, height: 1000 });
+  await page.goto(`${baseUrl}/`);
+  await page.locator('#connection[data-state="online"]').waitFor();
+  const frameOf = async () => page.locator("#viewer").getAttribute("data-frame");
+  let id;
+
+  await step(t, "the form's frame fields take the contract's limits and submit a range", async () => {
+    const schema = await (await page.request.get(`${baseUrl}/v1/schemas/render.schema.json`)).json();
+    const limits = schema.properties.frames.properties;
+    await page.waitForFunction((min) => document.querySelector("#frames-step").min === String(min), limits.step.minimum);
+    assert.equal(await page.getByLabel("First frame").getAttribute("min"), String(limits.start.minimum));
+    assert.equal(await page.getByLabel("Last frame").getAttribute("max"), String(limits.end.maximum));
+    assert.equal(await page.getByLabel("Frames per second").getAttribute("max"), String(schema.properties.fps.maximum));
+    await page.getByRole("tab", { name: "glTF" }).click();
+    await page.getByLabel("glTF files").setInputFiles({
+      name: "SpinningCube.glb", mimeType: "model/gltf-binary",
+      buffer: fs.readFileSync(path.join(repo, "examples/spinning_cube/SpinningCube.glb")),
+    });
+    await page.getByLabel("Width").fill("64");
+    await page.getByLabel("Height").fill("36");
+    await page.getByLabel("Samples per pixel").fill("2");
+    await page.getByLabel("First frame").fill("1");
+    await page.getByLabel("Last frame").fill("24");
+    await page.getByLabel("Frames per second").fill("12");
+    const res = await submitResponse();
+    assert.equal(res.status(), 202, await res.text());
+    id = (await res.json()).id;
+    const doc = await (await page.request.get(`${baseUrl}/v1/jobs/${id}/document`)).json();
+    assert.deepEqual(doc.render.frames, { start: 1, end: 24 });
+    assert.equal(doc.render.fps, 12);
+    await page.locator(`#job-title[title="${id}"]`).waitFor();
+  });
+
+  await step(t, "while it renders, the viewer shows its latest frame and the strip fills", async () => {
+    await page.locator("#frames-panel").waitFor();
+    await page.locator('#frames-strip [data-state="done"] img[src^="blob:"]').first().waitFor();
+    const running = await (await page.request.get(`${baseUrl}/v1/jobs/${id}`)).json();
+    if (running.state === "running") {
+      await page.locator("#preview-placeholder").waitFor({ state: "hidden" });
+      assert.match(await page.locator("#preview-caption").textContent(), /latest finished frame|Frame \d+/);
+    }
+    const done = await finished(id);
+    assert.equal(done.status.state, "succeeded", done.status.error);
+    await page.waitForFunction(() => /^24 of 24 frames done/.test(document.querySelector("#frames-counts").textContent));
+    // A window of the range, following the latest frame, which shows as a finished image.
+    await page.locator('#viewer[data-frame="24"][data-pass="final"][data-source="linear"]').waitFor();
+    const cells = page.locator("#frames-strip .frame-thumb");
+    assert.equal(await cells.count(), 12, "the strip shows a window of 12 frames, not the whole range");
+    assert.equal(await cells.last().getAttribute("data-frame"), "24");
+    assert.equal(await cells.last().getAttribute("aria-pressed"), "true");
+    const thumbs = () => page.evaluate(() =>
+      [...document.querySelectorAll("#frames-strip img")].map((i) => (i.complete ? i.naturalWidth : "loading")));
+    for (const deadline = Date.now() + 20000; ; ) {
+      const widths = await thumbs();
+      if (widths.length === 12 && widths.every((w) => w === 64)) break;
+      assert.ok(Date.now() < deadline, `every frame of the window shows its 64-pixel-wide PNG: ${widths}`);
+      await page.waitForTimeout(100);
+    }
+    assert.equal(await page.locator("#frames-fps").textContent(), "12 fps");
+  });
+
+  await step(t, "the strip pages, and a click shows a frame as a finished image with its downloads", async () => {
+    await page.getByRole("button", { name: "Earlier frames" }).click();
+    await page.waitForFunction(() => document.querySelector("#frames-strip .frame-thumb").dataset.frame === "1");
+    assert.ok(await page.getByRole("button", { name: "Earlier frames" }).isDisabled());
+    await page.locator('#frames-strip [data-frame="3"]').click();
+    await page.locator('#viewer[data-frame="3"][data-pass="final"][data-source="linear"]').waitFor();
+    assert.equal(await page.locator("#preview-caption").textContent(), "Frame 3 · final");
+    const [download] = await Promise.all([page.waitForEvent("download"), page.locator("#frame-download-png").click()]);
+    const want = await (await page.request.get(`${baseUrl}/v1/jobs/${id}/frames/3/result.png`)).body();
+    assert.ok(fs.readFileSync(await download.path()).equals(want), "the downloaded PNG is frame 3's");
+    const [exr] = await Promise.all([page.waitForEvent("download"), page.locator("#frame-download-exr").click()]);
+    assert.match(exr.suggestedFilename(), /frame-3\.exr$/);
+  });
+
+  await step(t, "Play advances the frame shown at the job's fps, Pause stops it, the scrubber picks one", async () => {
+    await page.getByRole("button", { name: "Play frames" }).click();
+    // The frames shown, in order: from the one picked, one after the other.
+    const seen = ["3"];
+    for (const deadline = Date.now() + 15000; seen.length < 5; ) {
+      const f = await frameOf();
+      if (f !== seen[seen.length - 1]) seen.push(f);
+      assert.ok(Date.now() < deadline, `the player showed only frames ${seen}`);
+      await page.waitForTimeout(20);
+    }
+    assert.deepEqual(seen.slice(0, 4), ["3", "4", "5", "6"], "the player steps frame by frame");
+    await page.getByRole("button", { name: "Pause frames" }).click();
+    const stopped = await frameOf();
+    await page.waitForTimeout(400);
+    assert.equal(await frameOf(), stopped, "paused, the frame stays");
+    assert.equal(await page.locator("#frames-scrubber").inputValue(), String(Number(stopped) - 1));
+    await page.locator("#frames-scrubber").fill("9");
+    await page.locator('#viewer[data-frame="10"]').waitFor();
+    await page.waitForFunction(() => document.querySelector('#frames-strip [data-frame="10"]')?.getAttribute("aria-pressed") === "true");
+    await page.getByRole("tab", { name: "Example" }).click();
+    await page.getByLabel("First frame").fill("");
+    await page.getByLabel("Last frame").fill("");
+    await page.getByLabel("Frames per second").fill("");
   });
   assert.deepEqual(pageErrors, []);
 });
@@ -1221,10 +1334,7 @@ test("what users reported: the name, the error banner, the material form and the
     const banners = page.locator("#toasts .toast");
     for (const key of ["width", "height", "spp"]) {
       await page.getByLabel("Job document").fill(`{"kind": "material", "material": {"type": "lambert"}, "render": {"${key}": 0}}`);
-      const [res] = await Promise.all([
-        page.waitForResponse((r) => r.request().method() === "POST" && new URL(r.url()).pathname === "/v1/jobs"),
-        page.getByRole("button", { name: "Submit job" }).click(),
-      ]);
+      const res = await submitResponse();
       assert.equal(res.status(), 422);
       await banners.filter({ hasText: `/render/${key}` }).waitFor();
       assert.equal(await banners.count(), 1, `after the refused ${key}: ${await banners.allTextContents()}`);
