@@ -1,0 +1,347 @@
+// Media from OpenVDB grids (renderer/grid_medium.h): ratio tracking of a constant grid transmits exp(-sigma_t d) and
+// of a linear gradient exp(-optical depth) in closed form; delta (spectral) tracking's weights are unbiased per
+// channel; a box of a constant grid renders as the homogeneous medium of the same coefficients, within the renders'
+// standard errors; and bad grids are refused naming the field, as a 422 names it. The grids are written here, with
+// OpenVDB.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+
+#include "renderer/grid_medium.h"
+#include "renderer/job.h"
+#include "renderer/scene_error.h"
+#include "renderer/session.h"
+#include "tests/renderer/test_util.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+constexpr float kVoxel = 0.05f;  // the test grids' voxel size, scene units
+
+// A folder of the test's grid files, removed at the end.
+struct GridFolder {
+  GridFolder() : path(fs::temp_directory_path() / ("tessera_grid_test_" + std::to_string(::getpid()))) {
+    fs::create_directories(path);
+    openvdb::initialize();
+  }
+  ~GridFolder() { fs::remove_all(path); }
+  // Writes `grids` to `name` in the folder; returns its path.
+  fs::path write(const std::string& name, const openvdb::GridPtrVec& grids) const {
+    openvdb::io::File file((path / name).string());
+    file.write(grids);
+    file.close();
+    return path / name;
+  }
+  fs::path path;
+};
+
+// A grid of voxel size kVoxel named `name` whose voxels of index -2 to n + 1 on each axis hold `value(i, j, k)`: the
+// densities are those values through the box [0, (n - 1) kVoxel]^3 of voxel centres (interpolation reaches the
+// background only beyond the voxels outside it).
+template <typename F>
+openvdb::FloatGrid::Ptr make_grid(int n, F value, const std::string& name = "density") {
+  auto grid = openvdb::FloatGrid::create(0.0f);
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(kVoxel));
+  grid->setName(name);
+  auto acc = grid->getAccessor();
+  for (int i = -2; i <= n + 1; ++i)
+    for (int j = -2; j <= n + 1; ++j)
+      for (int k = -2; k <= n + 1; ++k) acc.setValue(openvdb::Coord(i, j, k), value(i, j, k));
+  return grid;
+}
+
+GridMediumDesc desc_of(const fs::path& file, Rgb sigma_a, Rgb sigma_s) {
+  GridMediumDesc d;
+  d.file = file;
+  d.sigma_a = sigma_a;
+  d.sigma_s = sigma_s;
+  return d;
+}
+
+// Mean and standard error of n draws of `estimate` (an Rgb each), per channel.
+template <typename F>
+std::pair<Rgb, Rgb> mean_and_se(int n, F estimate) {
+  double sum[3] = {0, 0, 0}, sq[3] = {0, 0, 0};
+  for (int i = 0; i < n; ++i) {
+    const Rgb v = estimate(i);
+    for (int c = 0; c < 3; ++c) {
+      sum[c] += v[c];
+      sq[c] += double(v[c]) * v[c];
+    }
+  }
+  Rgb mean, se;
+  for (int c = 0; c < 3; ++c) {
+    const double m = sum[c] / n;
+    mean[c] = static_cast<float>(m);
+    se[c] = static_cast<float>(std::sqrt(std::max(0.0, sq[c] / n - m * m) / (n - 1)));
+  }
+  return {mean, se};
+}
+
+// Expects each channel of `mean` within 4 standard errors of `expected` (with a floor for channels that have no
+// variance).
+void expect_within(const std::pair<Rgb, Rgb>& estimate, const Rgb& expected, const std::string& what) {
+  for (int c = 0; c < 3; ++c)
+    EXPECT_NEAR(estimate.first[c], expected[c], 4 * estimate.second[c] + 1e-5f)
+        << what << ", channel " << c << " (standard error " << estimate.second[c] << ")";
+}
+
+TEST(MediumGrid, RatioTrackingOfAConstantGridIsExpOfMinusSigmaTD) {
+  const GridFolder folder;
+  const int n = 21;  // the constant box: [0, 1]^3
+  const fs::path file = folder.write("constant.vdb", {make_grid(n, [](int, int, int) { return 1.0f; })});
+  GridMediumDesc d = desc_of(file, Rgb(0.5f, 0.1f, 2.0f), Rgb(1.0f, 0.2f, 0.0f));
+  d.density_scale = 0.8f;
+  const auto medium = load_grid_medium(d);
+  EXPECT_FALSE(medium->homogeneous());
+  EXPECT_TRUE(medium->scatters());
+  const Rgb sigma_t = (d.sigma_a + d.sigma_s) * d.density_scale;
+  // Along the x axis through the box (a direction not of unit length: distances are along the unit direction), and
+  // diagonally across it.
+  const Ray along{Vec3(0.0f, 0.5f, 0.5f), Vec3(3, 0, 0)};
+  const Ray diagonal{Vec3(0.1f, 0.2f, 0.3f), Vec3(0.6f, 0.5f, 0.4f)};
+  for (const auto& [ray, distance] : {std::pair{along, 0.8f}, std::pair{diagonal, 1.0f}}) {
+    MediumRng rng(7);
+    const auto estimate = mean_and_se(20000, [&](int) { return medium->transmittance(ray, distance, rng); });
+    const Rgb expected(std::exp(-sigma_t.x * distance), std::exp(-sigma_t.y * distance),
+                       std::exp(-sigma_t.z * distance));
+    std::printf("transmittance over %.2f: %.4f %.4f %.4f (expected %.4f %.4f %.4f, se %.4f %.4f %.4f)\n", distance,
+                estimate.first.x, estimate.first.y, estimate.first.z, expected.x, expected.y, expected.z,
+                estimate.second.x, estimate.second.y, estimate.second.z);
+    expect_within(estimate, expected, "ratio tracking");
+  }
+}
+
+// Spectral tracking's weights: over a segment of length d of a constant chromatic medium, the crossing's expected
+// weight is exp(-sigma_t d) and the scattering's sigma_s / sigma_t (1 - exp(-sigma_t d)), per channel, whatever the
+// path's throughput (which only sets the probabilities).
+TEST(MediumGrid, DeltaTrackingWeightsAreUnbiasedPerChannel) {
+  const GridFolder folder;
+  const fs::path file = folder.write("constant.vdb", {make_grid(21, [](int, int, int) { return 1.0f; })});
+  const GridMediumDesc d = desc_of(file, Rgb(0.3f, 0.0f, 1.0f), Rgb(1.5f, 0.4f, 2.0f));
+  const auto medium = load_grid_medium(d);
+  const Rgb sigma_t = d.sigma_a + d.sigma_s;
+  const Ray ray{Vec3(0.05f, 0.5f, 0.5f), Vec3(1, 0, 0)};
+  const float distance = 0.9f;
+  for (const Rgb& throughput : {Rgb(1), Rgb(0.2f, 1.0f, 0.5f)}) {
+    MediumRng rng(11);
+    uint64_t draw = 0;
+    const auto crossed = mean_and_se(40000, [&](int) {
+      const FreeFlight f = medium->sample_free_flight(ray, distance, throughput, MediumRng(++draw).next(), rng);
+      return f.scattered ? Rgb(0) : f.weight;
+    });
+    draw = 0;
+    const auto scattered = mean_and_se(40000, [&](int) {
+      const FreeFlight f = medium->sample_free_flight(ray, distance, throughput, MediumRng(++draw).next(), rng);
+      EXPECT_TRUE(!f.scattered || (f.t >= 0 && f.t < distance));
+      return f.scattered ? f.weight : Rgb(0);
+    });
+    Rgb expect_crossed, expect_scattered;
+    for (int c = 0; c < 3; ++c) {
+      expect_crossed[c] = std::exp(-sigma_t[c] * distance);
+      expect_scattered[c] = d.sigma_s[c] / sigma_t[c] * (1 - expect_crossed[c]);
+    }
+    expect_within(crossed, expect_crossed, "crossing");
+    expect_within(scattered, expect_scattered, "scattering");
+  }
+}
+
+// A density growing linearly along x, rho(x) = 0.5 + 2 x (trilinear interpolation reproduces it exactly): along x
+// from a to b the optical depth is sigma_t (0.5 (b - a) + (b^2 - a^2)); the grid placed by scale and translate
+// moves it with it.
+TEST(MediumGrid, RatioTrackingOfAGradientMatchesTheAnalyticOpticalDepth) {
+  const GridFolder folder;
+  const fs::path file =
+      folder.write("gradient.vdb", {make_grid(21, [](int i, int, int) { return 0.5f + 2.0f * (i * kVoxel); })});
+  GridMediumDesc d = desc_of(file, Rgb(0.4f, 1.0f, 0.0f), Rgb(0.6f, 0.0f, 0.3f));
+  const auto medium = load_grid_medium(d);
+  const Rgb sigma_t = d.sigma_a + d.sigma_s;
+  const auto optical_depth = [](float a, float b) { return 0.5f * (b - a) + (b * b - a * a); };
+  MediumRng rng(3);
+  const auto estimate = mean_and_se(20000, [&](int) {
+    return medium->transmittance(Ray{Vec3(0.1f, 0.5f, 0.5f), Vec3(1, 0, 0)}, 0.8f, rng);
+  });
+  const float tau = optical_depth(0.1f, 0.9f);
+  expect_within(estimate, Rgb(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau)),
+                "gradient");
+  // Backwards along the same stretch, the same.
+  const auto back = mean_and_se(20000, [&](int) {
+    return medium->transmittance(Ray{Vec3(0.9f, 0.5f, 0.5f), Vec3(-1, 0, 0)}, 0.8f, rng);
+  });
+  expect_within(back, Rgb(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau)),
+                "gradient backwards");
+  // Placed at twice the size and 3 units along x: scene x = 2 x + 3, the density at scene x is rho((x - 3) / 2),
+  // and the optical depth from scene 3.2 to 4.8 is twice that from 0.1 to 0.9.
+  d.scale = 2;
+  d.translate = Vec3(3, 0, 0);
+  const auto placed = load_grid_medium(d);
+  const auto moved = mean_and_se(20000, [&](int) {
+    return placed->transmittance(Ray{Vec3(3.2f, 1.0f, 1.0f), Vec3(1, 0, 0)}, 1.6f, rng);
+  });
+  expect_within(moved,
+                Rgb(std::exp(-sigma_t.x * 2 * tau), std::exp(-sigma_t.y * 2 * tau), std::exp(-sigma_t.z * 2 * tau)),
+                "placed gradient");
+}
+
+// A closed box mesh over [lo, hi]^3, its triangles' front faces outwards.
+json box_object(float lo, float hi, const json& medium) {
+  json positions = json::array();
+  for (int v = 0; v < 8; ++v)
+    for (int a = 0; a < 3; ++a) positions.push_back((v >> a) & 1 ? hi : lo);
+  const json indices = {0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5, 0, 1, 5, 0, 5, 4,
+                        2, 6, 7, 2, 7, 3, 0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6};
+  return {
+      {"shape", "mesh"}, {"positions", positions}, {"indices", indices}, {"material", "boundary"}, {"medium", medium}};
+}
+
+// The box [0, 1]^3 of medium behind an interface, lit by a lamp and a dim sky, over a floor.
+json box_scene(const json& medium) {
+  return {
+      {"materials",
+       {{"boundary", {{"type", "interface"}}},
+        {"floor", {{"type", "lambert"}, {"albedo", 0.5}}},
+        {"lamp", {{"type", "emission"}, {"radiance", 6}}}}},
+      {"objects",
+       json::array({box_object(0, 1, medium),
+                    {{"shape", "rectangle"},
+                     {"corner", {-2, 0, 3}},
+                     {"edge1", {5, 0, 0}},
+                     {"edge2", {0, 0, -5}},
+                     {"material", "floor"}},
+                    {{"shape", "sphere"}, {"center", {0.5, 2.5, 1.5}}, {"radius", 0.5}, {"material", "lamp"}}})},
+      {"camera", {{"from", {1.6, 1.3, 2.6}}, {"to", {0.5, 0.45, 0.5}}, {"fov_deg", 45}}},
+      {"environment", {{"color", 0.2}}},
+  };
+}
+
+RenderSettings render_settings(int size, uint32_t spp, uint64_t seed) {
+  RenderSettings s;
+  s.width = s.height = size;
+  s.spp = spp;
+  s.seed = seed;
+  s.tile_size = 16;
+  s.integrator.max_depth = 16;
+  return s;
+}
+
+std::vector<float> render(const json& doc, const RenderSettings& settings, const fs::path& root) {
+  SceneLoadOptions options;
+  options.asset_root = root;
+  auto scene = load_scene(doc, "/scene", options);
+  ThreadPool pool(0);
+  RenderSession session(scene, settings, pool);
+  session.run();
+  return session.film().resolve();
+}
+
+// A box of a constant grid renders as the homogeneous medium of the same coefficients in the same box, region by
+// region and channel by channel within their standard errors (independent renders); the comparison sees a 5 %
+// difference, and the medium is there (the box is darker than without it).
+TEST(MediumGrid, AConstantGridRendersAsTheHomogeneousMedium) {
+  const GridFolder folder;
+  folder.write("constant.vdb", {make_grid(21, [](int, int, int) { return 0.5f; })});
+  const json coefficients = {{"sigma_a", {0.4, 0.2, 1.2}}, {"sigma_s", {2.4, 1.0, 3.0}}, {"g", 0.3}};
+  json homogeneous = coefficients, grid = coefficients;
+  homogeneous["sigma_a"] = {0.2, 0.1, 0.6};  // the grid's density 0.5 times its coefficients
+  homogeneous["sigma_s"] = {1.2, 0.5, 1.5};
+  grid["grid"] = "constant.vdb";
+  const int size = 32, regions = 4, runs = 16;
+  const uint32_t spp = 16;
+  const auto stats = [&](const json& medium, uint64_t seed) {
+    return test::grid_region_stats(runs, size, regions, [&](int k) {
+      return render(box_scene(medium), render_settings(size, spp, seed + 7919 * k), folder.path);
+    });
+  };
+  const test::RegionStats a = stats(homogeneous, 100), b = stats(grid, 200000);
+  // 16 regions x 3 channels = 48 comparisons with 15 degrees of freedom each: Bonferroni at a 0.1 % family-wise
+  // false alarm rate asks for two-sided p < 2e-5 each, |t_15| < 6.2.
+  const double bound = 6.2, z = test::worst_z(a, b);
+  std::printf("worst |z| homogeneous vs grid: %.2f\n", z);
+  EXPECT_LT(z, bound);
+  EXPECT_GT(test::worst_z(a, b, 1.05), bound);
+  const test::RegionStats empty = stats({{"sigma_a", 0}}, 400000);
+  EXPECT_GT(test::worst_z(a, empty), bound);
+}
+
+// Loading `doc` with assets in `root` (and at most `max_voxels` voxels a grid) fails at `pointer` with `words`.
+void expect_error(const json& doc, const fs::path& root, const std::string& pointer, const std::string& words,
+                  uint64_t max_voxels = 64'000'000) {
+  SceneLoadOptions options;
+  options.asset_root = root;
+  options.max_grid_voxels = max_voxels;
+  try {
+    load_scene(doc, "/scene", options);
+    ADD_FAILURE() << "no error for " << pointer;
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.pointer(), pointer) << e.what();
+    EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+  }
+}
+
+TEST(MediumGrid, BadGridsAreRefusedNamingTheField) {
+  const GridFolder folder;
+  folder.write("constant.vdb", {make_grid(5, [](int, int, int) { return 1.0f; })});
+  folder.write("negative.vdb", {make_grid(5, [](int i, int, int) { return i == 2 ? -0.5f : 1.0f; })});
+  folder.write("smoke.vdb", {make_grid(
+                                5, [](int, int, int) { return 1.0f; }, "smoke")});
+  auto vectors = openvdb::Vec3SGrid::create();
+  vectors->setName("density");
+  folder.write("vectors.vdb", {vectors});
+  std::ofstream(folder.path / "corrupt.vdb") << "this is not an OpenVDB file";
+  {
+    // A real file cut short.
+    std::ifstream in(folder.path / "constant.vdb", std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::ofstream(folder.path / "truncated.vdb", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  }
+  const std::string m = "/scene/objects/0/medium";
+  const auto doc = [](const json& medium) { return box_scene(medium); };
+  SceneLoadOptions options;
+  options.asset_root = folder.path;
+  EXPECT_NO_THROW(load_scene(doc({{"grid", "constant.vdb"}, {"sigma_s", 1}}), "/scene", options));
+  // The file's only float grid is taken when it has none named "density".
+  EXPECT_NO_THROW(load_scene(doc({{"grid", "smoke.vdb"}, {"sigma_s", 1}}), "/scene", options));
+  expect_error(doc({{"grid", "corrupt.vdb"}}), folder.path, m + "/grid", "not a readable OpenVDB file");
+  expect_error(doc({{"grid", "truncated.vdb"}}), folder.path, m + "/grid", "");
+  expect_error(doc({{"grid", "missing.vdb"}}), folder.path, m + "/grid", "no such file");
+  expect_error(doc({{"grid", "constant.vdb"}}), folder.path, m + "/grid", "more than the 100", 100);
+  expect_error(doc({{"grid", "constant.vdb"}, {"grid_name", "smoke"}}), folder.path, m + "/grid_name",
+               "no grid \"smoke\" (it has \"density\")");
+  expect_error(doc({{"grid", "vectors.vdb"}}), folder.path, m + "/grid", "not float densities");
+  expect_error(doc({{"grid", "negative.vdb"}}), folder.path, m + "/grid", "negative densities");
+  expect_error(doc({{"grid", "constant.vdb"}, {"sigma_a", -1}}), folder.path, m + "/sigma_a", "");
+  expect_error(doc({{"grid", "constant.vdb"}, {"sigma_s", {1, -1, 1}}}), folder.path, m + "/sigma_s/1", "");
+  expect_error(doc({{"grid", "constant.vdb"}, {"density_scale", -2}}), folder.path, m + "/density_scale", "");
+  expect_error(doc({{"grid", "constant.vdb"}, {"scale", 0}}), folder.path, m + "/scale", "");
+  expect_error(doc({{"grid", "constant.vdb"}, {"grid_nam", "x"}}), folder.path, m + "/grid_nam", "grid_name");
+  expect_error(doc({{"sigma_a", 1}, {"density_scale", 2}}), folder.path, m + "/density_scale", "with \"grid\"");
+  json around = doc({{"sigma_a", 0.1}});
+  around["medium"] = {{"grid", "constant.vdb"}};
+  expect_error(around, folder.path, "/scene/medium/grid", "needs a boundary");
+  // Light tracing and BDPT do not render media from grids: refused at the integrator, naming the field.
+  for (const std::string name : {"bdpt", "light"}) {
+    json job = {{"scene", doc({{"grid", "constant.vdb"}, {"sigma_a", 1}})},
+                {"render", {{"integrator", name}, {"width", 8}, {"height", 8}}}};
+    JobLoadOptions job_options;
+    job_options.scene.asset_root = folder.path;
+    try {
+      load_job(job, job_options);
+      ADD_FAILURE() << name << " took a medium from a grid";
+    } catch (const SceneError& e) {
+      EXPECT_EQ(e.pointer(), "/render/integrator");
+      EXPECT_NE(std::string(e.what()).find("objects[].medium.grid"), std::string::npos) << e.what();
+    }
+  }
+}
+
+}  // namespace
+}  // namespace tessera
