@@ -1,9 +1,9 @@
 // Heterogeneous media from OpenVDB grids (Museth 2013, "VDB: High-resolution sparse volumes with dynamic topology"):
 // a float grid of densities, scaled by sigma_a and sigma_s per scene unit, read by trilinear interpolation. Free
-// flights are sampled by delta tracking and transmittance estimated by ratio tracking against a majorant, the
-// largest extinction anywhere in the grid (Woodcock et al. 1965; Novák, Georgiev, Hanika and Jarosz 2018, "Monte
-// Carlo methods for physically based volume rendering", §5; Pharr, Jakob and Humphreys, Physically Based Rendering,
-// 4th ed., §14.2). OpenVDB stays inside grid_medium.cpp.
+// flights are sampled by delta tracking and transmittance estimated by ratio tracking against a majorant, a coarse
+// grid of the largest extinctions cell by cell or the largest in the whole grid (Woodcock et al. 1965; Novák, Georgiev,
+// Hanika and Jarosz 2018, "Monte Carlo methods for physically based volume rendering", §5; Pharr, Jakob and Humphreys,
+// Physically Based Rendering, 4th ed., §14.2). OpenVDB stays inside grid_medium.cpp.
 #pragma once
 
 #include <cstdint>
@@ -27,6 +27,9 @@ struct GridMediumDesc {
   Vec3 translate{0};
   float scale = 1;
   uint64_t max_voxels = 64'000'000;  // active voxels (and tiles' voxels) a grid may hold
+  // Track against a coarse grid of majorants (true) or the grid's one largest extinction (false): the same
+  // estimates in expectation, at different costs.
+  bool majorant_grid = true;
 };
 
 // Why a grid cannot be made a medium: `field` is the medium's key at fault ("grid", "grid_name").

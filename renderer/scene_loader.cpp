@@ -161,8 +161,8 @@ std::shared_ptr<const Medium> load_medium(const json& m, const std::string& poin
                                           bool with_grid) {
   if (!m.is_object()) throw SceneError(pointer, "must be an object with \"sigma_a\", \"sigma_s\" and \"g\"");
   static const std::vector<std::string> kHomogeneous = {"sigma_a", "sigma_s", "g"};
-  static const std::vector<std::string> kGrid = {"sigma_a",   "sigma_s",       "g",         "grid",
-                                                 "grid_name", "density_scale", "translate", "scale"};
+  static const std::vector<std::string> kGrid = {"sigma_a",       "sigma_s",   "g",     "grid",    "grid_name",
+                                                 "density_scale", "translate", "scale", "majorant"};
   const bool grid = m.contains("grid");
   if (grid && !with_grid)
     throw SceneError(at(pointer, "grid"),
@@ -196,6 +196,10 @@ std::shared_ptr<const Medium> load_medium(const json& m, const std::string& poin
     if (!it->is_string() || it->get_ref<const std::string&>().empty() || it->get_ref<const std::string&>().size() > 256)
       throw SceneError(at(pointer, "grid_name"), "must be a grid's name of 1 to 256 characters");
     desc.grid_name = it->get<std::string>();
+  }
+  if (auto it = m.find("majorant"); it != m.end()) {
+    if (*it != "grid" && *it != "global") throw SceneError(at(pointer, "majorant"), "must be \"grid\" or \"global\"");
+    desc.majorant_grid = *it == "grid";
   }
   desc.max_voxels = options.max_grid_voxels;
   desc.file = resolve(options, m["grid"], at(pointer, "grid"));

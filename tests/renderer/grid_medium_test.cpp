@@ -10,14 +10,12 @@
 #include <filesystem>
 #include <fstream>
 
-#include <openvdb/io/File.h>
-#include <openvdb/openvdb.h>
-
 #include "renderer/grid_medium.h"
 #include "renderer/job.h"
 #include "renderer/scene_error.h"
 #include "renderer/session.h"
 #include "tests/renderer/test_util.h"
+#include "tests/renderer/vdb_fixture.h"
 
 namespace tessera {
 namespace {
@@ -25,39 +23,22 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-constexpr float kVoxel = 0.05f;  // the test grids' voxel size, scene units
+using test::kVoxel;
+using test::make_grid;
 
 // A folder of the test's grid files, removed at the end.
 struct GridFolder {
   GridFolder() : path(fs::temp_directory_path() / ("tessera_grid_test_" + std::to_string(::getpid()))) {
     fs::create_directories(path);
-    openvdb::initialize();
   }
   ~GridFolder() { fs::remove_all(path); }
   // Writes `grids` to `name` in the folder; returns its path.
   fs::path write(const std::string& name, const openvdb::GridPtrVec& grids) const {
-    openvdb::io::File file((path / name).string());
-    file.write(grids);
-    file.close();
+    test::write_vdb(path / name, grids);
     return path / name;
   }
   fs::path path;
 };
-
-// A grid of voxel size kVoxel named `name` whose voxels of index -2 to n + 1 on each axis hold `value(i, j, k)`: the
-// densities are those values through the box [0, (n - 1) kVoxel]^3 of voxel centres (interpolation reaches the
-// background only beyond the voxels outside it).
-template <typename F>
-openvdb::FloatGrid::Ptr make_grid(int n, F value, const std::string& name = "density") {
-  auto grid = openvdb::FloatGrid::create(0.0f);
-  grid->setTransform(openvdb::math::Transform::createLinearTransform(kVoxel));
-  grid->setName(name);
-  auto acc = grid->getAccessor();
-  for (int i = -2; i <= n + 1; ++i)
-    for (int j = -2; j <= n + 1; ++j)
-      for (int k = -2; k <= n + 1; ++k) acc.setValue(openvdb::Coord(i, j, k), value(i, j, k));
-  return grid;
-}
 
 GridMediumDesc desc_of(const fs::path& file, Rgb sigma_a, Rgb sigma_s) {
   GridMediumDesc d;
@@ -101,6 +82,7 @@ TEST(MediumGrid, RatioTrackingOfAConstantGridIsExpOfMinusSigmaTD) {
   const fs::path file = folder.write("constant.vdb", {make_grid(n, [](int, int, int) { return 1.0f; })});
   GridMediumDesc d = desc_of(file, Rgb(0.5f, 0.1f, 2.0f), Rgb(1.0f, 0.2f, 0.0f));
   d.density_scale = 0.8f;
+  d.majorant_grid = false;  // one majorant: the grid of them is the gradient's test
   const auto medium = load_grid_medium(d);
   EXPECT_FALSE(medium->homogeneous());
   EXPECT_TRUE(medium->scatters());
@@ -162,34 +144,87 @@ TEST(MediumGrid, RatioTrackingOfAGradientMatchesTheAnalyticOpticalDepth) {
   const GridFolder folder;
   const fs::path file =
       folder.write("gradient.vdb", {make_grid(21, [](int i, int, int) { return 0.5f + 2.0f * (i * kVoxel); })});
-  GridMediumDesc d = desc_of(file, Rgb(0.4f, 1.0f, 0.0f), Rgb(0.6f, 0.0f, 0.3f));
-  const auto medium = load_grid_medium(d);
-  const Rgb sigma_t = d.sigma_a + d.sigma_s;
-  const auto optical_depth = [](float a, float b) { return 0.5f * (b - a) + (b * b - a * a); };
-  MediumRng rng(3);
-  const auto estimate = mean_and_se(20000, [&](int) {
-    return medium->transmittance(Ray{Vec3(0.1f, 0.5f, 0.5f), Vec3(1, 0, 0)}, 0.8f, rng);
-  });
-  const float tau = optical_depth(0.1f, 0.9f);
-  expect_within(estimate, Rgb(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau)),
-                "gradient");
-  // Backwards along the same stretch, the same.
-  const auto back = mean_and_se(20000, [&](int) {
-    return medium->transmittance(Ray{Vec3(0.9f, 0.5f, 0.5f), Vec3(-1, 0, 0)}, 0.8f, rng);
-  });
-  expect_within(back, Rgb(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau)),
-                "gradient backwards");
-  // Placed at twice the size and 3 units along x: scene x = 2 x + 3, the density at scene x is rho((x - 3) / 2),
-  // and the optical depth from scene 3.2 to 4.8 is twice that from 0.1 to 0.9.
-  d.scale = 2;
-  d.translate = Vec3(3, 0, 0);
-  const auto placed = load_grid_medium(d);
-  const auto moved = mean_and_se(20000, [&](int) {
-    return placed->transmittance(Ray{Vec3(3.2f, 1.0f, 1.0f), Vec3(1, 0, 0)}, 1.6f, rng);
-  });
-  expect_within(moved,
-                Rgb(std::exp(-sigma_t.x * 2 * tau), std::exp(-sigma_t.y * 2 * tau), std::exp(-sigma_t.z * 2 * tau)),
-                "placed gradient");
+  for (const bool majorant_grid : {true, false}) {
+    SCOPED_TRACE(majorant_grid ? "majorant grid" : "global majorant");
+    GridMediumDesc d = desc_of(file, Rgb(0.4f, 1.0f, 0.0f), Rgb(0.6f, 0.0f, 0.3f));
+    d.majorant_grid = majorant_grid;
+    const auto medium = load_grid_medium(d);
+    const Rgb sigma_t = d.sigma_a + d.sigma_s;
+    const auto optical_depth = [](float a, float b) { return 0.5f * (b - a) + (b * b - a * a); };
+    MediumRng rng(3);
+    const auto estimate = mean_and_se(20000, [&](int) {
+      return medium->transmittance(Ray{Vec3(0.1f, 0.5f, 0.5f), Vec3(1, 0, 0)}, 0.8f, rng);
+    });
+    const float tau = optical_depth(0.1f, 0.9f);
+    expect_within(estimate, Rgb(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau)),
+                  "gradient");
+    // Backwards along the same stretch, the same.
+    const auto back = mean_and_se(20000, [&](int) {
+      return medium->transmittance(Ray{Vec3(0.9f, 0.5f, 0.5f), Vec3(-1, 0, 0)}, 0.8f, rng);
+    });
+    expect_within(back, Rgb(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau)),
+                  "gradient backwards");
+    // Placed at twice the size and 3 units along x: scene x = 2 x + 3, the density at scene x is rho((x - 3) / 2),
+    // and the optical depth from scene 3.2 to 4.8 is twice that from 0.1 to 0.9. With the majorant grid (cells of 8
+    // voxels along the gradient, each its own majorant) and with one majorant.
+    d.scale = 2;
+    d.translate = Vec3(3, 0, 0);
+    const auto placed = load_grid_medium(d);
+    const auto moved = mean_and_se(20000, [&](int) {
+      return placed->transmittance(Ray{Vec3(3.2f, 1.0f, 1.0f), Vec3(1, 0, 0)}, 1.6f, rng);
+    });
+    expect_within(moved,
+                  Rgb(std::exp(-sigma_t.x * 2 * tau), std::exp(-sigma_t.y * 2 * tau), std::exp(-sigma_t.z * 2 * tau)),
+                  "placed gradient");
+  }
+}
+
+// The majorant grid's cells follow the density: across a step from 0.1 to 3 (at a leaf node's edge, between voxel
+// centres 23 and 24, where interpolation ramps it linearly) the optical depth is the step's, forwards and backwards,
+// with the grid of majorants and with one; and a grid whose density is an OpenVDB tile (a node's value, no voxels)
+// is the constant it holds.
+TEST(MediumGrid, TheMajorantGridFollowsStepsAndTiles) {
+  const GridFolder folder;
+  const float low = 0.1f, high = 3.0f;
+  const fs::path step_file =
+      folder.write("step.vdb", {make_grid(48, [&](int i, int, int) { return i >= 24 ? high : low; })});
+  auto tiled = openvdb::FloatGrid::create(0.0f);
+  tiled->setTransform(openvdb::math::Transform::createLinearTransform(kVoxel));
+  tiled->setName("density");
+  tiled->fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(127)), 0.5f, true);
+  ASSERT_GT(tiled->tree().activeTileCount(), 0u);
+  const fs::path tile_file = folder.write("tiles.vdb", {tiled});
+  const float a = 0.1f, b = 2.2f, up = 23 * kVoxel, to = 24 * kVoxel;
+  const float tau = low * (up - a) + (low + high) / 2 * (to - up) + high * (b - to);
+  for (const bool majorant_grid : {true, false}) {
+    SCOPED_TRACE(majorant_grid ? "majorant grid" : "global majorant");
+    GridMediumDesc d = desc_of(step_file, Rgb(0.2f, 0.5f, 0.0f), Rgb(0.3f, 0.0f, 0.1f));
+    d.majorant_grid = majorant_grid;
+    const auto step = load_grid_medium(d);
+    const Rgb sigma_t = d.sigma_a + d.sigma_s;
+    const Rgb expected(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau));
+    MediumRng rng(5);
+    expect_within(mean_and_se(20000,
+                              [&](int) {
+                                return step->transmittance(Ray{Vec3(a, 1.0f, 1.1f), Vec3(1, 0, 0)}, b - a, rng);
+                              }),
+                  expected, "step forwards");
+    expect_within(mean_and_se(20000,
+                              [&](int) {
+                                return step->transmittance(Ray{Vec3(b, 1.0f, 1.1f), Vec3(-1, 0, 0)}, b - a, rng);
+                              }),
+                  expected, "step backwards");
+    d.file = tile_file;
+    const auto tile = load_grid_medium(d);
+    const float length = 2;
+    expect_within(mean_and_se(20000,
+                              [&](int) {
+                                return tile->transmittance(Ray{Vec3(1, 1, 1), Vec3(1, 0.5f, 0.25f)}, length, rng);
+                              }),
+                  Rgb(std::exp(-sigma_t.x * 0.5f * length), std::exp(-sigma_t.y * 0.5f * length),
+                      std::exp(-sigma_t.z * 0.5f * length)),
+                  "tile");
+  }
 }
 
 // A closed box mesh over [lo, hi]^3, its triangles' front faces outwards.
