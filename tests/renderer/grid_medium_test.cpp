@@ -48,6 +48,11 @@ GridMediumDesc desc_of(const fs::path& file, Rgb sigma_a, Rgb sigma_s) {
   return d;
 }
 
+// exp(-sigma_t tau) per channel: the transmittance over optical depth tau at unit density (Beer–Lambert).
+Rgb beer(const Rgb& sigma_t, float tau) {
+  return Rgb(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau));
+}
+
 // Mean and standard error of n draws of `estimate` (an Rgb each), per channel.
 template <typename F>
 std::pair<Rgb, Rgb> mean_and_se(int n, F estimate) {
@@ -94,8 +99,7 @@ TEST(MediumGrid, RatioTrackingOfAConstantGridIsExpOfMinusSigmaTD) {
   for (const auto& [ray, distance] : {std::pair{along, 0.8f}, std::pair{diagonal, 1.0f}}) {
     MediumRng rng(7);
     const auto estimate = mean_and_se(20000, [&](int) { return medium->transmittance(ray, distance, rng); });
-    const Rgb expected(std::exp(-sigma_t.x * distance), std::exp(-sigma_t.y * distance),
-                       std::exp(-sigma_t.z * distance));
+    const Rgb expected = beer(sigma_t, distance);
     std::printf("transmittance over %.2f: %.4f %.4f %.4f (expected %.4f %.4f %.4f, se %.4f %.4f %.4f)\n", distance,
                 estimate.first.x, estimate.first.y, estimate.first.z, expected.x, expected.y, expected.z,
                 estimate.second.x, estimate.second.y, estimate.second.z);
@@ -156,14 +160,12 @@ TEST(MediumGrid, RatioTrackingOfAGradientMatchesTheAnalyticOpticalDepth) {
       return medium->transmittance(Ray{Vec3(0.1f, 0.5f, 0.5f), Vec3(1, 0, 0)}, 0.8f, rng);
     });
     const float tau = optical_depth(0.1f, 0.9f);
-    expect_within(estimate, Rgb(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau)),
-                  "gradient");
+    expect_within(estimate, beer(sigma_t, tau), "gradient");
     // Backwards along the same stretch, the same.
     const auto back = mean_and_se(20000, [&](int) {
       return medium->transmittance(Ray{Vec3(0.9f, 0.5f, 0.5f), Vec3(-1, 0, 0)}, 0.8f, rng);
     });
-    expect_within(back, Rgb(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau)),
-                  "gradient backwards");
+    expect_within(back, beer(sigma_t, tau), "gradient backwards");
     // Placed at twice the size and 3 units along x: scene x = 2 x + 3, the density at scene x is rho((x - 3) / 2),
     // and the optical depth from scene 3.2 to 4.8 is twice that from 0.1 to 0.9. With the majorant grid (cells of 8
     // voxels along the gradient, each its own majorant) and with one majorant.
@@ -173,9 +175,7 @@ TEST(MediumGrid, RatioTrackingOfAGradientMatchesTheAnalyticOpticalDepth) {
     const auto moved = mean_and_se(20000, [&](int) {
       return placed->transmittance(Ray{Vec3(3.2f, 1.0f, 1.0f), Vec3(1, 0, 0)}, 1.6f, rng);
     });
-    expect_within(moved,
-                  Rgb(std::exp(-sigma_t.x * 2 * tau), std::exp(-sigma_t.y * 2 * tau), std::exp(-sigma_t.z * 2 * tau)),
-                  "placed gradient");
+    expect_within(moved, beer(sigma_t, 2 * tau), "placed gradient");
   }
 }
 
@@ -202,7 +202,7 @@ TEST(MediumGrid, TheMajorantGridFollowsStepsAndTiles) {
     d.majorant_grid = majorant_grid;
     const auto step = load_grid_medium(d);
     const Rgb sigma_t = d.sigma_a + d.sigma_s;
-    const Rgb expected(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau));
+    const Rgb expected = beer(sigma_t, tau);
     MediumRng rng(5);
     expect_within(mean_and_se(20000,
                               [&](int) {
@@ -221,9 +221,7 @@ TEST(MediumGrid, TheMajorantGridFollowsStepsAndTiles) {
                               [&](int) {
                                 return tile->transmittance(Ray{Vec3(1, 1, 1), Vec3(1, 0.5f, 0.25f)}, length, rng);
                               }),
-                  Rgb(std::exp(-sigma_t.x * 0.5f * length), std::exp(-sigma_t.y * 0.5f * length),
-                      std::exp(-sigma_t.z * 0.5f * length)),
-                  "tile");
+                  beer(sigma_t, 0.5f * length), "tile");
   }
 }
 
@@ -248,7 +246,7 @@ json box_scene(const json& medium) {
       {"objects",
        json::array({box_object(0, 1, medium),
                     {{"shape", "rectangle"},
-                     {"corner", {-2, 0, 3}},
+                     {"corner", {-2, -0.01, 3}},
                      {"edge1", {5, 0, 0}},
                      {"edge2", {0, 0, -5}},
                      {"material", "floor"}},
