@@ -154,41 +154,27 @@ std::filesystem::path resolve(const SceneLoadOptions& options, const json& ref, 
   return *full;
 }
 
-// A medium from {"sigma_a": [r, g, b], "sigma_s": [r, g, b], "g": 0} (coefficients per scene unit, each a number or
-// three; every key optional, 0 by default): homogeneous, or with "grid" (an OpenVDB file, with_grid only) the
-// coefficients at density 1 of a heterogeneous medium (grid_medium.h) whose densities the grid holds.
-std::shared_ptr<const Medium> load_medium(const json& m, const std::string& pointer, const SceneLoadOptions& options,
-                                          bool with_grid) {
-  if (!m.is_object()) throw SceneError(pointer, "must be an object with \"sigma_a\", \"sigma_s\" and \"g\"");
-  static const std::vector<std::string> kHomogeneous = {"sigma_a", "sigma_s", "g"};
-  static const std::vector<std::string> kGrid = {"sigma_a",       "sigma_s",   "g",     "grid",    "grid_name",
-                                                 "density_scale", "translate", "scale", "majorant"};
-  const bool grid = m.contains("grid");
-  if (grid && !with_grid)
-    throw SceneError(at(pointer, "grid"),
-                     "a medium from a grid needs a boundary: give it to an object (objects[].medium), not the scene");
+// The keys of a medium's object: a homogeneous medium's, and those a medium from a grid adds.
+const std::vector<std::string> kMediumKeys = {"sigma_a", "sigma_s", "g"};
+const std::vector<std::string> kGridMediumKeys = {"sigma_a",       "sigma_s",   "g",     "grid",    "grid_name",
+                                                  "density_scale", "translate", "scale", "majorant"};
+
+// Refuses a key a medium (from a grid when `grid`) does not have, saying when it is a grid's key without "grid".
+void check_medium_keys(const json& m, const std::string& pointer, bool grid) {
+  const auto& known = grid ? kGridMediumKeys : kMediumKeys;
   for (const auto& [key, value] : m.items()) {
-    const auto& known = grid ? kGrid : kHomogeneous;
-    if (std::find(known.begin(), known.end(), key) == known.end())
-      throw SceneError(at(pointer, key), "unknown medium parameter \"" + key.substr(0, 64) + "\"" +
-                                             proto::did_you_mean(key, known) +
-                                             (grid || std::find(kGrid.begin(), kGrid.end(), key) == kGrid.end()
-                                                  ? ""
-                                                  : " (it is a parameter of a medium from a grid, with \"grid\")"));
+    if (std::find(known.begin(), known.end(), key) != known.end()) continue;
+    const bool grid_key = std::find(kGridMediumKeys.begin(), kGridMediumKeys.end(), key) != kGridMediumKeys.end();
+    throw SceneError(at(pointer, key),
+                     "unknown medium parameter \"" + key.substr(0, 64) + "\"" + proto::did_you_mean(key, known) +
+                         (grid_key ? " (it is a parameter of a medium from a grid, with \"grid\")" : ""));
   }
-  const Rgb sigma_a = params::rgb(m, "sigma_a", pointer, Rgb(0), 0.0f, 1e9f);
-  const Rgb sigma_s = params::rgb(m, "sigma_s", pointer, Rgb(0), 0.0f, 1e9f);
-  float g = 0;
-  if (auto it = m.find("g"); it != m.end()) {
-    g = static_cast<float>(finite_number(*it, at(pointer, "g")));
-    // |g| = 1 is a delta phase function (no scattering at all, or a mirror), not a Henyey–Greenstein lobe.
-    if (!(std::abs(g) < 1)) throw SceneError(at(pointer, "g"), "must lie strictly between -1 and 1");
-  }
-  if (!grid) return std::make_shared<HomogeneousMedium>(sigma_a, sigma_s, g);
-  GridMediumDesc desc;
-  desc.sigma_a = sigma_a;
-  desc.sigma_s = sigma_s;
-  desc.g = g;
+}
+
+// The medium from a grid of `m` (its coefficients read already into `desc`): the grid's file and name, where it lies,
+// its density scale and majorant.
+std::shared_ptr<const Medium> grid_medium_of(const json& m, const std::string& pointer, const SceneLoadOptions& options,
+                                             GridMediumDesc desc) {
   desc.density_scale = number_key(m, "density_scale", pointer, 1, 0, 1e9);
   desc.scale = number_key(m, "scale", pointer, 1, 0, 1e9, true);
   if (auto it = m.find("translate"); it != m.end()) desc.translate = vec3(*it, at(pointer, "translate"));
@@ -208,6 +194,33 @@ std::shared_ptr<const Medium> load_medium(const json& m, const std::string& poin
   } catch (const GridError& e) {
     throw SceneError(at(pointer, e.field), e.what());
   }
+}
+
+// A medium from {"sigma_a": [r, g, b], "sigma_s": [r, g, b], "g": 0} (coefficients per scene unit, each a number or
+// three; every key optional, 0 by default): homogeneous, or with "grid" (an OpenVDB file, with_grid only) the
+// coefficients at density 1 of a heterogeneous medium (grid_medium.h) whose densities the grid holds.
+std::shared_ptr<const Medium> load_medium(const json& m, const std::string& pointer, const SceneLoadOptions& options,
+                                          bool with_grid) {
+  if (!m.is_object()) throw SceneError(pointer, "must be an object with \"sigma_a\", \"sigma_s\" and \"g\"");
+  const bool grid = m.contains("grid");
+  if (grid && !with_grid)
+    throw SceneError(at(pointer, "grid"),
+                     "a medium from a grid needs a boundary: give it to an object (objects[].medium), not the scene");
+  check_medium_keys(m, pointer, grid);
+  const Rgb sigma_a = params::rgb(m, "sigma_a", pointer, Rgb(0), 0.0f, 1e9f);
+  const Rgb sigma_s = params::rgb(m, "sigma_s", pointer, Rgb(0), 0.0f, 1e9f);
+  float g = 0;
+  if (auto it = m.find("g"); it != m.end()) {
+    g = static_cast<float>(finite_number(*it, at(pointer, "g")));
+    // |g| = 1 is a delta phase function (no scattering at all, or a mirror), not a Henyey–Greenstein lobe.
+    if (!(std::abs(g) < 1)) throw SceneError(at(pointer, "g"), "must lie strictly between -1 and 1");
+  }
+  if (!grid) return std::make_shared<HomogeneousMedium>(sigma_a, sigma_s, g);
+  GridMediumDesc desc;
+  desc.sigma_a = sigma_a;
+  desc.sigma_s = sigma_s;
+  desc.g = g;
+  return grid_medium_of(m, pointer, options, desc);
 }
 
 // A camera that sees the whole of `b` from the front and a little above.
