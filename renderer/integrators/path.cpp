@@ -3,7 +3,8 @@
 // estimated by BSDF sampling, light sampling, or both weighted by multiple importance sampling (Veach 1997, ch. 9), and
 // Russian roulette. In participating media the path samples free flights and scatters by the phase function, with
 // next-event estimation through the media to the lights (the volumetric path tracer of Pharr, Jakob and Humphreys,
-// Physically Based Rendering, 4th ed., §14.2, with the transmittance of homogeneous media in closed form).
+// Physically Based Rendering, 4th ed., §14.2: the transmittance of homogeneous media in closed form, that of media
+// from grids by ratio tracking and their free flights by delta tracking, grid_medium.h).
 #include <bit>
 
 #include "renderer/aov.h"
