@@ -22,7 +22,7 @@ packages=(
   make build-essential cmake ninja-build pkg-config git ca-certificates curl python3
   libembree-dev libopenimageio-dev openimageio-tools libcpp-httplib-dev nlohmann-json3-dev libtinygltf-dev
   libsqlite3-dev libpq-dev libtbb-dev libssl-dev libstb-dev libjpeg-dev libdraco-dev libmeshoptimizer-dev
-  libseccomp-dev libeigen3-dev libmurmurhash-dev
+  libseccomp-dev libeigen3-dev libmurmurhash-dev libopenvdb-dev libboost-iostreams-dev
 )
 if [ "$mode" = "test" ]; then
   # postgresql: the server the job-store tests start their throw-away clusters with (initdb, pg_ctl).

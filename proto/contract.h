@@ -6,6 +6,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "proto/json_schema.h"
 
@@ -21,7 +22,11 @@ std::optional<std::string_view> contract_file(const std::string& path);
 // Where a job document names an asset (scene.schema.json's asset_ref, an asset id on the daemon). A multipart
 // submission may write the name of a file sent with it there (the daemon stores the file and writes its id in its
 // place), and a job rendered by `tessera render` the name of a file beside it (read from there).
-inline constexpr std::string_view kAssetRefPointers[] = {"/scene/gltf", "/scene/environment/map"};
+// A "*" token stands for every index of an array (asset_refs expands it).
+inline constexpr std::string_view kAssetRefPointers[] = {"/scene/gltf", "/scene/environment/map", "/scene/medium/grid",
+                                                         "/scene/objects/*/medium/grid"};
+// The pointers of `doc` where kAssetRefPointers' patterns find a string, in the patterns' order.
+std::vector<std::string> asset_refs(const nlohmann::json& doc);
 
 // Said with a document's schema errors when the checks that follow the schema's (the renderer's: material names,
 // indices, assets, limits) could not run on what the errors leave (SchemaSet::valid_remainder): the problem's

@@ -14,6 +14,7 @@
 
 #include "renderer/math.h"
 #include "renderer/phase.h"
+#include "renderer/sampler.h"
 
 namespace tessera {
 
@@ -26,19 +27,41 @@ struct FreeFlight {
   Rgb weight{1};
 };
 
+// Random numbers for the stochastic estimators of heterogeneous media (delta and ratio tracking draw as many as the
+// ray has tentative collisions, which no fixed layout of sampler dimensions can hold): a SplitMix64 stream (Steele,
+// Lea and Flood 2014) that a path seeds once and carries along. Homogeneous media draw none of them.
+class MediumRng {
+ public:
+  explicit MediumRng(uint64_t seed = 0) : state_(seed) {}
+  // Next uniform number in [0, 1).
+  float next() {
+    state_ += 0x9e3779b97f4a7c15ULL;
+    return static_cast<float>(mix64(state_) >> 40) * 0x1p-24f;
+  }
+
+ private:
+  uint64_t state_;
+};
+
 class Medium {
  public:
   virtual ~Medium() = default;
-  // The fraction of radiance, per channel, that crosses `distance` (scene units, infinity allowed) of the medium.
-  virtual Rgb transmittance(float distance) const = 0;
+  // The fraction of radiance, per channel, that crosses the first `distance` scene units (infinity allowed) of `ray`
+  // (its direction of any length: distances are along the unit direction) in the medium; an estimate whose expected
+  // value is that fraction for a heterogeneous medium, drawing its numbers from `rng`.
+  virtual Rgb transmittance(const Ray& ray, float distance, MediumRng& rng) const = 0;
   // Whether light scatters in the medium (sigma_s above zero in some channel): only then do paths sample free flights
   // through it and scatter in it; otherwise they are attenuated by the transmittance alone.
   virtual bool scatters() const = 0;
-  // Samples where along a segment of length t_max (infinity allowed) the path first interacts, for a path of
-  // throughput `throughput` (which chooses the channel to sample by, below); `u` uniform in [0, 1).
-  virtual FreeFlight sample_free_flight(float t_max, const Rgb& throughput, float u) const = 0;
+  // Samples where along the first t_max scene units of `ray` (infinity allowed; distances along its unit direction)
+  // the path first interacts, for a path of throughput `throughput` (which chooses the channel to sample by);
+  // `u` uniform in [0, 1), the first number, and `rng` the further numbers a heterogeneous medium draws.
+  virtual FreeFlight sample_free_flight(const Ray& ray, float t_max, const Rgb& throughput, float u,
+                                        MediumRng& rng) const = 0;
   // The phase function at a scattering event.
   virtual HenyeyGreenstein phase() const = 0;
+  // Whether the coefficients are the same everywhere (transmittance in closed form, free flights from one number).
+  virtual bool homogeneous() const { return true; }
   // True for the interior of a subsurface material (subsurface.h): dense, bright and entered through its surface;
   // the path tracer random-walks in it without the Russian roulette floor it keeps elsewhere.
   bool subsurface() const { return subsurface_; }
@@ -68,10 +91,12 @@ class HomogeneousMedium final : public Medium {
   const Rgb& sigma_t() const { return sigma_t_; }
   float g() const { return g_; }
 
-  Rgb transmittance(float distance) const override {
+  // exp(-sigma_t distance) per channel.
+  Rgb transmittance(float distance) const {
     return Rgb(channel_transmittance(sigma_t_.x, distance), channel_transmittance(sigma_t_.y, distance),
                channel_transmittance(sigma_t_.z, distance));
   }
+  Rgb transmittance(const Ray&, float distance, MediumRng&) const override { return transmittance(distance); }
   bool scatters() const override { return sigma_s_.x > 0 || sigma_s_.y > 0 || sigma_s_.z > 0; }
   HenyeyGreenstein phase() const override { return HenyeyGreenstein(g_); }
 
@@ -103,7 +128,10 @@ class HomogeneousMedium final : public Medium {
     return p;
   }
 
-  FreeFlight sample_free_flight(float t_max, const Rgb& throughput, float u) const override {
+  FreeFlight sample_free_flight(const Ray&, float t_max, const Rgb& throughput, float u, MediumRng&) const override {
+    return sample_free_flight(t_max, throughput, u);
+  }
+  FreeFlight sample_free_flight(float t_max, const Rgb& throughput, float u) const {
     const Rgb pmf = channel_pmf(throughput);
     // The channel by u, and u rescaled within its interval for the distance.
     int c = 0;
@@ -141,7 +169,7 @@ class HomogeneousMedium final : public Medium {
 // sigma_a = -ln(color) / distance, the parameterisation of glTF's KHR_materials_volume (attenuationColor,
 // attenuationDistance) and of the JSON materials' attenuation_color and attenuation_distance. Channels below 1e-6 are
 // taken as 1e-6 (a finite absorption), and a distance that is not positive gives no medium.
-inline std::shared_ptr<const Medium> absorbing_medium(const double (&color)[3], double distance) {
+inline std::shared_ptr<const HomogeneousMedium> absorbing_medium(const double (&color)[3], double distance) {
   if (!(distance > 0)) return nullptr;
   Rgb sigma_a;
   for (int c = 0; c < 3; ++c) sigma_a[c] = static_cast<float>(-std::log(std::clamp(color[c], 1e-6, 1.0)) / distance);
@@ -156,9 +184,9 @@ class MediumTracker {
   const Medium* current() const { return current_; }
   const Medium* outside() const { return outside_; }
   // The path went `t` along `ray` (its direction not normalised: t is in units of its length) inside the current
-  // medium: the throughput takes that segment's transmittance.
-  void attenuate(Rgb& throughput, const Ray& ray, float t) const {
-    if (current_) throughput *= current_->transmittance(t * length(ray.dir));
+  // medium: the throughput takes that segment's transmittance (estimated with `rng` in a heterogeneous medium).
+  void attenuate(Rgb& throughput, const Ray& ray, float t, MediumRng& rng) const {
+    if (current_) throughput *= current_->transmittance(ray, t * length(ray.dir), rng);
   }
   // The path refracted through a surface of a material whose inside is `interior` (null: none): in through the front
   // side it enters it, out through the back side it leaves into the medium around the objects (objects do not nest

@@ -7,6 +7,7 @@
 #include "proto/asset_path.h"
 #include "proto/did_you_mean.h"
 #include "renderer/gltf/loader.h"
+#include "renderer/grid_medium.h"
 #include "renderer/json_fields.h"
 #include "renderer/scene_error.h"
 #include "renderer/thread_pool.h"
@@ -153,15 +154,59 @@ std::filesystem::path resolve(const SceneLoadOptions& options, const json& ref, 
   return *full;
 }
 
-// A homogeneous medium from {"sigma_a": [r, g, b], "sigma_s": [r, g, b], "g": 0} (coefficients per scene unit, each
-// a number or three; every key optional, 0 by default).
-std::shared_ptr<const Medium> load_medium(const json& m, const std::string& pointer) {
-  if (!m.is_object()) throw SceneError(pointer, "must be an object with \"sigma_a\", \"sigma_s\" and \"g\"");
+// The keys of a medium's object: a homogeneous medium's, and those a medium from a grid adds.
+const std::vector<std::string> kMediumKeys = {"sigma_a", "sigma_s", "g"};
+const std::vector<std::string> kGridMediumKeys = {"sigma_a",       "sigma_s",   "g",     "grid",    "grid_name",
+                                                  "density_scale", "translate", "scale", "majorant"};
+
+// Refuses a key a medium (from a grid when `grid`) does not have, saying when it is a grid's key without "grid".
+void check_medium_keys(const json& m, const std::string& pointer, bool grid) {
+  const auto& known = grid ? kGridMediumKeys : kMediumKeys;
   for (const auto& [key, value] : m.items()) {
-    if (key != "sigma_a" && key != "sigma_s" && key != "g")
-      throw SceneError(at(pointer, key), "unknown medium parameter \"" + key.substr(0, 64) + "\"" +
-                                             proto::did_you_mean(key, {"sigma_a", "sigma_s", "g"}));
+    if (std::find(known.begin(), known.end(), key) != known.end()) continue;
+    const bool grid_key = std::find(kGridMediumKeys.begin(), kGridMediumKeys.end(), key) != kGridMediumKeys.end();
+    throw SceneError(at(pointer, key),
+                     "unknown medium parameter \"" + key.substr(0, 64) + "\"" + proto::did_you_mean(key, known) +
+                         (grid_key ? " (it is a parameter of a medium from a grid, with \"grid\")" : ""));
   }
+}
+
+// The medium from a grid of `m` (its coefficients read already into `desc`): the grid's file and name, where it lies,
+// its density scale and majorant.
+std::shared_ptr<const Medium> grid_medium_of(const json& m, const std::string& pointer, const SceneLoadOptions& options,
+                                             GridMediumDesc desc) {
+  desc.density_scale = number_key(m, "density_scale", pointer, 1, 0, 1e9);
+  desc.scale = number_key(m, "scale", pointer, 1, 0, 1e9, true);
+  if (auto it = m.find("translate"); it != m.end()) desc.translate = vec3(*it, at(pointer, "translate"));
+  if (auto it = m.find("grid_name"); it != m.end()) {
+    if (!it->is_string() || it->get_ref<const std::string&>().empty() || it->get_ref<const std::string&>().size() > 256)
+      throw SceneError(at(pointer, "grid_name"), "must be a grid's name of 1 to 256 characters");
+    desc.grid_name = it->get<std::string>();
+  }
+  if (auto it = m.find("majorant"); it != m.end()) {
+    if (*it != "grid" && *it != "global") throw SceneError(at(pointer, "majorant"), "must be \"grid\" or \"global\"");
+    desc.majorant_grid = *it == "grid";
+  }
+  desc.max_voxels = options.max_grid_voxels;
+  desc.file = resolve(options, m["grid"], at(pointer, "grid"));
+  try {
+    return load_grid_medium(desc);
+  } catch (const GridError& e) {
+    throw SceneError(at(pointer, e.field), e.what());
+  }
+}
+
+// A medium from {"sigma_a": [r, g, b], "sigma_s": [r, g, b], "g": 0} (coefficients per scene unit, each a number or
+// three; every key optional, 0 by default): homogeneous, or with "grid" (an OpenVDB file, with_grid only) the
+// coefficients at density 1 of a heterogeneous medium (grid_medium.h) whose densities the grid holds.
+std::shared_ptr<const Medium> load_medium(const json& m, const std::string& pointer, const SceneLoadOptions& options,
+                                          bool with_grid) {
+  if (!m.is_object()) throw SceneError(pointer, "must be an object with \"sigma_a\", \"sigma_s\" and \"g\"");
+  const bool grid = m.contains("grid");
+  if (grid && !with_grid)
+    throw SceneError(at(pointer, "grid"),
+                     "a medium from a grid needs a boundary: give it to an object (objects[].medium), not the scene");
+  check_medium_keys(m, pointer, grid);
   const Rgb sigma_a = params::rgb(m, "sigma_a", pointer, Rgb(0), 0.0f, 1e9f);
   const Rgb sigma_s = params::rgb(m, "sigma_s", pointer, Rgb(0), 0.0f, 1e9f);
   float g = 0;
@@ -170,7 +215,12 @@ std::shared_ptr<const Medium> load_medium(const json& m, const std::string& poin
     // |g| = 1 is a delta phase function (no scattering at all, or a mirror), not a Henyey–Greenstein lobe.
     if (!(std::abs(g) < 1)) throw SceneError(at(pointer, "g"), "must lie strictly between -1 and 1");
   }
-  return std::make_shared<HomogeneousMedium>(sigma_a, sigma_s, g);
+  if (!grid) return std::make_shared<HomogeneousMedium>(sigma_a, sigma_s, g);
+  GridMediumDesc desc;
+  desc.sigma_a = sigma_a;
+  desc.sigma_s = sigma_s;
+  desc.g = g;
+  return grid_medium_of(m, pointer, options, desc);
 }
 
 // A camera that sees the whole of `b` from the front and a little above.
@@ -342,7 +392,7 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
         throw SceneError(mp, "the material \"" + name +
                                  "\" has attenuation_color or attenuation_distance, an absorbing interior of its own: "
                                  "give the object a medium or the material an attenuation, not both");
-      std::shared_ptr<const Medium> interior = load_medium(*m, mp);
+      std::shared_ptr<const Medium> interior = load_medium(*m, mp, options, true);
       std::unique_ptr<Material> own =
           MaterialRegistry::builtin().create(material_doc, at(at(pointer, "materials"), name), mctx);
       own->interior = std::move(interior);
@@ -464,10 +514,11 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
   }
 
   if (auto it = doc.find("medium"); it != doc.end()) {
-    scene->medium = load_medium(*it, at(pointer, "medium"));
+    scene->medium = load_medium(*it, at(pointer, "medium"), options, false);
     // Light from infinitely far (the environment, directional lights) crosses an infinite stretch of the medium: in
     // a channel that interacts at all none of it arrives.
-    const Rgb far = scene->medium->transmittance(kInfinity);
+    MediumRng rng;
+    const Rgb far = scene->medium->transmittance(Ray{}, kInfinity, rng);
     const bool directional = std::any_of(punctual.begin(), punctual.end(), [](const PunctualLight& l) {
       return l.kind == PunctualLight::Kind::kDirectional;
     });

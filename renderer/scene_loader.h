@@ -20,14 +20,15 @@ struct SceneLoadOptions {
   size_t max_triangles = 50'000'000;
   size_t max_gltf_vertices = 50'000'000;    // GltfImportOptions::max_vertices
   uint64_t max_gltf_instances = 1'000'000;  // GltfImportOptions::max_instances
+  uint64_t max_grid_voxels = 64'000'000;    // GridMediumDesc::max_voxels: voxels of one medium's grid
   // Asked to stop (a daemon shutting down, a job cancelled or paused), load_scene ends soon with LoadStopped.
   std::stop_token stop;
   // false: check the document and make its objects but build no lights or acceleration structure, and check images
   // (textures, environment maps) from their headers without reading their pixels (for validating a job at
   // submission, cheaply); the scene is then not renderable.
   bool build = true;
-  // Maps an asset reference of the document ("gltf": "<ref>", an environment map) to a file; throws SceneError at
-  // `pointer` when the reference is unknown. Unset: references are paths relative to asset_root.
+  // Maps an asset reference of the document ("gltf": "<ref>", an environment map, a medium's grid) to a file; throws
+  // SceneError at `pointer` when the reference is unknown. Unset: references are paths relative to asset_root.
   std::function<std::filesystem::path(const std::string& ref, const std::string& pointer)> resolve_asset;
   // Not empty: the scene is a frame of a range of its animation (render.frames, frames.h), which needs a glTF asset
   // with animations; SceneError at this pointer otherwise.

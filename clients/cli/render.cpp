@@ -325,11 +325,8 @@ int cmd_render(int argc, char** argv) {
     return it == option_of.end() ? nullptr : &it->second;
   };
   json checked = doc;
-  for (std::string_view p : tessera::proto::kAssetRefPointers) {
-    const json::json_pointer pointer{std::string(p)};
-    if (checked.is_object() && checked.contains(pointer) && checked[pointer].is_string())
-      checked[pointer] = std::string(64, '0');
-  }
+  const std::vector<std::string> refs = tessera::proto::asset_refs(doc);
+  for (const std::string& p : refs) checked[json::json_pointer(p)] = std::string(64, '0');
   if (const auto errors = tessera::proto::contract_schemas().validate_all(checked, "job.schema.json");
       !errors.empty()) {
     // A value an option gave is a usage error naming the option (--integrator bpdt), not an error of the file.
@@ -346,8 +343,8 @@ int cmd_render(int argc, char** argv) {
     std::string more = input + ": " + std::string(tessera::proto::kChecksPending);
     if (rest && errors.size() < tessera::proto::kMaxReportedErrors) {
       more.clear();
-      for (std::string_view p : tessera::proto::kAssetRefPointers) {  // the files again, not the stand-in ids
-        const json::json_pointer pointer{std::string(p)};
+      for (const std::string& p : refs) {  // the files again, not the stand-in ids
+        const json::json_pointer pointer{p};
         if (rest->contains(pointer)) (*rest)[pointer] = doc[pointer];
       }
       tessera::JobLoadOptions check;

@@ -21,6 +21,7 @@
 // Pixel measurement: a pixel's importance is width x height times the camera's W_e over the rays that land in it
 // (Camera::importance). One light subpath is traced per pixel sample of the region; a splat is weighted by the
 // image's pixel count over the region's, so the light paths of a crop estimate the same pixels.
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -232,6 +233,8 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
   float pdf_fwd = pdf_dir;
   float eta_scale = 1;   // radiance's eta^2 across refractions, kept out of Russian roulette
   MediumTracker medium;  // the medium the walk is in
+  // Homogeneous media only (integrator_scene_problem refuses the others): their transmittance draws no numbers.
+  MediumRng medium_rng;
   int n = 0;
   for (;;) {
     Vertex& v = path[n + 1];
@@ -250,7 +253,7 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
       }
       break;
     }
-    medium.attenuate(beta, ray, si.t);
+    medium.attenuate(beta, ray, si.t, medium_rng);
     v = Vertex();
     v.kind = VertexKind::kSurface;
     si.sp.wavelength_nm = wavelength_nm;
@@ -701,6 +704,9 @@ std::string integrator_scene_problem(const std::string& name, const Scene& scene
   if (name != "light" && name != "bdpt") return {};
   if (scene.has_scattering_media()) return "integrator " + name + " does not render scattering media yet; use path";
   if (scene.medium) return "integrator " + name + " does not render a medium around the objects yet; use path";
+  if (std::any_of(scene.materials.begin(), scene.materials.end(),
+                  [](const auto& m) { return m->interior && !m->interior->homogeneous(); }))
+    return "integrator " + name + " does not render media from grids (objects[].medium.grid) yet; use path";
   return {};
 }
 

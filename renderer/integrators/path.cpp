@@ -3,7 +3,10 @@
 // estimated by BSDF sampling, light sampling, or both weighted by multiple importance sampling (Veach 1997, ch. 9), and
 // Russian roulette. In participating media the path samples free flights and scatters by the phase function, with
 // next-event estimation through the media to the lights (the volumetric path tracer of Pharr, Jakob and Humphreys,
-// Physically Based Rendering, 4th ed., §14.2, with the transmittance of homogeneous media in closed form).
+// Physically Based Rendering, 4th ed., §14.2: the transmittance of homogeneous media in closed form, that of media
+// from grids by ratio tracking and their free flights by delta tracking, grid_medium.h).
+#include <bit>
+
 #include "renderer/aov.h"
 #include "renderer/integrator.h"
 #include "renderer/integrators/guided_walk.h"
@@ -19,23 +22,23 @@ namespace {
 // The fraction of radiance that travels along `shadow` (to its tmax) through the media from `medium` on: zero when a
 // surface blocks it, else the media's transmittance. Index-matched boundaries (Material::index_matched) do not block:
 // the shadow ray crosses them and changes medium as a path does, up to `max_crossings` of them.
-Rgb shadow_transmittance(const Scene& scene, Ray shadow, MediumTracker medium, int max_crossings,
+Rgb shadow_transmittance(const Scene& scene, Ray shadow, MediumTracker medium, int max_crossings, MediumRng& rng,
                          RayCounters& counters) {
   ++counters.shadow;
   Rgb tr(1);
   if (!scene.index_matched()) {
     if (scene.occluded(shadow)) return Rgb(0);
-    medium.attenuate(tr, shadow, shadow.tmax);
+    medium.attenuate(tr, shadow, shadow.tmax, rng);
     return tr;
   }
   for (int crossings = 0;; ++crossings) {
     SurfaceInteraction si;
     if (!scene.intersect(shadow, &si)) {
-      medium.attenuate(tr, shadow, shadow.tmax);
+      medium.attenuate(tr, shadow, shadow.tmax, rng);
       return tr;
     }
     if (!si.material->index_matched || crossings >= max_crossings) return Rgb(0);
-    medium.attenuate(tr, shadow, si.t);
+    medium.attenuate(tr, shadow, si.t, rng);
     medium.refract(si.sp.front_face, si.material->interior.get());
     shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, shadow.dir);
     shadow.tmax -= si.t;
@@ -54,7 +57,7 @@ struct LightSplit {
 // given, receives how the contribution splits between the lobe classes.
 Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& bsdf, uint32_t flags,
                  const Vec3& wo_world, const Vec3& wo, bool mis, float u_select, Vec2 u, const MediumTracker& medium,
-                 int max_crossings, RayCounters& counters, LightSplit* split = nullptr) {
+                 int max_crossings, MediumRng& rng, RayCounters& counters, LightSplit* split = nullptr) {
   LightSample ls;
   if (!scene.lights().sample(si.sp.p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
   const Vec3 wi = si.sp.frame.to_local(ls.wi);
@@ -71,7 +74,7 @@ Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& b
   // The shadow ray starts in the medium on the light's side of the surface.
   MediumTracker beyond = medium;
   if (light_transmits) beyond.refract(si.sp.front_face, si.material->interior.get());
-  const Rgb tr = shadow_transmittance(scene, shadow, beyond, max_crossings, counters);
+  const Rgb tr = shadow_transmittance(scene, shadow, beyond, max_crossings, rng, counters);
   if (is_black(tr)) return {};
   const float w = weigh ? power_heuristic(ls.pdf, bsdf_pdf) : 1.0f;
   if (split) {
@@ -95,17 +98,27 @@ void note_walk_surface(const MediumTracker& medium, const Vec3& ng, const Vec3& 
 // Next-event estimation at a scattering event in a medium, at `p`: the phase function takes the BSDF's place.
 Rgb direct_light_in_medium(const Scene& scene, const Vec3& p, const Vec3& wo_world, const HenyeyGreenstein& phase,
                            bool mis, float u_select, Vec2 u, const MediumTracker& medium, int max_crossings,
-                           RayCounters& counters) {
+                           MediumRng& rng, RayCounters& counters) {
   LightSample ls;
   if (!scene.lights().sample(p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
   const float f = phase.p(wo_world, ls.wi);
   if (!(f > 0)) return {};
   // A point in a medium has no surface to leave: the shadow ray starts at it.
   const Ray shadow = shadow_ray_to_light(p, Vec3(0), ls);
-  const Rgb tr = shadow_transmittance(scene, shadow, medium, max_crossings, counters);
+  const Rgb tr = shadow_transmittance(scene, shadow, medium, max_crossings, rng, counters);
   if (is_black(tr)) return {};
   const float w = mis && !ls.delta ? power_heuristic(ls.pdf, f) : 1.0f;
   return ls.radiance * tr * (f * w / ls.pdf);
+}
+
+// The seed of a path's MediumRng: a hash of its camera ray, whose direction the pixel sample's numbers jitter, so that
+// each sample's stream differs and a render is repeatable, without drawing a sampler dimension (the layout of every
+// other number, and so every render without heterogeneous media, stays as it was).
+uint64_t camera_ray_seed(const Ray& ray) {
+  uint64_t h = 0;
+  for (float f : {ray.origin.x, ray.origin.y, ray.origin.z, ray.dir.x, ray.dir.y, ray.dir.z})
+    h = mix64(h ^ std::bit_cast<uint32_t>(f));
+  return h;
 }
 
 // The camera ray's closest hit when the caller has traced it already (camera rays of neighbouring pixels go to
@@ -156,10 +169,11 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
   bool prev_delta = true;  // the camera ray counts as a delta event: emitters it sees are added fully
   float prev_pdf = 0;
   Vec3 prev_p;
-  float eta_scale = 1;                         // product of eta^2 across refractions, kept out of Russian roulette
-  MediumTracker medium(scene.medium.get());    // the medium the path is travelling through
-  bool dispersed = false;                      // the throughput carries the wavelength's weight
-  const bool scattering = scene.scattering();  // whether any medium scatters: only then are free flights sampled
+  float eta_scale = 1;                       // product of eta^2 across refractions, kept out of Russian roulette
+  MediumTracker medium(scene.medium.get());  // the medium the path is travelling through
+  MediumRng medium_rng(camera_ray_seed(camera_ray));  // the further numbers of heterogeneous media (medium.h)
+  bool dispersed = false;                             // the throughput carries the wavelength's weight
+  const bool scattering = scene.scattering();         // whether any medium scatters: only then are free flights sampled
   // Scattering events in media and crossings of index-matched boundaries: they are not bounces (depth), and have
   // their own limit, settings.max_volume_depth.
   int volume_depth = 0;
@@ -204,19 +218,20 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       found = primary->found;
       if (found) scene.interaction(ray, primary->hit, &si, &cone);
       if (in_scattering_medium)
-        flight = current->sample_free_flight(found ? si.t * dir_length : kInfinity, throughput, sampler.get1d());
-    } else if (in_scattering_medium) {
+        flight = current->sample_free_flight(ray, found ? si.t * dir_length : kInfinity, throughput, sampler.get1d(),
+                                             medium_rng);
+    } else if (in_scattering_medium && current->homogeneous()) {
       // The distance first, then the surface searched for only up to it, as Cycles' random walk does: a walk in a
       // dense medium (subsurface scattering) mostly scatters before any surface, and a short ray is cheap to
-      // trace and needs no hit record. The flight is a function of its number alone until a surface cuts it short,
-      // so it is the one that sampling to the surface would have drawn; a surface found before it takes the
-      // crossing's weight, sampled again to that surface with the same number.
+      // trace and needs no hit record. In a homogeneous medium the flight is a function of its number alone until a
+      // surface cuts it short, so it is the one that sampling to the surface would have drawn; a surface found
+      // before it takes the crossing's weight, sampled again to that surface with the same number.
       const float u_flight = sampler.get1d();
       if (guided) {
         flight.t = guided->sample_distance(u_flight);
         flight.scattered = flight.t < kInfinity;
       } else {
-        flight = current->sample_free_flight(kInfinity, throughput, u_flight);
+        flight = current->sample_free_flight(ray, kInfinity, throughput, u_flight, medium_rng);
       }
       Ray search = ray;
       if (flight.scattered) search.tmax = std::min(ray.tmax, flight.t / dir_length);
@@ -226,10 +241,15 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         flight.weight = guided->weight(flight.t, flight.scattered);
         guided.reset();
       } else if (found) {
-        flight = current->sample_free_flight(si.t * dir_length, throughput, u_flight);
+        flight = current->sample_free_flight(ray, si.t * dir_length, throughput, u_flight, medium_rng);
       }
     } else {
+      // A heterogeneous medium's flight (delta tracking) draws further numbers as it goes: it is sampled to the
+      // surface.
       found = scene.intersect(ray, &si, &cone);
+      if (in_scattering_medium)
+        flight = current->sample_free_flight(ray, found ? si.t * dir_length : kInfinity, throughput, sampler.get1d(),
+                                             medium_rng);
     }
     camera_segment = false;
 
@@ -270,7 +290,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         if (bounces == 0) first = 3;
         if (sample_light) {
           const Rgb c = throughput * direct_light_in_medium(scene, p, wo_world, phase, mis, u_light_select, u_light,
-                                                            medium, settings.max_volume_depth, counters);
+                                                            medium, settings.max_volume_depth, medium_rng, counters);
           radiance += c;
           record(c, bounces + 1, false);
         }
@@ -308,7 +328,8 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       // Escaping through the medium around the objects, the path takes its transmittance to infinity: none in a
       // channel that interacts at all (a path that escapes from inside an object's medium leaked through its
       // boundary and is not attenuated).
-      if (!in_scattering_medium && current && current == medium.outside()) medium.attenuate(throughput, ray, kInfinity);
+      if (!in_scattering_medium && current && current == medium.outside())
+        medium.attenuate(throughput, ray, kInfinity, medium_rng);
       if (!scene.environment.black()) {
         if (prev_delta) {
           // Seen from the camera, directly or through mirrors and glass.
@@ -327,7 +348,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       }
       break;
     }
-    if (!in_scattering_medium) medium.attenuate(throughput, ray, si.t);
+    if (!in_scattering_medium) medium.attenuate(throughput, ray, si.t, medium_rng);
     const Vec3 wo_world = -ray.dir;
     if (si.material->emissive()) {
       Rgb le = si.material->emitted(si.sp, wo_world);
@@ -406,7 +427,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
       LightSplit split;
       const Rgb c =
           throughput * direct_light(scene, si, *bsdf, flags, wo_world, wo, mis, u_light_select, u_light, medium,
-                                    settings.max_volume_depth, counters, first_bounce ? &split : nullptr);
+                                    settings.max_volume_depth, medium_rng, counters, first_bounce ? &split : nullptr);
       radiance += c;
       if (first_bounce) {
         // The first bounce's own light sample: direct light of each class its lobes give.

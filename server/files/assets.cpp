@@ -176,12 +176,13 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
   std::sort(files.begin(), files.end(), [](const UploadFile& a, const UploadFile& b) { return a.name < b.name; });
 
   // The main file, at the top of the upload (not in a subfolder), decides the kind.
-  std::vector<const UploadFile*> scenes, maps;
+  std::vector<const UploadFile*> scenes, maps, grids;
   for (const UploadFile& f : files) {
     if (f.name.find('/') != std::string::npos) continue;
     const std::string e = lower_ext(f.name);
     if (e == ".glb" || e == ".gltf") scenes.push_back(&f);
     if (e == ".hdr" || e == ".exr") maps.push_back(&f);
+    if (e == ".vdb") grids.push_back(&f);
   }
   AssetInfo info;
   info.owners = {owner};
@@ -191,9 +192,13 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
   } else if (scenes.empty() && maps.size() == 1 && files.size() == 1) {
     info.kind = "environment";
     info.main = maps[0]->name;
+  } else if (scenes.empty() && grids.size() == 1 && files.size() == 1) {
+    info.kind = "volume";
+    info.main = grids[0]->name;
   } else {
     return invalid(
-        "an upload holds one .glb, or one .gltf with the files it references, or one .hdr or .exr environment map");
+        "an upload holds one .glb, or one .gltf with the files it references, or one .hdr or .exr environment map, "
+        "or one .vdb volume");
   }
   for (const UploadFile& f : files) {
     info.files.push_back(f.name);
@@ -241,6 +246,16 @@ std::variant<StoredAsset, Problem> DirectoryAssetStore::store(std::vector<Upload
     json scene;
     if (info.kind == "gltf") {
       scene = {{"gltf", "upload"}};
+    } else if (info.kind == "volume") {
+      // The grid a job names by default ("density", else the first float grid): the file must hold one.
+      scene = {{"materials", {{"boundary", {{"type", "interface"}}}}},
+               {"objects",
+                {{{"shape", "sphere"},
+                  {"center", {0, 0, 0}},
+                  {"radius", 1},
+                  {"material", "boundary"},
+                  {"medium", {{"grid", "upload"}}}}}},
+               {"camera", {{"from", {0, 0, 3}}, {"to", {0, 0, 0}}}}};
     } else {
       scene = {{"objects", json::array()},
                {"camera", {{"from", {0, 0, 1}}, {"to", {0, 0, 0}}}},
@@ -355,8 +370,10 @@ std::optional<fs::path> DirectoryAssetStore::main_file(const std::string& id, co
 std::function<fs::path(const std::string&, const std::string&)> asset_resolver(const AssetStore& assets,
                                                                                std::optional<std::string> owner) {
   return [&assets, owner](const std::string& ref, const std::string& pointer) -> fs::path {
-    const bool map = pointer.size() >= 4 && pointer.compare(pointer.size() - 4, 4, "/map") == 0;
-    const std::string kind = map ? "environment" : "gltf";
+    const auto ends_with = [&](std::string_view tail) {
+      return pointer.size() >= tail.size() && pointer.compare(pointer.size() - tail.size(), tail.size(), tail) == 0;
+    };
+    const std::string kind = ends_with("/map") ? "environment" : ends_with("/grid") ? "volume" : "gltf";
     if (!is_asset_id(ref)) throw SceneError(pointer, "must be an asset id (64 hex digits) from POST /v1/assets");
     auto info = assets.get(ref);
     if (info && owner && !info->owned_by(*owner)) info.reset();  // another user's asset is unknown

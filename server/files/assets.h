@@ -1,10 +1,11 @@
-// Uploaded assets: a glTF 2.0 asset (.glb, or a .gltf with its buffers and images) or an equirectangular
-// .hdr/.exr environment map, stored content-addressed under <data>/assets/<id>/ and referenced by jobs by id.
-// The id is the sha256 of the file (one file) or of a canonical manifest of (file name, sha256) pairs, sorted by
-// name (several files). Everything is checked before it is stored: file names are asset paths (subfolders allowed;
-// the main file at the top), a .glb's container is consistent, a .gltf is JSON, every URI inside is accepted by
-// proto/asset_path.h and names a file of the same upload (or is a data: URI), and the asset loads as the renderer
-// will load it. A directory appears whole (temp dir, rename).
+// Uploaded assets: a glTF 2.0 asset (.glb, or a .gltf with its buffers and images), an equirectangular .hdr/.exr
+// environment map or an OpenVDB volume (.vdb, a medium's grid), stored content-addressed under <data>/assets/<id>/ and
+// referenced by jobs by id. The id is the sha256 of the file (one file) or of a canonical manifest of (file name,
+// sha256) pairs, sorted by name (several files). Everything is checked before it is stored: file names are asset paths
+// (subfolders allowed; the main file at the top), a .glb's container is consistent, a .gltf is JSON, every URI inside
+// is accepted by proto/asset_path.h and names a file of the same upload (or is a data: URI), and the asset loads as the
+// renderer will load it. A directory appears whole (temp dir, rename).
+//
 // Content addressing shares the bytes, never the visibility: an asset belongs to each user who uploaded it, and to
 // no one else (another user's asset is as unknown as one that does not exist).
 #pragma once
@@ -31,7 +32,7 @@ struct UploadFile {
 
 struct AssetInfo {
   std::string id;    // 64 lowercase hex digits
-  std::string kind;  // "gltf" | "environment"
+  std::string kind;  // "gltf" | "environment" | "volume"
   std::vector<std::string> files;
   std::string main;  // the file a job's reference resolves to
   uint64_t bytes = 0;

@@ -532,7 +532,7 @@ void post_asset(ApiContext& ctx, const Request& req, Response& res) {
         {"image/vnd.radiance", {"map.hdr", {".hdr"}}},
         {"image/x-exr", {"map.exr", {".exr"}}},
         {"image/aces", {"map.exr", {".exr"}}},
-        {"application/octet-stream", {"", {".glb", ".gltf", ".hdr", ".exr"}}},
+        {"application/octet-stream", {"", {".glb", ".gltf", ".hdr", ".exr", ".vdb"}}},
     };
     auto it = kTypes.find(type);
     if (it == kTypes.end())

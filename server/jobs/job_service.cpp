@@ -121,9 +121,9 @@ JobService::~JobService() {
 std::optional<Problem> JobService::store_uploads(const Caller& caller, json& doc, std::vector<UploadFile> files) {
   // An asset reference that is no asset id names a file this request should have sent: said so, naming the file,
   // where the schema would only say that the reference is not an asset id.
-  for (std::string_view at : proto::kAssetRefPointers) {
-    const json::json_pointer pointer{std::string(at)};
-    if (!doc.is_object() || !doc.contains(pointer) || !doc[pointer].is_string()) continue;
+  const std::vector<std::string> refs = proto::asset_refs(doc);
+  for (const std::string& at : refs) {
+    const json::json_pointer pointer{at};
     const std::string name = doc[pointer].get<std::string>();
     if (is_asset_id(name) ||
         std::any_of(files.begin(), files.end(), [&](const UploadFile& f) { return f.name == name; }))
@@ -133,25 +133,29 @@ std::optional<Problem> JobService::store_uploads(const Caller& caller, json& doc
     return Problem{422,
                    field + " names " + name +
                        ", which this request did not send: add it as a file part, or give an uploaded asset's id",
-                   std::string(at)};
+                   at};
   }
   if (files.empty()) return std::nullopt;
   if (!doc.is_object() || !doc.contains("scene") || !doc["scene"].is_object())
     return Problem{422, "uploaded files need a scene job that names them", "/scene"};
   json& scene = doc["scene"];
-  // The map the job names becomes an environment asset of its own; the rest is the glTF asset.
-  if (scene.contains("environment") && scene["environment"].is_object() && scene["environment"].contains("map") &&
-      scene["environment"]["map"].is_string()) {
-    const std::string map = scene["environment"]["map"];
-    auto it = std::find_if(files.begin(), files.end(), [&](const UploadFile& f) { return f.name == map; });
-    if (it != files.end()) {
-      std::vector<UploadFile> one;
-      one.push_back(std::move(*it));
-      files.erase(it);
-      auto stored = assets_.store(std::move(one), caller.name);
-      if (auto* p = std::get_if<Problem>(&stored)) return *p;
-      scene["environment"]["map"] = std::get<StoredAsset>(stored).info.id;
-    }
+  // A file the job names at a reference other than scene.gltf (an environment map, a medium's grid) becomes an asset
+  // of its own; the rest is the glTF asset.
+  for (const std::string& at : refs) {
+    if (at == "/scene/gltf") continue;
+    const json::json_pointer pointer{at};
+    const std::string name = doc[pointer].get<std::string>();
+    auto it = std::find_if(files.begin(), files.end(), [&](const UploadFile& f) { return f.name == name; });
+    if (it == files.end()) continue;
+    std::vector<UploadFile> one;
+    one.push_back(std::move(*it));
+    files.erase(it);
+    auto stored = assets_.store(std::move(one), caller.name);
+    if (auto* p = std::get_if<Problem>(&stored)) return *p;
+    const std::string id = std::get<StoredAsset>(stored).info.id;
+    // Every reference to the same file takes its id (a grid shared by several objects).
+    for (const std::string& other : refs)
+      if (other != "/scene/gltf" && doc[json::json_pointer(other)] == name) doc[json::json_pointer(other)] = id;
   }
   if (files.empty()) return std::nullopt;
   const bool named = scene.contains("gltf") && scene["gltf"].is_string() &&

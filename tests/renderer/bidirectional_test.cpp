@@ -432,12 +432,13 @@ TEST(Media, AnAttenuationColourIsWhatWhiteLightTurnsAfterItsDistance) {
   EXPECT_FALSE(absorbing_medium(color, -1.0));
   // The tracker: in by a front face, out by a back face; a direction not normalised counts its length.
   MediumTracker tracker;
+  MediumRng rng;
   Rgb throughput(1);
   const Ray ray{Vec3(0, 0, 0), Vec3(0, 0, 2)};
-  tracker.attenuate(throughput, ray, 1.0f);
+  tracker.attenuate(throughput, ray, 1.0f, rng);
   EXPECT_EQ(throughput.x, 1.0f);  // vacuum
   tracker.refract(true, medium.get());
-  tracker.attenuate(throughput, ray, 1.0f);  // 2 units
+  tracker.attenuate(throughput, ray, 1.0f, rng);  // 2 units
   EXPECT_NEAR(throughput.x, 0.8f, 1e-6);
   tracker.refract(false, medium.get());
   EXPECT_EQ(tracker.current(), nullptr);

@@ -7,9 +7,11 @@
 #include <fstream>
 #include <iterator>
 
+#include "renderer/scene_error.h"
 #include "server/base/file_io.h"
 #include "server/files/assets.h"
 #include "tests/renderer/gltf_fixture.h"
+#include "tests/renderer/vdb_fixture.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {
@@ -142,6 +144,44 @@ TEST(AssetStore, AGlbNamedAsAnEnvironmentMapIsRefused) {
     EXPECT_EQ(std::get<Problem>(stored).status, 422) << std::get<Problem>(stored).detail;
     EXPECT_NE(std::get<Problem>(stored).detail.find("cannot read the environment map"), std::string::npos)
         << std::get<Problem>(stored).detail;
+  }
+}
+
+// An OpenVDB file is a volume asset, checked by loading its grid as a medium's: a job's reference to it at a
+// medium's "grid" resolves to the file, and at any other field it is the wrong kind; a .vdb that OpenVDB cannot
+// read, or that holds no float grid, is refused.
+TEST(AssetStore, AVdbIsAVolumeAssetThatResolvesAtAMediumsGrid) {
+  test::TempDir dir;
+  DirectoryAssetStore assets(dir.path());
+  const auto read = [](const fs::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  };
+  tessera::test::write_vdb(dir.path() / "smoke.vdb", {tessera::test::make_grid(4, [](int, int, int) { return 1.0f; })});
+  auto stored = assets.store({{"smoke.vdb", read(dir.path() / "smoke.vdb")}}, "alice");
+  ASSERT_TRUE(std::holds_alternative<StoredAsset>(stored)) << std::get<Problem>(stored).detail;
+  const AssetInfo info = std::get<StoredAsset>(stored).info;
+  EXPECT_EQ(info.kind, "volume");
+  const auto resolve = asset_resolver(assets, "alice");
+  EXPECT_EQ(resolve(info.id, "/scene/objects/0/medium/grid").filename(), "smoke.vdb");
+  try {
+    resolve(info.id, "/scene/gltf");
+    ADD_FAILURE() << "a volume asset resolved as a glTF asset";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("is a volume asset, not a gltf asset"), std::string::npos) << e.what();
+  }
+  auto vectors = openvdb::Vec3SGrid::create();
+  vectors->setName("velocity");
+  tessera::test::write_vdb(dir.path() / "vectors.vdb", {vectors});
+  const std::pair<std::string, std::string> bad[] = {
+      {"not an OpenVDB file", "not a readable OpenVDB file"},
+      {read(dir.path() / "vectors.vdb"), "holds no float grid"},
+  };
+  for (const auto& [bytes, words] : bad) {
+    auto refused = assets.store({{"bad.vdb", bytes}}, "alice");
+    ASSERT_TRUE(std::holds_alternative<Problem>(refused)) << words;
+    EXPECT_EQ(std::get<Problem>(refused).status, 422);
+    EXPECT_NE(std::get<Problem>(refused).detail.find(words), std::string::npos) << std::get<Problem>(refused).detail;
   }
 }
 

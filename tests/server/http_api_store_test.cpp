@@ -23,6 +23,7 @@
 #include "server/jobs/metrics.h"
 #include "server/jobs/scheduler.h"
 #include "server/store/sqlite_job_store.h"
+#include "tests/renderer/vdb_fixture.h"
 #include "tests/server/test_util.h"
 
 namespace tessera::server {
@@ -448,6 +449,45 @@ TEST_F(ApiMultipart, AJobNamingAFileItDidNotSendIsToldWhichFile) {
             "scene.environment.map names sky.hdr, which this request did not send: add it as a file part, or give an "
             "uploaded asset's id");
   EXPECT_EQ(p.value("pointer", ""), "/scene/environment/map");
+}
+
+// A medium's grid in a multipart job: the .vdb file part it names becomes a volume asset of its own, and the
+// accepted document names it by id; a grid the request did not send is told by its field.
+TEST_F(ApiMultipart, AMediumsGridIsAFilePartOrToldWhichFile) {
+  ctx_.limits.resolve_asset = asset_resolver(assets_);  // the daemon's (server/main.cpp)
+  scheduler_.start();
+  const std::filesystem::path vdb = dir_.path() / "smoke.vdb";
+  tessera::test::write_vdb(vdb, {tessera::test::make_grid(4, [](int, int, int) { return 1.0f; })});
+  std::ifstream in(vdb, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const json box = {{"shape", "sphere"},
+                    {"center", {0.1, 0.1, 0.1}},
+                    {"radius", 0.2},
+                    {"material", "boundary"},
+                    {"medium", {{"grid", "smoke.vdb"}, {"sigma_s", 1}}}};
+  const json job = {{"kind", "scene"},
+                    {"scene",
+                     {{"materials", {{"boundary", {{"type", "interface"}}}}},
+                      {"objects", {box}},
+                      {"camera", {{"from", {0, 0, 2}}, {"to", {0, 0, 0}}}},
+                      {"environment", {{"color", 1}}}}},
+                    {"render", {{"width", 8}, {"height", 8}, {"spp", 1}}}};
+  auto res = client_->Post("/v1/jobs", httplib::MultipartFormDataItems{{"job", job.dump(), "", "application/json"},
+                                                                       {"file", bytes, "smoke.vdb", ""}});
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 202) << res->body;
+  const std::string id = json::parse(res->body).value("id", "");
+  auto document = client_->Get(("/v1/jobs/" + id + "/document").c_str());
+  ASSERT_TRUE(document);
+  const std::string grid = json::parse(document->body)["scene"]["objects"][0]["medium"]["grid"].get<std::string>();
+  ASSERT_TRUE(is_asset_id(grid)) << document->body;
+  EXPECT_EQ(assets_.get(grid)->kind, "volume");
+  const json p = problem_of(
+      client_->Post("/v1/jobs", httplib::MultipartFormDataItems{{"job", job.dump(), "", "application/json"}}), 422);
+  EXPECT_EQ(p.value("pointer", ""), "/scene/objects/0/medium/grid") << p.dump();
+  EXPECT_EQ(p.value("detail", ""),
+            "scene.objects.0.medium.grid names smoke.vdb, which this request did not send: add it as a file part, or "
+            "give an uploaded asset's id");
 }
 
 }  // namespace

@@ -1,0 +1,46 @@
+// Heterogeneous media from OpenVDB grids (Museth 2013, "VDB: High-resolution sparse volumes with dynamic topology"):
+// a float grid of densities, scaled by sigma_a and sigma_s per scene unit, read by trilinear interpolation. Free
+// flights are sampled by delta tracking and transmittance estimated by ratio tracking against a majorant, a coarse
+// grid of the largest extinctions cell by cell or the largest in the whole grid (Woodcock et al. 1965; Novák, Georgiev,
+// Hanika and Jarosz 2018, "Monte Carlo methods for physically based volume rendering", §5; Pharr, Jakob and Humphreys,
+// Physically Based Rendering, 4th ed., §14.2). OpenVDB stays inside grid_medium.cpp.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "renderer/medium.h"
+
+namespace tessera {
+
+struct GridMediumDesc {
+  std::filesystem::path file;  // a .vdb file
+  // The float grid of densities; empty: the grid named "density", else the file's first float grid.
+  std::string grid_name;
+  Rgb sigma_a{0}, sigma_s{0};  // per scene unit, at density 1
+  float g = 0;                 // the Henyey–Greenstein asymmetry
+  float density_scale = 1;     // multiplies every density
+  // Where the grid's world space lies in the scene: scene = grid world * scale + translate.
+  Vec3 translate{0};
+  float scale = 1;
+  uint64_t max_voxels = 64'000'000;  // active voxels (and tiles' voxels) a grid may hold
+  // Track against a coarse grid of majorants (true) or the grid's one largest extinction (false): the same
+  // estimates in expectation, at different costs.
+  bool majorant_grid = true;
+};
+
+// Why a grid cannot be made a medium: `field` is the medium's key at fault ("grid", "grid_name").
+class GridError : public std::runtime_error {
+ public:
+  GridError(std::string field, const std::string& message) : std::runtime_error(message), field(std::move(field)) {}
+  std::string field;
+};
+
+// The medium of `desc`; throws GridError for a file that is not an OpenVDB file, a grid it does not hold, one that is
+// not a float grid, one of more than max_voxels voxels or with negative densities.
+std::shared_ptr<const Medium> load_grid_medium(const GridMediumDesc& desc);
+
+}  // namespace tessera

@@ -1,0 +1,380 @@
+// Media from OpenVDB grids (renderer/grid_medium.h): ratio tracking of a constant grid transmits exp(-sigma_t d) and
+// of a linear gradient exp(-optical depth) in closed form; delta (spectral) tracking's weights are unbiased per
+// channel; a box of a constant grid renders as the homogeneous medium of the same coefficients, within the renders'
+// standard errors; and bad grids are refused naming the field, as a 422 names it. The grids are written here, with
+// OpenVDB.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "renderer/grid_medium.h"
+#include "renderer/job.h"
+#include "renderer/scene_error.h"
+#include "renderer/session.h"
+#include "tests/renderer/test_util.h"
+#include "tests/renderer/vdb_fixture.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+using test::kVoxel;
+using test::make_grid;
+
+// A folder of the test's grid files, removed at the end.
+struct GridFolder {
+  GridFolder() : path(fs::temp_directory_path() / ("tessera_grid_test_" + std::to_string(::getpid()))) {
+    fs::create_directories(path);
+  }
+  ~GridFolder() { fs::remove_all(path); }
+  // Writes `grids` to `name` in the folder; returns its path.
+  fs::path write(const std::string& name, const openvdb::GridPtrVec& grids) const {
+    test::write_vdb(path / name, grids);
+    return path / name;
+  }
+  fs::path path;
+};
+
+GridMediumDesc desc_of(const fs::path& file, Rgb sigma_a, Rgb sigma_s) {
+  GridMediumDesc d;
+  d.file = file;
+  d.sigma_a = sigma_a;
+  d.sigma_s = sigma_s;
+  return d;
+}
+
+// exp(-sigma_t tau) per channel: the transmittance over optical depth tau at unit density (Beer–Lambert).
+Rgb beer(const Rgb& sigma_t, float tau) {
+  return Rgb(std::exp(-sigma_t.x * tau), std::exp(-sigma_t.y * tau), std::exp(-sigma_t.z * tau));
+}
+
+// Mean and standard error of n draws of `estimate` (an Rgb each), per channel.
+template <typename F>
+std::pair<Rgb, Rgb> mean_and_se(int n, F estimate) {
+  double sum[3] = {0, 0, 0}, sq[3] = {0, 0, 0};
+  for (int i = 0; i < n; ++i) {
+    const Rgb v = estimate(i);
+    for (int c = 0; c < 3; ++c) {
+      sum[c] += v[c];
+      sq[c] += double(v[c]) * v[c];
+    }
+  }
+  Rgb mean, se;
+  for (int c = 0; c < 3; ++c) {
+    const double m = sum[c] / n;
+    mean[c] = static_cast<float>(m);
+    se[c] = static_cast<float>(std::sqrt(std::max(0.0, sq[c] / n - m * m) / (n - 1)));
+  }
+  return {mean, se};
+}
+
+// Expects each channel of `mean` within 4 standard errors of `expected` (with a floor for channels that have no
+// variance).
+void expect_within(const std::pair<Rgb, Rgb>& estimate, const Rgb& expected, const std::string& what) {
+  for (int c = 0; c < 3; ++c)
+    EXPECT_NEAR(estimate.first[c], expected[c], 4 * estimate.second[c] + 1e-5f)
+        << what << ", channel " << c << " (standard error " << estimate.second[c] << ")";
+}
+
+TEST(MediumGrid, RatioTrackingOfAConstantGridIsExpOfMinusSigmaTD) {
+  const GridFolder folder;
+  const int n = 21;  // the constant box: [0, 1]^3
+  const fs::path file = folder.write("constant.vdb", {make_grid(n, [](int, int, int) { return 1.0f; })});
+  GridMediumDesc d = desc_of(file, Rgb(0.5f, 0.1f, 2.0f), Rgb(1.0f, 0.2f, 0.0f));
+  d.density_scale = 0.8f;
+  d.majorant_grid = false;  // one majorant: the grid of them is the gradient's test
+  const auto medium = load_grid_medium(d);
+  EXPECT_FALSE(medium->homogeneous());
+  EXPECT_TRUE(medium->scatters());
+  const Rgb sigma_t = (d.sigma_a + d.sigma_s) * d.density_scale;
+  // Along the x axis through the box (a direction not of unit length: distances are along the unit direction), and
+  // diagonally across it.
+  const Ray along{Vec3(0.0f, 0.5f, 0.5f), Vec3(3, 0, 0)};
+  const Ray diagonal{Vec3(0.1f, 0.2f, 0.3f), Vec3(0.6f, 0.5f, 0.4f)};
+  for (const auto& [ray, distance] : {std::pair{along, 0.8f}, std::pair{diagonal, 1.0f}}) {
+    MediumRng rng(7);
+    const auto estimate = mean_and_se(20000, [&](int) { return medium->transmittance(ray, distance, rng); });
+    const Rgb expected = beer(sigma_t, distance);
+    std::printf("transmittance over %.2f: %.4f %.4f %.4f (expected %.4f %.4f %.4f, se %.4f %.4f %.4f)\n", distance,
+                estimate.first.x, estimate.first.y, estimate.first.z, expected.x, expected.y, expected.z,
+                estimate.second.x, estimate.second.y, estimate.second.z);
+    expect_within(estimate, expected, "ratio tracking");
+  }
+}
+
+// Spectral tracking's weights: over a segment of length d of a constant chromatic medium, the crossing's expected
+// weight is exp(-sigma_t d) and the scattering's sigma_s / sigma_t (1 - exp(-sigma_t d)), per channel, whatever the
+// path's throughput (which only sets the probabilities).
+TEST(MediumGrid, DeltaTrackingWeightsAreUnbiasedPerChannel) {
+  const GridFolder folder;
+  const fs::path file = folder.write("constant.vdb", {make_grid(21, [](int, int, int) { return 1.0f; })});
+  const GridMediumDesc d = desc_of(file, Rgb(0.3f, 0.0f, 1.0f), Rgb(1.5f, 0.4f, 2.0f));
+  const auto medium = load_grid_medium(d);
+  const Rgb sigma_t = d.sigma_a + d.sigma_s;
+  const Ray ray{Vec3(0.05f, 0.5f, 0.5f), Vec3(1, 0, 0)};
+  const float distance = 0.9f;
+  for (const Rgb& throughput : {Rgb(1), Rgb(0.2f, 1.0f, 0.5f)}) {
+    MediumRng rng(11);
+    uint64_t draw = 0;
+    const auto crossed = mean_and_se(40000, [&](int) {
+      const FreeFlight f = medium->sample_free_flight(ray, distance, throughput, MediumRng(++draw).next(), rng);
+      return f.scattered ? Rgb(0) : f.weight;
+    });
+    draw = 0;
+    const auto scattered = mean_and_se(40000, [&](int) {
+      const FreeFlight f = medium->sample_free_flight(ray, distance, throughput, MediumRng(++draw).next(), rng);
+      EXPECT_TRUE(!f.scattered || (f.t >= 0 && f.t < distance));
+      return f.scattered ? f.weight : Rgb(0);
+    });
+    Rgb expect_crossed, expect_scattered;
+    for (int c = 0; c < 3; ++c) {
+      expect_crossed[c] = std::exp(-sigma_t[c] * distance);
+      expect_scattered[c] = d.sigma_s[c] / sigma_t[c] * (1 - expect_crossed[c]);
+    }
+    expect_within(crossed, expect_crossed, "crossing");
+    expect_within(scattered, expect_scattered, "scattering");
+  }
+}
+
+// A density growing linearly along x, rho(x) = 0.5 + 2 x (trilinear interpolation reproduces it exactly): along x
+// from a to b the optical depth is sigma_t (0.5 (b - a) + (b^2 - a^2)); the grid placed by scale and translate
+// moves it with it.
+TEST(MediumGrid, RatioTrackingOfAGradientMatchesTheAnalyticOpticalDepth) {
+  const GridFolder folder;
+  const fs::path file =
+      folder.write("gradient.vdb", {make_grid(21, [](int i, int, int) { return 0.5f + 2.0f * (i * kVoxel); })});
+  for (const bool majorant_grid : {true, false}) {
+    SCOPED_TRACE(majorant_grid ? "majorant grid" : "global majorant");
+    GridMediumDesc d = desc_of(file, Rgb(0.4f, 1.0f, 0.0f), Rgb(0.6f, 0.0f, 0.3f));
+    d.majorant_grid = majorant_grid;
+    const auto medium = load_grid_medium(d);
+    const Rgb sigma_t = d.sigma_a + d.sigma_s;
+    const auto optical_depth = [](float a, float b) { return 0.5f * (b - a) + (b * b - a * a); };
+    MediumRng rng(3);
+    const auto estimate = mean_and_se(20000, [&](int) {
+      return medium->transmittance(Ray{Vec3(0.1f, 0.5f, 0.5f), Vec3(1, 0, 0)}, 0.8f, rng);
+    });
+    const float tau = optical_depth(0.1f, 0.9f);
+    expect_within(estimate, beer(sigma_t, tau), "gradient");
+    // Backwards along the same stretch, the same.
+    const auto back = mean_and_se(20000, [&](int) {
+      return medium->transmittance(Ray{Vec3(0.9f, 0.5f, 0.5f), Vec3(-1, 0, 0)}, 0.8f, rng);
+    });
+    expect_within(back, beer(sigma_t, tau), "gradient backwards");
+    // Placed at twice the size and 3 units along x: scene x = 2 x + 3, the density at scene x is rho((x - 3) / 2),
+    // and the optical depth from scene 3.2 to 4.8 is twice that from 0.1 to 0.9. With the majorant grid (cells of 8
+    // voxels along the gradient, each its own majorant) and with one majorant.
+    d.scale = 2;
+    d.translate = Vec3(3, 0, 0);
+    const auto placed = load_grid_medium(d);
+    const auto moved = mean_and_se(20000, [&](int) {
+      return placed->transmittance(Ray{Vec3(3.2f, 1.0f, 1.0f), Vec3(1, 0, 0)}, 1.6f, rng);
+    });
+    expect_within(moved, beer(sigma_t, 2 * tau), "placed gradient");
+  }
+}
+
+// The majorant grid's cells follow the density: across a step from 0.1 to 3 (at a leaf node's edge, between voxel
+// centres 23 and 24, where interpolation ramps it linearly) the optical depth is the step's, forwards and backwards,
+// with the grid of majorants and with one; and a grid whose density is an OpenVDB tile (a node's value, no voxels)
+// is the constant it holds.
+TEST(MediumGrid, TheMajorantGridFollowsStepsAndTiles) {
+  const GridFolder folder;
+  const float low = 0.1f, high = 3.0f;
+  const fs::path step_file =
+      folder.write("step.vdb", {make_grid(48, [&](int i, int, int) { return i >= 24 ? high : low; })});
+  auto tiled = openvdb::FloatGrid::create(0.0f);
+  tiled->setTransform(openvdb::math::Transform::createLinearTransform(kVoxel));
+  tiled->setName("density");
+  tiled->fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(127)), 0.5f, true);
+  ASSERT_GT(tiled->tree().activeTileCount(), 0u);
+  const fs::path tile_file = folder.write("tiles.vdb", {tiled});
+  const float a = 0.1f, b = 2.2f, up = 23 * kVoxel, to = 24 * kVoxel;
+  const float tau = low * (up - a) + (low + high) / 2 * (to - up) + high * (b - to);
+  for (const bool majorant_grid : {true, false}) {
+    SCOPED_TRACE(majorant_grid ? "majorant grid" : "global majorant");
+    GridMediumDesc d = desc_of(step_file, Rgb(0.2f, 0.5f, 0.0f), Rgb(0.3f, 0.0f, 0.1f));
+    d.majorant_grid = majorant_grid;
+    const auto step = load_grid_medium(d);
+    const Rgb sigma_t = d.sigma_a + d.sigma_s;
+    const Rgb expected = beer(sigma_t, tau);
+    MediumRng rng(5);
+    expect_within(mean_and_se(20000,
+                              [&](int) {
+                                return step->transmittance(Ray{Vec3(a, 1.0f, 1.1f), Vec3(1, 0, 0)}, b - a, rng);
+                              }),
+                  expected, "step forwards");
+    expect_within(mean_and_se(20000,
+                              [&](int) {
+                                return step->transmittance(Ray{Vec3(b, 1.0f, 1.1f), Vec3(-1, 0, 0)}, b - a, rng);
+                              }),
+                  expected, "step backwards");
+    d.file = tile_file;
+    const auto tile = load_grid_medium(d);
+    const float length = 2;
+    expect_within(mean_and_se(20000,
+                              [&](int) {
+                                return tile->transmittance(Ray{Vec3(1, 1, 1), Vec3(1, 0.5f, 0.25f)}, length, rng);
+                              }),
+                  beer(sigma_t, 0.5f * length), "tile");
+  }
+}
+
+// A closed box mesh over [lo, hi]^3, its triangles' front faces outwards.
+json box_object(float lo, float hi, const json& medium) {
+  json positions = json::array();
+  for (int v = 0; v < 8; ++v)
+    for (int a = 0; a < 3; ++a) positions.push_back((v >> a) & 1 ? hi : lo);
+  const json indices = {0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5, 0, 1, 5, 0, 5, 4,
+                        2, 6, 7, 2, 7, 3, 0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6};
+  return {
+      {"shape", "mesh"}, {"positions", positions}, {"indices", indices}, {"material", "boundary"}, {"medium", medium}};
+}
+
+// The box [0, 1]^3 of medium behind an interface, lit by a lamp and a dim sky, over a floor.
+json box_scene(const json& medium) {
+  return {
+      {"materials",
+       {{"boundary", {{"type", "interface"}}},
+        {"floor", {{"type", "lambert"}, {"albedo", 0.5}}},
+        {"lamp", {{"type", "emission"}, {"radiance", 6}}}}},
+      {"objects",
+       json::array({box_object(0, 1, medium),
+                    {{"shape", "rectangle"},
+                     {"corner", {-2, -0.01, 3}},
+                     {"edge1", {5, 0, 0}},
+                     {"edge2", {0, 0, -5}},
+                     {"material", "floor"}},
+                    {{"shape", "sphere"}, {"center", {0.5, 2.5, 1.5}}, {"radius", 0.5}, {"material", "lamp"}}})},
+      {"camera", {{"from", {1.6, 1.3, 2.6}}, {"to", {0.5, 0.45, 0.5}}, {"fov_deg", 45}}},
+      {"environment", {{"color", 0.2}}},
+  };
+}
+
+RenderSettings render_settings(int size, uint32_t spp, uint64_t seed) {
+  RenderSettings s;
+  s.width = s.height = size;
+  s.spp = spp;
+  s.seed = seed;
+  s.tile_size = 16;
+  s.integrator.max_depth = 16;
+  return s;
+}
+
+std::vector<float> render(const json& doc, const RenderSettings& settings, const fs::path& root) {
+  SceneLoadOptions options;
+  options.asset_root = root;
+  auto scene = load_scene(doc, "/scene", options);
+  ThreadPool pool(0);
+  RenderSession session(scene, settings, pool);
+  session.run();
+  return session.film().resolve();
+}
+
+// A box of a constant grid renders as the homogeneous medium of the same coefficients in the same box, region by
+// region and channel by channel within their standard errors (independent renders); the comparison sees a 5 %
+// difference, and the medium is there (the box is darker than without it).
+TEST(MediumGrid, AConstantGridRendersAsTheHomogeneousMedium) {
+  const GridFolder folder;
+  folder.write("constant.vdb", {make_grid(21, [](int, int, int) { return 0.5f; })});
+  const json coefficients = {{"sigma_a", {0.4, 0.2, 1.2}}, {"sigma_s", {2.4, 1.0, 3.0}}, {"g", 0.3}};
+  json homogeneous = coefficients, grid = coefficients;
+  homogeneous["sigma_a"] = {0.2, 0.1, 0.6};  // the grid's density 0.5 times its coefficients
+  homogeneous["sigma_s"] = {1.2, 0.5, 1.5};
+  grid["grid"] = "constant.vdb";
+  const int size = 32, regions = 4, runs = 16;
+  const uint32_t spp = 16;
+  const auto stats = [&](const json& medium, uint64_t seed) {
+    return test::grid_region_stats(runs, size, regions, [&](int k) {
+      return render(box_scene(medium), render_settings(size, spp, seed + 7919 * k), folder.path);
+    });
+  };
+  const test::RegionStats a = stats(homogeneous, 100), b = stats(grid, 200000);
+  // 16 regions x 3 channels = 48 comparisons with 15 degrees of freedom each: Bonferroni at a 0.1 % family-wise
+  // false alarm rate asks for two-sided p < 2e-5 each, |t_15| < 6.2.
+  const double bound = 6.2, z = test::worst_z(a, b);
+  std::printf("worst |z| homogeneous vs grid: %.2f\n", z);
+  EXPECT_LT(z, bound);
+  EXPECT_GT(test::worst_z(a, b, 1.05), bound);
+  const test::RegionStats empty = stats({{"sigma_a", 0}}, 400000);
+  EXPECT_GT(test::worst_z(a, empty), bound);
+}
+
+// Loading `doc` with assets in `root` (and at most `max_voxels` voxels a grid) fails at `pointer` with `words`.
+void expect_error(const json& doc, const fs::path& root, const std::string& pointer, const std::string& words,
+                  uint64_t max_voxels = 64'000'000) {
+  SceneLoadOptions options;
+  options.asset_root = root;
+  options.max_grid_voxels = max_voxels;
+  try {
+    load_scene(doc, "/scene", options);
+    ADD_FAILURE() << "no error for " << pointer;
+  } catch (const SceneError& e) {
+    EXPECT_EQ(e.pointer(), pointer) << e.what();
+    EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+  }
+}
+
+TEST(MediumGrid, BadGridsAreRefusedNamingTheField) {
+  const GridFolder folder;
+  folder.write("constant.vdb", {make_grid(5, [](int, int, int) { return 1.0f; })});
+  folder.write("negative.vdb", {make_grid(5, [](int i, int, int) { return i == 2 ? -0.5f : 1.0f; })});
+  folder.write("smoke.vdb", {make_grid(
+                                5, [](int, int, int) { return 1.0f; }, "smoke")});
+  auto vectors = openvdb::Vec3SGrid::create();
+  vectors->setName("density");
+  folder.write("vectors.vdb", {vectors});
+  std::ofstream(folder.path / "corrupt.vdb") << "this is not an OpenVDB file";
+  {
+    // A real file cut short.
+    std::ifstream in(folder.path / "constant.vdb", std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::ofstream(folder.path / "truncated.vdb", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  }
+  const std::string m = "/scene/objects/0/medium";
+  const auto doc = [](const json& medium) { return box_scene(medium); };
+  SceneLoadOptions options;
+  options.asset_root = folder.path;
+  EXPECT_NO_THROW(load_scene(doc({{"grid", "constant.vdb"}, {"sigma_s", 1}}), "/scene", options));
+  // The file's only float grid is taken when it has none named "density".
+  EXPECT_NO_THROW(load_scene(doc({{"grid", "smoke.vdb"}, {"sigma_s", 1}}), "/scene", options));
+  expect_error(doc({{"grid", "corrupt.vdb"}}), folder.path, m + "/grid", "not a readable OpenVDB file");
+  expect_error(doc({{"grid", "truncated.vdb"}}), folder.path, m + "/grid", "");
+  expect_error(doc({{"grid", "missing.vdb"}}), folder.path, m + "/grid", "no such file");
+  expect_error(doc({{"grid", "constant.vdb"}}), folder.path, m + "/grid", "more than the 100", 100);
+  expect_error(doc({{"grid", "constant.vdb"}, {"grid_name", "smoke"}}), folder.path, m + "/grid_name",
+               "no grid \"smoke\" (it has \"density\")");
+  expect_error(doc({{"grid", "vectors.vdb"}}), folder.path, m + "/grid", "not float densities");
+  expect_error(doc({{"grid", "negative.vdb"}}), folder.path, m + "/grid", "negative densities");
+  expect_error(doc({{"grid", "constant.vdb"}, {"sigma_a", -1}}), folder.path, m + "/sigma_a", "");
+  expect_error(doc({{"grid", "constant.vdb"}, {"sigma_s", {1, -1, 1}}}), folder.path, m + "/sigma_s/1", "");
+  expect_error(doc({{"grid", "constant.vdb"}, {"density_scale", -2}}), folder.path, m + "/density_scale", "");
+  expect_error(doc({{"grid", "constant.vdb"}, {"scale", 0}}), folder.path, m + "/scale", "");
+  expect_error(doc({{"grid", "constant.vdb"}, {"grid_nam", "x"}}), folder.path, m + "/grid_nam", "grid_name");
+  expect_error(doc({{"sigma_a", 1}, {"density_scale", 2}}), folder.path, m + "/density_scale", "with \"grid\"");
+  json around = doc({{"sigma_a", 0.1}});
+  around["medium"] = {{"grid", "constant.vdb"}};
+  expect_error(around, folder.path, "/scene/medium/grid", "needs a boundary");
+  // Light tracing and BDPT do not render media from grids: refused at the integrator, naming the field.
+  for (const std::string name : {"bdpt", "light"}) {
+    json job = {{"scene", doc({{"grid", "constant.vdb"}, {"sigma_a", 1}})},
+                {"render", {{"integrator", name}, {"width", 8}, {"height", 8}}}};
+    JobLoadOptions job_options;
+    job_options.scene.asset_root = folder.path;
+    try {
+      load_job(job, job_options);
+      ADD_FAILURE() << name << " took a medium from a grid";
+    } catch (const SceneError& e) {
+      EXPECT_EQ(e.pointer(), "/render/integrator");
+      EXPECT_NE(std::string(e.what()).find("objects[].medium.grid"), std::string::npos) << e.what();
+    }
+  }
+}
+
+}  // namespace
+}  // namespace tessera
