@@ -5,7 +5,7 @@
 # included (under a shutter the importer poses the asset once a time step, and the BVH holds every step).
 #
 #   bench/motion_blur.sh [JOB.json]   (default: examples/spinning_cube/job.json)
-#   env: BUILD=build WIDTH=640 HEIGHT=360 SPP=16 FRAMES=1-8 THREADS=<all> SHUTTER=-0.25:0.25
+#   env: BUILD=build WIDTH=640 HEIGHT=360 SPP=16 FRAMES=1-8 THREADS=<all> SHUTTER=-0.25:0.25 ROUNDS=3
 # Figures, not a test: run it on an otherwise idle machine.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -33,11 +33,26 @@ frame_seconds() {
   load=$(sed -n 's/.*of which load+BVH \([0-9.]*\)s.*/\1/p' "$tmp/log")
   echo "$(echo "($t1 - $t0) / $n" | bc -l) $load"
 }
-read -r none none_load < <(frame_seconds)
-printf 'frames %s at %sx%s, %s spp\n' "$frames" "${WIDTH:-640}" "${HEIGHT:-360}" "${SPP:-16}"
-printf '  no shutter:              %.3f s a frame (load+BVH %.4f s)\n' "$none" "$none_load"
+# Rounds of the three, in turn (none, 2 steps, 8 steps, none, ...), so that a machine whose speed drifts slows them
+# alike; each figure is the median of its rounds.
+rounds=${ROUNDS:-3}
+declare -A secs loads
+for r in $(seq "$rounds"); do
+  for steps in 0 2 8; do
+    opts=()
+    ((steps > 0)) && opts=(--shutter "$shutter:$steps")
+    read -r s l < <(frame_seconds "${opts[@]}")
+    secs[$steps]+="$s "
+    loads[$steps]+="$l "
+  done
+done
+median() { tr ' ' '\n' <<<"$1" | grep . | sort -g | awk '{v[NR] = $1} END {print v[int((NR + 1) / 2)]}'; }
+none=$(median "${secs[0]}")
+printf 'frames %s at %sx%s, %s spp, medians of %d rounds\n' "$frames" "${WIDTH:-640}" "${HEIGHT:-360}" "${SPP:-16}" \
+  "$rounds"
+printf '  no shutter:                  %.3f s a frame (load+BVH %.4f s)\n' "$none" "$(median "${loads[0]}")"
 for steps in 2 8; do
-  read -r blurred load < <(frame_seconds --shutter "$shutter:$steps")
+  blurred=$(median "${secs[$steps]}")
   printf '  shutter %s, %d steps: %.3f s a frame (load+BVH %.4f s), %.2fx the frame without\n' "$shutter" "$steps" \
-    "$blurred" "$load" "$(echo "$blurred / $none" | bc -l)"
+    "$blurred" "$(median "${loads[$steps]}")" "$(echo "$blurred / $none" | bc -l)"
 done
