@@ -8,7 +8,7 @@
 #include <string>
 
 #include "renderer/geometry.h"
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 #include "renderer/sampler.h"
 
 namespace tessera {

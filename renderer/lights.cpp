@@ -3,7 +3,7 @@
 #include "renderer/environment.h"
 #include "renderer/geometry.h"
 #include "renderer/interaction.h"
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 
 namespace tessera {
 

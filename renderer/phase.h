@@ -2,7 +2,7 @@
 // counterpart of a BSDF (Pharr, Jakob and Humphreys, Physically Based Rendering, 4th ed., §11.3). A phase function is
 // a normalised density over the sphere of directions, so that sampling it exactly gives the path weight 1.
 //
-// Conventions as for the BSDFs (bsdf/bsdf.h): `wo` points back to where the path came from, `wi` to where light comes
+// Conventions as for the BSDFs (renderer/bsdf/bsdf.h): `wo` points back to where the path came from, `wi` to where light comes
 // from; both are unit vectors in world space. Light travelling along -wi is scattered into wo, so the scattering
 // angle theta, between the directions of travel before and after, has cos theta = dot(-wi, wo) = dot(-wo, wi).
 #pragma once

@@ -11,7 +11,7 @@
 #include "renderer/geometry.h"
 #include "renderer/interaction.h"
 #include "renderer/lights.h"
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 
 namespace tessera {
 

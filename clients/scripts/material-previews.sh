@@ -81,7 +81,7 @@ lines.append("Any parameter of kind *texture* also takes an image texture, `{\"t
              "`mirror`, file relative to the scene's folder), or a checkerboard, `{\"checker\": {\"a\": 0.8, \"b\": 0.2, "
              "\"scale\": 8}}`. Every model also takes `emission` (radiance) and `one_sided`.\n")
 lines.append("The physics of each model, its sources and its tests are in the header comment of its file in "
-             "`renderer/bsdf/`; `tests/materials/` checks every model statistically (chi-square of sampling against "
+             "`renderer/material/`; `tests/materials/` checks every model statistically (chi-square of sampling against "
              "the pdf, energy, reciprocity, Fresnel closed forms).\n")
 lines.append("| model | preview | parameters (default, range) |")
 lines.append("| --- | --- | --- |")

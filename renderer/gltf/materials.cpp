@@ -5,7 +5,7 @@
 
 #include "proto/did_you_mean.h"
 #include "renderer/gltf/internal.h"
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 
 namespace tessera::gltf {
 

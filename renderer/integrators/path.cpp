@@ -175,23 +175,36 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     arena.reset();
     SurfaceInteraction si;
     bool found;
-    if (camera_segment && primary) {
-      found = primary->found;
-      if (found) scene.interaction(ray, primary->hit, &si, &cone);
-    } else {
-      found = scene.intersect(ray, &si, &cone);
-    }
-    camera_segment = false;
-
     // In a scattering medium the path may interact before the surface (or infinity): free-flight sampling decides
     // (medium.h), and a scattering event is a path vertex whose phase function is sampled, and light sampled, as a
     // BSDF's is at a surface. Its numbers follow the free flight's in the same layout as a surface vertex's.
     const Medium* current = medium.current();
     const bool in_scattering_medium = scattering && current && current->scatters();
+    const float dir_length = in_scattering_medium ? length(ray.dir) : 1.0f;
+    FreeFlight flight;
+    if (camera_segment && primary) {
+      found = primary->found;
+      if (found) scene.interaction(ray, primary->hit, &si, &cone);
+      if (in_scattering_medium)
+        flight = current->sample_free_flight(found ? si.t * dir_length : kInfinity, throughput, sampler.get1d());
+    } else if (in_scattering_medium) {
+      // The distance first, then the surface searched for only up to it, as Cycles' random walk does: a walk in a
+      // dense medium (subsurface scattering) mostly scatters before any surface, and a short ray is cheap to
+      // trace and needs no hit record. The flight is a function of its number alone until a surface cuts it short,
+      // so it is the one that sampling to the surface would have drawn; a surface found before it takes the
+      // crossing's weight, sampled again to that surface with the same number.
+      const float u_flight = sampler.get1d();
+      flight = current->sample_free_flight(kInfinity, throughput, u_flight);
+      Ray search = ray;
+      if (flight.scattered) search.tmax = std::min(ray.tmax, flight.t / dir_length);
+      found = scene.intersect(search, &si, &cone);
+      if (found) flight = current->sample_free_flight(si.t * dir_length, throughput, u_flight);
+    } else {
+      found = scene.intersect(ray, &si, &cone);
+    }
+    camera_segment = false;
+
     if (in_scattering_medium) {
-      const float dir_length = length(ray.dir);
-      const FreeFlight flight =
-          current->sample_free_flight(found ? si.t * dir_length : kInfinity, throughput, sampler.get1d());
       throughput *= flight.weight;
       if (is_black(throughput) || !is_finite(throughput)) break;
       if (flight.scattered) {

@@ -12,7 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "renderer/arena.h"
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 #include "tests/renderer/test_util.h"
 
 namespace tessera::test {

@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 #include "renderer/scene_error.h"
 
 namespace tessera {

@@ -10,7 +10,7 @@
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 #include "renderer/scene.h"
 #include "renderer/scene_error.h"
 #include "renderer/scene_loader.h"

@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "renderer/subsurface.h"
+#include "renderer/material/subsurface.h"
 
 namespace tessera {
 namespace {

@@ -2,7 +2,7 @@
 // probability w, so the mixture's pdf is exactly that sum; a sampled non-delta direction reports the mixture's f and
 // pdf (so sample, eval and pdf agree), a delta lobe its own weight times the lobe's (pbrt-v4's MixMaterial chooses
 // one material per hit instead; keeping both lets MIS see the whole mixture). Emission is the mix's own "emission".
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 #include "renderer/scene_error.h"
 
 namespace tessera {

@@ -1,4 +1,4 @@
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 
 #include "renderer/scene_error.h"
 

@@ -1,5 +1,5 @@
 // The list of built-in material models. A new model adds its register function here.
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 
 namespace tessera {
 

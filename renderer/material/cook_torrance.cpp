@@ -10,7 +10,7 @@
 // expression would reflect 4 times too much. Sampling: visible normals of D (V-cavity or Smith) for the
 // specular lobe, cosine for the diffuse one, chosen by the luminances of kd and ks. kd + ks <= 1 per channel keeps
 // the albedo at most 1.
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"

@@ -3,7 +3,7 @@
 // Physically Based Rendering, 4th ed., §11.4). It is not drawn: it only marks where a medium begins and ends. Its BSDF
 // is the delta transmission straight on, f = delta(wi + wo) / |cos theta_i|; the path tracer steps through such
 // surfaces without a bounce (Material::index_matched), the other integrators see a specular transmission.
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 
 namespace tessera {
 namespace {

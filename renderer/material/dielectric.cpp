@@ -13,12 +13,12 @@
 // tinted by "reflectance" and "transmittance".
 //
 // Local frame: +z points outside; "ior" is eta_inside / eta_outside.
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/bsdf/rough_dielectric.h"
 #include "renderer/scene_error.h"
 #include "renderer/spectrum.h"
-#include "renderer/subsurface.h"
+#include "renderer/material/subsurface.h"
 
 namespace tessera {
 

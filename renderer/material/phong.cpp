@@ -20,7 +20,7 @@
 // the Phong lobe is sampled around the mirror direction with pdf (n+1)/(2 pi) cos^n(alpha), the Blinn-Phong lobe
 // through its half vector with pdf (n+1)/(2 pi) (N.H)^n / (4 wo.H) (Walter 2007, eq. 14). Directions that fall
 // below the surface are discarded, so pdf integrates to less than 1 for wide lobes at grazing incidence.
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"
 

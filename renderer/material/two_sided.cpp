@@ -1,7 +1,7 @@
 // `two_sided`: wraps a material so that both sides of the surface show its front (+z) side. Opaque reflectors are
 // already two-sided by the convention of bsdf.h; this matters for models whose back differs from their front (a
 // dielectric seen from inside, a thin transmissive layer, a material built for one-sided glTF geometry).
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 
 namespace tessera {
 namespace {

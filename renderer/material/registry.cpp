@@ -5,7 +5,7 @@
 
 #include "proto/asset_path.h"
 #include "proto/did_you_mean.h"
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 #include "renderer/scene_error.h"
 
 namespace tessera {

@@ -13,7 +13,7 @@
 // The roughness is a constant here (the table of E is built once per material).
 #include <array>
 
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"

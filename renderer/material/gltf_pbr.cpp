@@ -79,13 +79,13 @@
 // subsurface_weight), translucent, transmission); the subsurface share refracts, untinted, through the transmission
 // lobe's interface into the interior medium, where the path tracer random-walks until it leaves. The two refracting
 // shares are one lobe of weight t + (1 - t) subsurface_weight, tinted by their weighted mean colour.
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/bsdf/rough_dielectric.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"
 #include "renderer/spectrum.h"
-#include "renderer/subsurface.h"
+#include "renderer/material/subsurface.h"
 #include "renderer/thread_pool.h"
 
 namespace tessera {

@@ -1,9 +1,9 @@
-#include "renderer/subsurface.h"
+#include "renderer/material/subsurface.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 #include "renderer/scene_error.h"
 
 namespace tessera {

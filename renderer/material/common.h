@@ -1,11 +1,11 @@
-// Helpers shared by the model files in renderer/bsdf/: the two-sided reflector convention, lobe selection, and
-// reading the parameters several models have in common (microfacet roughness, conductor indices).
+// Helpers shared by the material model files in renderer/material/: the two-sided reflector convention, lobe selection,
+// and reading the parameters several models have in common (microfacet roughness, conductor indices).
 #pragma once
 
 #include <string>
 
 #include "renderer/bsdf/microfacet.h"
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 
 namespace tessera {
 

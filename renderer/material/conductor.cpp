@@ -1,7 +1,7 @@
 // Conductors (metals): smooth and rough reflection with the Fresnel reflectance of a complex index of refraction
 // eta + i k per RGB channel (fresnel.h), f = F(wo.h) D G / (4 cos cos) when rough (Walter 2007, eq. 20) and a
 // mirror F / |cos| when smooth (Pharr, Jakob & Humphreys, Physically Based Rendering, 3rd ed., §8.2.2).
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/scene_error.h"
 

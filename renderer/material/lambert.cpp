@@ -1,6 +1,6 @@
 // Lambert's ideal diffuse reflector, f_r = rho / pi (Dutré, Bala & Bekaert, Advanced Global Illumination, 2nd ed.,
 // §2.5.3), sampled by cos(theta) / pi.
-#include "renderer/material.h"
+#include "renderer/material/material.h"
 #include "renderer/sampling.h"
 
 namespace tessera {

@@ -12,7 +12,7 @@
 // whose density is p(h) = exp(...) / (pi ax ay cos^3 theta_h), i.e. Beckmann's D(h) cos(theta_h), then
 // p(wi) = p(h) / (4 wi.h). Both are done here through the Beckmann slope sampler (microfacet.h), which draws the
 // same density. rho_d + rho_s <= 1 per channel is required.
-#include "renderer/bsdf/common.h"
+#include "renderer/material/common.h"
 #include "renderer/bsdf/fresnel.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_error.h"
