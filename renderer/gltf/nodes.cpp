@@ -332,9 +332,11 @@ void place_motion_steps(Import& import, Materials& materials, const std::vector<
   const std::vector<double>& offsets = import.options.shutter_times;
   std::vector<std::vector<std::vector<Vec3>>> positions(meshes - first_mesh), normals(meshes - first_mesh);
   std::vector<std::vector<CameraDesc>> camera_steps(cameras - first_camera);
-  // What the frame's walk counted and reported stands: each step's walk places the same meshes again, briefly.
+  // What the frame's walk counted and reported stands: each step's walk places the same meshes again, briefly. The
+  // asset's bounds stay the frame's (a camera made to frame the asset frames it as without a shutter).
   const size_t triangles = import.triangles, vertices = import.vertices, lights = result.lights.size(),
                warnings = result.warnings.size();
+  const Bounds bounds = result.bounds;
   for (const double offset : offsets) {
     import.check_stop();
     Pose pose = static_pose(import.model);
@@ -357,6 +359,7 @@ void place_motion_steps(Import& import, Materials& materials, const std::vector<
     result.warnings.resize(warnings);
     import.triangles = triangles;
     import.vertices = vertices;
+    result.bounds = bounds;
   }
   for (size_t m = 0; m < positions.size(); ++m) {
     Mesh& mesh = scene.meshes[first_mesh + m];
