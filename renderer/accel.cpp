@@ -94,9 +94,18 @@ uint32_t attach_mesh(RTCDevice device, RTCScene scene, const Mesh& mesh, const M
     rtcSetGeometryOccludedFilterFunction(geom, &alpha_filter);
   }
   // Shared buffers: Embree reads our arrays in place. Vertex buffers need 4 bytes readable past the last vertex
-  // (Embree loads 16 bytes at a time), which Scene::finalize guarantees by reserving capacity.
-  rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh.positions.data(), 0, sizeof(Vec3),
-                             mesh.positions.size());
+  // (Embree loads 16 bytes at a time), which Scene::finalize guarantees by reserving capacity. A moving mesh has one
+  // vertex buffer per time step (slot i at ray time i / (steps - 1)), between which Embree interpolates linearly
+  // (Embree 3 manual, "Motion Blur"); a still one has its positions alone, and rays' times do not matter to it.
+  if (mesh.moves()) {
+    rtcSetGeometryTimeStepCount(geom, static_cast<unsigned>(mesh.motion_positions.size()));
+    for (unsigned step = 0; step < mesh.motion_positions.size(); ++step)
+      rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, step, RTC_FORMAT_FLOAT3,
+                                 mesh.motion_positions[step].data(), 0, sizeof(Vec3), mesh.positions.size());
+  } else {
+    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh.positions.data(), 0,
+                               sizeof(Vec3), mesh.positions.size());
+  }
   rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, mesh.indices.data(), 0,
                              3 * sizeof(uint32_t), mesh.triangle_count());
   rtcCommitGeometry(geom);
@@ -249,7 +258,7 @@ bool Accel::intersect(const Ray& ray, RayHit* hit) const {
   rh.ray.dir_z = ray.dir.z;
   rh.ray.tnear = ray.tmin;
   rh.ray.tfar = ray.tmax;
-  rh.ray.time = 0;
+  rh.ray.time = ray.time;
   rh.ray.mask = 0xffffffffu;
   rh.ray.id = 0;
   rh.ray.flags = 0;
@@ -278,7 +287,7 @@ void Accel::intersect_packet(const Ray* rays, int count, RayHit* hits, bool* fou
     rh.ray.dir_z[i] = ray.dir.z;
     rh.ray.tnear[i] = ray.tmin;
     rh.ray.tfar[i] = ray.tmax;
-    rh.ray.time[i] = 0;
+    rh.ray.time[i] = ray.time;
     rh.ray.mask[i] = 0xffffffffu;
     rh.ray.id[i] = static_cast<unsigned>(i);
     rh.ray.flags[i] = 0;
@@ -305,7 +314,7 @@ bool Accel::occluded(const Ray& ray) const {
   r.dir_z = ray.dir.z;
   r.tnear = ray.tmin;
   r.tfar = ray.tmax;
-  r.time = 0;
+  r.time = ray.time;
   r.mask = 0xffffffffu;
   r.id = 0;
   r.flags = 0;

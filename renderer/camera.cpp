@@ -6,6 +6,23 @@
 
 namespace tessera {
 
+CameraDesc camera_at(const std::vector<CameraDesc>& steps, float time) {
+  const float f = std::clamp(time, 0.0f, 1.0f) * static_cast<float>(steps.size() - 1);
+  const size_t i = std::min(static_cast<size_t>(f), steps.size() - 2);
+  const float u = f - static_cast<float>(i);
+  const CameraDesc &a = steps[i], &b = steps[i + 1];
+  auto mix = [u](auto x, auto y) { return x * (1 - u) + y * u; };
+  CameraDesc c = a;
+  c.from = mix(a.from, b.from);
+  c.to = mix(a.to, b.to);
+  c.up = mix(a.up, b.up);
+  c.fov_deg = mix(a.fov_deg, b.fov_deg);
+  c.ortho_height = mix(a.ortho_height, b.ortho_height);
+  c.aperture_radius = mix(a.aperture_radius, b.aperture_radius);
+  c.focus_distance = mix(a.focus_distance, b.focus_distance);
+  return c;
+}
+
 Camera::Camera(const CameraDesc& desc, int width, int height) : desc_(desc), width_(width), height_(height) {
   Vec3 forward = normalize(desc.to - desc.from);
   Vec3 right = cross(forward, desc.up);

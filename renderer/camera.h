@@ -1,6 +1,8 @@
 // Cameras: map a point on the film (continuous pixel coordinates) and a lens sample to a primary ray.
 #pragma once
 
+#include <vector>
+
 #include "renderer/math.h"
 
 namespace tessera {
@@ -26,6 +28,11 @@ struct CameraDesc {
   float aperture_radius = 0;  // thin lens radius; 0 is a pinhole
   float focus_distance = 0;   // 0: the distance from `from` to `to`
 };
+
+// A moving camera at ray time `time` in [0, 1]: its poses at evenly spaced time steps (0 at the first, 1 at the last),
+// interpolated linearly between the two around `time` (position, target, up, field of view, lens), as the geometry's
+// time steps are. `steps` must hold at least two.
+CameraDesc camera_at(const std::vector<CameraDesc>& steps, float time);
 
 class Camera {
  public:

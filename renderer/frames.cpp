@@ -19,6 +19,13 @@ std::vector<int64_t> frame_numbers(const FrameRange& range) {
   return frames;
 }
 
+std::vector<double> shutter_step_times(const Shutter& shutter, double fps) {
+  std::vector<double> times;
+  const int n = std::max(shutter.steps, 2);
+  for (int i = 0; i < n; ++i) times.push_back((shutter.open + (shutter.close - shutter.open) * i / (n - 1)) / fps);
+  return times;
+}
+
 double frame_time(int64_t frame, double fps, double time_offset) {
   return static_cast<double>(frame) / fps + time_offset;
 }

@@ -26,6 +26,22 @@ struct FrameRange {
   bool operator==(const FrameRange&) const = default;
 };
 
+// render.shutter: a box shutter open from `open` to `close` frames relative to the frame (a still's: around scene.time,
+// in frames at render.fps), over which moving geometry and cameras blur. Each object's motion is sampled at `steps`
+// times spread evenly over the interval and interpolated linearly between them (Embree's time steps).
+struct Shutter {
+  double open = -0.25;
+  double close = 0.25;
+  int steps = 2;
+
+  bool operator==(const Shutter&) const = default;
+};
+constexpr double kMaxShutterFrames = 10;  // |open| and |close| at most this many frames from the frame
+constexpr int kMaxShutterSteps = 129;     // Embree 3's most time steps per geometry (RTC_MAX_TIME_STEP_COUNT)
+
+// The shutter's times in seconds relative to the frame's: its `steps` sample times, open to close, at `fps`.
+std::vector<double> shutter_step_times(const Shutter& shutter, double fps);
+
 constexpr double kDefaultFps = 24;  // render.fps when the job does not say (the contract's default)
 // Frame numbers are within +-kMaxFrameNumber (the contract's bound): every number fits 10 digits and a sign.
 constexpr int64_t kMaxFrameNumber = 1'000'000'000;

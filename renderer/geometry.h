@@ -3,6 +3,7 @@
 // (scene.h) both read them.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -24,7 +25,26 @@ struct Mesh {
   uint32_t first_light = 0;  // index of its first triangle's light when the material emits
   bool prototype = false;    // object-space geometry of a MeshGroup, traced only through its instances
   std::string name;          // the object's, for Cryptomatte (Scene::object_names)
+  // Motion over a shutter (motion blur): the positions, and the normals when the mesh has them, at each of the
+  // shutter's time steps, evenly spaced from its opening (ray time 0) to its closing (1), linear between them as
+  // Embree interpolates them. Empty: the mesh stands still at `positions`, which hold its pose at the frame's time.
+  std::vector<std::vector<Vec3>> motion_positions;
+  std::vector<std::vector<Vec3>> motion_normals;
   size_t triangle_count() const { return indices.size() / 3; }
+  bool moves() const { return motion_positions.size() >= 2; }
+  // Vertex v's position and normal at ray time `time` in [0, 1] (the still ones when the mesh does not move).
+  Vec3 position_at(uint32_t v, float time) const { return moves() ? at_time(motion_positions, v, time) : positions[v]; }
+  Vec3 normal_at(uint32_t v, float time) const {
+    return motion_normals.size() >= 2 ? at_time(motion_normals, v, time) : normals[v];
+  }
+  // Linear interpolation between the two time steps around `time`, as Embree's linear motion blur does (its time
+  // steps at i / (n - 1)).
+  static Vec3 at_time(const std::vector<std::vector<Vec3>>& steps, uint32_t v, float time) {
+    const float f = std::clamp(time, 0.0f, 1.0f) * static_cast<float>(steps.size() - 1);
+    const size_t i = std::min(static_cast<size_t>(f), steps.size() - 2);
+    const float u = f - static_cast<float>(i);
+    return steps[i][v] * (1 - u) + steps[i + 1][v] * u;
+  }
 };
 
 // Meshes that several instances share (Embree instancing): traced once per instance through a transform.

@@ -11,8 +11,20 @@
 
 namespace tessera {
 
-Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls) {
+void camera_at_time(const IntegratorSetup& setup, const PixelSampler& sampler, CameraAtTime* out) {
+  const Scene& scene = *setup.scene;
+  out->camera = &setup.camera;
+  out->time = 0;
+  if (!scene.moving()) return;
+  out->time = sampler.get1d_time();
+  if (scene.camera_motion.empty()) return;
+  out->posed = Camera(camera_at(scene.camera_motion, out->time), setup.width, setup.height);
+  out->camera = &out->posed;
+}
+
+Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls, float time) {
   Ray shadow;
+  shadow.time = time;
   shadow.origin = offset_ray_origin(p, ng, ls.wi);
   if (std::isinf(ls.dist)) {
     shadow.dir = ls.wi;

@@ -111,7 +111,17 @@ struct IntegratorSetup {
 // The shadow ray from a surface point (p, geometric normal ng) to a sampled light point: both ends offset clear of
 // self-intersection, the direction unnormalised so that t = 1 is the light's point; to infinity for a light at
 // infinity (ls.dist infinite).
-Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls);
+Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls, float time);
+
+// A camera sample's time within the shutter and the camera at it (motion blur): in a scene that moves
+// (Scene::moving), the time is the sampler's reserved time dimension (PixelSampler::get1d_time) and a moving camera is
+// posed at it (camera_at); elsewhere the time is 0 and the camera the setup's, and the sampler is not read.
+struct CameraAtTime {
+  float time = 0;
+  Camera posed;                    // the moving camera at `time`
+  const Camera* camera = nullptr;  // `posed` or the setup's
+};
+void camera_at_time(const IntegratorSetup& setup, const PixelSampler& sampler, CameraAtTime* out);
 
 // The render passes' records of a camera sample (SurfaceFeatures, aov.h), written the same way by every integrator
 // that traces from the camera. note_surface: the camera ray's first drawn surface (at `sp`, of the object and material

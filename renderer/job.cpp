@@ -45,6 +45,8 @@ std::shared_ptr<Scene> load_frame_scene(const json& job, const RenderSettings& s
                                         const SceneLoadOptions& options) {
   std::shared_ptr<Scene> scene;
   const std::string kind = kind_of(job);
+  SceneLoadOptions scene_options = options;
+  if (settings.shutter) scene_options.shutter_times = shutter_step_times(*settings.shutter, settings.fps);
   if (settings.frames) {
     if (kind != "scene") throw SceneError("/render/frames", "a material job has no animation to render frames of");
     const auto it = job.find("scene");
@@ -62,7 +64,7 @@ std::shared_ptr<Scene> load_frame_scene(const json& job, const RenderSettings& s
     // The stage scene names the subjects "subject" (one material) or "subject0".."subject15" (a row); errors found
     // in it are reported at the job's own fields: /material/... or /materials/<i>/...
     try {
-      scene = load_scene(material_stage_scene(job, settings.width, settings.height), "", options);
+      scene = load_scene(material_stage_scene(job, settings.width, settings.height), "", scene_options);
     } catch (const SceneError& e) {
       const std::string& p = e.pointer();
       const std::string row = "/materials/subject";
@@ -79,11 +81,11 @@ std::shared_ptr<Scene> load_frame_scene(const json& job, const RenderSettings& s
     auto it = job.find("scene");
     if (it == job.end()) throw SceneError("/scene", "a scene job needs a \"scene\"");
     if (settings.frames) {
-      SceneLoadOptions frame_options = options;
+      SceneLoadOptions frame_options = scene_options;
       frame_options.frames_pointer = "/render/frames";
       scene = load_scene(frame_scene(*it, frame, settings.fps), "/scene", frame_options);
     } else {
-      scene = load_scene(*it, "/scene", options);
+      scene = load_scene(*it, "/scene", scene_options);
     }
   }
   const Camera camera(scene->camera, settings.width, settings.height);

@@ -174,6 +174,9 @@ struct Ray {
   Vec3 dir;
   float tmin = 0;
   float tmax = kInfinity;
+  // When within the shutter the ray is traced, in [0, 1] from its opening to its closing (Embree's RTCRay::time):
+  // moving geometry is hit where it is at that time. Every ray of a path carries the camera sample's time.
+  float time = 0;
 };
 
 // A ray's cone (Akenine-Möller et al., "Texture Level of Detail Strategies for Real-Time Ray Tracing", 2019): the

@@ -135,6 +135,30 @@ std::vector<std::string> aovs_key(const json& render, const std::string& pointer
   return aovs;
 }
 
+// A document's "shutter" (frames.h): open and close in frames, open at most close, each within kMaxShutterFrames of
+// the frame; steps, the motion's time steps, 2 to kMaxShutterSteps. `integer_of` reads an integer key as the other
+// integers of "render" are read. None when absent.
+template <typename IntegerOf>
+std::optional<Shutter> shutter_key(const json& render, const std::string& pointer, const IntegerOf& integer_of) {
+  auto it = render.find("shutter");
+  if (it == render.end() || it->is_null()) return std::nullopt;
+  const std::string sp = at(pointer, "shutter");
+  if (!it->is_object()) throw SceneError(sp, "must be an object {\"open\", \"close\", \"steps\"}");
+  Shutter shutter;
+  for (const char* key : {"open", "close"}) {
+    const auto v = it->find(key);
+    if (v == it->end()) throw SceneError(at(sp, key), "is required: the shutter's opening and closing, in frames");
+    const double d = fields::finite_number(*v, at(sp, key));
+    if (std::abs(d) > kMaxShutterFrames)
+      throw SceneError(at(sp, key), "must be within " + json(kMaxShutterFrames).dump() + " frames of the frame");
+    (std::string(key) == "open" ? shutter.open : shutter.close) = d;
+  }
+  if (shutter.close < shutter.open)
+    throw SceneError(at(sp, "close"), "must not be before open (" + json(shutter.open).dump() + ")");
+  shutter.steps = static_cast<int>(integer_of(*it, sp, "steps", shutter.steps, 2, kMaxShutterSteps));
+  return shutter;
+}
+
 }  // namespace
 
 RenderSettings render_settings_from_json(const json& render, const std::string& pointer, const RenderLimits& limits) {
@@ -223,6 +247,7 @@ RenderSettings render_settings_from_json(const json& render, const std::string& 
     s.fps = fields::finite_number(*it, at(pointer, "fps"));
     if (!(s.fps > 0) || s.fps > 1000) throw SceneError(at(pointer, "fps"), "must be greater than 0 and at most 1000");
   }
+  s.shutter = shutter_key(render, pointer, integer_of);
   return s;
 }
 
@@ -243,31 +268,34 @@ json with_preview_defaults(const json& render) {
 }
 
 json render_settings_to_json(const RenderSettings& s) {
-  json out = {{"width", s.width},
-              {"height", s.height},
-              {"spp", s.spp},
-              {"max_depth", s.integrator.max_depth},
-              {"integrator", s.integrator.name},
-              {"estimator", estimator_name(s.integrator.estimator)},
-              {"seed", s.seed},
-              {"sampler", sampler_name(s.sampler)},
-              {"time_limit_s", s.time_limit_s},
-              {"noise_target", s.noise_target},
-              {"exposure_ev", s.display.exposure_ev},
-              {"tonemap", tonemap_name(s.display.tonemap)},
-              {"exr_precision", name_of(kExrPrecisions, s.exr_half)},
-              {"max_volume_depth", s.integrator.max_volume_depth},
-              {"subsurface_guiding", s.integrator.subsurface_guiding},
-              {"aovs", s.aovs},
-              {"denoise", denoiser_name(s.denoise)},
-              {"frames", s.frames ? json{{"start", s.frames->start},
-                                         {"end", s.frames->end},
-                                         {"step", s.frames->step},
-                                         {"chunk", s.frames->chunk}}
-                                  : json()},
-              {"fps", s.fps},
-              {"adaptive_threshold", s.adaptive_threshold},
-              {"min_spp", s.min_spp}};
+  json out = {
+      {"width", s.width},
+      {"height", s.height},
+      {"spp", s.spp},
+      {"max_depth", s.integrator.max_depth},
+      {"integrator", s.integrator.name},
+      {"estimator", estimator_name(s.integrator.estimator)},
+      {"seed", s.seed},
+      {"sampler", sampler_name(s.sampler)},
+      {"time_limit_s", s.time_limit_s},
+      {"noise_target", s.noise_target},
+      {"exposure_ev", s.display.exposure_ev},
+      {"tonemap", tonemap_name(s.display.tonemap)},
+      {"exr_precision", name_of(kExrPrecisions, s.exr_half)},
+      {"max_volume_depth", s.integrator.max_volume_depth},
+      {"subsurface_guiding", s.integrator.subsurface_guiding},
+      {"aovs", s.aovs},
+      {"denoise", denoiser_name(s.denoise)},
+      {"frames", s.frames ? json{{"start", s.frames->start},
+                                 {"end", s.frames->end},
+                                 {"step", s.frames->step},
+                                 {"chunk", s.frames->chunk}}
+                          : json()},
+      {"fps", s.fps},
+      {"shutter",
+       s.shutter ? json{{"open", s.shutter->open}, {"close", s.shutter->close}, {"steps", s.shutter->steps}} : json()},
+      {"adaptive_threshold", s.adaptive_threshold},
+      {"min_spp", s.min_spp}};
   // Keys the mapping gained after jobs were first stored are written only where they differ from their defaults:
   // records (and their checkpoints' fingerprints, FNV-1a of this text) of jobs stored before a key existed keep their
   // text byte for byte.
@@ -277,6 +305,7 @@ json render_settings_to_json(const RenderSettings& s) {
                                           {"denoise", denoiser_name(Denoiser::kNone)},
                                           {"frames", nullptr},
                                           {"fps", kDefaultFps},
+                                          {"shutter", nullptr},
                                           {"adaptive_threshold", 0.0}};
   for (const auto& [key, fallback] : kLaterKeysDefaults.items())
     if (out[key] == fallback) out.erase(key);

@@ -52,6 +52,9 @@ struct RenderSettings {
   // A range of frames of the scene's animation (frames.h), each the still at its time; none: one still.
   std::optional<FrameRange> frames;
   double fps = kDefaultFps;  // frames per second: frame f is at f / fps seconds (plus scene.time_offset)
+  // Motion blur (frames.h): the interval around each frame (a still's scene.time) that the camera's samples spread
+  // over, in frames at fps; none: every sample at the frame's time.
+  std::optional<Shutter> shutter;
 
   // Set by whoever renders a part of a job, never by a document (not in the JSON mapping); integrator.rr_start_depth
   // neither.
@@ -108,8 +111,8 @@ RenderSettings render_settings_from_json(const nlohmann::json& render, const std
 inline constexpr double kPreviewAdaptiveThreshold = 0.05;
 nlohmann::json with_preview_defaults(const nlohmann::json& render);
 // The normalised form: every field a document can set, defaults filled in (but max_volume_depth, subsurface_guiding,
-// aovs, denoise, frames and fps only where they are not their defaults, so that records written before they existed
-// keep their text).
+// aovs, denoise, frames, fps and shutter only where they are not their defaults, so that records written before they
+// existed keep their text).
 nlohmann::json render_settings_to_json(const RenderSettings& settings);
 // The same as the job status shows it: a stopping rule that is off (time_limit_s, noise_target at 0, the documents'
 // default) is left out, as a document leaves it out, so that it reads as "none" rather than as a limit of zero.

@@ -131,6 +131,11 @@ class PixelSampler {
   // makes once, where only some samples make it (the wavelength of a path through a dispersive material), drawn
   // without moving any other number. Stratified over the pixel's samples as dimension 1 is.
   float get1d_dimension0() const { return get1d_at(0); }
+  // The number of the dimension reserved for a camera sample's time within the shutter (motion blur), which get1d()
+  // and get2d() never reach either: drawn only where something moves, so that no other number moves with it and a
+  // still scene keeps its bits. Stratified over the pixel's samples as dimension 0 is.
+  static constexpr uint32_t kTimeDimension = 0xffffffffu;
+  float get1d_time() const { return get1d_at(kTimeDimension); }
   // Steps over the dimensions a get1d() or get2d() would use, without computing them: for numbers a caller draws
   // only to keep the dimension layout fixed and would not use. Every later number is the same as after the call.
   void skip1d() { ++dimension_; }

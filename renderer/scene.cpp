@@ -31,7 +31,12 @@ void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
   auto start = std::chrono::steady_clock::now();
   bounds_ = geometry_bounds();
   // Embree reads vertex buffers with 16-byte loads: keep 4 bytes readable past the last vertex.
-  for (Mesh& mesh : meshes) mesh.positions.reserve(mesh.positions.size() + 1);
+  moving_ = !camera_motion.empty();
+  for (Mesh& mesh : meshes) {
+    mesh.positions.reserve(mesh.positions.size() + 1);
+    for (std::vector<Vec3>& step : mesh.motion_positions) step.reserve(step.size() + 1);
+    moving_ = moving_ || mesh.moves();
+  }
   std::vector<const Material*> material_ptrs;
   dispersive_ = false;
   index_matched_ = false;
@@ -65,8 +70,11 @@ Bounds Scene::geometry_bounds(bool* finite) const {
     b.extend(p);
   };
   for (const Mesh& mesh : meshes)
-    if (!mesh.prototype)
+    if (!mesh.prototype) {
       for (const Vec3& p : mesh.positions) extend(p);
+      for (const std::vector<Vec3>& step : mesh.motion_positions)
+        for (const Vec3& p : step) extend(p);
+    }
   for (const Instance& inst : instances) {
     for (uint32_t m : groups.at(inst.group).meshes) {
       Bounds local;
@@ -170,9 +178,10 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     const Instance* inst = hit.instance == kNoInstance ? nullptr : &instances[hit.instance];
     const uint32_t* idx = &mesh.indices[3 * hit.prim_id];
     float b1 = hit.u, b2 = hit.v, b0 = 1 - b1 - b2;
-    Vec3 p0 = mesh.positions[idx[0]];
-    Vec3 p1 = mesh.positions[idx[1]];
-    Vec3 p2 = mesh.positions[idx[2]];
+    // Where the triangle is at the ray's time (a moving mesh's, as Embree intersected it).
+    Vec3 p0 = mesh.position_at(idx[0], ray.time);
+    Vec3 p1 = mesh.position_at(idx[1], ray.time);
+    Vec3 p2 = mesh.position_at(idx[2], ray.time);
     if (inst) {
       p0 = inst->to_world.point(p0);
       p1 = inst->to_world.point(p1);
@@ -186,7 +195,8 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     sp.ng = ng;
     Vec3 ns = ng;
     if (!mesh.normals.empty()) {
-      Vec3 n = mesh.normals[idx[0]] * b0 + mesh.normals[idx[1]] * b1 + mesh.normals[idx[2]] * b2;
+      Vec3 n = mesh.normal_at(idx[0], ray.time) * b0 + mesh.normal_at(idx[1], ray.time) * b1 +
+               mesh.normal_at(idx[2], ray.time) * b2;
       if (inst) n = inst->normal_to_world.vector(n);
       float len2 = length_squared(n);
       if (len2 > 0 && std::isfinite(len2)) {

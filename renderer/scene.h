@@ -24,6 +24,9 @@ class Scene {
   std::vector<MeshGroup> groups;
   std::vector<Instance> instances;
   CameraDesc camera;
+  // An animated camera's poses at a shutter's time steps, evenly spaced from its opening (ray time 0) to its closing
+  // (1); empty: the camera stands still at `camera` (camera_at, camera.h).
+  std::vector<CameraDesc> camera_motion;
   Environment environment;
   // The medium around the objects, where the camera and the lights sit (null: vacuum); objects' media are their
   // materials' interiors (Material::interior).
@@ -63,6 +66,9 @@ class Scene {
   // Whether some material is an index-matched boundary (Material::index_matched): only then may shadow rays cross
   // surfaces.
   bool index_matched() const { return index_matched_; }
+  // Whether anything moves over the shutter (a mesh's motion_positions, camera_motion): only then do the camera's
+  // samples draw a time (motion blur), as finalize found it.
+  bool moving() const { return moving_; }
 
  private:
   Accel accel_;
@@ -72,6 +78,7 @@ class Scene {
   bool dispersive_ = false;
   bool scattering_ = false;
   bool index_matched_ = false;
+  bool moving_ = false;
 };
 
 // Keeps the first of each warning given more than once, in order, and at most kMaxWarnings of them: the rest are

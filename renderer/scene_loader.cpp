@@ -331,6 +331,12 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
       gopts.animate = true;
       gopts.frames_pointer = options.frames_pointer;
     }
+    if (gopts.animate)
+      gopts.shutter_times = options.shutter_times;
+    else if (!options.shutter_times.empty())
+      scene->warnings.push_back(
+          "render.shutter blurs nothing: the asset is rendered as it is stated, not animated (scene.time or "
+          "scene.animation poses it by its animation)");
     gltf = import_gltf(resolve(options, *it, gp), gp, *scene, gopts);
     has_gltf = true;
     for (const std::string& w : gltf.warnings) scene->warnings.push_back(w);
@@ -338,6 +344,8 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
 
   if (!has_gltf && doc.contains("gltf_variant"))
     throw SceneError(at(pointer, "gltf_variant"), "a variant is chosen only for a glTF asset (scene.gltf)");
+  if (!has_gltf && !options.shutter_times.empty())
+    scene->warnings.push_back("render.shutter blurs nothing: only a glTF asset's animation moves (scene.gltf)");
   if (!has_gltf && !options.frames_pointer.empty())
     throw SceneError(options.frames_pointer, "a frame range renders a glTF asset's animation (scene.gltf)");
   for (const char* key : {"animation", "time", "time_offset"})
@@ -436,8 +444,10 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
         throw SceneError(at(cp, "gltf"),
                          "no such camera in the glTF asset (it has " + std::to_string(gltf.cameras.size()) + ")");
       scene->camera = found->desc;
+      scene->camera_motion = found->motion;
     } else if (!gltf.cameras.empty()) {
       scene->camera = gltf.cameras[0].desc;
+      scene->camera_motion = gltf.cameras[0].motion;
     } else {
       Bounds b = gltf.bounds;
       for (const Sphere& sp : scene->spheres) {

@@ -6,6 +6,7 @@
 #include <functional>
 #include <memory>
 #include <stop_token>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -33,6 +34,9 @@ struct SceneLoadOptions {
   // Not empty: the scene is a frame of a range of its animation (render.frames, frames.h), which needs a glTF asset
   // with animations; SceneError at this pointer otherwise.
   std::string frames_pointer;
+  // Motion blur (render.shutter): the times of the shutter's time steps, in seconds relative to the scene's time
+  // (shutter_step_times); an animated glTF asset's moving meshes and camera are posed at each. Empty: no blur.
+  std::vector<double> shutter_times;
 };
 
 // Builds a scene from the "scene" object of a job. `pointer` is that object's JSON pointer (e.g. "/scene").

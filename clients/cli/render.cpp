@@ -66,6 +66,10 @@ const char* kRenderUsage =
     "  --frames START-END[:STEP]  frames of the animation (render.frames; a frame f at f / render.fps seconds),\n"
     "                         each written to numbered files beside each output: -o out.png writes\n"
     "                         out.0001.png, out.0002.png, ... (padded to the range's widest frame, at least 4)\n"
+    "  --shutter OPEN:CLOSE[:STEPS]  motion blur (render.shutter): the shutter open from OPEN to CLOSE frames\n"
+    "                         around each frame (a still's: around --time, at render.fps), the animated meshes\n"
+    "                         and camera posed at STEPS times over it (default 2; -0.25:0.25 is a 180-degree\n"
+    "                         shutter)\n"
     "  -q, --quiet            print nothing but errors and the scene's warnings (no progress bar, no summary)\n"
     "\n"
     "exit codes: 0 done, 1 bad input (fatal), 2 usage, 75 transient failure (retry)\n";
@@ -131,6 +135,23 @@ json frames_option(const std::string& option, const std::string& v) {
                    {"end", parse_integer(option, dash == std::string::npos ? range : range.substr(dash + 1))}};
     if (colon != std::string::npos) frames["step"] = parse_integer(option, v.substr(colon + 1));
     return frames;
+  } catch (const std::invalid_argument&) {
+    throw std::invalid_argument(usage);
+  }
+}
+
+// --shutter OPEN:CLOSE[:STEPS] as render.shutter: frames relative to the frame, and the motion's time steps.
+json shutter_option(const std::string& option, const std::string& v) {
+  const std::string usage =
+      option + " needs OPEN:CLOSE[:STEPS] (such as -0.25:0.25 or -0.25:0.25:8), not \"" + v + "\"";
+  const size_t first = v.find(':');
+  if (first == std::string::npos) throw std::invalid_argument(usage);
+  const size_t second = v.find(':', first + 1);
+  try {
+    json shutter = {{"open", parse_number(option, v.substr(0, first))},
+                    {"close", parse_number(option, v.substr(first + 1, second - first - 1))}};
+    if (second != std::string::npos) shutter["steps"] = parse_integer(option, v.substr(second + 1));
+    return shutter;
   } catch (const std::invalid_argument&) {
     throw std::invalid_argument(usage);
   }
@@ -248,6 +269,8 @@ int cmd_render(int argc, char** argv) {
       scene_overrides["animation"] = animation_choice(value());
     else if (a == "--frames")
       set("frames", frames_option(a, value()));
+    else if (a == "--shutter")
+      set("shutter", shutter_option(a, value()));
     else if (a == "-q" || a == "--quiet")
       quiet = true;
     else if (!a.empty() && a[0] == '-')
@@ -256,7 +279,7 @@ int cmd_render(int argc, char** argv) {
                          "--min-spp", "--threads",   "--integrator", "--estimator",
                          "--seed",    "--max-depth", "--aov",        "--denoise",
                          "--variant", "--time",      "--animation",  "--frames",
-                         "--quiet",   "--help"});
+                         "--shutter", "--quiet",     "--help"});
     else if (input.empty())
       input = a;
     else
@@ -446,7 +469,8 @@ int cmd_render(int argc, char** argv) {
   const int padding = tessera::frame_padding(range);
   tessera::RenderSettings still_settings = job.settings;  // a frame's: those of the still at its time
   still_settings.frames.reset();
-  still_settings.fps = tessera::kDefaultFps;
+  // A still's fps matters only to its shutter (in frames at render.fps): without one it is the still's default.
+  if (!still_settings.shutter) still_settings.fps = tessera::kDefaultFps;
   // Every frame's files can be written, before the first renders.
   for (const int64_t frame : frame_list)
     for (const std::string& out : outputs) check_writable(tessera::frame_path(out, frame, padding).string());
@@ -479,7 +503,7 @@ int cmd_render(int argc, char** argv) {
     json still = doc;
     still["scene"] = tessera::frame_scene(doc["scene"], frame, job.settings.fps);
     still["render"].erase("frames");
-    still["render"].erase("fps");
+    if (!still_settings.shutter) still["render"].erase("fps");
     std::vector<std::string> outs;
     for (const std::string& out : outputs) outs.push_back(tessera::frame_path(out, frame, padding).string());
     try {

@@ -237,4 +237,12 @@ std::vector<int> scene_roots(const Import& import);
 // import.result.
 void place_nodes(Import& import, Materials& materials, const std::vector<int>& roots, const Pose& pose);
 
+// Motion blur: the nodes posed by `animation` at each of options.shutter_times (after `time`), walked as place_nodes
+// walks them, their meshes and cameras kept as the poses of those place_nodes placed at the frame's time: the scene's
+// meshes from `first_mesh` and the result's cameras from `first_camera` (the same walk makes them in the same order).
+// A mesh or camera that moves over the steps gets them (Mesh::motion_positions and motion_normals,
+// GltfCamera::motion); emissive meshes keep the frame's pose.
+void place_motion_steps(Import& import, Materials& materials, const std::vector<int>& roots, const Animation& animation,
+                        size_t first_mesh, size_t first_camera);
+
 }  // namespace tessera::gltf

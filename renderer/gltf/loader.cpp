@@ -26,7 +26,10 @@ GltfImport import_gltf(const std::filesystem::path& path, const std::string& poi
   // The nodes as stated, or posed by the chosen animation at the chosen time.
   gltf::Pose pose = gltf::static_pose(import.model);
   if (animation) animation->pose_at(options.time, pose);
+  const size_t first_mesh = scene.meshes.size(), first_camera = result.cameras.size();
   gltf::place_nodes(import, materials, roots, pose);
+  if (animation && !options.shutter_times.empty())
+    gltf::place_motion_steps(import, materials, roots, *animation, first_mesh, first_camera);
   if (!import.tinygltf_warnings.empty()) result.warnings.push_back(import.tinygltf_warnings);
   // Each warning once (a mesh drawn by many nodes says it once), and not too many.
   tidy_warnings(&result.warnings);

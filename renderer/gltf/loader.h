@@ -18,6 +18,8 @@ struct GltfCamera {
   std::string name;
   CameraDesc desc;
   float aspect_ratio = 0;  // glTF's aspectRatio, 0 when absent
+  // Its poses at the shutter's time steps (GltfImportOptions::shutter_times) when it moves over them; else empty.
+  std::vector<CameraDesc> motion;
 };
 
 struct GltfImport {
@@ -61,6 +63,11 @@ struct GltfImportOptions {
   // Not empty: a frame range of the animation is rendered (frames.h), and an asset without animations is a SceneError
   // at this pointer rather than the static pose with a warning.
   std::string frames_pointer;
+  // Motion blur: the times of a shutter's time steps, in seconds relative to `time` (frames.h, shutter_step_times).
+  // With an animation applied, the nodes are posed at each as well, and every mesh and camera that moves over them
+  // gets its poses at them (Mesh::motion_positions, GltfCamera::motion); meshes are then never instanced (each moving
+  // copy has vertices of its own). Emissive meshes keep the frame's pose: the lights are sampled where they are hit.
+  std::vector<double> shutter_times;
   // Images are checked from their headers (they open, within max_texture_pixels) and stand in as 1x1 white: for a
   // scene that is checked, not rendered.
   bool headers_only = false;

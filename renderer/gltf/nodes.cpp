@@ -286,7 +286,8 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
     for (const tinygltf::Primitive& prim : model.meshes[mesh_index].primitives)
       if (prim.material >= 0 && prim.material < static_cast<int>(materials.index.size()))
         emits = emits || scene.materials[materials.index[prim.material]]->emissive();
-    if (!emits) instanced.insert(mesh_index);
+    // Under a shutter every mesh is placed in world space, so that each copy gets its own time steps.
+    if (!emits && options.shutter_times.empty()) instanced.insert(mesh_index);
   }
   // Every node's world transform (of its first path from the scene), for the joints of skins, which need not be
   // ancestors of the meshes they pose.
@@ -302,6 +303,76 @@ void place_nodes(Import& import, Materials& materials, const std::vector<int>& r
     for (int r : roots) walk(r, TransformD(), 0);
   }
   for (int r : roots) visit(r, TransformD(), 0);
+}
+
+}  // namespace tessera::gltf
+
+namespace tessera::gltf {
+
+namespace {
+
+// Whether every step holds the same values (nothing moves over the shutter).
+bool still(const std::vector<std::vector<Vec3>>& steps) {
+  for (const std::vector<Vec3>& step : steps)
+    if (step != steps.front()) return false;
+  return true;
+}
+
+bool same_pose(const CameraDesc& a, const CameraDesc& b) {
+  return a.from == b.from && a.to == b.to && a.up == b.up && a.fov_deg == b.fov_deg && a.ortho_height == b.ortho_height;
+}
+
+}  // namespace
+
+void place_motion_steps(Import& import, Materials& materials, const std::vector<int>& roots, const Animation& animation,
+                        size_t first_mesh, size_t first_camera) {
+  Scene& scene = import.scene;
+  GltfImport& result = import.result;
+  const size_t meshes = scene.meshes.size(), cameras = result.cameras.size();
+  const std::vector<double>& offsets = import.options.shutter_times;
+  std::vector<std::vector<std::vector<Vec3>>> positions(meshes - first_mesh), normals(meshes - first_mesh);
+  std::vector<std::vector<CameraDesc>> camera_steps(cameras - first_camera);
+  // What the frame's walk counted and reported stands: each step's walk places the same meshes again, briefly. The
+  // asset's bounds stay the frame's (a camera made to frame the asset frames it as without a shutter).
+  const size_t triangles = import.triangles, vertices = import.vertices, lights = result.lights.size(),
+               warnings = result.warnings.size();
+  const Bounds bounds = result.bounds;
+  for (const double offset : offsets) {
+    import.check_stop();
+    Pose pose = static_pose(import.model);
+    animation.pose_at(import.options.time + offset, pose);
+    place_nodes(import, materials, roots, pose);
+    if (scene.meshes.size() - meshes != meshes - first_mesh ||
+        result.cameras.size() - cameras != cameras - first_camera)
+      import.fail("the asset's nodes placed different meshes at the shutter's times than at the frame's");
+    for (size_t m = 0; m < positions.size(); ++m) {
+      Mesh& step = scene.meshes[meshes + m];
+      if (step.positions.size() != scene.meshes[first_mesh + m].positions.size())
+        import.fail("a mesh has different vertices at the shutter's times than at the frame's");
+      positions[m].push_back(std::move(step.positions));
+      normals[m].push_back(std::move(step.normals));
+    }
+    for (size_t c = 0; c < camera_steps.size(); ++c) camera_steps[c].push_back(result.cameras[cameras + c].desc);
+    scene.meshes.resize(meshes);
+    result.cameras.resize(cameras);
+    result.lights.resize(lights);
+    result.warnings.resize(warnings);
+    import.triangles = triangles;
+    import.vertices = vertices;
+    result.bounds = bounds;
+  }
+  for (size_t m = 0; m < positions.size(); ++m) {
+    Mesh& mesh = scene.meshes[first_mesh + m];
+    if (still(positions[m]) || scene.materials[mesh.material]->emissive()) continue;
+    mesh.motion_positions = std::move(positions[m]);
+    if (!mesh.normals.empty()) mesh.motion_normals = std::move(normals[m]);
+  }
+  for (size_t c = 0; c < camera_steps.size(); ++c) {
+    const std::vector<CameraDesc>& steps = camera_steps[c];
+    if (std::all_of(steps.begin(), steps.end(), [&](const CameraDesc& d) { return same_pose(d, steps.front()); }))
+      continue;
+    result.cameras[first_camera + c].motion = steps;
+  }
 }
 
 }  // namespace tessera::gltf

@@ -92,9 +92,12 @@ Vec3 direction_to(const Vertex& a, const Vertex& b) {
 
 struct Context {
   const Scene& scene;
-  const Camera& camera;
+  const Camera& camera;  // at the sample's time
   const IntegratorSettings& settings;
   float disc_pdf;  // area density of the origins of light from infinity
+  // The camera sample's time within the shutter (motion blur): every ray of both subpaths and of their connections is
+  // traced at it, so that a path sees the scene at one instant.
+  float time = 0;
 };
 
 // The BSDF at surface vertex v for light leaving towards `next`, with the shading-normal correction of importance
@@ -209,16 +212,17 @@ void record_light(LightPassSample& lp, const Vertex& first, const Vec3& toward_l
 }
 
 // Whether the segment between two finite vertices is unobstructed, each end offset off its surface.
-bool visible(const Scene& scene, const Vertex& a, const Vertex& b, RayCounters& counters) {
+bool visible(const Context& c, const Vertex& a, const Vertex& b, RayCounters& counters) {
   ++counters.shadow;
   Ray ray;
+  ray.time = c.time;
   const Vec3 d = b.p - a.p;
   ray.origin = a.on_surface() ? offset_ray_origin(a.p, a.ng, d) : a.p;
   const Vec3 target = b.on_surface() ? offset_ray_origin(b.p, b.ng, -d) : b.p;
   ray.dir = target - ray.origin;
   ray.tmin = 0;
   ray.tmax = 1 - 1e-5f;
-  return !scene.occluded(ray);
+  return !c.scene.occluded(ray);
 }
 
 // The subpath's walk from its endpoint (Veach 1997, 10.2): vertices path[1..] after path[0], the endpoint, up to
@@ -471,7 +475,7 @@ void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32
   Worker& worker = this->worker(w);
   RayCounters counters;
   uint64_t nonfinite = 0;
-  const Context c{*setup_.scene, setup_.camera, setup_.settings, disc_pdf_};
+  CameraAtTime at;  // a sample's time within the shutter, and the camera then
   std::vector<Vertex>& vertices = vertices_[static_cast<size_t>(w)];
   const size_t half = vertices.size() / 2;
   Vertex* camera = vertices.data();
@@ -483,6 +487,8 @@ void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32
       const uint32_t pixel = static_cast<uint32_t>(y) * static_cast<uint32_t>(setup_.width) + static_cast<uint32_t>(x);
       for (uint32_t s = first_sample; s < first_sample + count; ++s) {
         PixelSampler sampler(seed_keys, pixel, s, setup_.sampler);
+        camera_at_time(setup_, sampler, &at);
+        const Context c{*setup_.scene, *at.camera, setup_.settings, disc_pdf_, at.time};
         const Vec2 jitter = sampler.get2d();
         spectrum::WavelengthSample wavelength;
         if (dispersive) wavelength = spectrum::sample_wavelength(sampler.get1d_dimension0());
@@ -522,7 +528,8 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
   // The camera subpath (none for light tracing).
   int n_camera = 0;
   if (!light_only_) {
-    const Ray ray = c.camera.generate_ray(film_pos, u_lens);
+    Ray ray = c.camera.generate_ray(film_pos, u_lens);
+    ray.time = c.time;
     ++counters.camera;
     camera[0] = Vertex();
     camera[0].kind = VertexKind::kCamera;
@@ -558,6 +565,7 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
     l0.beta = Rgb(1 / le.pdf_pos);  // the origin before a direction is chosen: for s = 1, t = 1
     l0.pdf_fwd = le.pdf_pos;
     Ray ray = le.ray;
+    ray.time = c.time;
     ray.tmin = 0;
     ray.tmax = kInfinity;
     if (!le.infinite && !is_black(le.n)) ray.origin = offset_ray_origin(le.ray.origin, le.n, le.ray.dir);
@@ -644,7 +652,7 @@ Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, 
     } else {
       l = qs.beta * vertex_f(qs, cs.wi, TransportMode::kImportance) * sampled->beta * std::abs(dot(cs.wi, qs.frame.n));
     }
-    if (is_black(l) || !visible(scene, qs, *sampled, counters)) return Rgb(0);
+    if (is_black(l) || !visible(c, qs, *sampled, counters)) return Rgb(0);
     *splat_at = cs.film;
     return l;
   }
@@ -673,7 +681,7 @@ Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, 
         pt.beta * vertex_f(pt, ls.wi, TransportMode::kRadiance) * sampled->beta * std::abs(dot(ls.wi, pt.frame.n));
     if (is_black(l)) return Rgb(0);
     ++counters.shadow;
-    const Ray shadow = shadow_ray_to_light(pt.p, pt.ng, ls);
+    const Ray shadow = shadow_ray_to_light(pt.p, pt.ng, ls, c.time);
     if (scene.occluded(shadow)) return Rgb(0);
     return l;
   }
@@ -688,7 +696,7 @@ Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, 
   Rgb l = qs.beta * vertex_f(qs, -w, TransportMode::kImportance) * vertex_f(pt, w, TransportMode::kRadiance) * pt.beta;
   if (is_black(l)) return Rgb(0);
   l *= std::abs(dot(qs.frame.n, w)) * std::abs(dot(pt.frame.n, w)) / d2;
-  if (!visible(scene, pt, qs, counters)) return Rgb(0);
+  if (!visible(c, pt, qs, counters)) return Rgb(0);
   return l;
 }
 

@@ -57,7 +57,7 @@ struct LightSplit {
 // given, receives how the contribution splits between the lobe classes.
 Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& bsdf, uint32_t flags,
                  const Vec3& wo_world, const Vec3& wo, bool mis, float u_select, Vec2 u, const MediumTracker& medium,
-                 int max_crossings, MediumRng& rng, RayCounters& counters, LightSplit* split = nullptr) {
+                 float time, int max_crossings, MediumRng& rng, RayCounters& counters, LightSplit* split = nullptr) {
   LightSample ls;
   if (!scene.lights().sample(si.sp.p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
   const Vec3 wi = si.sp.frame.to_local(ls.wi);
@@ -70,7 +70,7 @@ Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& b
   float bsdf_pdf = 0;
   const Rgb f = (weigh ? bsdf.eval_pdf(wo, wi, &bsdf_pdf) : bsdf.eval(wo, wi)) * std::abs(wi.z);
   if (is_black(f)) return {};
-  const Ray shadow = shadow_ray_to_light(si.sp.p, si.sp.ng, ls);
+  const Ray shadow = shadow_ray_to_light(si.sp.p, si.sp.ng, ls, time);
   // The shadow ray starts in the medium on the light's side of the surface.
   MediumTracker beyond = medium;
   if (light_transmits) beyond.refract(si.sp.front_face, si.material->interior.get());
@@ -97,14 +97,14 @@ void note_walk_surface(const MediumTracker& medium, const Vec3& ng, const Vec3& 
 
 // Next-event estimation at a scattering event in a medium, at `p`: the phase function takes the BSDF's place.
 Rgb direct_light_in_medium(const Scene& scene, const Vec3& p, const Vec3& wo_world, const HenyeyGreenstein& phase,
-                           bool mis, float u_select, Vec2 u, const MediumTracker& medium, int max_crossings,
+                           bool mis, float u_select, Vec2 u, const MediumTracker& medium, float time, int max_crossings,
                            MediumRng& rng, RayCounters& counters) {
   LightSample ls;
   if (!scene.lights().sample(p, u_select, u, &ls) || !(ls.pdf > 0) || is_black(ls.radiance)) return {};
   const float f = phase.p(wo_world, ls.wi);
   if (!(f > 0)) return {};
   // A point in a medium has no surface to leave: the shadow ray starts at it.
-  const Ray shadow = shadow_ray_to_light(p, Vec3(0), ls);
+  const Ray shadow = shadow_ray_to_light(p, Vec3(0), ls, time);
   const Rgb tr = shadow_transmittance(scene, shadow, medium, max_crossings, rng, counters);
   if (is_black(tr)) return {};
   const float w = mis && !ls.delta ? power_heuristic(ls.pdf, f) : 1.0f;
@@ -289,8 +289,9 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         }
         if (bounces == 0) first = 3;
         if (sample_light) {
-          const Rgb c = throughput * direct_light_in_medium(scene, p, wo_world, phase, mis, u_light_select, u_light,
-                                                            medium, settings.max_volume_depth, medium_rng, counters);
+          const Rgb c =
+              throughput * direct_light_in_medium(scene, p, wo_world, phase, mis, u_light_select, u_light, medium,
+                                                  ray.time, settings.max_volume_depth, medium_rng, counters);
           radiance += c;
           record(c, bounces + 1, false);
         }
@@ -425,9 +426,9 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     }
     if (sample_light) {
       LightSplit split;
-      const Rgb c =
-          throughput * direct_light(scene, si, *bsdf, flags, wo_world, wo, mis, u_light_select, u_light, medium,
-                                    settings.max_volume_depth, medium_rng, counters, first_bounce ? &split : nullptr);
+      const Rgb c = throughput * direct_light(scene, si, *bsdf, flags, wo_world, wo, mis, u_light_select, u_light,
+                                              medium, ray.time, settings.max_volume_depth, medium_rng, counters,
+                                              first_bounce ? &split : nullptr);
       radiance += c;
       if (first_bounce) {
         // The first bounce's own light sample: direct light of each class its lobes give.
@@ -511,9 +512,7 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
   RayCounters counters;
   uint64_t nonfinite = 0;
   const Scene& scene = *setup_.scene;
-  const Camera& camera = setup_.camera;
-  const bool uses_lens = camera.uses_lens();
-  const RayCone cone = camera.pixel_cone(setup_.samples_per_pixel);
+  const RayCone cone = setup_.camera.pixel_cone(setup_.samples_per_pixel);
   const bool dispersive = scene.dispersive();
   // Camera rays of up to kGroup neighbouring pixels in a row, at the same sample index, go to Embree as one packet:
   // they are coherent, and a packet traces them several times faster than one by one. Each pixel still gets its
@@ -525,7 +524,8 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
   Ray rays[kGroup];
   RayHit hits[kGroup];
   bool found[kGroup];
-  int xs[kGroup];  // the packet's pixels' columns
+  int xs[kGroup];   // the packet's pixels' columns
+  CameraAtTime at;  // a sample's time within the shutter, and the camera then
   for (int y = y0; y < y1; ++y) {
     const uint32_t row = static_cast<uint32_t>(y) * static_cast<uint32_t>(setup_.width);
     for (int gx = x0; gx < x1;) {
@@ -541,14 +541,16 @@ void PathIntegrator::render_tile(const PixelRegion& tile, Worker& worker, uint32
         for (int i = 0; i < n; ++i) {
           PixelSampler& sampler = samplers[i];
           sampler = PixelSampler(seed_keys, row + static_cast<uint32_t>(xs[i]), s, setup_.sampler);
+          camera_at_time(setup_, sampler, &at);
           Vec2 jitter = sampler.get2d();
           Vec2 lens;
-          if (uses_lens)
+          if (at.camera->uses_lens())
             lens = sampler.get2d();
           else
             sampler.skip2d();
-          rays[i] =
-              camera.generate_ray(Vec2(static_cast<float>(xs[i]) + jitter.x, static_cast<float>(y) + jitter.y), lens);
+          rays[i] = at.camera->generate_ray(
+              Vec2(static_cast<float>(xs[i]) + jitter.x, static_cast<float>(y) + jitter.y), lens);
+          rays[i].time = at.time;
         }
         scene.accel().intersect_packet(rays, n, hits, found);
         for (int i = 0; i < n; ++i) {

@@ -236,6 +236,35 @@ expect 2 "tessera render --frames of an asset without animations" "$TESSERA" ren
   --frames 1-2
 grep -qF "no animations" "$tmp/err" && ok "the refusal says the asset has no animations" \
   || not_ok "--frames of tri.gltf said: $(cat "$tmp/err")"
+# --shutter (render.shutter): a frame blurred over its shutter is the still at its time with the same shutter, byte for
+# byte, and differs from the frame without one; a bad shutter is a usage error naming the option. The triangle is
+# made grey under a white sky (an emissive mesh is not blurred).
+python3 - <<'PY'
+import json
+gltf = json.load(open("assets/tri-anim.gltf"))
+gltf["materials"] = [{"pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.2, 0.2, 1], "metallicFactor": 0}}]
+json.dump(gltf, open("assets/tri-grey.gltf", "w"))
+json.dump({"kind": "scene", "scene": {"gltf": "tri-grey.gltf", "environment": {"color": [1, 1, 1]}}},
+          open("assets/tri-grey-job.json", "w"))
+PY
+for shutter in "" "--shutter 0:1:4"; do
+  out=tri-grey${shutter:+-mb}.exr
+  # shellcheck disable=SC2086
+  expect 0 "tessera render --frames 0-0 $shutter" "$TESSERA" render assets/tri-grey-job.json --width 16 --height 16 \
+    --spp 2 --threads 2 -q -o "$out" --frames 0-0 $shutter
+done
+expect 0 "tessera render --time 0 --shutter 0:1:4" "$TESSERA" render assets/tri-grey-job.json --width 16 \
+  --height 16 --spp 2 --threads 2 -q -o tri-grey-mb-still.exr --time 0 --shutter 0:1:4
+cmp -s tri-grey-mb.0000.exr tri-grey-mb-still.exr && ok "a blurred frame is the blurred still at its time, byte for byte" \
+  || not_ok "frame 0 with --shutter differs from the still at 0 s with it"
+if same_pixels tri-grey-mb.0000.exr tri-grey.0000.exr; then not_ok "--shutter did not blur the moving triangle"; else
+  ok "--shutter blurs the moving triangle"
+fi
+expect 2 "tessera render --shutter 0.25:-0.25" "$TESSERA" render assets/tri-anim.gltf -q -o x.exr --time 0 \
+  --shutter 0.25:-0.25
+grep -qF -- "--shutter 0.25:-0.25: must not be before open (0.25)" "$tmp/err" && ok "the refusal names --shutter" \
+  || not_ok "--shutter 0.25:-0.25 said: $(cat "$tmp/err")"
+expect 2 "tessera render --shutter 0.25" "$TESSERA" render assets/tri-anim.gltf -q -o x.exr --shutter 0.25
 mkdir -p blocked.0002.png
 expect 1 "a frame's output in the way is refused before rendering" "$TESSERA" render assets/tri-anim.gltf \
   --width 16 --height 16 --spp 1 --threads 2 -q -o blocked.png --frames 1-3

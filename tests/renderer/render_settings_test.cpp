@@ -4,7 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
+#include <limits>
 #include <stdexcept>
 
 #include "renderer/scene_error.h"
@@ -68,7 +70,8 @@ TEST(RenderSettingsMapping, TheNormalisedFormIsTheSchemasFieldsAndDefaults) {
   ASSERT_TRUE(in) << "run from the source tree";
   const json properties = json::parse(in)["properties"];
   // max_volume_depth, subsurface_guiding, aovs, denoise and fps are left out at their defaults (the stored records'
-  // text, below), written otherwise; frames, which has no default (a still), is written only when set.
+  // text, below), written otherwise; frames and shutter, which have no default (a still, no blur), are written only
+  // when set.
   RenderSettings deep;
   deep.integrator.max_volume_depth = 7;
   EXPECT_EQ(render_settings_to_json(deep).value("max_volume_depth", 0), 7);
@@ -85,13 +88,15 @@ TEST(RenderSettingsMapping, TheNormalisedFormIsTheSchemasFieldsAndDefaults) {
   normalised["denoise"] = "none";
   EXPECT_FALSE(normalised.contains("fps"));
   EXPECT_FALSE(normalised.contains("frames"));
+  EXPECT_FALSE(normalised.contains("shutter"));
   normalised["fps"] = kDefaultFps;
   normalised["adaptive_threshold"] = 0.0;
   normalised["min_spp"] = 16;
   EXPECT_FALSE(properties["frames"].contains("default"));
-  EXPECT_EQ(normalised.size() + 1, properties.size()) << normalised.dump();
+  EXPECT_FALSE(properties["shutter"].contains("default"));
+  EXPECT_EQ(normalised.size() + 2, properties.size()) << normalised.dump();
   for (const auto& [key, property] : properties.items()) {
-    if (key == "frames") continue;
+    if (key == "frames" || key == "shutter") continue;
     ASSERT_TRUE(normalised.contains(key)) << key;
     EXPECT_EQ(normalised[key], property["default"]) << key;
   }
@@ -118,6 +123,38 @@ TEST(RenderSettingsMapping, RefusalsNameTheFieldAndTheNames) {
   RenderLimits limits;
   limits.max_spp = 100;
   EXPECT_THROW(render_settings_from_json({{"spp", 101}}, "/render", limits), SceneError);
+}
+
+// render.shutter: read with its steps' default, written back only when set, refused naming the field where open is
+// after close, a value is not a finite number or further than 10 frames from the frame, or the steps are not 2 to 129.
+TEST(RenderSettingsMapping, AShutterIsReadAndRefusedNamingTheField) {
+  const RenderSettings blurred = read({{"shutter", {{"open", -0.25}, {"close", 0.25}}}});
+  ASSERT_TRUE(blurred.shutter);
+  EXPECT_EQ(*blurred.shutter, (Shutter{-0.25, 0.25, 2}));
+  expect_round_trip({{"shutter", {{"open", -0.25}, {"close", 0.25}}}});
+  expect_round_trip({{"shutter", {{"open", 0}, {"close", 1}, {"steps", 8}}}});
+  EXPECT_FALSE(render_settings_to_json(read(json::object())).contains("shutter"));
+  auto refused_at = [](const json& shutter) {
+    try {
+      read({{"shutter", shutter}});
+    } catch (const SceneError& e) {
+      return e.pointer();
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(refused_at({{"open", 0.5}, {"close", 0.25}}), "/render/shutter/close");
+  EXPECT_EQ(refused_at({{"open", -0.25}, {"close", std::numeric_limits<double>::infinity()}}), "/render/shutter/close");
+  EXPECT_EQ(refused_at({{"open", std::nan("")}, {"close", 0.25}}), "/render/shutter/open");
+  EXPECT_EQ(refused_at({{"open", -11}, {"close", 0.25}}), "/render/shutter/open");
+  EXPECT_EQ(refused_at({{"open", 0}, {"close", 0.25}, {"steps", 130}}), "/render/shutter/steps");
+  EXPECT_EQ(refused_at({{"close", 0.25}}), "/render/shutter/open");
+  EXPECT_EQ(refused_at("fast"), "/render/shutter");
+  // The steps' times, in seconds relative to the frame's: evenly spread from open to close at the frames' rate.
+  const std::vector<double> times = shutter_step_times(Shutter{-0.5, 0.5, 3}, 2);
+  ASSERT_EQ(times.size(), 3u);
+  EXPECT_DOUBLE_EQ(times[0], -0.25);
+  EXPECT_DOUBLE_EQ(times[1], 0);
+  EXPECT_DOUBLE_EQ(times[2], 0.25);
 }
 
 TEST(RenderSettingsMapping, AdaptiveSamplingRoundTripsAndIsWrittenOnlyWhereSet) {

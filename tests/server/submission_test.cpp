@@ -250,6 +250,40 @@ TEST(Submission, AMaterialJobPreviewsAdaptiveAndDenoisedUnlessItSaysOtherwise) {
   EXPECT_EQ(scene.settings.denoise, Denoiser::kNone);
 }
 
+// render.shutter: open and close within 10 frames of the frame (a number that is not finite is not JSON: 400; the
+// renderer's reader refuses one, RenderSettings.AShutterIsReadAndRefusedNamingTheField), open not after close, steps
+// within Embree's; each refusal a 422 naming the field. A good shutter is taken, and its steps default to 2.
+TEST(Submission, RefusesABadShutterNamingTheField) {
+  struct Case {
+    json shutter;
+    const char* pointer;
+  };
+  const Case cases[] = {
+      {{{"open", 0.25}, {"close", -0.25}}, "/render/shutter/close"},  // open after close
+      {{{"open", -20}, {"close", 0.25}}, "/render/shutter/open"},     // wider than the limit
+      {{{"open", -0.25}, {"close", 0.25}, {"steps", 1}}, "/render/shutter/steps"},
+      {{{"open", -0.25}, {"close", 0.25}, {"steps", 1000}}, "/render/shutter/steps"},
+      {{{"open", "-0.25"}, {"close", 0.25}}, "/render/shutter/open"},
+      {{{"open", -0.25}}, "/render/shutter/close"},
+      {-0.25, "/render/shutter"},
+  };
+  for (const Case& c : cases) {
+    json doc = test::cornell_job();
+    doc["render"]["shutter"] = c.shutter;
+    const Problem p = refused("application/json", doc.dump());
+    EXPECT_EQ(p.status, 422) << c.shutter.dump();
+    EXPECT_EQ(p.pointer, c.pointer) << c.shutter.dump() << ": " << p.detail;
+  }
+  json doc = test::cornell_job();
+  doc["render"]["shutter"] = {{"open", -0.25}, {"close", 0.25}};
+  auto r = check_submission("application/json", doc.dump(), {});
+  ASSERT_TRUE(std::get_if<AcceptedJob>(&r)) << std::get<Problem>(r).detail;
+  const RenderSettings& settings = std::get<AcceptedJob>(r).settings;
+  ASSERT_TRUE(settings.shutter);
+  EXPECT_EQ(*settings.shutter, (Shutter{-0.25, 0.25, 2}));
+  EXPECT_EQ(render_settings_from_text(render_settings_text(settings)), settings);
+}
+
 TEST(Submission, ConfiguredLimitsNameTheField) {
   SubmissionLimits limits;
   limits.render.max_width = 256;
