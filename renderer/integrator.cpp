@@ -1,6 +1,7 @@
 #include "renderer/integrator.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <stdexcept>
 
@@ -35,6 +36,37 @@ Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls, fl
     shadow.tmax = 1 - 1e-5f;
   }
   return shadow;
+}
+
+Rgb shadow_transmittance(const Scene& scene, Ray shadow, MediumTracker medium, int max_crossings, MediumRng& rng,
+                         RayCounters& counters) {
+  ++counters.shadow;
+  Rgb tr(1);
+  if (!scene.index_matched()) {
+    if (scene.occluded(shadow)) return Rgb(0);
+    medium.attenuate(tr, shadow, shadow.tmax, rng);
+    return tr;
+  }
+  for (int crossings = 0;; ++crossings) {
+    SurfaceInteraction si;
+    if (!scene.intersect(shadow, &si)) {
+      medium.attenuate(tr, shadow, shadow.tmax, rng);
+      return tr;
+    }
+    if (!si.material->index_matched || crossings >= max_crossings) return Rgb(0);
+    medium.attenuate(tr, shadow, si.t, rng);
+    medium.refract(si.sp.front_face, si.material->interior.get());
+    shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, shadow.dir);
+    shadow.tmax -= si.t;
+    ++counters.shadow;
+  }
+}
+
+uint64_t ray_seed(const Ray& ray) {
+  uint64_t h = 0;
+  for (float f : {ray.origin.x, ray.origin.y, ray.origin.z, ray.dir.x, ray.dir.y, ray.dir.z})
+    h = mix64(h ^ std::bit_cast<uint32_t>(f));
+  return h;
 }
 
 void note_surface(SurfaceFeatures& f, const ShadingPoint& sp, uint32_t object, uint32_t material_index,

@@ -21,6 +21,7 @@
 #include "renderer/arena.h"
 #include "renderer/camera.h"
 #include "renderer/film.h"
+#include "renderer/medium.h"
 #include "renderer/sampler.h"
 
 namespace tessera {
@@ -113,6 +114,18 @@ struct IntegratorSetup {
 // infinity (ls.dist infinite).
 Ray shadow_ray_to_light(const Vec3& p, const Vec3& ng, const LightSample& ls, float time);
 
+// The fraction of radiance that travels along `shadow` (to its tmax) through the media from `medium` on: zero when a
+// surface blocks it, else the media's transmittance (estimated with `rng` in media from grids). Index-matched
+// boundaries (Material::index_matched) do not block: the shadow ray crosses them and changes medium as a path does, up
+// to `max_crossings` of them. Every integrator's shadow rays and connections go through it.
+Rgb shadow_transmittance(const Scene& scene, Ray shadow, MediumTracker medium, int max_crossings, MediumRng& rng,
+                         RayCounters& counters);
+
+// The seed of a path's MediumRng: a hash of a ray that the pixel sample's numbers jitter (its camera ray), so that
+// each sample's stream differs and a render is repeatable, without drawing a sampler dimension (the layout of every
+// other number, and so every render without heterogeneous media, stays as it was).
+uint64_t ray_seed(const Ray& ray);
+
 // A camera sample's time within the shutter and the camera at it (motion blur): in a scene that moves
 // (Scene::moving), the time is the sampler's reserved time dimension (PixelSampler::get1d_time) and a moving camera is
 // posed at it (camera_at); elsewhere the time is 0 and the camera the setup's, and the sampler is not read.
@@ -193,10 +206,6 @@ class IntegratorRegistry {
 // What keeps the integrator `name` from rendering through `camera`, or empty: light tracing and BDPT join paths to
 // the lens through the camera's importance, which only a perspective camera has.
 std::string integrator_camera_problem(const std::string& name, const Camera& camera);
-// What keeps the integrator `name` from rendering `scene`, or empty: light tracing and BDPT have no medium vertices
-// yet, so they refuse a medium that scatters and a medium around the objects (the camera and lights sit in vacuum for
-// them); absorbing media inside objects they render.
-std::string integrator_scene_problem(const std::string& name, const Scene& scene);
 
 // What keeps the integrator `name` from making the render pass `aov` (aov.h), or empty: light tracing splats every
 // sample where it lands, so it has no first surface per pixel nor a pixel's own samples for a variance; BDPT's pixels

@@ -91,8 +91,6 @@ std::shared_ptr<Scene> load_frame_scene(const json& job, const RenderSettings& s
   const Camera camera(scene->camera, settings.width, settings.height);
   const std::string problem = integrator_camera_problem(settings.integrator.name, camera);
   if (!problem.empty()) throw SceneError("/render/integrator", problem);
-  const std::string scene_problem = integrator_scene_problem(settings.integrator.name, *scene);
-  if (!scene_problem.empty()) throw SceneError("/render/integrator", scene_problem);
   return scene;
 }
 

@@ -181,6 +181,12 @@ inline std::shared_ptr<const HomogeneousMedium> absorbing_medium(const double (&
 class MediumTracker {
  public:
   explicit MediumTracker(const Medium* outside = nullptr) : current_(outside), outside_(outside) {}
+  // A tracker that starts in `current` rather than around the objects (a path's later vertex).
+  static MediumTracker starting_in(const Medium* current, const Medium* outside) {
+    MediumTracker t(outside);
+    t.current_ = current;
+    return t;
+  }
   const Medium* current() const { return current_; }
   const Medium* outside() const { return outside_; }
   // The path went `t` along `ray` (its direction not normalised: t is in units of its length) inside the current

@@ -15,6 +15,15 @@
 // left out of the sum. Russian roulette ends subpaths unbiasedly; the weights leave it out (they are any functions
 // of the path that sum to 1 over the strategies that can make it).
 //
+// In participating media (medium.h) both subpaths sample free flights, and a scattering event is a vertex whose phase
+// function takes the BSDF's place; segments that join vertices take the media's transmittance, crossing `interface`
+// boundaries as shadow rays do (Lafortune and Willems 1996, "Rendering participating media with bidirectional path
+// tracing"; Pharr, Jakob and Humphreys, PBR 3rd ed., §16.3.1 and 16.3.4). The densities the weights compare are the
+// directions' (phase or BSDF, by area); the free flights' distance densities are left out of them as pbrt-v3 leaves
+// them out, which keeps the weights a function of the path that sums to 1 over the strategies, so the estimate stays
+// unbiased. A walk passes through index-matched boundaries without a vertex. Medium vertices count towards
+// render.max_volume_depth, not max_depth.
+//
 // `light` keeps only the t = 1 strategies, unweighted: light tracing. It does not see lights at infinity directly
 // (the environment appears black) nor anything seen only through mirrors and glass.
 //
@@ -35,7 +44,7 @@ namespace tessera {
 
 namespace {
 
-enum class VertexKind : uint8_t { kCamera, kLight, kSurface };
+enum class VertexKind : uint8_t { kCamera, kLight, kSurface, kMedium };
 
 struct Vertex {
   VertexKind kind = VertexKind::kSurface;
@@ -45,7 +54,10 @@ struct Vertex {
   Frame frame;  // shading frame (surfaces)
   Vec3 wo;      // unit direction towards the previous vertex (surfaces)
   const Bsdf* bsdf = nullptr;
-  ShadingPoint sp;  // the surface point, for its emission
+  // The medium it scattered in (medium vertices) or was reached through (surfaces).
+  const Medium* medium = nullptr;
+  int volume = 0;                  // medium vertices on its subpath up to and including it
+  ShadingPoint sp;                 // the surface point, for its emission
   const Material* material = nullptr;
   uint32_t object = 0, material_index = 0;  // SurfaceInteraction's (surfaces)
   uint32_t light = kNoLight;                // the light this vertex is on (light vertices, emitting surfaces)
@@ -69,6 +81,8 @@ struct Vertex {
         return !(infinite && delta_light);  // a directional light's direction is fixed
       case VertexKind::kSurface:
         return bsdf && has_non_delta(bsdf->flags());
+      case VertexKind::kMedium:
+        return true;
     }
     return false;
   }
@@ -98,12 +112,39 @@ struct Context {
   // The camera sample's time within the shutter (motion blur): every ray of both subpaths and of their connections is
   // traced at it, so that a path sees the scene at one instant.
   float time = 0;
+  // The pixel sample's stream of further numbers for media from grids (medium.h), shared by its walks and joins.
+  MediumRng* medium_rng = nullptr;
 };
+
+// The medium light crosses leaving vertex v along w: the one a medium vertex is in; the one around the objects at the
+// camera and the lights; at a surface, the one it was reached through when w leaves on that side, else the one
+// beyond it as MediumTracker::refract finds it.
+const Medium* medium_towards(const Context& c, const Vertex& v, const Vec3& w) {
+  switch (v.kind) {
+    case VertexKind::kMedium:
+      return v.medium;
+    case VertexKind::kCamera:
+    case VertexKind::kLight:
+      return c.scene.medium.get();
+    case VertexKind::kSurface:
+      break;
+  }
+  if ((dot(w, v.ng) > 0) == (dot(v.wo, v.ng) > 0)) return v.medium;
+  MediumTracker beyond = MediumTracker::starting_in(v.medium, c.scene.medium.get());
+  beyond.refract(dot(v.wo, v.ng) > 0, v.material->interior.get());
+  return beyond.current();
+}
+
+// The cosine a vertex's scattering weighs light along w by: at a surface the shading normal's; none in a medium.
+float cos_at(const Vertex& v, const Vec3& w) {
+  return v.kind == VertexKind::kMedium ? 1.0f : std::abs(dot(v.frame.n, w));
+}
 
 // The BSDF at surface vertex v for light leaving towards `next`, with the shading-normal correction of importance
 // transport (Veach 1997, 5.3: |wo.ns| |wi.ng| / (|wo.ng| |wi.ns|)); zero where the shading and geometric normals
 // disagree on the side of wi.
 Rgb vertex_f(const Vertex& v, const Vec3& wi, TransportMode mode) {
+  if (v.kind == VertexKind::kMedium) return Rgb(v.medium->phase().p(v.wo, wi));  // symmetric: no adjoint to take
   const Vec3 wo_l = v.frame.to_local(v.wo), wi_l = v.frame.to_local(wi);
   const float go = dot(v.wo, v.ng), gi = dot(wi, v.ng);
   if ((go * gi > 0) != (wo_l.z * wi_l.z > 0)) return Rgb(0);
@@ -162,6 +203,9 @@ float vertex_pdf(const Context& c, const Vertex& v, const Vertex* prev, const Ve
     ray.dir = wn;
     float pdf_pos;
     c.camera.importance_pdf(ray, &pdf_pos, &pdf);
+  } else if (v.kind == VertexKind::kMedium) {
+    if (!prev) return 0;
+    pdf = v.medium->phase().pdf(direction_to(v, *prev), wn);
   } else {
     if (!prev || !v.bsdf) return 0;
     pdf = v.bsdf->pdf(v.frame.to_local(direction_to(v, *prev)), v.frame.to_local(wn));
@@ -176,6 +220,11 @@ void camera_features(const Vertex* camera, int n, SurfaceFeatures* f) {
   bool straight = true;
   for (int i = 1; i < n; ++i) {
     const Vertex& v = camera[i];
+    if (v.kind == VertexKind::kMedium) {
+      // A scattering event in a medium: shaded by the throughput alone, and the camera ray is not followed past it.
+      note_shading(*f, v.beta, nullptr, Vec3(0), v.wo);
+      return;
+    }
     if (v.kind != VertexKind::kSurface) return;
     const bool crossing = v.material->index_matched;
     if (straight && !crossing) {
@@ -198,6 +247,10 @@ void camera_features(const Vertex* camera, int n, SurfaceFeatures* f) {
 // sampled.
 void record_light(LightPassSample& lp, const Vertex& first, const Vec3& toward_light, const Vec3& toward_eye,
                   bool joined, int k, const Rgb& c) {
+  if (first.kind == VertexKind::kMedium) {
+    (k == 1 ? lp.volume_direct : lp.volume_indirect) += c;
+    return;
+  }
   Rgb* direct_or_indirect = k == 1 ? lp.direct : lp.indirect;
   if (!joined) {
     if (first.lobe >= 0) direct_or_indirect[first.lobe] += c;
@@ -211,9 +264,9 @@ void record_light(LightPassSample& lp, const Vertex& first, const Vec3& toward_l
   direct_or_indirect[transmits ? 2 : 1] += c - diffuse;
 }
 
-// Whether the segment between two finite vertices is unobstructed, each end offset off its surface.
-bool visible(const Context& c, const Vertex& a, const Vertex& b, RayCounters& counters) {
-  ++counters.shadow;
+// The fraction of light that crosses the segment between two finite vertices, each end offset off its surface: zero
+// where a surface blocks it, else the media's transmittance along it (shadow_transmittance, from a's side).
+Rgb transmittance(const Context& c, const Vertex& a, const Vertex& b, RayCounters& counters) {
   Ray ray;
   ray.time = c.time;
   const Vec3 d = b.p - a.p;
@@ -222,30 +275,92 @@ bool visible(const Context& c, const Vertex& a, const Vertex& b, RayCounters& co
   ray.dir = target - ray.origin;
   ray.tmin = 0;
   ray.tmax = 1 - 1e-5f;
-  return !c.scene.occluded(ray);
+  const MediumTracker medium = MediumTracker::starting_in(medium_towards(c, a, d), c.scene.medium.get());
+  return shadow_transmittance(c.scene, ray, medium, c.settings.max_volume_depth, *c.medium_rng, counters);
 }
 
-// The subpath's walk from its endpoint (Veach 1997, 10.2): vertices path[1..] after path[0], the endpoint, up to
-// max_vertices of them; returns how many. `beta` and `pdf_dir` are the throughput and the solid-angle density of
-// the ray leaving the endpoint. Camera subpaths that leave the scene end at the environment, as a light vertex.
-// `wavelength_nm` is the pixel sample's, for dispersive BSDFs (0: none).
-int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vertices, TransportMode mode,
-                float wavelength_nm, PixelSampler& sampler, ScratchArena& arena, Vertex* path, RayCounters& counters) {
-  if (max_vertices <= 0) return 0;
+// Russian roulette on the throughput relative to the subpath's start `beta_ref`, from the vertex count
+// rr_start_depth on (`n` vertices so far): false when the walk ends, else `beta` takes the survival's weight.
+bool survives_roulette(const Context& c, int n, Rgb& beta, float eta_scale, float beta_ref, float u_rr) {
+  if (n < c.settings.rr_start_depth) return true;
+  const float q = std::max(0.05f, 1 - max_component(beta) * eta_scale / beta_ref);
+  if (u_rr < q) return false;
+  beta /= 1 - q;
+  return true;
+}
+
+// The subpath's walk from its endpoint (Veach 1997, 10.2): vertices path[1..] after path[0], the endpoint; returns
+// how many. It ends at its max_surfaces-th surface vertex, or when its medium vertices and crossings of index-matched
+// boundaries would pass max_volume_depth. `beta` and `pdf_dir` are the throughput and the solid-angle density of the
+// ray leaving the endpoint. Camera subpaths that leave the scene end at the environment, as a light vertex.
+// `wavelength_nm` is the pixel sample's, for dispersive BSDFs (0: none). A walk `from_infinity` (a light at infinity)
+// brings light from infinitely far through the medium around the objects: its first segment takes that medium's
+// transmittance to infinity (none in a channel that interacts, as the path tracer's escaping paths take) and samples
+// no free flight.
+int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_surfaces, TransportMode mode,
+                float wavelength_nm, bool from_infinity, PixelSampler& sampler, ScratchArena& arena, Vertex* path,
+                RayCounters& counters) {
+  if (max_surfaces <= 0) return 0;
   const Scene& scene = c.scene;
   const float beta_ref = std::max(max_component(beta), 1e-30f);
   float pdf_fwd = pdf_dir;
-  float eta_scale = 1;   // radiance's eta^2 across refractions, kept out of Russian roulette
-  MediumTracker medium;  // the medium the walk is in
-  // Homogeneous media only (integrator_scene_problem refuses the others): their transmittance draws no numbers.
-  MediumRng medium_rng;
-  int n = 0;
-  for (;;) {
-    Vertex& v = path[n + 1];
+  float eta_scale = 1;                       // radiance's eta^2 across refractions, kept out of Russian roulette
+  MediumTracker medium(scene.medium.get());  // the medium the walk is in
+  MediumRng& rng = *c.medium_rng;
+  int n = 0, surfaces = 0;
+  int volume_steps = 0;  // medium vertices and boundary crossings
+  for (bool first_segment = true;; first_segment = false) {
     Vertex& prev = path[n];
     SurfaceInteraction si;
-    if (!scene.intersect(ray, &si)) {
+    const bool found = scene.intersect(ray, &si);
+    const Medium* current = medium.current();
+    if (current && first_segment && from_infinity) {
+      medium.attenuate(beta, ray, kInfinity, rng);
+    } else if (current && current->scatters()) {
+      // A free flight (medium.h): a scattering event before the surface is a medium vertex.
+      const float dir_length = length(ray.dir);
+      const FreeFlight flight =
+          current->sample_free_flight(ray, found ? si.t * dir_length : kInfinity, beta, sampler.get1d(), rng);
+      beta *= flight.weight;
+      if (flight.scattered) {
+        if (is_black(beta) || !is_finite(beta) || volume_steps >= c.settings.max_volume_depth) break;
+        ++volume_steps;
+        Vertex& v = path[n + 1];
+        v = Vertex();
+        v.kind = VertexKind::kMedium;
+        v.medium = current;
+        v.p = ray.origin + ray.dir * (flight.t / dir_length);
+        v.wo = -ray.dir / dir_length;
+        v.beta = beta;
+        v.dispersed = prev.dispersed;
+        v.volume = prev.volume + 1;
+        v.pdf_fwd = to_area(pdf_fwd, prev, v);
+        ++n;
+        sampler.skip1d();  // a surface's lobe choice: a phase function has one lobe
+        const Vec2 u_dir = sampler.get2d();
+        const float u_rr = sampler.get1d();
+        // Sampled exactly, the phase function's weight p / pdf is 1; p is symmetric, so the reverse density is the
+        // forward one.
+        const PhaseSample ps = current->phase().sample(v.wo, u_dir);
+        if (!(ps.pdf > 0)) break;
+        pdf_fwd = ps.pdf;
+        prev.pdf_rev = to_area(ps.pdf, v, prev);
+        if (!survives_roulette(c, n, beta, eta_scale, beta_ref, u_rr)) break;
+        ray.origin = v.p;
+        ray.dir = ps.wi;
+        ray.tmin = 0;
+        ray.tmax = kInfinity;
+        ++counters.bounce;
+        continue;
+      }
+    } else if (current && (found || current == medium.outside())) {
+      // Escaping, a path takes the transmittance to infinity of the medium around the objects only.
+      medium.attenuate(beta, ray, found ? si.t : kInfinity, rng);
+    }
+    if (is_black(beta)) break;
+    if (!found) {
       if (mode == TransportMode::kRadiance && !scene.environment.black()) {
+        Vertex& v = path[n + 1];
         v = Vertex();
         v.kind = VertexKind::kLight;
         v.infinite = true;
@@ -253,15 +368,28 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
         v.beta = beta;
         v.pdf_fwd = pdf_fwd;
         v.light = scene.lights().environment_light();
+        v.volume = prev.volume;
         ++n;
       }
       break;
     }
-    medium.attenuate(beta, ray, si.t, medium_rng);
+    if (si.material->index_matched) {
+      // An index-matched boundary is crossed straight on into the medium beyond, without a vertex.
+      if (volume_steps >= c.settings.max_volume_depth) break;
+      ++volume_steps;
+      medium.refract(si.sp.front_face, si.material->interior.get());
+      ray.origin = offset_ray_origin(si.sp.p, si.sp.ng, ray.dir);
+      ray.tmin = 0;
+      ray.tmax = kInfinity;
+      continue;
+    }
+    Vertex& v = path[n + 1];
     v = Vertex();
     v.kind = VertexKind::kSurface;
+    v.medium = current;
     si.sp.wavelength_nm = wavelength_nm;
     v.dispersed = prev.dispersed || si.material->dispersive;
+    v.volume = prev.volume;
     v.p = si.sp.p;
     v.ng = si.sp.ng;
     v.frame = si.sp.frame;
@@ -275,7 +403,7 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
     v.pdf_fwd = to_area(pdf_fwd, prev, v);
     v.bsdf = si.material->bsdf(si.sp, arena);
     ++n;
-    if (n >= max_vertices || !v.bsdf) break;
+    if (++surfaces >= max_surfaces || !v.bsdf) break;
     const Vec3 wo = v.frame.to_local(v.wo);
     if (wo.z == 0) break;
     const float u_lobe = sampler.get1d();
@@ -305,12 +433,7 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_vert
       medium.refract(si.sp.front_face, si.material->interior.get());
     }
     prev.pdf_rev = to_area(pdf_rev, v, prev);
-    // Russian roulette on the throughput relative to the subpath's start.
-    if (n >= c.settings.rr_start_depth) {
-      const float q = std::max(0.05f, 1 - max_component(beta) * eta_scale / beta_ref);
-      if (u_rr < q) break;
-      beta /= 1 - q;
-    }
+    if (!survives_roulette(c, n, beta, eta_scale, beta_ref, u_rr)) break;
     ray.origin = offset_ray_origin(v.p, v.ng, wi);
     ray.dir = wi;
     ray.tmin = 0;
@@ -388,8 +511,7 @@ float mis_weight(const Context& c, Vertex* light, Vertex* camera, Vertex& sample
 class BidirectionalIntegrator final : public Integrator {
  public:
   BidirectionalIntegrator(const IntegratorSetup& setup, bool light_only) : Integrator(setup), light_only_(light_only) {
-    std::string problem = integrator_camera_problem(setup_.settings.name, setup_.camera);
-    if (problem.empty()) problem = integrator_scene_problem(setup_.settings.name, *setup_.scene);
+    const std::string problem = integrator_camera_problem(setup_.settings.name, setup_.camera);
     if (!problem.empty()) throw std::invalid_argument(problem);
     const double image = static_cast<double>(setup_.width) * setup_.height;
     const double region = static_cast<double>(setup_.region.width) * setup_.region.height;
@@ -397,8 +519,10 @@ class BidirectionalIntegrator final : public Integrator {
     const float r = std::max(setup_.scene->bounds().radius(), 1e-3f);
     disc_pdf_ = 1 / (kPi * r * r);
     // Camera subpaths: the camera and up to max_depth + 1 surfaces (the last may only emit); light subpaths: the
-    // light and up to max_depth surfaces.
-    const size_t per_worker = static_cast<size_t>(setup_.settings.max_depth) * 2 + 4;
+    // light and up to max_depth surfaces; in a scene whose media scatter, either with up to max_volume_depth medium
+    // vertices besides.
+    const size_t volume = setup_.scene->scattering() ? static_cast<size_t>(setup_.settings.max_volume_depth) : 0;
+    const size_t per_worker = (static_cast<size_t>(setup_.settings.max_depth) + 2 + volume) * 2;
     for (int i = 0; i < setup_.pool->size(); ++i) vertices_.emplace_back(per_worker);
   }
 
@@ -488,7 +612,8 @@ void BidirectionalIntegrator::render_tile(const PixelRegion& tile, int w, uint32
       for (uint32_t s = first_sample; s < first_sample + count; ++s) {
         PixelSampler sampler(seed_keys, pixel, s, setup_.sampler);
         camera_at_time(setup_, sampler, &at);
-        const Context c{*setup_.scene, *at.camera, setup_.settings, disc_pdf_, at.time};
+        MediumRng medium_rng(mix64(setup_.seed ^ mix64((static_cast<uint64_t>(pixel) << 32) | s)));
+        const Context c{*setup_.scene, *at.camera, setup_.settings, disc_pdf_, at.time, &medium_rng};
         const Vec2 jitter = sampler.get2d();
         spectrum::WavelengthSample wavelength;
         if (dispersive) wavelength = spectrum::sample_wavelength(sampler.get1d_dimension0());
@@ -537,8 +662,8 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
     camera[0].beta = Rgb(1);
     float pdf_pos, pdf_dir;
     c.camera.importance_pdf(ray, &pdf_pos, &pdf_dir);
-    n_camera = 1 + random_walk(c, ray, Rgb(1), pdf_dir, max_depth + 1, TransportMode::kRadiance, wavelength_nm, sampler,
-                               arena, camera, counters);
+    n_camera = 1 + random_walk(c, ray, Rgb(1), pdf_dir, max_depth + 1, TransportMode::kRadiance, wavelength_nm, false,
+                               sampler, arena, camera, counters);
     if (features) camera_features(camera, n_camera, features);
     if (lp && n_camera >= 2 && camera[1].kind == VertexKind::kSurface && camera[1].bsdf) {
       const Bsdf::LobeColors colors = camera[1].bsdf->lobe_colors();
@@ -570,7 +695,7 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
     ray.tmax = kInfinity;
     if (!le.infinite && !is_black(le.n)) ray.origin = offset_ray_origin(le.ray.origin, le.n, le.ray.dir);
     n_light = 1 + random_walk(c, ray, le.weight(), le.pdf_dir, max_depth, TransportMode::kImportance, wavelength_nm,
-                              sampler, arena, light, counters);
+                              le.infinite, sampler, arena, light, counters);
     if (le.infinite) {
       // From infinity the first surface is found by area across the beam, and the light's own density is that of
       // its direction.
@@ -587,8 +712,10 @@ Rgb BidirectionalIntegrator::sample(const Context& c, Vec2 film_pos, PixelSample
   const int t_max = light_only_ ? 1 : n_camera;
   for (int t = 1; t <= t_max; ++t) {
     for (int s = 0; s <= n_light; ++s) {
+      // The path's scattering vertices: max_depth surfaces at most, and max_volume_depth in media.
       const int depth = s + t - 2;
-      if (depth < 0 || depth > max_depth) continue;
+      const int volume = (s >= 2 ? light[s - 1].volume : 0) + (t >= 2 ? camera[t - 1].volume : 0);
+      if (depth < 0 || depth - volume > max_depth || volume > c.settings.max_volume_depth) continue;
       if (!light_only_ && s == 1 && t == 1) continue;  // the emitter seen directly: s = 0, t = 2 alone
       if (light_only_ && s == 0) continue;
       Vec2 splat_at;
@@ -650,9 +777,10 @@ Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, 
       l = qs.beta * sampled->beta * le.emitted(cs.wi);
       if (qs.on_surface()) l *= std::abs(dot(cs.wi, qs.ng));
     } else {
-      l = qs.beta * vertex_f(qs, cs.wi, TransportMode::kImportance) * sampled->beta * std::abs(dot(cs.wi, qs.frame.n));
+      l = qs.beta * vertex_f(qs, cs.wi, TransportMode::kImportance) * sampled->beta * cos_at(qs, cs.wi);
     }
-    if (is_black(l) || !visible(c, qs, *sampled, counters)) return Rgb(0);
+    if (is_black(l)) return Rgb(0);
+    l *= transmittance(c, qs, *sampled, counters);
     *splat_at = cs.film;
     return l;
   }
@@ -677,13 +805,11 @@ Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, 
     }
     sampled->beta = ls.radiance / ls.pdf;
     sampled->pdf_fwd = pdf_light_origin(c, *sampled, pt);
-    const Rgb l =
-        pt.beta * vertex_f(pt, ls.wi, TransportMode::kRadiance) * sampled->beta * std::abs(dot(ls.wi, pt.frame.n));
+    const Rgb l = pt.beta * vertex_f(pt, ls.wi, TransportMode::kRadiance) * sampled->beta * cos_at(pt, ls.wi);
     if (is_black(l)) return Rgb(0);
-    ++counters.shadow;
     const Ray shadow = shadow_ray_to_light(pt.p, pt.ng, ls, c.time);
-    if (scene.occluded(shadow)) return Rgb(0);
-    return l;
+    const MediumTracker medium = MediumTracker::starting_in(medium_towards(c, pt, ls.wi), scene.medium.get());
+    return l * shadow_transmittance(scene, shadow, medium, c.settings.max_volume_depth, *c.medium_rng, counters);
   }
   // Both subpaths' ends joined by a segment.
   Vertex& qs = light[s - 1];
@@ -695,9 +821,8 @@ Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, 
   const Vec3 w = d / std::sqrt(d2);  // from pt towards qs
   Rgb l = qs.beta * vertex_f(qs, -w, TransportMode::kImportance) * vertex_f(pt, w, TransportMode::kRadiance) * pt.beta;
   if (is_black(l)) return Rgb(0);
-  l *= std::abs(dot(qs.frame.n, w)) * std::abs(dot(pt.frame.n, w)) / d2;
-  if (!visible(c, pt, qs, counters)) return Rgb(0);
-  return l;
+  l *= cos_at(qs, w) * cos_at(pt, w) / d2;
+  return l * transmittance(c, pt, qs, counters);
 }
 
 }  // namespace
@@ -705,16 +830,6 @@ Rgb BidirectionalIntegrator::connect(const Context& c, const LightEmission& le, 
 std::string integrator_camera_problem(const std::string& name, const Camera& camera) {
   if ((name == "light" || name == "bdpt") && !camera.has_importance())
     return "the " + name + " integrator needs a perspective camera";
-  return {};
-}
-
-std::string integrator_scene_problem(const std::string& name, const Scene& scene) {
-  if (name != "light" && name != "bdpt") return {};
-  if (scene.has_scattering_media()) return "integrator " + name + " does not render scattering media yet; use path";
-  if (scene.medium) return "integrator " + name + " does not render a medium around the objects yet; use path";
-  if (std::any_of(scene.materials.begin(), scene.materials.end(),
-                  [](const auto& m) { return m->interior && !m->interior->homogeneous(); }))
-    return "integrator " + name + " does not render media from grids (objects[].medium.grid) yet; use path";
   return {};
 }
 

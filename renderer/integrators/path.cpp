@@ -5,8 +5,6 @@
 // next-event estimation through the media to the lights (the volumetric path tracer of Pharr, Jakob and Humphreys,
 // Physically Based Rendering, 4th ed., §14.2: the transmittance of homogeneous media in closed form, that of media
 // from grids by ratio tracking and their free flights by delta tracking, grid_medium.h).
-#include <bit>
-
 #include "renderer/aov.h"
 #include "renderer/integrator.h"
 #include "renderer/integrators/guided_walk.h"
@@ -18,33 +16,6 @@
 namespace tessera {
 
 namespace {
-
-// The fraction of radiance that travels along `shadow` (to its tmax) through the media from `medium` on: zero when a
-// surface blocks it, else the media's transmittance. Index-matched boundaries (Material::index_matched) do not block:
-// the shadow ray crosses them and changes medium as a path does, up to `max_crossings` of them.
-Rgb shadow_transmittance(const Scene& scene, Ray shadow, MediumTracker medium, int max_crossings, MediumRng& rng,
-                         RayCounters& counters) {
-  ++counters.shadow;
-  Rgb tr(1);
-  if (!scene.index_matched()) {
-    if (scene.occluded(shadow)) return Rgb(0);
-    medium.attenuate(tr, shadow, shadow.tmax, rng);
-    return tr;
-  }
-  for (int crossings = 0;; ++crossings) {
-    SurfaceInteraction si;
-    if (!scene.intersect(shadow, &si)) {
-      medium.attenuate(tr, shadow, shadow.tmax, rng);
-      return tr;
-    }
-    if (!si.material->index_matched || crossings >= max_crossings) return Rgb(0);
-    medium.attenuate(tr, shadow, si.t, rng);
-    medium.refract(si.sp.front_face, si.material->interior.get());
-    shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, shadow.dir);
-    shadow.tmax -= si.t;
-    ++counters.shadow;
-  }
-}
 
 // How a light sample's contribution splits between the lobe classes (Bsdf::eval_diffuse), for the light passes.
 struct LightSplit {
@@ -111,16 +82,6 @@ Rgb direct_light_in_medium(const Scene& scene, const Vec3& p, const Vec3& wo_wor
   return ls.radiance * tr * (f * w / ls.pdf);
 }
 
-// The seed of a path's MediumRng: a hash of its camera ray, whose direction the pixel sample's numbers jitter, so that
-// each sample's stream differs and a render is repeatable, without drawing a sampler dimension (the layout of every
-// other number, and so every render without heterogeneous media, stays as it was).
-uint64_t camera_ray_seed(const Ray& ray) {
-  uint64_t h = 0;
-  for (float f : {ray.origin.x, ray.origin.y, ray.origin.z, ray.dir.x, ray.dir.y, ray.dir.z})
-    h = mix64(h ^ std::bit_cast<uint32_t>(f));
-  return h;
-}
-
 // The camera ray's closest hit when the caller has traced it already (camera rays of neighbouring pixels go to
 // Embree together, as a packet).
 struct PrimaryHit {
@@ -169,11 +130,11 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
   bool prev_delta = true;  // the camera ray counts as a delta event: emitters it sees are added fully
   float prev_pdf = 0;
   Vec3 prev_p;
-  float eta_scale = 1;                       // product of eta^2 across refractions, kept out of Russian roulette
-  MediumTracker medium(scene.medium.get());  // the medium the path is travelling through
-  MediumRng medium_rng(camera_ray_seed(camera_ray));  // the further numbers of heterogeneous media (medium.h)
-  bool dispersed = false;                             // the throughput carries the wavelength's weight
-  const bool scattering = scene.scattering();         // whether any medium scatters: only then are free flights sampled
+  float eta_scale = 1;                         // product of eta^2 across refractions, kept out of Russian roulette
+  MediumTracker medium(scene.medium.get());    // the medium the path is travelling through
+  MediumRng medium_rng(ray_seed(camera_ray));  // the further numbers of heterogeneous media (medium.h)
+  bool dispersed = false;                      // the throughput carries the wavelength's weight
+  const bool scattering = scene.scattering();  // whether any medium scatters: only then are free flights sampled
   // Scattering events in media and crossings of index-matched boundaries: they are not bounces (depth), and have
   // their own limit, settings.max_volume_depth.
   int volume_depth = 0;

@@ -142,6 +142,31 @@ TEST(Bidirectional, AgreesWithThePathTracerOnTheCornellBox) {
   expect_agreement("cornell", scene, 32, 32, grid(32, 32, 2), grid(32, 32, 2), 16, 16);
 }
 
+// In participating media (medium vertices on both subpaths, joins through the media's transmittance and across
+// `interface` boundaries): the Cornell box in a fog that fills the space around the objects (scene.medium, which the
+// camera and the light sit in), and the Cornell box with a sphere of a chromatic, anisotropic medium behind an
+// `interface` boundary (its colours compared channel by channel).
+TEST(Bidirectional, AgreesWithThePathTracerInAFoggedRoom) {
+  json doc = cornell_scene();
+  doc["medium"] = {{"sigma_a", 0.3}, {"sigma_s", {1.2, 1.5, 2.0}}, {"g", 0.5}};
+  auto scene = load_scene(doc, "/scene", SceneLoadOptions{});
+  expect_agreement("fogged room", scene, 32, 32, grid(32, 32, 2), grid(32, 32, 2), 16, 16);
+}
+
+TEST(Bidirectional, AgreesWithThePathTracerOnAScatteringSphere) {
+  json doc = cornell_scene();
+  doc["materials"]["boundary"] = {{"type", "interface"}};
+  doc["objects"].push_back({{"shape", "sphere"},
+                            {"center", {0.28, 0.4, 0.15}},
+                            {"radius", 0.1},
+                            {"material", "boundary"},
+                            {"medium", {{"sigma_a", {1, 2, 4}}, {"sigma_s", {20, 10, 15}}, {"g", 0.4}}}});
+  auto scene = load_scene(doc, "/scene", SceneLoadOptions{});
+  // The sphere's four quarters in the image.
+  const std::vector<PixelRegion> sphere = {{11, 6, 5, 5}, {16, 6, 5, 5}, {11, 11, 5, 5}, {16, 11, 5, 5}};
+  expect_agreement("scattering sphere", scene, 32, 32, sphere, sphere, 16, 16, true);
+}
+
 // The image depends only on (seed, pixel, sample index) with splats too: one thread and many give the same bits, a
 // render stopped and resumed from its film gives the bits of one that was not, and films of sample ranges merge
 // into the film of all the samples.

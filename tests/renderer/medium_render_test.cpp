@@ -75,6 +75,46 @@ TEST(Media, WhiteFurnaceVanishes) {
   }
 }
 
+// The white furnace for every integrator. Under the uniform sky, path and bdpt: bdpt's camera subpaths scatter in the
+// medium, its light subpaths come in from the sky, and every strategy that joins them crosses the interface. Light
+// tracing does not see a light at infinity (bidirectional's header): its furnace is a uniformly emitting sphere
+// around the scene (radiance 1 inwards, scattering nothing), which every integrator sees as 1 through a medium that
+// does not absorb. Each mean is within 0.5 % of 1. Light tracing's image mean, from paths that mostly miss the view,
+// has a standard error of about 0.3 % at 16384 samples per pixel (three seeds: 0.9999, 0.9969, 1.0046): it takes four
+// times as many.
+TEST(Media, WhiteFurnaceVanishesForEveryIntegrator) {
+  const json media[] = {
+      {{"sigma_s", 1.5}, {"g", 0}},
+      {{"sigma_s", {0.3, 1.2, 3.0}}, {"g", 0.6}},
+  };
+  json enclosed = furnace_scene(media[0]);
+  enclosed.erase("environment");
+  enclosed["materials"]["sky"] = {{"type", "emission"}, {"radiance", 1.0}};
+  enclosed["objects"].push_back({{"shape", "sphere"}, {"center", {0, 0, 0}}, {"radius", 2.5}, {"material", "sky"}});
+  struct Case {
+    std::string integrator;
+    json scene;
+    uint32_t spp;
+  };
+  std::vector<Case> cases;
+  for (const json& medium : media) cases.push_back({"bdpt", furnace_scene(medium), 1024});
+  for (const json& medium : media) {
+    json scene = enclosed;
+    scene["objects"][0]["medium"] = medium;
+    for (const char* integrator : {"path", "bdpt", "light"})
+      cases.push_back({integrator, scene, std::string(integrator) == "light" ? 65536u : 1024u});
+  }
+  for (const Case& k : cases) {
+    RenderSettings s = settings(24, k.spp, Estimator::kMis, 3, 8);
+    s.integrator.name = k.integrator;
+    const Rgb mean = mean_color(render_document(k.scene, s));
+    const std::string what = k.integrator + " " + k.scene["objects"][0]["medium"].dump() +
+                             (k.scene.contains("environment") ? " under the sky" : " in the emitting sphere");
+    std::printf("%s: %.4f %.4f %.4f\n", what.c_str(), mean.x, mean.y, mean.z);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(mean[c], 1.0, 0.005) << what << ", channel " << c;
+  }
+}
+
 // The separate limit: with max_volume_depth 0 no path may cross the boundary, and the sphere is black.
 TEST(Media, VolumeDepthLimitsCrossingsAndScattering) {
   RenderSettings s = settings(16, 16, Estimator::kMis, 5, 8);
@@ -208,22 +248,6 @@ TEST(Media, BadInputNamesTheField) {
   bad = good;
   bad["medium"] = {{"sigma_a", {0, 0, -1}}};
   test::expect_scene_error(bad, "/scene/medium/sigma_a/2");
-  // Light tracing and BDPT have no medium vertices yet: a job that asks for them on a scattering medium is refused
-  // at its integrator, and a medium that only absorbs is still rendered.
-  for (const std::string name : {"bdpt", "light"}) {
-    json job = {{"scene", good}, {"render", {{"integrator", name}, {"width", 8}, {"height", 8}}}};
-    try {
-      load_job(job, JobLoadOptions{});
-      ADD_FAILURE() << name << " took a scattering medium";
-    } catch (const SceneError& e) {
-      EXPECT_EQ(e.pointer(), "/render/integrator");
-      EXPECT_NE(std::string(e.what()).find("integrator " + name + " does not render scattering media yet; use path"),
-                std::string::npos)
-          << e.what();
-    }
-    job["scene"]["objects"][0]["medium"] = {{"sigma_a", 0.5}};
-    EXPECT_NO_THROW(load_job(job, JobLoadOptions{})) << name;
-  }
   json job = {{"scene", good}, {"render", {{"max_volume_depth", -1}}}};
   try {
     load_job(job, JobLoadOptions{});

@@ -260,15 +260,10 @@ TEST(Subsurface, BadInputNamesTheField) {
   pbr["materials"]["skin"]["diffuse_transmission"] = 0.5;
   test::expect_scene_error(pbr, mp + "/subsurface_weight", "diffuse_transmission");
 
+  // Every integrator takes it: light tracing and BDPT walk subsurface media with medium vertices.
   for (const std::string name : {"bdpt", "light"}) {
     const json job = {{"scene", good}, {"render", {{"integrator", name}, {"width", 8}, {"height", 8}}}};
-    try {
-      load_job(job, JobLoadOptions{});
-      ADD_FAILURE() << name << " took a subsurface material";
-    } catch (const SceneError& e) {
-      EXPECT_EQ(e.pointer(), "/render/integrator");
-      EXPECT_NE(std::string(e.what()).find("integrator " + name + " does not render"), std::string::npos) << e.what();
-    }
+    EXPECT_NO_THROW(load_job(job, JobLoadOptions{})) << name;
   }
 }
 
