@@ -56,8 +56,8 @@ struct Vertex {
   const Bsdf* bsdf = nullptr;
   // The medium it scattered in (medium vertices) or was reached through (surfaces).
   const Medium* medium = nullptr;
-  int volume = 0;                  // medium vertices on its subpath up to and including it
-  ShadingPoint sp;                 // the surface point, for its emission
+  int volume = 0;   // medium vertices on its subpath up to and including it
+  ShadingPoint sp;  // the surface point, for its emission
   const Material* material = nullptr;
   uint32_t object = 0, material_index = 0;  // SurfaceInteraction's (surfaces)
   uint32_t light = kNoLight;                // the light this vertex is on (light vertices, emitting surfaces)
