@@ -41,16 +41,16 @@ secs() { sed -n 's/.* spp in \([0-9.]*\)s.*/\1/p'; }
 job "$ref_spp" '{"seed": 99}' > "$work/ref.json"
 job "$spp" > "$work/eq.json"
 echo "references: tessera and Cycles, ${size}x${size}, $ref_spp spp each ..."
-"$tessera" render "$work/ref.json" -o "$work/ref_tessera.exr" -q --threads "$threads" 2>&1 | tail -1
+"$tessera" render "$work/ref.json" -o "$work/ref_tessera.exr" --threads "$threads" 2>&1 | tail -1
 t_ref_cycles=$(cycles "$work/ref_cycles.exr" "$ref_spp" 99)
 echo "Cycles: ${size}x${size}, $ref_spp spp in ${t_ref_cycles}s"
 
 echo "timed renders: $spp spp ..."
-t_tessera=$("$tessera" render "$work/eq.json" -o "$work/tessera.exr" -q --threads "$threads" 2>&1 | tail -1 | secs)
+t_tessera=$("$tessera" render "$work/eq.json" -o "$work/tessera.exr" --threads "$threads" 2>&1 | tail -1 | secs)
 t_cycles=$(cycles "$work/cycles.exr" "$spp" 1)
 # Equal time: tessera gets Cycles' render time.
 job 65536 "{\"time_limit_s\": $t_cycles}" > "$work/eqtime.json"
-"$tessera" render "$work/eqtime.json" -o "$work/tessera-eqtime.exr" -q --threads "$threads" 2>&1 | tail -1 > "$work/eqtime.log"
+"$tessera" render "$work/eqtime.json" -o "$work/tessera-eqtime.exr" --threads "$threads" 2>&1 | tail -1 > "$work/eqtime.log"
 
 python3 - "$work" "$t_tessera" "$t_cycles" "$spp" "$size" <<'PY'
 import re, subprocess, sys

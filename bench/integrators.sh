@@ -32,7 +32,7 @@ trap 'rm -rf "$tmp"' EXIT
 # "tessera: WxH, N spp in S s ...", the render time without loading).
 render() {
   "$TESSERA" render "$scene" --width "$SIZE" --height "$SIZE" --spp 65536 --time-limit "$3" --seed "$4" \
-    --integrator "$2" "${threads[@]}" -q -o "$tmp/$1.exr" 2>"$tmp/$1.log"
+    --integrator "$2" "${threads[@]}" -o "$tmp/$1.exr" 2>"$tmp/$1.log"
   sed -n 's/^tessera: [0-9]*x[0-9]*, \([0-9]*\) spp in \([0-9.]*\)s.*/\1 \2/p' "$tmp/$1.log"
 }
 rmse() { { idiff -v -a "$1" "$2" 2>/dev/null || true; } | sed -n 's/^ *RMS error = \([0-9.e+-]*\).*/\1/p'; }

@@ -234,12 +234,16 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         // The next direction: from the phase function, whose one lobe needs no choice; or, in a subsurface walk that
         // has met its surface, by the guided walk's mixture (guided_walk.h), the lobe's number choosing the channel
         // and the technique, the step's distance then drawn with the same pair.
-        if (guiding && walk_normal && current->subsurface() && (!walk || &walk->medium() != current))
-          if (const auto* homogeneous = dynamic_cast<const HomogeneousMedium*>(current)) walk.emplace(*homogeneous);
+        const GuidedWalk* guide = nullptr;  // the walk's constants, when this step is guided
+        if (guiding && walk_normal && current->subsurface()) {
+          if (!walk || &walk->medium() != current)
+            if (const auto* homogeneous = dynamic_cast<const HomogeneousMedium*>(current)) walk.emplace(*homogeneous);
+          if (walk && &walk->medium() == current) guide = &*walk;
+        }
         PhaseSample ps;
-        if (guiding && walk_normal && walk && &walk->medium() == current) {
+        if (guide) {
           const float u_technique = sampler.get1d();
-          guided.emplace(*walk, *walk_normal, wo_world, throughput, u_technique, sampler.get2d());
+          guided.emplace(*guide, *walk_normal, wo_world, throughput, u_technique, sampler.get2d());
           // Light this direction finds is weighted against the light sample taken here by the phase function's
           // density, as the light sample is weighted against it: any pair of weights that sums to one keeps both
           // unbiased (Veach 1997, §9.2.2), whatever density drew the direction.
