@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <vector>
 
@@ -109,6 +110,12 @@ class GridMedium final : public Medium {
     if (desc.majorant_grid && lo_.x <= hi_.x) build_majorant_grid();
   }
 
+  // The largest extinction anywhere, per scene unit, and the optical depth at it across the bounds' diagonal.
+  float majorant() const { return majorant_; }
+  double majorant_optical_depth() const {
+    return lo_.x <= hi_.x ? static_cast<double>(majorant_) * length(hi_ - lo_) : 0.0;
+  }
+
   bool scatters() const override { return majorant_ > 0 && (sigma_s_.x > 0 || sigma_s_.y > 0 || sigma_s_.z > 0); }
   HenyeyGreenstein phase() const override { return HenyeyGreenstein(g_); }
   bool homogeneous() const override { return false; }
@@ -116,19 +123,21 @@ class GridMedium final : public Medium {
   // Ratio tracking (Cramer 1978; Novák, Selle and Jarosz 2014, "Residual ratio tracking for estimating attenuation
   // in participating media", §3): tentative collisions at the majorant's rate, each multiplying the estimate by the
   // probability of a null collision there, 1 - sigma_t(x) / majorant, per channel. Once the estimate is small the
-  // walk is ended by Russian roulette, unbiased (PBR 4th ed. §14.2.2).
+  // walk is ended by Russian roulette, unbiased (PBR 4th ed. §14.2.2), and past kMaxTentativeCollisions with 0.
   Rgb transmittance(const Ray& ray, float distance, MediumRng& rng) const override {
     Segment s;
     if (!clip(ray, distance, &s)) return Rgb(1);
     const Accessor acc = grid_->getConstUnsafeAccessor();
     const Rgb sigma_t = sigma_a_ + sigma_s_;
     Rgb tr(1);
+    int collisions = 0;
     MajorantWalk walk(majorants_.get(), majorant_, s);
     for (MajorantSegment seg; walk.next(&seg);) {
       if (!(seg.sigma > 0)) continue;
       for (float t = seg.t0;;) {
         t -= std::log1p(-rng.next()) / seg.sigma;
         if (!(t < seg.t1)) break;
+        if (++collisions > kMaxTentativeCollisions) return Rgb(0);
         const float d = density(s.o + s.d * t, acc);
         for (int c = 0; c < 3; ++c) tr[c] *= std::max(0.0f, 1 - sigma_t[c] * d / seg.sigma);
         if (max_component(tr) < 0.05f) {
@@ -148,7 +157,7 @@ class GridMedium final : public Medium {
   // sigma_s(x) and times sigma_n(x) = majorant - sigma_t(x), summed over the channels, and the weight takes the
   // chosen event's coefficient over majorant times its probability, per channel. Absorption is not sampled: it is
   // the part of the majorant neither event takes, and the estimate (no emission) is unbiased without it. The first
-  // distance is drawn from `u`, the rest from `rng`.
+  // distance is drawn from `u`, the rest from `rng`. Past kMaxTentativeCollisions the path is absorbed.
   FreeFlight sample_free_flight(const Ray& ray, float t_max, const Rgb& throughput, float u,
                                 MediumRng& rng) const override {
     Segment s;
@@ -156,6 +165,7 @@ class GridMedium final : public Medium {
     const Accessor acc = grid_->getConstUnsafeAccessor();
     Rgb weight(1);
     float u_dist = u;
+    int collisions = 0;
     MajorantWalk walk(majorants_.get(), majorant_, s);
     for (MajorantSegment seg; walk.next(&seg);) {
       if (!(seg.sigma > 0)) continue;
@@ -163,6 +173,7 @@ class GridMedium final : public Medium {
         t -= std::log1p(-std::min(u_dist, 0x1.fffffep-1f)) / seg.sigma;
         u_dist = rng.next();
         if (!(t < seg.t1)) break;
+        if (++collisions > kMaxTentativeCollisions) return FreeFlight{false, t_max, Rgb(0)};
         const float d = density(s.o + s.d * t, acc);
         const Rgb ss = sigma_s_ * d;
         Rgb sn;
@@ -318,6 +329,21 @@ openvdb::math::MinMax<float> value_range(const openvdb::FloatGrid& grid) {
   return range;
 }
 
+// Refuses a medium too dense to track (kMaxMajorantOpticalDepth), naming density_scale, the factor a scene most
+// often sets past all measure.
+void check_optical_depth(const GridMedium& medium, const std::string& name) {
+  const double depth = medium.majorant_optical_depth();
+  if (!(depth > kMaxMajorantOpticalDepth)) return;
+  char text[320];
+  std::snprintf(text, sizeof text,
+                "the grid \"%s\" is too dense to render: its largest extinction (density_scale x its largest density x "
+                "the largest of sigma_a + sigma_s) is %.3g per unit, an optical depth of %.3g across its %.3g units, "
+                "more than the %.3g (2^24) a medium may have; lower density_scale",
+                name.substr(0, 64).c_str(), medium.majorant(), depth, depth / medium.majorant(),
+                kMaxMajorantOpticalDepth);
+  throw GridError("density_scale", text);
+}
+
 }  // namespace
 
 std::shared_ptr<const Medium> load_grid_medium(const GridMediumDesc& desc) {
@@ -360,7 +386,9 @@ std::shared_ptr<const Medium> load_grid_medium(const GridMediumDesc& desc) {
   if (range.min() < 0)
     throw GridError("grid", "the grid \"" + name + "\" holds negative densities (down to " +
                                 std::to_string(range.min()) + "); densities are at least 0");
-  return std::make_shared<GridMedium>(grid, range.max(), desc);
+  auto medium = std::make_shared<GridMedium>(grid, range.max(), desc);
+  check_optical_depth(*medium, name);
+  return medium;
 }
 
 }  // namespace tessera
