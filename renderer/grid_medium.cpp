@@ -1,6 +1,7 @@
 #include "renderer/grid_medium.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <mutex>
@@ -99,6 +100,7 @@ class GridMedium final : public Medium {
       : grid_(std::move(grid)),
         sigma_a_(desc.sigma_a),
         sigma_s_(desc.sigma_s),
+        unit_(desc.sigma_a, desc.sigma_s, desc.g),
         g_(desc.g),
         density_scale_(desc.density_scale),
         translate_(desc.translate),
@@ -138,7 +140,8 @@ class GridMedium final : public Medium {
       for (float t = seg.t0;;) {
         t -= std::log1p(-rng.next()) / seg.sigma;
         if (!(t < seg.t1)) break;
-        if (++collisions > kMaxTentativeCollisions) return tr * marched_transmittance(s, t, acc, rng.next());
+        if (++collisions > kMaxTentativeCollisions)
+          return tr * unit_.transmittance(march(s, t, acc, rng.next()).integral());
         const float d = density(s.o + s.d * t, acc);
         for (int c = 0; c < 3; ++c) tr[c] *= std::max(0.0f, 1 - sigma_t[c] * d / seg.sigma);
         if (max_component(tr) < 0.05f) {
@@ -158,8 +161,8 @@ class GridMedium final : public Medium {
   // sigma_s(x) and times sigma_n(x) = majorant - sigma_t(x), summed over the channels, and the weight takes the
   // chosen event's coefficient over majorant times its probability, per channel. Absorption is not sampled: it is
   // the part of the majorant neither event takes, and the estimate (no emission) is unbiased without it. The first
-  // distance is drawn from `u`, the rest from `rng`. Past kMaxTentativeCollisions the path crosses the rest of the
-  // stretch without scattering, attenuated by its ray-marched transmittance.
+  // distance is drawn from `u`, the rest from `rng`. Past kMaxTentativeCollisions the flight through the rest of
+  // the stretch is sampled in the ray-marched medium.
   FreeFlight sample_free_flight(const Ray& ray, float t_max, const Rgb& throughput, float u,
                                 MediumRng& rng) const override {
     Segment s;
@@ -176,7 +179,7 @@ class GridMedium final : public Medium {
         u_dist = rng.next();
         if (!(t < seg.t1)) break;
         if (++collisions > kMaxTentativeCollisions)
-          return FreeFlight{false, t_max, weight * marched_transmittance(s, t, acc, u_dist)};
+          return marched_free_flight(march(s, t, acc, u_dist), t_max, throughput * weight, rng.next(), weight);
         const float d = density(s.o + s.d * t, acc);
         const Rgb ss = sigma_s_ * d;
         Rgb sn;
@@ -195,20 +198,53 @@ class GridMedium final : public Medium {
   }
 
  private:
-  // The transmittance from t to the end of segment `s` by ray marching (Perlin and Hoffert 1989, "Hypertexture"): the
-  // optical depth by the midpoint rule at kMarchPoints points offset by `u` in [0, 1), exp(-depth) per channel. A
-  // biased estimate (the quadrature's error, and Jensen's inequality over the offset) of bounded cost, for the rest
-  // of a tracking call that reached kMaxTentativeCollisions: near 1 over the empty voxels of a dense cell, near 0
-  // in the dense medium itself.
-  Rgb marched_transmittance(const Segment& s, float t, const Accessor& acc, float u) const {
-    constexpr int kMarchPoints = 64;
-    if (!(t < s.t1)) return Rgb(1);
-    const float dt = (s.t1 - t) / kMarchPoints;
-    double integral = 0;
-    for (int i = 0; i < kMarchPoints; ++i) integral += density(s.o + s.d * (t + (i + u) * dt), acc);
-    const float depth = static_cast<float>(integral * dt);
-    const Rgb sigma_t = sigma_a_ + sigma_s_;
-    return Rgb(std::exp(-sigma_t.x * depth), std::exp(-sigma_t.y * depth), std::exp(-sigma_t.z * depth));
+  // The rest of a stretch from t by ray marching (Perlin and Hoffert 1989, "Hypertexture"): kMarchPoints equal
+  // intervals, each of the density at its point offset by `u` in [0, 1) (a jittered midpoint rule), for the rest of
+  // a tracking call that reached kMaxTentativeCollisions. A biased stand-in of bounded cost (the quadrature's
+  // error), near the medium where the density varies little across an interval.
+  struct MarchedRest {
+    static constexpr int kMarchPoints = 64;
+    float t0 = 0, dt = 0;
+    std::array<float, kMarchPoints> density{};
+    // The integral of the density over the rest: the optical depth at unit extinction.
+    float integral() const {
+      double sum = 0;
+      for (float d : density) sum += d;
+      return static_cast<float>(sum * dt);
+    }
+    // The distance along the ray at which the integral from t0 reaches `depth` (<= integral()).
+    float distance_at(float depth) const {
+      float from = 0;
+      for (int i = 0; i < kMarchPoints; ++i) {
+        const float to = from + density[i] * dt;
+        if (depth < to && density[i] > 0) return t0 + i * dt + (depth - from) / density[i];
+        from = to;
+      }
+      return t0 + kMarchPoints * dt;
+    }
+  };
+  MarchedRest march(const Segment& s, float t, const Accessor& acc, float u) const {
+    MarchedRest rest;
+    rest.t0 = t;
+    rest.dt = std::max(0.0f, s.t1 - t) / MarchedRest::kMarchPoints;
+    for (int i = 0; i < MarchedRest::kMarchPoints; ++i)
+      rest.density[i] = density(s.o + s.d * (t + (i + u) * rest.dt), acc);
+    return rest;
+  }
+
+  // A free flight through the marched rest, for a path of throughput `throughput` that carries `weight` so far. In
+  // the coordinate D(t), the integral of the density from the rest's start, every channel's transmittance is
+  // exp(-sigma_t D): the rest is the homogeneous medium of the grid's coefficients at density 1 over D's range, whose
+  // flight (chromatic, by its one-sample MIS over the channels) is sampled from `u` and taken back to a distance.
+  // The weight is the same in either coordinate: the density at the point divides both the integrand and the pdf.
+  FreeFlight marched_free_flight(const MarchedRest& rest, float t_max, const Rgb& throughput, float u,
+                                 const Rgb& weight) const {
+    const FreeFlight f = unit_.sample_free_flight(rest.integral(), throughput, u);
+    if (!f.scattered) return FreeFlight{false, t_max, weight * f.weight};
+    // A scattering of weight 0 (no channel scatters) is an absorption, which tracking reports so.
+    if (!(max_component(f.weight) > 0)) return FreeFlight{false, t_max, Rgb(0)};
+    return FreeFlight{true, std::min(rest.distance_at(f.t), rest.t0 + MarchedRest::kMarchPoints * rest.dt),
+                      weight * f.weight};
   }
 
   // The density at scene point p: the grid's value there by trilinear interpolation (OpenVDB's BoxSampler), scaled.
@@ -314,6 +350,7 @@ class GridMedium final : public Medium {
 
   openvdb::FloatGrid::ConstPtr grid_;
   Rgb sigma_a_, sigma_s_;
+  HomogeneousMedium unit_;  // the coefficients at density 1, as a medium: the marched rest's, per unit of density
   float g_, density_scale_;
   Vec3 translate_;
   float scale_;

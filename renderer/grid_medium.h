@@ -17,18 +17,19 @@
 namespace tessera {
 
 // The most tentative collisions one tracking call (one transmittance estimate, one free flight) takes; past them the
-// call ray-marches the rest of its stretch (a bounded quadrature of the optical depth at 64 points): a transmittance
-// estimate takes its product so far times the marched transmittance, a free flight crosses the rest without
-// scattering, its weight times the marched transmittance. Delta and ratio tracking take about majorant x distance
-// tentative collisions (Novák, Georgiev, Hanika and Jarosz 2018, §5; PBR 4th ed. §14.2), unbounded as
-// density_scale grows, and where the steps 1 / majorant fall below a float's spacing the tracking does not advance
-// at all. With a majorant mu tight over extinctions sigma_t, the transmittance left after N tentative collisions is
-// about exp(-N sigma_t / mu): below exp(-10) for any majorant up to 6500 times the extinctions met (ratio tracking's
-// Russian roulette has ended most such walks long before), so what the call does past the cap changes a negligible
-// part of the estimate. Where the majorant is looser still (a long stretch of near-empty voxels under the majorant
-// of a dense cell of 8 voxels, or under the global majorant) the marching keeps such a ray from being darkened, at
-// the price of its bias and of the scattering it does not sample in the rest; the cap bounds a call to a few
-// milliseconds.
+// call ray-marches the rest of its stretch, a bounded quadrature of the density at 64 points: a transmittance
+// estimate takes its product so far times the marched transmittance, and a free flight is sampled through the
+// marched rest as through a homogeneous medium, in the coordinate of the density's integral. Delta and ratio
+// tracking take about majorant x distance tentative collisions (Novák, Georgiev, Hanika and Jarosz 2018, §5; PBR 4th
+// ed. §14.2), unbounded as density_scale grows, and where the steps 1 / majorant fall below a float's spacing the
+// tracking does not advance at all. With a majorant mu tight over extinctions sigma_t, the transmittance left after N
+// tentative collisions is about exp(-N sigma_t / mu): below exp(-10) for any majorant up to 6500 times the
+// extinctions met (ratio tracking's Russian roulette has ended most such walks long before), so what a call does past
+// the cap changes a negligible part of the estimate. Where the majorant is looser still (a long stretch of near-empty
+// voxels under the majorant of a dense cell of 8 voxels, or under the global majorant) the call reaches the cap, and
+// the marching's bias, small where the density varies little across a 64th of the rest, is the price of a call
+// bounded to a few milliseconds; ending such a call as absorbed instead would darken every ray that crosses the empty
+// edge of a dense cloud.
 inline constexpr int kMaxTentativeCollisions = 1 << 16;
 
 // The largest optical depth at the majorant across a grid's diagonal that a medium may have: 2^24, a float's
