@@ -1,7 +1,9 @@
 #include "renderer/grid_medium.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <vector>
 
@@ -98,6 +100,7 @@ class GridMedium final : public Medium {
       : grid_(std::move(grid)),
         sigma_a_(desc.sigma_a),
         sigma_s_(desc.sigma_s),
+        unit_(desc.sigma_a, desc.sigma_s, desc.g),
         g_(desc.g),
         density_scale_(desc.density_scale),
         translate_(desc.translate),
@@ -109,6 +112,12 @@ class GridMedium final : public Medium {
     if (desc.majorant_grid && lo_.x <= hi_.x) build_majorant_grid();
   }
 
+  // The largest extinction anywhere, per scene unit, and the optical depth at it across the bounds' diagonal.
+  float majorant() const { return majorant_; }
+  double majorant_optical_depth() const {
+    return lo_.x <= hi_.x ? static_cast<double>(majorant_) * length(hi_ - lo_) : 0.0;
+  }
+
   bool scatters() const override { return majorant_ > 0 && (sigma_s_.x > 0 || sigma_s_.y > 0 || sigma_s_.z > 0); }
   HenyeyGreenstein phase() const override { return HenyeyGreenstein(g_); }
   bool homogeneous() const override { return false; }
@@ -116,19 +125,23 @@ class GridMedium final : public Medium {
   // Ratio tracking (Cramer 1978; Novák, Selle and Jarosz 2014, "Residual ratio tracking for estimating attenuation
   // in participating media", §3): tentative collisions at the majorant's rate, each multiplying the estimate by the
   // probability of a null collision there, 1 - sigma_t(x) / majorant, per channel. Once the estimate is small the
-  // walk is ended by Russian roulette, unbiased (PBR 4th ed. §14.2.2).
+  // walk is ended by Russian roulette, unbiased (PBR 4th ed. §14.2.2). Past kMaxTentativeCollisions the rest of the
+  // stretch is ray-marched.
   Rgb transmittance(const Ray& ray, float distance, MediumRng& rng) const override {
     Segment s;
     if (!clip(ray, distance, &s)) return Rgb(1);
     const Accessor acc = grid_->getConstUnsafeAccessor();
     const Rgb sigma_t = sigma_a_ + sigma_s_;
     Rgb tr(1);
+    int collisions = 0;
     MajorantWalk walk(majorants_.get(), majorant_, s);
     for (MajorantSegment seg; walk.next(&seg);) {
       if (!(seg.sigma > 0)) continue;
       for (float t = seg.t0;;) {
         t -= std::log1p(-rng.next()) / seg.sigma;
         if (!(t < seg.t1)) break;
+        if (++collisions > kMaxTentativeCollisions)
+          return tr * unit_.transmittance(march(s, t, acc, rng.next()).integral());
         const float d = density(s.o + s.d * t, acc);
         for (int c = 0; c < 3; ++c) tr[c] *= std::max(0.0f, 1 - sigma_t[c] * d / seg.sigma);
         if (max_component(tr) < 0.05f) {
@@ -148,7 +161,8 @@ class GridMedium final : public Medium {
   // sigma_s(x) and times sigma_n(x) = majorant - sigma_t(x), summed over the channels, and the weight takes the
   // chosen event's coefficient over majorant times its probability, per channel. Absorption is not sampled: it is
   // the part of the majorant neither event takes, and the estimate (no emission) is unbiased without it. The first
-  // distance is drawn from `u`, the rest from `rng`.
+  // distance is drawn from `u`, the rest from `rng`. Past kMaxTentativeCollisions the flight through the rest of
+  // the stretch is sampled in the ray-marched medium.
   FreeFlight sample_free_flight(const Ray& ray, float t_max, const Rgb& throughput, float u,
                                 MediumRng& rng) const override {
     Segment s;
@@ -156,6 +170,7 @@ class GridMedium final : public Medium {
     const Accessor acc = grid_->getConstUnsafeAccessor();
     Rgb weight(1);
     float u_dist = u;
+    int collisions = 0;
     MajorantWalk walk(majorants_.get(), majorant_, s);
     for (MajorantSegment seg; walk.next(&seg);) {
       if (!(seg.sigma > 0)) continue;
@@ -163,6 +178,8 @@ class GridMedium final : public Medium {
         t -= std::log1p(-std::min(u_dist, 0x1.fffffep-1f)) / seg.sigma;
         u_dist = rng.next();
         if (!(t < seg.t1)) break;
+        if (++collisions > kMaxTentativeCollisions)
+          return marched_free_flight(march(s, t, acc, u_dist), t_max, throughput * weight, rng.next(), weight);
         const float d = density(s.o + s.d * t, acc);
         const Rgb ss = sigma_s_ * d;
         Rgb sn;
@@ -181,6 +198,55 @@ class GridMedium final : public Medium {
   }
 
  private:
+  // The rest of a stretch from t by ray marching (Perlin and Hoffert 1989, "Hypertexture"): kMarchPoints equal
+  // intervals, each of the density at its point offset by `u` in [0, 1) (a jittered midpoint rule), for the rest of
+  // a tracking call that reached kMaxTentativeCollisions. A biased stand-in of bounded cost (the quadrature's
+  // error), near the medium where the density varies little across an interval.
+  struct MarchedRest {
+    static constexpr int kMarchPoints = 64;
+    float t0 = 0, dt = 0;
+    std::array<float, kMarchPoints> density{};
+    // The integral of the density over the rest: the optical depth at unit extinction.
+    float integral() const {
+      double sum = 0;
+      for (float d : density) sum += d;
+      return static_cast<float>(sum * dt);
+    }
+    // The distance along the ray at which the integral from t0 reaches `depth` (<= integral()).
+    float distance_at(float depth) const {
+      float from = 0;
+      for (int i = 0; i < kMarchPoints; ++i) {
+        const float to = from + density[i] * dt;
+        if (depth < to && density[i] > 0) return t0 + i * dt + (depth - from) / density[i];
+        from = to;
+      }
+      return t0 + kMarchPoints * dt;
+    }
+  };
+  MarchedRest march(const Segment& s, float t, const Accessor& acc, float u) const {
+    MarchedRest rest;
+    rest.t0 = t;
+    rest.dt = std::max(0.0f, s.t1 - t) / MarchedRest::kMarchPoints;
+    for (int i = 0; i < MarchedRest::kMarchPoints; ++i)
+      rest.density[i] = density(s.o + s.d * (t + (i + u) * rest.dt), acc);
+    return rest;
+  }
+
+  // A free flight through the marched rest, for a path of throughput `throughput` that carries `weight` so far. In
+  // the coordinate D(t), the integral of the density from the rest's start, every channel's transmittance is
+  // exp(-sigma_t D): the rest is the homogeneous medium of the grid's coefficients at density 1 over D's range, whose
+  // flight (chromatic, by its one-sample MIS over the channels) is sampled from `u` and taken back to a distance.
+  // The weight is the same in either coordinate: the density at the point divides both the integrand and the pdf.
+  FreeFlight marched_free_flight(const MarchedRest& rest, float t_max, const Rgb& throughput, float u,
+                                 const Rgb& weight) const {
+    const FreeFlight f = unit_.sample_free_flight(rest.integral(), throughput, u);
+    if (!f.scattered) return FreeFlight{false, t_max, weight * f.weight};
+    // A scattering of weight 0 (no channel scatters) is an absorption, which tracking reports so.
+    if (!(max_component(f.weight) > 0)) return FreeFlight{false, t_max, Rgb(0)};
+    return FreeFlight{true, std::min(rest.distance_at(f.t), rest.t0 + MarchedRest::kMarchPoints * rest.dt),
+                      weight * f.weight};
+  }
+
   // The density at scene point p: the grid's value there by trilinear interpolation (OpenVDB's BoxSampler), scaled.
   float density(const Vec3& p, const Accessor& acc) const {
     const Vec3 w = (p - translate_) / scale_;
@@ -284,6 +350,7 @@ class GridMedium final : public Medium {
 
   openvdb::FloatGrid::ConstPtr grid_;
   Rgb sigma_a_, sigma_s_;
+  HomogeneousMedium unit_;  // the coefficients at density 1, as a medium: the marched rest's, per unit of density
   float g_, density_scale_;
   Vec3 translate_;
   float scale_;
@@ -316,6 +383,21 @@ openvdb::math::MinMax<float> value_range(const openvdb::FloatGrid& grid) {
   range.add(grid.background());
   for (auto it = grid.cbeginValueOff(); it; ++it) range.add(*it);
   return range;
+}
+
+// Refuses a medium too dense to track (kMaxMajorantOpticalDepth), naming density_scale, the factor a scene most
+// often sets past all measure.
+void check_optical_depth(const GridMedium& medium, const std::string& name) {
+  const double depth = medium.majorant_optical_depth();
+  if (!(depth > kMaxMajorantOpticalDepth)) return;
+  char text[320];
+  std::snprintf(text, sizeof text,
+                "the grid \"%s\" is too dense to render: its largest extinction (density_scale x its largest density x "
+                "the largest of sigma_a + sigma_s) is %.3g per unit, an optical depth of %.3g across its %.3g units, "
+                "more than the %.3g (2^24) a medium may have; lower density_scale",
+                name.substr(0, 64).c_str(), medium.majorant(), depth, depth / medium.majorant(),
+                kMaxMajorantOpticalDepth);
+  throw GridError("density_scale", text);
 }
 
 }  // namespace
@@ -360,7 +442,9 @@ std::shared_ptr<const Medium> load_grid_medium(const GridMediumDesc& desc) {
   if (range.min() < 0)
     throw GridError("grid", "the grid \"" + name + "\" holds negative densities (down to " +
                                 std::to_string(range.min()) + "); densities are at least 0");
-  return std::make_shared<GridMedium>(grid, range.max(), desc);
+  auto medium = std::make_shared<GridMedium>(grid, range.max(), desc);
+  check_optical_depth(*medium, name);
+  return medium;
 }
 
 }  // namespace tessera

@@ -535,11 +535,15 @@ void post_asset(ApiContext& ctx, const Request& req, Response& res) {
         {"application/octet-stream", {"", {".glb", ".gltf", ".hdr", ".exr", ".vdb"}}},
     };
     auto it = kTypes.find(type);
-    if (it == kTypes.end())
+    if (it == kTypes.end()) {
+      // The types the table takes, those without a default name saying that they need one.
+      std::string accepted;
+      for (const auto& [accepted_type, name_and_extensions] : kTypes)
+        accepted += ", " + accepted_type + (name_and_extensions.first.empty() ? " (with ?name=file.ext)" : "");
       return send_problem(res, 415,
-                          "an asset is model/gltf-binary, model/gltf+json, image/vnd.radiance, image/x-exr or "
-                          "multipart/form-data, not \"" +
+                          "an asset is multipart/form-data or one file of type " + accepted.substr(2) + ", not \"" +
                               req.get_header_value("Content-Type").substr(0, 100) + "\"");
+    }
     std::string name = req.has_param("name") ? req.get_param_value("name") : it->second.first;
     if (name.empty()) return send_problem(res, 422, "an application/octet-stream upload needs ?name=file.ext");
     std::string ext = std::filesystem::path(name).extension().string();

@@ -523,7 +523,16 @@ TEST_F(ServiceTest, HostileUploadsAreRefusedAndTheDaemonLives) {
     }
     expect_alive(*client_, c.name);
   }
-  expect_status(client_->Post("/v1/assets", "x", "text/plain"), 415, "wrong content type");
+  // A type it does not take is told those it does: each of the table's and multipart's.
+  auto wrong_type = client_->Post("/v1/assets", "x", "text/plain");
+  expect_status(wrong_type, 415, "wrong content type");
+  if (wrong_type) {
+    const std::string detail = json::parse(wrong_type->body).value("detail", "");
+    for (const char* type :
+         {"application/octet-stream (with ?name=file.ext)", "model/gltf-binary", "model/gltf+json",
+          "image/vnd.radiance", "image/x-exr", "image/aces", "multipart/form-data", "\"text/plain\""})
+      EXPECT_NE(detail.find(type), std::string::npos) << type << " is not in: " << detail;
+  }
   expect_status(client_->Post("/v1/assets?name=x.hdr", good_glb, "model/gltf-binary"), 422, "name vs type");
   expect_status(client_->Post("/v1/assets?name=a.glb", std::string(9 << 20, 'x'), "model/gltf-binary"), 413, "big");
   // A good one goes through; nothing of the refused ones was stored.

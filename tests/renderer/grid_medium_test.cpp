@@ -5,6 +5,7 @@
 // OpenVDB.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -225,6 +226,119 @@ TEST(MediumGrid, TheMajorantGridFollowsStepsAndTiles) {
   }
 }
 
+// The numbers a tracking call drew from its stream: how many steps of SplitMix64 lie between `before` and `after`,
+// found by stepping a copy of `before` until its next three numbers are those of `after`; -1 past `limit`.
+long draws_between(MediumRng before, const MediumRng& after, long limit) {
+  const auto next_three = [](MediumRng rng) {
+    const float a = rng.next(), b = rng.next();
+    return std::array<float, 3>{a, b, rng.next()};
+  };
+  const std::array<float, 3> target = next_three(after);
+  for (long n = 0; n <= limit; ++n, before.next())
+    if (next_three(before) == target) return n;
+  return -1;
+}
+
+// The most numbers one tracking call may draw: one a tentative collision up to kMaxTentativeCollisions and one past
+// it, and one more each for ratio tracking's roulette or delta tracking's choice of event.
+constexpr long kMaxDraws = 2L * kMaxTentativeCollisions + 2;
+
+// Runs `track(rng)` and expects it to draw at most kMaxDraws numbers from `rng`; returns how many it drew (-1: more).
+template <typename F>
+long expect_bounded_draws(MediumRng& rng, const std::string& what, F track) {
+  const MediumRng before = rng;
+  track(rng);
+  const long n = draws_between(before, rng, kMaxDraws);
+  EXPECT_NE(n, -1) << what << " drew more than " << kMaxDraws << " numbers";
+  return n;
+}
+
+// Tracking a grid far denser than its surroundings: near the densest a medium may be (an optical depth of 9 million
+// at its majorant across the grid, kMaxMajorantOpticalDepth 16.8 million), entered through the one-voxel ramp from the
+// background. Ratio tracking's estimate is 0, as is the transmittance, exp(-5 x 10^6); every free flight of a medium
+// that only scatters scatters, and of one that only absorbs is absorbed (weight 0); and no call draws more numbers
+// than its cap of tentative collisions allows. (Delta tracking of the absorbing medium reaches the cap: its weight
+// falls through the ramp, 2 x 10^5 tentative collisions, with no roulette to end it, and ends at 0 all the same.)
+TEST(MediumGrid, TrackingAVeryDenseGridGivesTheOpaqueLimit) {
+  const GridFolder folder;
+  const fs::path file = folder.write("constant.vdb", {make_grid(21, [](int, int, int) { return 1.0f; })});
+  for (const bool scattering : {true, false}) {
+    SCOPED_TRACE(scattering ? "scattering" : "absorbing");
+    GridMediumDesc d = desc_of(file, scattering ? Rgb(0) : Rgb(1), scattering ? Rgb(1) : Rgb(0));
+    d.density_scale = 4e6f;  // over the bounds' diagonal of 1.3 sqrt(3) units, an optical depth of 9 million
+    const auto medium = load_grid_medium(d);
+    const Ray ray{Vec3(-0.5f, 0.5f, 0.5f), Vec3(1, 0, 0)};  // 1.3 units through the bounds
+    MediumRng rng(13);
+    long most = 0;
+    for (int i = 0; i < 64; ++i) {
+      Rgb tr;
+      most = std::max(most, expect_bounded_draws(rng, "ratio tracking",
+                                                 [&](MediumRng& r) { tr = medium->transmittance(ray, 2, r); }));
+      EXPECT_EQ(tr, Rgb(0));
+      FreeFlight f;
+      most = std::max(most, expect_bounded_draws(rng, "delta tracking", [&](MediumRng& r) {
+                        f = medium->sample_free_flight(ray, 2, Rgb(1), MediumRng(i).next(), r);
+                      }));
+      if (scattering) {
+        EXPECT_TRUE(f.scattered);
+        EXPECT_GT(f.t, 0.34f);  // in the ramp from the background, x from -0.15 to -0.1
+        EXPECT_LT(f.t, 0.4f);
+      } else {
+        EXPECT_FALSE(f.scattered);
+        EXPECT_EQ(f.weight, Rgb(0));
+      }
+    }
+    std::printf("%s: at most %ld numbers drawn by a call\n", scattering ? "scattering" : "absorbing", most);
+  }
+}
+
+// Where the majorant is far looser than the extinction, a tracking call ray-marches the rest of its stretch after
+// kMaxTentativeCollisions: along a row of a grid of density 2e-7 (at density_scale 5 x 10^6, extinction 1 per unit,
+// half of it scattering) whose one dense voxel sets the global majorant (5 x 10^6 per unit, some 6.5 x 10^6
+// tentative collisions to cross the row), each call draws at most the numbers its cap allows; ratio tracking's
+// estimate is the transmittance exp(-1.25) (the row's optical depth: 1.2 units of voxel centres and the half-voxel
+// ramp from the background at each end) within the marching's error, call by call (the tracked part, 0.013 units,
+// hardly varies); and free flights cross with expected weight exp(-1.25) and scatter, inside the row, with expected
+// weight 0.5 (1 - exp(-1.25)), within their standard errors.
+TEST(MediumGrid, TrackingPastTheCapRayMarchesTheRest) {
+  const GridFolder folder;
+  const fs::path file = folder.write(
+      "speck.vdb", {make_grid(21, [](int i, int j, int k) { return i == 18 && j == 18 && k == 18 ? 1.0f : 2e-7f; })});
+  GridMediumDesc d = desc_of(file, Rgb(0.5f), Rgb(0.5f));
+  d.density_scale = 5e6f;
+  d.majorant_grid = false;
+  const auto medium = load_grid_medium(d);
+  const Ray row{Vec3(-0.5f, 0.1f, 0.1f), Vec3(1, 0, 0)};  // 1.3 units through the bounds, 0.8 from the speck
+  const float expected = std::exp(-1.25f);
+  MediumRng rng(17);
+  Rgb tr;
+  for (int i = 0; i < 8; ++i) {
+    expect_bounded_draws(rng, "ratio tracking", [&](MediumRng& r) { tr = medium->transmittance(row, 2, r); });
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(tr[c], expected, 0.01f * expected) << "ratio tracking, channel " << c;
+  }
+  std::vector<FreeFlight> flights(400);
+  for (size_t i = 0; i < flights.size(); ++i)
+    expect_bounded_draws(rng, "delta tracking", [&](MediumRng& r) {
+      flights[i] = medium->sample_free_flight(row, 2, Rgb(1), MediumRng(i).next(), r);
+    });
+  for (const FreeFlight& f : flights) {
+    EXPECT_TRUE(f.scattered || f.t == 2.0f);
+    if (f.scattered) {
+      EXPECT_TRUE(f.t > 0.35f && f.t < 1.65f) << f.t;
+    }
+  }
+  const auto part = [&](bool scattered) {
+    return mean_and_se(static_cast<int>(flights.size()),
+                       [&](int i) { return flights[i].scattered == scattered ? flights[i].weight : Rgb(0); });
+  };
+  const auto crossed = part(false), scattered = part(true);
+  std::printf(
+      "transmittance (the last) %.4f (expected %.4f); free flights crossing %.4f, scattering %.4f (expected %.4f)\n",
+      tr.x, expected, crossed.first.x, scattered.first.x, 0.5f * (1 - expected));
+  expect_within(crossed, Rgb(expected), "crossing");
+  expect_within(scattered, Rgb(0.5f * (1 - expected)), "scattering");
+}
+
 // A closed box mesh over [lo, hi]^3, its triangles' front faces outwards.
 json box_object(float lo, float hi, const json& medium) {
   json positions = json::array();
@@ -360,6 +474,13 @@ TEST(MediumGrid, BadGridsAreRefusedNamingTheField) {
   expect_error(doc({{"grid", "constant.vdb"}, {"sigma_s", {1, -1, 1}}}), folder.path, m + "/sigma_s/1", "");
   expect_error(doc({{"grid", "constant.vdb"}, {"density_scale", -2}}), folder.path, m + "/density_scale", "");
   expect_error(doc({{"grid", "constant.vdb"}, {"scale", 0}}), folder.path, m + "/scale", "");
+  // Past an optical depth of 2^24 = 1.68 x 10^7 at the majorant across the grid's diagonal (0.5 sqrt(3) units here,
+  // the voxels' box widened by the one voxel interpolation reaches): 1.65 x 10^7 at 1.9 x 10^7 per unit, 1.73 x 10^7
+  // at 2 x 10^7.
+  EXPECT_NO_THROW(
+      load_scene(doc({{"grid", "constant.vdb"}, {"sigma_s", 1}, {"density_scale", 1.9e7}}), "/scene", options));
+  expect_error(doc({{"grid", "constant.vdb"}, {"sigma_s", 1}, {"density_scale", 2e7}}), folder.path,
+               m + "/density_scale", "an optical depth of 1.73e+07 across its 0.866 units, more than the 1.68e+07");
   expect_error(doc({{"grid", "constant.vdb"}, {"grid_nam", "x"}}), folder.path, m + "/grid_nam", "grid_name");
   expect_error(doc({{"sigma_a", 1}, {"density_scale", 2}}), folder.path, m + "/density_scale", "with \"grid\"");
   json around = doc({{"sigma_a", 0.1}});
