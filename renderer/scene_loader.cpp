@@ -403,8 +403,8 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
       Material::Common enclosing;
       enclosing.interior = load_medium(*m, mp, options, true);
       material = static_cast<uint32_t>(scene->materials.size());
-      scene->materials.push_back(
-          MaterialRegistry::builtin().create(material_doc, at(at(pointer, "materials"), name), mctx, std::move(enclosing)));
+      scene->materials.push_back(MaterialRegistry::builtin().create(material_doc, at(at(pointer, "materials"), name),
+                                                                    mctx, std::move(enclosing)));
       scene->material_names.push_back(name);
     }
     if (s == "sphere") {

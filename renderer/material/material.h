@@ -36,8 +36,8 @@ class Material {
     // material): paths cross it straight on, changing medium, and the path tracer does not count the crossing as a
     // bounce.
     bool index_matched = false;
-    // False when none of the material's parameters is a texture (MaterialRegistry::create works it out from the
-    // parameters): hits on it skip working out the texture footprint. True is always correct.
+    // False when none of the material's parameters is a texture: hits on it skip working out the texture footprint.
+    // MaterialRegistry::create works it out from the parameters (a model does not set it). True is always correct.
     bool reads_textures = true;
   };
 
@@ -48,7 +48,7 @@ class Material {
   // The parameters of every model: a few models define some themselves (an emission model's radiance, a subsurface
   // model's interior); MaterialRegistry::create sets the others from the JSON's common keys and from what a loader
   // read elsewhere (a glTF material's coverage, normal maps and volume; an object's medium).
-  // (Every member has an initializer, so that a model can name just the ones it sets.)
+  // Every member has an initializer: a model names only those it sets (Common{.interior = ...}).
   struct Common {
     RgbParam emission{};              // radiance, W/(m^2 sr) per channel
     bool emission_one_sided = false;  // emit only to the side the geometric normal points to
