@@ -58,8 +58,8 @@ void alpha_filter(const RTCFilterFunctionNArguments* args) {
     sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
     const float alpha = data->material->coverage(sp);
     bool keep;
-    if (data->material->alpha_mode == Material::AlphaMode::kMask) {
-      keep = alpha >= data->material->alpha_cutoff;
+    if (data->material->alpha_mode() == Material::AlphaMode::kMask) {
+      keep = alpha >= data->material->alpha_cutoff();
     } else {
       // Blend: keep the hit with probability alpha, decided by a hash of the ray and the hit, so the decision is
       // deterministic (the same ray always sees the same surface) yet uncorrelated between rays.
@@ -87,7 +87,7 @@ void alpha_filter(const RTCFilterFunctionNArguments* args) {
 uint32_t attach_mesh(RTCDevice device, RTCScene scene, const Mesh& mesh, const Material* material,
                      std::vector<std::unique_ptr<AlphaUserData>>& alpha_data) {
   RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  if (material && material->alpha_mode != Material::AlphaMode::kOpaque) {
+  if (material && material->alpha_mode() != Material::AlphaMode::kOpaque) {
     alpha_data.push_back(std::make_unique<AlphaUserData>(AlphaUserData{&mesh, material}));
     rtcSetGeometryUserData(geom, alpha_data.back().get());
     rtcSetGeometryIntersectFilterFunction(geom, &alpha_filter);

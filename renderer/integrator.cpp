@@ -53,9 +53,9 @@ Rgb shadow_transmittance(const Scene& scene, Ray shadow, MediumTracker medium, i
       medium.attenuate(tr, shadow, shadow.tmax, rng);
       return tr;
     }
-    if (!si.material->index_matched || crossings >= max_crossings) return Rgb(0);
+    if (!si.material->index_matched() || crossings >= max_crossings) return Rgb(0);
     medium.attenuate(tr, shadow, si.t, rng);
-    medium.refract(si.sp.front_face, si.material->interior.get());
+    medium.refract(si.sp.front_face, si.material->interior());
     shadow.origin = offset_ray_origin(si.sp.p, si.sp.ng, shadow.dir);
     shadow.tmax -= si.t;
     ++counters.shadow;

@@ -57,7 +57,7 @@ void LightSet::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>&
       triangles_.resize(entries_.size());
       triangles_.push_back({tp.a, tp.b - tp.a, tp.c - tp.a, area > 0 ? c / (2 * area) : Vec3(0, 0, 1), area, &mat});
       entries_.push_back({Kind::kTriangle, m, t});
-      power.push_back(area > 0 ? emitted_power(mat.emission.average(), area, mat.emission_one_sided) : -1.0f);
+      power.push_back(area > 0 ? emitted_power(mat.emission().average(), area, mat.emission_one_sided()) : -1.0f);
     }
   }
   for (uint32_t s = 0; s < (*spheres_).size(); ++s) {
@@ -65,7 +65,7 @@ void LightSet::build(const std::vector<Mesh>& meshes, const std::vector<Sphere>&
     const Material& mat = *(*materials_)[sphere.material];
     if (!mat.emissive()) continue;
     entries_.push_back({Kind::kSphere, s, 0});
-    power.push_back(emitted_power(mat.emission.average(), 4 * kPi * sqr(sphere.radius), mat.emission_one_sided));
+    power.push_back(emitted_power(mat.emission().average(), 4 * kPi * sqr(sphere.radius), mat.emission_one_sided()));
   }
   for (uint32_t i = 0; i < punctual_.size(); ++i) {
     const PunctualLight& l = punctual_[i];
@@ -105,7 +105,7 @@ bool LightSet::sample(const Vec3& p, float u_select, Vec2 u, LightSample* out) c
       sp.p = tri.p0 + tri.e1 * b.x + tri.e2 * b.y;
       sp.ng = tri.n;
       sp.frame = Frame(Vec3(1, 0, 0), Vec3(0, 1, 0), tri.n);  // emission reads ng and uv only
-      if (mat.emission.texture) triangle_uv((*meshes_)[e.object], e.prim, b.x, b.y, &sp);
+      if (mat.emission().texture) triangle_uv((*meshes_)[e.object], e.prim, b.x, b.y, &sp);
       Vec3 d = sp.p - p;
       float dist2 = length_squared(d);
       if (!(dist2 > 0)) return false;
@@ -296,14 +296,14 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, LightEmis
       sp.p = tri.p0 + tri.e1 * b.x + tri.e2 * b.y;
       sp.ng = tri.n;
       sp.frame = Frame(Vec3(1, 0, 0), Vec3(0, 1, 0), tri.n);  // emission reads ng and uv only
-      if (mat.emission.texture) triangle_uv((*meshes_)[e.object], e.prim, b.x, b.y, &sp);
-      const Vec3 dir = sample_emitted_direction(tri.n, mat.emission_one_sided, u_dir, &out->pdf_dir);
+      if (mat.emission().texture) triangle_uv((*meshes_)[e.object], e.prim, b.x, b.y, &sp);
+      const Vec3 dir = sample_emitted_direction(tri.n, mat.emission_one_sided(), u_dir, &out->pdf_dir);
       out->ray.origin = sp.p;
       out->ray.dir = dir;
       out->n = tri.n;
       out->pdf_pos = pmf / tri.area;
-      out->source = mat.emission.eval(sp);
-      out->one_sided = mat.emission_one_sided;
+      out->source = mat.emission().eval(sp);
+      out->one_sided = mat.emission_one_sided();
       out->radiance = out->emitted(dir);
       break;
     }
@@ -315,13 +315,13 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, LightEmis
       sp.p = s.center + n * s.radius;
       sp.ng = n;
       sp.frame = Frame::from_normal(n);
-      const Vec3 dir = sample_emitted_direction(n, mat.emission_one_sided, u_dir, &out->pdf_dir);
+      const Vec3 dir = sample_emitted_direction(n, mat.emission_one_sided(), u_dir, &out->pdf_dir);
       out->ray.origin = sp.p;
       out->ray.dir = dir;
       out->n = n;
       out->pdf_pos = pmf / (4 * kPi * sqr(s.radius));
-      out->source = mat.emission.eval(sp);
-      out->one_sided = mat.emission_one_sided;
+      out->source = mat.emission().eval(sp);
+      out->one_sided = mat.emission_one_sided();
       out->radiance = out->emitted(dir);
       break;
     }
@@ -381,13 +381,13 @@ void LightSet::emission_pdf(uint32_t light, const Vec3& n, const Vec3& dir, floa
       const TriangleGeometry& tri = triangles_[light];
       if (!(tri.area > 0)) return;
       *pdf_pos = pmf / tri.area;
-      *pdf_dir = emitted_direction_pdf(n, tri.material->emission_one_sided, dir);
+      *pdf_dir = emitted_direction_pdf(n, tri.material->emission_one_sided(), dir);
       return;
     }
     case Kind::kSphere: {
       const Sphere& s = (*spheres_)[e.object];
       *pdf_pos = pmf / (4 * kPi * sqr(s.radius));
-      *pdf_dir = emitted_direction_pdf(n, (*materials_)[s.material]->emission_one_sided, dir);
+      *pdf_dir = emitted_direction_pdf(n, (*materials_)[s.material]->emission_one_sided(), dir);
       return;
     }
     case Kind::kPunctual: {

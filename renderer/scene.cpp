@@ -42,8 +42,8 @@ void Scene::finalize_with_lights(const std::vector<PunctualLight>& punctual) {
   index_matched_ = false;
   for (const auto& m : materials) {
     material_ptrs.push_back(m.get());
-    dispersive_ = dispersive_ || m->dispersive;
-    index_matched_ = index_matched_ || m->index_matched;
+    dispersive_ = dispersive_ || m->dispersive();
+    index_matched_ = index_matched_ || m->index_matched();
   }
   scattering_ = has_scattering_media();
   accel_.build(meshes, spheres, groups, instances, material_ptrs);
@@ -170,7 +170,7 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     si->material = materials[s.material].get();
     si->material_index = s.material;
     si->object = static_cast<uint32_t>(meshes.size()) + hit.object;
-    if (si->material->reads_textures) uv_per_world = 1 / (std::sqrt(2.0f) * kPi * s.radius);
+    if (si->material->reads_textures()) uv_per_world = 1 / (std::sqrt(2.0f) * kPi * s.radius);
     sp.vertex_color = Rgb(1);
     si->light = si->material->emissive() ? s.light : kNoLight;
   } else {
@@ -217,11 +217,11 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     const Material* material = materials[mesh.material].get();
     si->material_index = mesh.material;
     si->object = inst ? static_cast<uint32_t>(meshes.size() + spheres.size()) + hit.instance : hit.object;
-    if (cone && ng_len > 0 && material->reads_textures) uv_per_world = std::sqrt(std::abs(uv_det) / ng_len);
+    if (cone && ng_len > 0 && material->reads_textures()) uv_per_world = std::sqrt(std::abs(uv_det) / ng_len);
     sp.uv1 = mesh.uvs1.empty() ? sp.uv : mesh.uvs1[idx[0]] * b0 + mesh.uvs1[idx[1]] * b1 + mesh.uvs1[idx[2]] * b2;
     // Tangent: from the mesh when given, else along dp/du (with the handedness of dp/dv); none is needed for an
     // isotropic material without a normal map.
-    const bool needs_tangent = !material->isotropic || material->normal_map || material->coat_normal_map;
+    const bool needs_tangent = !material->isotropic() || material->normal_map() || material->coat_normal_map();
     Vec3 tangent;
     if (!needs_tangent) {
       sp.frame = Frame::from_normal(ns);
@@ -257,12 +257,12 @@ void Scene::interaction(const Ray& ray, const RayHit& hit, SurfaceInteraction* s
     sp.uv_footprint = cone->width_at(hit.t * dir_len) / std::sqrt(std::max(cos_hit, 1.0f / 64)) * uv_per_world;
   }
   sp.coat_normal = Vec3(0, 0, 0);
-  if (si->material->coat_normal_map) {
+  if (si->material->coat_normal_map()) {
     // From the frame before the base's normal map bends it.
-    const Vec3 n = mapped_normal(*si->material->coat_normal_map, si->material->coat_normal_scale, sp);
+    const Vec3 n = mapped_normal(*si->material->coat_normal_map(), si->material->coat_normal_scale(), sp);
     if (length_squared(n) > 0) sp.coat_normal = keep_reflection_above_surface(n, sp.ng, -ray.dir);
   }
-  if (si->material->normal_map) apply_normal_map(*si->material, -ray.dir, &sp);
+  if (si->material->normal_map()) apply_normal_map(*si->material, -ray.dir, &sp);
 }
 
 Vec3 keep_reflection_above_surface(const Vec3& n, const Vec3& ng, const Vec3& wo_in) {
@@ -306,7 +306,7 @@ Vec3 mapped_normal(const Texture& map, float scale, const ShadingPoint& sp) {
 }
 
 void apply_normal_map(const Material& material, const Vec3& wo, ShadingPoint* sp) {
-  const Vec3 n = mapped_normal(*material.normal_map, material.normal_scale, *sp);
+  const Vec3 n = mapped_normal(*material.normal_map(), material.normal_scale(), *sp);
   if (length_squared(n) > 0)
     sp->frame = Frame::from_normal_tangent(keep_reflection_above_surface(n, sp->ng, wo), sp->frame.s);
 }
@@ -314,7 +314,7 @@ void apply_normal_map(const Material& material, const Vec3& wo, ShadingPoint* sp
 bool Scene::has_scattering_media() const {
   if (medium && medium->scatters()) return true;
   return std::any_of(materials.begin(), materials.end(),
-                     [](const auto& m) { return m->interior && m->interior->scatters(); });
+                     [](const auto& m) { return m->interior() && m->interior()->scatters(); });
 }
 
 Vec3 offset_ray_origin(const Vec3& p, const Vec3& ng, const Vec3& dir) {

@@ -387,7 +387,7 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
       const std::string& name = obj["material"].get_ref<const std::string&>();
       const json& material_doc = (*material_docs)[name];
       const std::string type = material_doc.value("type", std::string());
-      if (scene->materials[material]->interior && !material_doc.contains("attenuation_color") &&
+      if (scene->materials[material]->interior() && !material_doc.contains("attenuation_color") &&
           !material_doc.contains("attenuation_distance"))
         throw SceneError(mp, "the material \"" + name +
                                  "\" has subsurface parameters, an interior medium of its own: give the object a "
@@ -400,12 +400,11 @@ std::shared_ptr<Scene> load_scene(const json& doc, const std::string& pointer, c
         throw SceneError(mp, "the material \"" + name +
                                  "\" has attenuation_color or attenuation_distance, an absorbing interior of its own: "
                                  "give the object a medium or the material an attenuation, not both");
-      std::shared_ptr<const Medium> interior = load_medium(*m, mp, options, true);
-      std::unique_ptr<Material> own =
-          MaterialRegistry::builtin().create(material_doc, at(at(pointer, "materials"), name), mctx);
-      own->interior = std::move(interior);
+      Material::Common enclosing;
+      enclosing.interior = load_medium(*m, mp, options, true);
       material = static_cast<uint32_t>(scene->materials.size());
-      scene->materials.push_back(std::move(own));
+      scene->materials.push_back(MaterialRegistry::builtin().create(material_doc, at(at(pointer, "materials"), name),
+                                                                    mctx, std::move(enclosing)));
       scene->material_names.push_back(name);
     }
     if (s == "sphere") {

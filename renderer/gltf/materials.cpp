@@ -372,7 +372,63 @@ json spec_gloss_to_metal_rough(json& doc, const json& material,
   return out;
 }
 
-namespace {}  // namespace
+namespace {
+
+// The common parameters of glTF material `m` (its JSON `mj`) that tessera's material JSON has no keys for: coverage,
+// the normal maps and the volume's absorption (MaterialRegistry::create takes them).
+Material::Common common_parameters(const json& doc, const json& mj, const tinygltf::Material& m,
+                                   const std::string& pointer, const MaterialContext& mctx,
+                                   std::vector<std::string>* warnings) {
+  Material::Common common;
+  // Coverage (spec 3.9.4): base colour alpha (factor times texture alpha); MASK against alphaCutoff, BLEND
+  // stochastically.
+  if (m.alphaMode == "MASK" || m.alphaMode == "BLEND") {
+    common.alpha_mode = m.alphaMode == "MASK" ? Material::AlphaMode::kMask : Material::AlphaMode::kBlend;
+    common.alpha_cutoff = static_cast<float>(m.alphaCutoff);
+    const json pbr = mj.value("pbrMetallicRoughness", json::object());
+    double a = pbr.contains("baseColorFactor") && pbr["baseColorFactor"].size() == 4
+                   ? pbr["baseColorFactor"][3].get<double>()
+                   : 1.0;
+    json tex = texture_param(doc, pbr.value("baseColorTexture", json()), 3, false, std::clamp(a, 0.0, 1.0), nullptr);
+    json holder = {{"alpha", tex.is_null() ? json(std::clamp(a, 0.0, 1.0)) : tex}};
+    common.alpha = params::float_param(holder, "alpha", pointer, 1.0f, 0.0f, 1.0f, mctx);
+  }
+  // Normal map (spec 3.9.3): tangent-space, linear, scaled in x and y.
+  if (mj.contains("normalTexture")) {
+    json tex = texture_param(doc, mj["normalTexture"], -1, false, json{1, 1, 1}, warnings);
+    if (!tex.is_null()) {
+      json holder = {{"normal", tex}};
+      common.normal_map = params::rgb_param(holder, "normal", pointer, Rgb(1), 0.0f, 1.0f, mctx).texture;
+      common.normal_scale = static_cast<float>(mj["normalTexture"].value("scale", 1.0));
+    }
+  }
+  // KHR_materials_clearcoat's clearcoatNormalTexture: the coat's own normal map, read like normalTexture.
+  if (const json ext_cc = parse_extensions(m.extensions_json_string).value("KHR_materials_clearcoat", json());
+      ext_cc.is_object() && ext_cc.contains("clearcoatNormalTexture")) {
+    json tex = texture_param(doc, ext_cc["clearcoatNormalTexture"], -1, false, json{1, 1, 1}, warnings);
+    if (!tex.is_null()) {
+      json holder = {{"normal", tex}};
+      common.coat_normal_map = params::rgb_param(holder, "normal", pointer, Rgb(1), 0.0f, 1.0f, mctx).texture;
+      common.coat_normal_scale = static_cast<float>(ext_cc["clearcoatNormalTexture"].value("scale", 1.0));
+    }
+  }
+  // KHR_materials_volume: absorption through the object (thickness is a rasteriser's stand-in; a path tracer
+  // measures the real distance travelled inside the geometry).
+  json ext = parse_extensions(m.extensions_json_string);
+  if (ext.contains("KHR_materials_volume")) {
+    const json& v = ext["KHR_materials_volume"];
+    double distance = v.value("attenuationDistance", 0.0);
+    json color = v.value("attenuationColor", json{1, 1, 1});
+    if (color.is_array() && color.size() == 3) {
+      double rgb[3];
+      for (int c = 0; c < 3; ++c) rgb[c] = color[c].is_number() ? color[c].get<double>() : 1.0;
+      common.interior = absorbing_medium(rgb, distance);
+    }
+  }
+  return common;
+}
+
+}  // namespace
 
 Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<const ImagePixels>> images) {
   json& doc = import.doc;
@@ -411,54 +467,8 @@ Materials make_materials(Import& import, std::map<std::string, std::shared_ptr<c
     }
     material_index[i] = static_cast<uint32_t>(scene.materials.size());
     const std::string mp = pointer + "/materials/" + std::to_string(i);
-    std::unique_ptr<Material> material = registry.create(params, mp, mctx);
-    // Coverage (spec 3.9.4): base colour alpha (factor times texture alpha); MASK against alphaCutoff, BLEND
-    // stochastically.
-    if (m.alphaMode == "MASK" || m.alphaMode == "BLEND") {
-      material->alpha_mode = m.alphaMode == "MASK" ? Material::AlphaMode::kMask : Material::AlphaMode::kBlend;
-      material->alpha_cutoff = static_cast<float>(m.alphaCutoff);
-      const json pbr = mj.value("pbrMetallicRoughness", json::object());
-      double a = pbr.contains("baseColorFactor") && pbr["baseColorFactor"].size() == 4
-                     ? pbr["baseColorFactor"][3].get<double>()
-                     : 1.0;
-      json tex = texture_param(doc, pbr.value("baseColorTexture", json()), 3, false, std::clamp(a, 0.0, 1.0), nullptr);
-      json holder = {{"alpha", tex.is_null() ? json(std::clamp(a, 0.0, 1.0)) : tex}};
-      material->alpha = params::float_param(holder, "alpha", mp, 1.0f, 0.0f, 1.0f, mctx);
-    }
-    // Normal map (spec 3.9.3): tangent-space, linear, scaled in x and y.
-    if (mj.contains("normalTexture")) {
-      json tex = texture_param(doc, mj["normalTexture"], -1, false, json{1, 1, 1}, &import.result.warnings);
-      if (!tex.is_null()) {
-        json holder = {{"normal", tex}};
-        material->normal_map = params::rgb_param(holder, "normal", mp, Rgb(1), 0.0f, 1.0f, mctx).texture;
-        material->normal_scale = static_cast<float>(mj["normalTexture"].value("scale", 1.0));
-      }
-    }
-    // KHR_materials_clearcoat's clearcoatNormalTexture: the coat's own normal map, read like normalTexture.
-    if (const json ext_cc = parse_extensions(m.extensions_json_string).value("KHR_materials_clearcoat", json());
-        ext_cc.is_object() && ext_cc.contains("clearcoatNormalTexture")) {
-      json tex =
-          texture_param(doc, ext_cc["clearcoatNormalTexture"], -1, false, json{1, 1, 1}, &import.result.warnings);
-      if (!tex.is_null()) {
-        json holder = {{"normal", tex}};
-        material->coat_normal_map = params::rgb_param(holder, "normal", mp, Rgb(1), 0.0f, 1.0f, mctx).texture;
-        material->coat_normal_scale = static_cast<float>(ext_cc["clearcoatNormalTexture"].value("scale", 1.0));
-      }
-    }
-    // KHR_materials_volume: absorption through the object (thickness is a rasteriser's stand-in; a path tracer
-    // measures the real distance travelled inside the geometry).
-    json ext = parse_extensions(m.extensions_json_string);
-    if (ext.contains("KHR_materials_volume")) {
-      const json& v = ext["KHR_materials_volume"];
-      double distance = v.value("attenuationDistance", 0.0);
-      json color = v.value("attenuationColor", json{1, 1, 1});
-      if (color.is_array() && color.size() == 3) {
-        double rgb[3];
-        for (int c = 0; c < 3; ++c) rgb[c] = color[c].is_number() ? color[c].get<double>() : 1.0;
-        material->interior = absorbing_medium(rgb, distance);
-      }
-    }
-    scene.materials.push_back(std::move(material));
+    Material::Common common = common_parameters(doc, mj, m, mp, mctx, &import.result.warnings);
+    scene.materials.push_back(registry.create(params, mp, mctx, std::move(common)));
     scene.material_names.push_back(m.name.empty() ? "gltf:" + std::to_string(i) : m.name);
   }
   return out;

@@ -131,7 +131,7 @@ const Medium* medium_towards(const Context& c, const Vertex& v, const Vec3& w) {
   }
   if ((dot(w, v.ng) > 0) == (dot(v.wo, v.ng) > 0)) return v.medium;
   MediumTracker beyond = MediumTracker::starting_in(v.medium, c.scene.medium.get());
-  beyond.refract(dot(v.wo, v.ng) > 0, v.material->interior.get());
+  beyond.refract(dot(v.wo, v.ng) > 0, v.material->interior());
   return beyond.current();
 }
 
@@ -226,7 +226,7 @@ void camera_features(const Vertex* camera, int n, SurfaceFeatures* f) {
       return;
     }
     if (v.kind != VertexKind::kSurface) return;
-    const bool crossing = v.material->index_matched;
+    const bool crossing = v.material->index_matched();
     if (straight && !crossing) {
       note_surface(*f, v.sp, v.object, v.material_index, v.bsdf, length(v.p - camera[0].p));
       straight = false;
@@ -373,11 +373,11 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_surf
       }
       break;
     }
-    if (si.material->index_matched) {
+    if (si.material->index_matched()) {
       // An index-matched boundary is crossed straight on into the medium beyond, without a vertex.
       if (volume_steps >= c.settings.max_volume_depth) break;
       ++volume_steps;
-      medium.refract(si.sp.front_face, si.material->interior.get());
+      medium.refract(si.sp.front_face, si.material->interior());
       ray.origin = offset_ray_origin(si.sp.p, si.sp.ng, ray.dir);
       ray.tmin = 0;
       ray.tmax = kInfinity;
@@ -388,7 +388,7 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_surf
     v.kind = VertexKind::kSurface;
     v.medium = current;
     si.sp.wavelength_nm = wavelength_nm;
-    v.dispersed = prev.dispersed || si.material->dispersive;
+    v.dispersed = prev.dispersed || si.material->dispersive();
     v.volume = prev.volume;
     v.p = si.sp.p;
     v.ng = si.sp.ng;
@@ -430,7 +430,7 @@ int random_walk(const Context& c, Ray ray, Rgb beta, float pdf_dir, int max_surf
     }
     if (transmit) {
       if (mode == TransportMode::kRadiance) eta_scale *= sqr(bs->eta);
-      medium.refract(si.sp.front_face, si.material->interior.get());
+      medium.refract(si.sp.front_face, si.material->interior());
     }
     prev.pdf_rev = to_area(pdf_rev, v, prev);
     if (!survives_roulette(c, n, beta, eta_scale, beta_ref, u_rr)) break;

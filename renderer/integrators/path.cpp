@@ -44,7 +44,7 @@ Rgb direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& b
   const Ray shadow = shadow_ray_to_light(si.sp.p, si.sp.ng, ls, time);
   // The shadow ray starts in the medium on the light's side of the surface.
   MediumTracker beyond = medium;
-  if (light_transmits) beyond.refract(si.sp.front_face, si.material->interior.get());
+  if (light_transmits) beyond.refract(si.sp.front_face, si.material->interior());
   const Rgb tr = shadow_transmittance(scene, shadow, beyond, max_crossings, rng, counters);
   if (is_black(tr)) return {};
   const float w = weigh ? power_heuristic(ls.pdf, bsdf_pdf) : 1.0f;
@@ -331,12 +331,12 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
         }
       }
     }
-    if (si.material->index_matched) {
+    if (si.material->index_matched()) {
       // An index-matched boundary: the path crosses it straight on into the medium beyond, not a bounce.
       if (volume_depth >= settings.max_volume_depth) break;
       ++volume_depth;
       if (features && straight) travelled += si.t * length(ray.dir);
-      medium.refract(si.sp.front_face, si.material->interior.get());
+      medium.refract(si.sp.front_face, si.material->interior());
       note_walk_surface(medium, si.sp.ng, ray.dir, walk_normal);
       cone.width = cone.width_at(si.t * length(ray.dir));
       ray.origin = offset_ray_origin(si.sp.p, si.sp.ng, ray.dir);
@@ -347,7 +347,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     if (depth >= settings.max_depth) break;
     if (wavelength) {
       si.sp.wavelength_nm = wavelength->lambda_nm;
-      if (si.material->dispersive && !dispersed) {
+      if (si.material->dispersive() && !dispersed) {
         throughput *= wavelength->weight;
         dispersed = true;
       }
@@ -416,7 +416,7 @@ Rgb trace_path(const Scene& scene, const Ray& camera_ray, const PrimaryHit* prim
     if (!is_finite(throughput)) break;
     if (transmit) {
       eta_scale *= sqr(bs->eta);
-      medium.refract(si.sp.front_face, si.material->interior.get());
+      medium.refract(si.sp.front_face, si.material->interior());
     }
     note_walk_surface(medium, si.sp.ng, wi_world, walk_normal);
     // The cone goes on from its width here. A lobe of density p spreads over a solid angle of about 1/p, a cone of

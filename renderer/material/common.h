@@ -35,8 +35,8 @@ inline float power_cosine_pdf(float cos_theta, float exponent) {
 }
 
 // The `interface` material (interface.cpp): an index-matched boundary that is not drawn, for models whose surface is
-// one.
-std::unique_ptr<Material> make_interface_material();
+// one, enclosing `interior` (null: none).
+std::unique_ptr<Material> make_interface_material(std::shared_ptr<const Medium> interior = nullptr);
 
 // Roughness parameters of a microfacet model: "distribution" ("ggx" | "beckmann"), "roughness" (isotropic alpha)
 // or "alpha_x" / "alpha_y" (anisotropic, along the tangent / bitangent), texture-able.

@@ -195,20 +195,20 @@ class ThinDielectricBsdf final : public Bsdf {
 
 class DielectricMaterial final : public Material {
  public:
-  DielectricMaterial(bool thin, RoughnessParams rough, float ior, float dispersion, RgbParam kr, RgbParam kt)
-      : thin_(thin),
+  DielectricMaterial(bool thin, RoughnessParams rough, float ior, float dispersion, RgbParam kr, RgbParam kt,
+                     std::shared_ptr<const Medium> interior = nullptr)
+      : Material(Traits{.dispersive = dispersion > 0}, Common{.interior = std::move(interior)}),
+        thin_(thin),
         rough_(std::move(rough)),
         ior_(ior),
         dispersion_(dispersion),
         kr_(std::move(kr)),
-        kt_(std::move(kt)) {
-    dispersive = dispersion_ > 0;
-  }
+        kt_(std::move(kt)) {}
   const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
     if (thin_) return arena.make<ThinDielectricBsdf>(ior_, kr_.eval(sp), kt_.eval(sp));
     // Dispersion: the index at the path's wavelength (spectrum.h); without one (no wavelength drawn), at the d line.
     float eta = ior_;
-    if (dispersive && sp.wavelength_nm > 0)
+    if (dispersive() && sp.wavelength_nm > 0)
       eta = keep_refracting(spectrum::dispersive_ior(ior_, dispersion_, sp.wavelength_nm));
     return arena.make<DielectricBsdf>(rough_.at(sp), eta, kr_.eval(sp), kt_.eval(sp));
   }
@@ -240,17 +240,11 @@ MaterialFactory dielectric_factory(bool thin) {
 std::unique_ptr<Material> make_subsurface(const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
   const SubsurfaceParams sss = read_subsurface(j, ptr, false);
   const float ior = params::number(j, "ior", ptr, 1.5f, 1.0f, 4.0f);
-  std::unique_ptr<Material> m;
-  if (ior == 1) {
-    m = make_interface_material();
-  } else {
-    RgbParam white;
-    white.value = Rgb(1);
-    m = std::make_unique<DielectricMaterial>(false, read_roughness(j, ptr, ctx, 0.0f, false), keep_refracting(ior),
-                                             0.0f, white, white);
-  }
-  m->interior = subsurface_medium(sss);
-  return m;
+  if (ior == 1) return make_interface_material(subsurface_medium(sss));
+  RgbParam white;
+  white.value = Rgb(1);
+  return std::make_unique<DielectricMaterial>(false, read_roughness(j, ptr, ctx, 0.0f, false), keep_refracting(ior),
+                                              0.0f, white, white, subsurface_medium(sss));
 }
 
 }  // namespace

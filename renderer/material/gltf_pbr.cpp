@@ -618,8 +618,8 @@ class GltfPbrBsdf final : public Bsdf {
   }
 };
 
-class GltfPbrMaterial final : public Material {
- public:
+// The parameters of a gltf_pbr, as its factory reads them.
+struct GltfPbrParams {
   RgbParam base_color, specular_color, sheen_color;
   FloatParam metallic, roughness, specular, transmission, clearcoat, clearcoat_roughness, sheen_roughness;
   FloatParam anisotropy;            // KHR_materials_anisotropy: anisotropyStrength (times the texture's B)
@@ -635,7 +635,7 @@ class GltfPbrMaterial final : public Material {
   float ior = 1.5f;
   bool solid = false;           // "thin_walled": false, and an index that refracts
   float subsurface_weight = 0;  // a solid's share of the dielectric base that is its subsurface volume (interior)
-  float dispersion = 0;         // KHR_materials_dispersion: 20 / V_d, a solid's only (Material::dispersive)
+  float dispersion = 0;         // KHR_materials_dispersion: 20 / V_d, a solid's only (Material::Traits::dispersive)
   // The film's f0 bound (film_f0_bound), worked out once where nothing it depends on varies over the surface.
   Rgb film_bound{-1, -1, -1};
   // metallic's and roughness's textures as one RGB lookup, when they read channels of the same image.
@@ -654,6 +654,13 @@ class GltfPbrMaterial final : public Material {
     const float t = clamp(iridescence_thickness.eval(sp), 0.0f, 1.0f);
     return iridescence_thickness_min + (iridescence_thickness_max - iridescence_thickness_min) * t;
   }
+};
+
+// The material reads its parameters as members of its own (a private base).
+class GltfPbrMaterial final : public Material, private GltfPbrParams {
+ public:
+  GltfPbrMaterial(GltfPbrParams params, Traits traits, std::shared_ptr<const Medium> interior)
+      : Material(traits, Common{.interior = std::move(interior)}), GltfPbrParams(std::move(params)) {}
 
   const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
     GltfLobes l;
@@ -675,7 +682,7 @@ class GltfPbrMaterial final : public Material {
     l.alpha_t = rt * rt;
     // A dispersive solid refracts, and reflects, by its index at the path's wavelength (spectrum.h).
     float eta = ior, f0 = f0_ior;
-    if (dispersive && sp.wavelength_nm > 0) {
+    if (dispersive() && sp.wavelength_nm > 0) {
       eta = std::max(spectrum::dispersive_ior(ior, dispersion, sp.wavelength_nm), 1.001f);
       f0 = f0_from_ior(eta);
     }
@@ -733,11 +740,11 @@ class GltfPbrMaterial final : public Material {
 };
 
 // The subsurface lobe of a gltf_pbr with subsurface_weight above 0: a solid's interior becomes the subsurface medium
-// (subsurface.h), entered through the transmission lobe's interface. A thin-walled surface has no interior: its
-// subsurface falls back to diffuse transmission of subsurface_color (as glTF's KHR_materials_volume_scatter does
-// without KHR_materials_volume).
-void read_subsurface_lobe(const nlohmann::json& j, const std::string& ptr, const SubsurfaceParams& sss,
-                          bool thin_walled, GltfPbrMaterial& m) {
+// (subsurface.h, returned), entered through the transmission lobe's interface. A thin-walled surface has no interior
+// (null): its subsurface falls back to diffuse transmission of subsurface_color (as glTF's
+// KHR_materials_volume_scatter does without KHR_materials_volume).
+std::shared_ptr<const Medium> read_subsurface_lobe(const nlohmann::json& j, const std::string& ptr,
+                                                   const SubsurfaceParams& sss, bool thin_walled, GltfPbrParams& m) {
   if (thin_walled) {
     if (j.contains("diffuse_transmission") || j.contains("diffuse_transmission_color"))
       throw SceneError(ptr + "/subsurface_weight",
@@ -745,76 +752,77 @@ void read_subsurface_lobe(const nlohmann::json& j, const std::string& ptr, const
                        "diffuse_transmission or subsurface_weight, not both");
     m.diffuse_transmission.value = sss.weight;
     m.diffuse_transmission_color.value = sss.color;
-    return;
+    return nullptr;
   }
   if (!m.solid)
     throw SceneError(ptr + "/ior",
                      "subsurface on a solid gltf_pbr is entered by refraction and needs an ior above 1.001; the "
                      "subsurface material has an index-matched boundary (ior 1)");
   m.subsurface_weight = sss.weight;
-  m.interior = subsurface_medium(sss);
+  return subsurface_medium(sss);
 }
 
 }  // namespace
 
 void register_gltf_pbr(MaterialRegistry& registry) {
   registry.add("gltf_pbr", [](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
-    auto m = std::make_unique<GltfPbrMaterial>();
-    m->isotropic = true;  // isotropic unless anisotropic (below); a normal map (set later by the loader) gets a tangent
-    m->base_color = params::rgb_param(j, "base_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
-    m->metallic = params::float_param(j, "metallic", ptr, 1.0f, 0.0f, 1.0f, ctx);
-    m->roughness = params::float_param(j, "roughness", ptr, 1.0f, 0.0f, 1.0f, ctx);
-    if (m->metallic.texture && m->roughness.texture)
-      m->metallic_roughness = make_shared_channels_texture(m->metallic.texture.get(), m->roughness.texture.get(),
-                                                           &m->metallic_channel, &m->roughness_channel);
+    GltfPbrParams p;
+    p.base_color = params::rgb_param(j, "base_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
+    p.metallic = params::float_param(j, "metallic", ptr, 1.0f, 0.0f, 1.0f, ctx);
+    p.roughness = params::float_param(j, "roughness", ptr, 1.0f, 0.0f, 1.0f, ctx);
+    if (p.metallic.texture && p.roughness.texture)
+      p.metallic_roughness = make_shared_channels_texture(p.metallic.texture.get(), p.roughness.texture.get(),
+                                                          &p.metallic_channel, &p.roughness_channel);
     float ior = params::number(j, "ior", ptr, 1.5f, 1.0f, 4.0f);
-    m->f0_ior = f0_from_ior(ior);
-    m->transmission_roughness_scale = clamp(2 * ior - 2, 0.0f, 1.0f);
-    m->ior = ior;
+    p.f0_ior = f0_from_ior(ior);
+    p.transmission_roughness_scale = clamp(2 * ior - 2, 0.0f, 1.0f);
+    p.ior = ior;
     // An index within 0.1 % of 1 bends rays by less than a few hundredths of a degree and makes the refraction half
     // vector (Walter 2007, eq. 16) degenerate: such a volume is drawn thin-walled.
     // Subsurface makes a solid unless the surface is said to be thin-walled.
     const SubsurfaceParams sss = read_subsurface(j, ptr, true);
     const bool thin_walled = params::boolean(j, "thin_walled", ptr, !(sss.weight > 0));
-    m->solid = !thin_walled && ior > 1.001f;
+    p.solid = !thin_walled && ior > 1.001f;
     // Dispersion parts the colours of light refracted through a solid; a thin wall lets light out as it came in.
-    m->dispersion = params::number(j, "dispersion", ptr, 0.0f, 0.0f, 100.0f);
-    m->dispersive = m->solid && m->dispersion > 0;
-    m->specular = params::float_param(j, "specular", ptr, 1.0f, 0.0f, 1.0f, ctx);
-    m->specular_color = params::rgb_param(j, "specular_color", ptr, Rgb(1), 0.0f, 1e3f, ctx);
-    m->transmission = params::float_param(j, "transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);
-    m->clearcoat = params::float_param(j, "clearcoat", ptr, 0.0f, 0.0f, 1.0f, ctx);
-    m->clearcoat_roughness = params::float_param(j, "clearcoat_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
-    m->sheen_color = params::rgb_param(j, "sheen_color", ptr, Rgb(0), 0.0f, 1.0f, ctx);
-    m->sheen_roughness = params::float_param(j, "sheen_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
-    m->diffuse_transmission = params::float_param(j, "diffuse_transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);
-    m->diffuse_transmission_color = params::rgb_param(j, "diffuse_transmission_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
-    if (sss.weight > 0) read_subsurface_lobe(j, ptr, sss, thin_walled, *m);
-    m->iridescence = params::float_param(j, "iridescence", ptr, 0.0f, 0.0f, 1.0f, ctx);
-    m->iridescence_ior = params::number(j, "iridescence_ior", ptr, 1.3f, 1.0f, 4.0f);
-    m->iridescence_thickness = params::float_param(j, "iridescence_thickness", ptr, 1.0f, 0.0f, 1.0f, ctx);
-    m->iridescence_thickness_min = params::number(j, "iridescence_thickness_minimum", ptr, 100.0f, 0.0f, 1e4f);
-    m->iridescence_thickness_max = params::number(j, "iridescence_thickness_maximum", ptr, 400.0f, 0.0f, 1e4f);
-    m->anisotropy = params::float_param(j, "anisotropy", ptr, 0.0f, 0.0f, 1.0f, ctx);
-    m->anisotropy_direction = params::rgb_param(j, "anisotropy_direction", ptr, Rgb(1, 0.5f, 1), 0.0f, 1.0f, ctx);
+    p.dispersion = params::number(j, "dispersion", ptr, 0.0f, 0.0f, 100.0f);
+    const bool dispersive = p.solid && p.dispersion > 0;
+    p.specular = params::float_param(j, "specular", ptr, 1.0f, 0.0f, 1.0f, ctx);
+    p.specular_color = params::rgb_param(j, "specular_color", ptr, Rgb(1), 0.0f, 1e3f, ctx);
+    p.transmission = params::float_param(j, "transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    p.clearcoat = params::float_param(j, "clearcoat", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    p.clearcoat_roughness = params::float_param(j, "clearcoat_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    p.sheen_color = params::rgb_param(j, "sheen_color", ptr, Rgb(0), 0.0f, 1.0f, ctx);
+    p.sheen_roughness = params::float_param(j, "sheen_roughness", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    p.diffuse_transmission = params::float_param(j, "diffuse_transmission", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    p.diffuse_transmission_color = params::rgb_param(j, "diffuse_transmission_color", ptr, Rgb(1), 0.0f, 1.0f, ctx);
+    std::shared_ptr<const Medium> interior;
+    if (sss.weight > 0) interior = read_subsurface_lobe(j, ptr, sss, thin_walled, p);
+    p.iridescence = params::float_param(j, "iridescence", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    p.iridescence_ior = params::number(j, "iridescence_ior", ptr, 1.3f, 1.0f, 4.0f);
+    p.iridescence_thickness = params::float_param(j, "iridescence_thickness", ptr, 1.0f, 0.0f, 1.0f, ctx);
+    p.iridescence_thickness_min = params::number(j, "iridescence_thickness_minimum", ptr, 100.0f, 0.0f, 1e4f);
+    p.iridescence_thickness_max = params::number(j, "iridescence_thickness_maximum", ptr, 400.0f, 0.0f, 1e4f);
+    p.anisotropy = params::float_param(j, "anisotropy", ptr, 0.0f, 0.0f, 1.0f, ctx);
+    p.anisotropy_direction = params::rgb_param(j, "anisotropy_direction", ptr, Rgb(1, 0.5f, 1), 0.0f, 1.0f, ctx);
     const float rotation = params::number(j, "anisotropy_rotation", ptr, 0.0f, -1e3f, 1e3f);
-    m->aniso_rot_cos = std::cos(rotation);
-    m->aniso_rot_sin = std::sin(rotation);
+    p.aniso_rot_cos = std::cos(rotation);
+    p.aniso_rot_sin = std::sin(rotation);
     // A film of one thickness on a base of one f0: its bound once here rather than at every hit (7 film Fresnels).
-    if ((m->iridescence.texture || m->iridescence.value > 0) && !m->iridescence_thickness.texture &&
-        !m->specular.texture && !m->specular_color.texture && !m->dispersive) {
+    if ((p.iridescence.texture || p.iridescence.value > 0) && !p.iridescence_thickness.texture && !p.specular.texture &&
+        !p.specular_color.texture && !dispersive) {
       const ShadingPoint anywhere;  // the parameters are untextured: any point gives them
       float f90;
-      const Rgb f0 = m->dielectric_f0(m->f0_ior, anywhere, &f90);
-      m->film_bound = film_f0_bound(f0, f90, m->iridescence_ior, m->film_thickness(anywhere));
+      const Rgb f0 = p.dielectric_f0(p.f0_ior, anywhere, &f90);
+      p.film_bound = film_f0_bound(f0, f90, p.iridescence_ior, p.film_thickness(anywhere));
     }
-    // An anisotropic lobe needs the hit's tangent.
-    if (m->anisotropy.texture || m->anisotropy.value > 0) m->isotropic = false;
+    // An anisotropic lobe needs the hit's tangent (so does a normal map, which the hits see for themselves).
+    const bool isotropic = !p.anisotropy.texture && !(p.anisotropy.value > 0);
     // The albedo tables are computed once per process (0.1 s, and 0.2 s for sheen's): here, while the scene loads,
     // rather than on a render thread in the first pass, where the other render threads would wait for them.
     SchlickAlbedoTable::get();
-    if (m->sheen_color.texture || !is_black(m->sheen_color.value)) SheenAlbedoTable::get();
-    return m;
+    if (p.sheen_color.texture || !is_black(p.sheen_color.value)) SheenAlbedoTable::get();
+    return std::make_unique<GltfPbrMaterial>(
+        std::move(p), Material::Traits{.isotropic = isotropic, .dispersive = dispersive}, std::move(interior));
   });
 }
 

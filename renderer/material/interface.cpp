@@ -2,7 +2,7 @@
 // without turning, reflecting or losing anything (pbrt-v4's "interface" material; Pharr, Jakob and Humphreys,
 // Physically Based Rendering, 4th ed., §11.4). It is not drawn: it only marks where a medium begins and ends. Its BSDF
 // is the delta transmission straight on, f = delta(wi + wo) / |cos theta_i|; the path tracer steps through such
-// surfaces without a bounce (Material::index_matched), the other integrators see a specular transmission.
+// surfaces without a bounce (Material::Traits::index_matched), the other integrators see a specular transmission.
 #include "renderer/material/common.h"
 
 namespace tessera {
@@ -24,17 +24,15 @@ class PassThroughBsdf final : public Bsdf {
 
 class InterfaceMaterial final : public Material {
  public:
-  InterfaceMaterial() {
-    index_matched = true;
-    isotropic = true;
-  }
+  explicit InterfaceMaterial(std::shared_ptr<const Medium> interior)
+      : Material(Traits{.isotropic = true, .index_matched = true}, Common{.interior = std::move(interior)}) {}
   const Bsdf* bsdf(const ShadingPoint&, ScratchArena& arena) const override { return arena.make<PassThroughBsdf>(); }
 };
 
 }  // namespace
 
-std::unique_ptr<Material> make_interface_material() {
-  return std::make_unique<InterfaceMaterial>();
+std::unique_ptr<Material> make_interface_material(std::shared_ptr<const Medium> interior) {
+  return std::make_unique<InterfaceMaterial>(std::move(interior));
 }
 
 void register_interface(MaterialRegistry& registry) {

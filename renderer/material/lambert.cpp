@@ -30,7 +30,7 @@ class LambertBsdf final : public Bsdf {
 
 class LambertMaterial final : public Material {
  public:
-  explicit LambertMaterial(RgbParam albedo) : albedo_(std::move(albedo)) {}
+  explicit LambertMaterial(RgbParam albedo) : Material(Traits{.isotropic = true}), albedo_(std::move(albedo)) {}
   const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
     return arena.make<LambertBsdf>(albedo_.eval(sp));
   }
@@ -42,6 +42,7 @@ class LambertMaterial final : public Material {
 // A surface that only emits: it absorbs all light that reaches it.
 class EmissionMaterial final : public Material {
  public:
+  explicit EmissionMaterial(RgbParam radiance) : Material(Traits{}, Common{.emission = std::move(radiance)}) {}
   const Bsdf* bsdf(const ShadingPoint&, ScratchArena&) const override { return nullptr; }
 };
 
@@ -49,15 +50,11 @@ class EmissionMaterial final : public Material {
 
 void register_lambert(MaterialRegistry& registry) {
   registry.add("lambert", [](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
-    auto m = std::make_unique<LambertMaterial>(params::rgb_param(j, "albedo", ptr, Rgb(0.8f), 0.0f, 1.0f, ctx));
-    m->isotropic = true;
-    return m;
+    return std::make_unique<LambertMaterial>(params::rgb_param(j, "albedo", ptr, Rgb(0.8f), 0.0f, 1.0f, ctx));
   });
   registry.add("emission", [](const nlohmann::json& j, const std::string& ptr, const MaterialContext& ctx) {
-    auto m = std::make_unique<EmissionMaterial>();
     // "radiance" is the emission model's own name for the common "emission" key.
-    m->emission = params::rgb_param(j, "radiance", ptr, Rgb(1.0f), 0.0f, 1e9f, ctx);
-    return m;
+    return std::make_unique<EmissionMaterial>(params::rgb_param(j, "radiance", ptr, Rgb(1.0f), 0.0f, 1e9f, ctx));
   });
 }
 

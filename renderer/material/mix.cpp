@@ -79,9 +79,10 @@ const BlackBsdf kBlack;
 class MixMaterial final : public Material {
  public:
   MixMaterial(std::unique_ptr<Material> a, std::unique_ptr<Material> b, FloatParam w)
-      : a_(std::move(a)), b_(std::move(b)), w_(std::move(w)) {
-    dispersive = a_->dispersive || b_->dispersive;
-  }
+      : Material(Traits{.dispersive = a->dispersive() || b->dispersive()}),
+        a_(std::move(a)),
+        b_(std::move(b)),
+        w_(std::move(w)) {}
   const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
     float w = clamp(w_.eval(sp), 0.0f, 1.0f);
     const Bsdf* a = a_->bsdf(sp, arena);

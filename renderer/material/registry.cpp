@@ -31,8 +31,82 @@ const MaterialRegistry& MaterialRegistry::builtin() {
   return registry;
 }
 
+namespace {
+
+// True when any of the parameters is a texture: textures (and nested materials) are objects; numbers, colours and
+// names are not.
+bool any_texture(const nlohmann::json& params) {
+  return std::any_of(params.begin(), params.end(), [](const nlohmann::json& v) {
+    return v.is_object() || (v.is_array() && std::any_of(v.begin(), v.end(), [](const nlohmann::json& e) {
+                               return e.is_object() || e.is_array();
+                             }));
+  });
+}
+
+// The common keys of every model over `common` (the model's own): emission, a tangent-space normal map, and
+// absorption inside a closed transmissive object given as the colour white light takes after
+// "attenuation_distance" metres (as glTF's KHR_materials_volume).
+void read_common_keys(const nlohmann::json& params, const std::string& pointer, const MaterialContext& ctx,
+                      Material::Common& common) {
+  if (params.contains("emission")) {
+    common.emission = params::rgb_param(params, "emission", pointer, Rgb(0), 0.0f, 1e9f, ctx);
+  }
+  common.emission_one_sided = params::boolean(params, "one_sided", pointer, common.emission_one_sided);
+  if (auto it = params.find("normal_map"); it != params.end()) {
+    if (!it->is_object()) throw SceneError(pointer + "/normal_map", "must be a texture object");
+    nlohmann::json map = *it;
+    if (!map.contains("colorspace")) map["colorspace"] = "linear";
+    nlohmann::json holder = {{"normal_map", map}};
+    common.normal_map = params::rgb_param(holder, "normal_map", pointer, Rgb(1), 0.0f, 1.0f, ctx).texture;
+  }
+  common.normal_scale = params::number(params, "normal_scale", pointer, 1.0f, 0.0f, 10.0f);
+  if (params.contains("attenuation_distance") || params.contains("attenuation_color")) {
+    // A model that defines its interior (subsurface parameters) has no room for a second one.
+    if (common.interior)
+      throw SceneError(
+          pointer + (params.contains("attenuation_color") ? "/attenuation_color" : "/attenuation_distance"),
+          "this material's subsurface parameters define its interior medium: attenuation_color and "
+          "attenuation_distance (an absorbing interior) cannot be given with them");
+    const float distance = params::number(params, "attenuation_distance", pointer, 1.0f, 1e-6f, 1e9f);
+    const Rgb color = params::rgb(params, "attenuation_color", pointer, Rgb(1), 1e-6f, 1.0f);
+    const double rgb[3] = {color.x, color.y, color.z};
+    common.interior = absorbing_medium(rgb, distance);
+  }
+}
+
+// What the caller gave over `common`: each parameter it set (emission, coverage, a normal map, an interior) with
+// the values that go with it.
+void take_given(Material::Common given, const std::string& pointer, Material::Common& common) {
+  if (!is_black(given.emission.value)) {
+    common.emission = std::move(given.emission);
+    common.emission_one_sided = given.emission_one_sided;
+  }
+  if (given.alpha_mode != Material::AlphaMode::kOpaque) {
+    common.alpha_mode = given.alpha_mode;
+    common.alpha_cutoff = given.alpha_cutoff;
+    common.alpha = std::move(given.alpha);
+  }
+  if (given.normal_map) {
+    common.normal_map = std::move(given.normal_map);
+    common.normal_scale = given.normal_scale;
+  }
+  if (given.coat_normal_map) {
+    common.coat_normal_map = std::move(given.coat_normal_map);
+    common.coat_normal_scale = given.coat_normal_scale;
+  }
+  if (given.interior) {
+    if (common.interior)
+      throw SceneError(pointer,
+                       "this material has an interior medium of its own (subsurface parameters or "
+                       "attenuation_color and attenuation_distance): it cannot enclose another");
+    common.interior = std::move(given.interior);
+  }
+}
+
+}  // namespace
+
 std::unique_ptr<Material> MaterialRegistry::create(const nlohmann::json& params, const std::string& pointer,
-                                                   const MaterialContext& ctx) const {
+                                                   const MaterialContext& ctx, Material::Common given) const {
   if (!params.is_object()) throw SceneError(pointer, "a material must be an object");
   auto type_it = params.find("type");
   if (type_it == params.end() || !type_it->is_string())
@@ -45,38 +119,9 @@ std::unique_ptr<Material> MaterialRegistry::create(const nlohmann::json& params,
                                             proto::did_you_mean(type_it->get<std::string>(), known));
   }
   std::unique_ptr<Material> material = it->second(params, pointer, ctx);
-  // Textures (and nested materials) are objects; numbers, colours and names are not.
-  material->reads_textures = std::any_of(params.begin(), params.end(), [](const nlohmann::json& v) {
-    return v.is_object() || (v.is_array() && std::any_of(v.begin(), v.end(), [](const nlohmann::json& e) {
-                               return e.is_object() || e.is_array();
-                             }));
-  });
-  if (params.contains("emission")) {
-    material->emission = params::rgb_param(params, "emission", pointer, Rgb(0), 0.0f, 1e9f, ctx);
-  }
-  material->emission_one_sided = params::boolean(params, "one_sided", pointer, material->emission_one_sided);
-  // Common keys of every model: a tangent-space normal map, and absorption inside a closed transmissive object
-  // given as the colour white light takes after "attenuation_distance" metres (as glTF's KHR_materials_volume).
-  if (auto it = params.find("normal_map"); it != params.end()) {
-    if (!it->is_object()) throw SceneError(pointer + "/normal_map", "must be a texture object");
-    nlohmann::json map = *it;
-    if (!map.contains("colorspace")) map["colorspace"] = "linear";
-    nlohmann::json holder = {{"normal_map", map}};
-    material->normal_map = params::rgb_param(holder, "normal_map", pointer, Rgb(1), 0.0f, 1.0f, ctx).texture;
-  }
-  material->normal_scale = params::number(params, "normal_scale", pointer, 1.0f, 0.0f, 10.0f);
-  if (params.contains("attenuation_distance") || params.contains("attenuation_color")) {
-    // A model that defines its interior (subsurface parameters) has no room for a second one.
-    if (material->interior)
-      throw SceneError(
-          pointer + (params.contains("attenuation_color") ? "/attenuation_color" : "/attenuation_distance"),
-          "this material's subsurface parameters define its interior medium: attenuation_color and "
-          "attenuation_distance (an absorbing interior) cannot be given with them");
-    const float distance = params::number(params, "attenuation_distance", pointer, 1.0f, 1e-6f, 1e9f);
-    const Rgb color = params::rgb(params, "attenuation_color", pointer, Rgb(1), 1e-6f, 1.0f);
-    const double rgb[3] = {color.x, color.y, color.z};
-    material->interior = absorbing_medium(rgb, distance);
-  }
+  material->traits_.reads_textures = any_texture(params);
+  read_common_keys(params, pointer, ctx, material->common_);
+  take_given(std::move(given), pointer, material->common_);
   return material;
 }
 

@@ -46,9 +46,8 @@ class TwoSidedBsdf final : public Bsdf {
 
 class TwoSidedMaterial final : public Material {
  public:
-  explicit TwoSidedMaterial(std::unique_ptr<Material> inner) : inner_(std::move(inner)) {
-    dispersive = inner_->dispersive;
-  }
+  explicit TwoSidedMaterial(std::unique_ptr<Material> inner)
+      : Material(Traits{.dispersive = inner->dispersive()}), inner_(std::move(inner)) {}
   const Bsdf* bsdf(const ShadingPoint& sp, ScratchArena& arena) const override {
     const Bsdf* inner = inner_->bsdf(sp, arena);
     return inner ? arena.make<TwoSidedBsdf>(inner) : nullptr;

@@ -181,7 +181,7 @@ TEST(GltfMaterials, AnAnisotropicAssetImportsWithoutAWarningAndAsksForTangents) 
   std::filesystem::remove_all(dir);
   EXPECT_TRUE(imported.warnings.empty()) << imported.warnings.front();
   ASSERT_EQ(scene.materials.size(), 1u);
-  EXPECT_FALSE(scene.materials[0]->isotropic);  // the hit's tangent orients the lobe
+  EXPECT_FALSE(scene.materials[0]->isotropic());  // the hit's tangent orients the lobe
 }
 
 // KHR_materials_iridescence (the extension's specification): the factor (times the texture's R), the film's index,
@@ -253,7 +253,7 @@ TEST(GltfMaterials, DispersionIsReadAndDispersesASolid) {
   EXPECT_TRUE(warnings.empty());
   EXPECT_EQ(p["dispersion"], 0.36);
   MaterialContext ctx;
-  EXPECT_TRUE(MaterialRegistry::builtin().create(p, "/m", ctx)->dispersive);
+  EXPECT_TRUE(MaterialRegistry::builtin().create(p, "/m", ctx)->dispersive());
   // Without a volume the surface is thin-walled: read, not dispersive, and warned about, naming the material.
   json thin = solid;
   thin["extensions"].erase("KHR_materials_volume");
@@ -262,7 +262,7 @@ TEST(GltfMaterials, DispersionIsReadAndDispersesASolid) {
   ASSERT_EQ(warnings.size(), 1u);
   EXPECT_NE(warnings[0].find("\"gem\""), std::string::npos) << warnings[0];
   EXPECT_NE(warnings[0].find("KHR_materials_dispersion"), std::string::npos) << warnings[0];
-  EXPECT_FALSE(MaterialRegistry::builtin().create(q, "/m", ctx)->dispersive);
+  EXPECT_FALSE(MaterialRegistry::builtin().create(q, "/m", ctx)->dispersive());
   // The default, 0, is no dispersion.
   const json none =
       gltf::material_params(doc, {{"extensions", {{"KHR_materials_dispersion", json::object()}}}}, nullptr);
@@ -286,7 +286,7 @@ TEST(GltfMaterials, ADispersiveAssetImportsWithoutAWarning) {
   std::filesystem::remove_all(dir);
   EXPECT_TRUE(imported.warnings.empty()) << imported.warnings.front();
   ASSERT_EQ(scene.materials.size(), 1u);
-  EXPECT_TRUE(scene.materials[0]->dispersive);
+  EXPECT_TRUE(scene.materials[0]->dispersive());
 }
 
 // KHR_materials_diffuse_transmission (the extension's specification): the factor (times the texture's A, linear)

@@ -7,7 +7,9 @@
 #include <gtest/gtest.h>
 
 #include "renderer/material/material.h"
+#include "renderer/medium.h"
 #include "renderer/scene_error.h"
+#include "renderer/texture.h"
 
 namespace tessera {
 namespace {
@@ -134,6 +136,42 @@ TEST(MaterialRegistry, EveryModelBuildsABsdfAtItsDefaults) {
     ASSERT_NE(bsdf, nullptr) << t;
     EXPECT_NE(bsdf->flags(), 0u) << t;
   }
+}
+
+// A material's common parameters: the model's own, the JSON's common keys over them, and what the caller read
+// elsewhere over those; one interior only, whichever of the three defines it.
+TEST(MaterialRegistry, CommonParametersComeFromTheModelTheKeysAndTheCaller) {
+  const MaterialRegistry& registry = MaterialRegistry::builtin();
+  MaterialContext ctx;
+  const double white[3] = {1, 1, 1};
+  Material::Common given;
+  given.alpha_mode = Material::AlphaMode::kMask;
+  given.alpha_cutoff = 0.25f;
+  given.normal_map = make_checker_texture(Rgb(0.5f, 0.5f, 1), Rgb(0.5f, 0.5f, 1), 1);
+  given.normal_scale = 2;
+  given.interior = absorbing_medium(white, 1);
+  const Medium* medium = given.interior.get();
+  auto m = registry.create({{"type", "dielectric"}, {"emission", 2}}, "/m", ctx, given);
+  EXPECT_TRUE(m->emissive());
+  EXPECT_EQ(m->alpha_mode(), Material::AlphaMode::kMask);
+  EXPECT_EQ(m->alpha_cutoff(), 0.25f);
+  EXPECT_EQ(m->normal_scale(), 2.0f);
+  EXPECT_EQ(m->interior(), medium);
+  // The model's own: the emission model's radiance, a subsurface interior.
+  EXPECT_TRUE(registry.create({{"type", "emission"}}, "/m", ctx)->emissive());
+  EXPECT_NE(registry.create({{"type", "subsurface"}}, "/m", ctx)->interior(), nullptr);
+  // A second interior is refused, naming the material (or the attenuation key that gives it).
+  Material::Common enclosing;
+  enclosing.interior = absorbing_medium(white, 1);
+  for (const json& doc : {json{{"type", "subsurface"}}, json{{"type", "dielectric"}, {"attenuation_distance", 2}}}) {
+    try {
+      registry.create(doc, "/m", ctx, enclosing);
+      ADD_FAILURE() << doc.dump() << " took a second interior";
+    } catch (const SceneError& e) {
+      EXPECT_EQ(e.pointer(), "/m") << doc.dump();
+    }
+  }
+  EXPECT_THROW(registry.create({{"type", "subsurface"}, {"attenuation_distance", 2}}, "/m", ctx), SceneError);
 }
 
 }  // namespace

@@ -144,9 +144,9 @@ TEST_F(TextureTest, CheckerboardAndScalarChannels) {
 // parameter holds the texture (a model's own, the common emission and normal map, or a nested material's).
 TEST_F(TextureTest, MaterialsKnowWhetherTheyReadTextures) {
   const MaterialRegistry& registry = MaterialRegistry::builtin();
-  EXPECT_FALSE(registry.create({{"type", "lambert"}, {"albedo", {0.5, 0.4, 0.3}}}, "/m", ctx_)->reads_textures);
-  EXPECT_FALSE(registry.create({{"type", "conductor"}, {"roughness", 0.2}}, "/m", ctx_)->reads_textures);
-  EXPECT_FALSE(registry.create({{"type", "emission"}, {"radiance", 3}}, "/m", ctx_)->reads_textures);
+  EXPECT_FALSE(registry.create({{"type", "lambert"}, {"albedo", {0.5, 0.4, 0.3}}}, "/m", ctx_)->reads_textures());
+  EXPECT_FALSE(registry.create({{"type", "conductor"}, {"roughness", 0.2}}, "/m", ctx_)->reads_textures());
+  EXPECT_FALSE(registry.create({{"type", "emission"}, {"radiance", 3}}, "/m", ctx_)->reads_textures());
   const json textured[] = {
       {{"type", "lambert"}, {"albedo", {{"checker", {{"a", 0.9}, {"b", 0.1}}}}}},
       {{"type", "conductor"}, {"roughness", {{"texture", "sub/grey.exr"}, {"channel", 1}}}},
@@ -156,7 +156,7 @@ TEST_F(TextureTest, MaterialsKnowWhetherTheyReadTextures) {
        {"a", {{"type", "lambert"}, {"albedo", {{"checker", {{"a", 0.9}}}}}}},
        {"b", {{"type", "lambert"}}}},
   };
-  for (const json& m : textured) EXPECT_TRUE(registry.create(m, "/m", ctx_)->reads_textures) << m.dump();
+  for (const json& m : textured) EXPECT_TRUE(registry.create(m, "/m", ctx_)->reads_textures()) << m.dump();
 }
 
 TEST_F(TextureTest, PathsStayInsideTheAssetFolder) {

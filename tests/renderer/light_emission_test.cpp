@@ -76,7 +76,7 @@ TEST(LightEmission, AreaLightsEmitTheirClosedFormPower) {
   scene.spheres.push_back({Vec3(1, 0, 0), 0.5f, add_material(scene, {{"type", "emission"}, {"radiance", 2}}), 0, {}});
   scene.finalize();
   const auto& mat = *scene.materials[0];
-  expect_power(scene, (mat.emission_one_sided ? 1 : 2) * kPi * 4 * kPi * 0.25 * 2);
+  expect_power(scene, (mat.emission_one_sided() ? 1 : 2) * kPi * 4 * kPi * 0.25 * 2);
 }
 
 TEST(LightEmission, PunctualLightsEmitTheirClosedFormPower) {
