@@ -119,9 +119,13 @@ std::unique_ptr<Material> MaterialRegistry::create(const nlohmann::json& params,
                                             proto::did_you_mean(type_it->get<std::string>(), known));
   }
   std::unique_ptr<Material> material = it->second(params, pointer, ctx);
-  material->traits_.reads_textures = any_texture(params);
   read_common_keys(params, pointer, ctx, material->common_);
   take_given(std::move(given), pointer, material->common_);
+  // Textures the caller gave count as the JSON's do: a glTF material whose only texture is a normal map still has
+  // its hits' footprints worked out, for that map's filtering.
+  const Material::Common& c = material->common_;
+  material->traits_.reads_textures =
+      any_texture(params) || c.normal_map || c.coat_normal_map || c.alpha.texture || c.emission.texture;
   return material;
 }
 

@@ -157,6 +157,9 @@ TEST(MaterialRegistry, CommonParametersComeFromTheModelTheKeysAndTheCaller) {
   EXPECT_EQ(m->alpha_cutoff(), 0.25f);
   EXPECT_EQ(m->normal_scale(), 2.0f);
   EXPECT_EQ(m->interior(), medium);
+  // A texture the caller gave is read as the JSON's are: the hits' footprints are worked out for it.
+  EXPECT_TRUE(m->reads_textures());
+  EXPECT_FALSE(registry.create({{"type", "dielectric"}}, "/m", ctx)->reads_textures());
   // The model's own: the emission model's radiance, a subsurface interior.
   EXPECT_TRUE(registry.create({{"type", "emission"}}, "/m", ctx)->emissive());
   EXPECT_NE(registry.create({{"type", "subsurface"}}, "/m", ctx)->interior(), nullptr);
