@@ -217,6 +217,12 @@ std::string integrator_aov_problem(const std::string& name, std::string_view aov
 // light paths cannot be kept from the pixels that stopped.
 std::string integrator_adaptive_problem(const std::string& name);
 
+// What one pixel sample of the integrator `settings` names may cost, counted in path events for a job's work limit:
+// max_depth bounces off surfaces, and in a scene whose media scatter (`scattering`) up to max_volume_depth events in
+// media besides; BDPT joins every vertex of its camera subpath to every vertex of its light subpath, so its count is
+// those events squared. `formula` receives how it was counted ("(max_depth + max_volume_depth)^2"), for a refusal.
+double sample_work(const IntegratorSettings& settings, bool scattering, std::string* formula);
+
 // Adds every integrator the renderer ships to `registry` (one line per integrator in integrators/registry.cpp).
 void register_builtin_integrators(IntegratorRegistry& registry);
 

@@ -852,6 +852,13 @@ std::string integrator_adaptive_problem(const std::string& name) {
          "pixel's own samples do not measure its error; use path";
 }
 
+double sample_work(const IntegratorSettings& settings, bool scattering, std::string* formula) {
+  const double events = std::max(1, settings.max_depth) + (scattering ? settings.max_volume_depth : 0);
+  const bool pairs = settings.name == "bdpt";
+  *formula = std::string(scattering ? "(max_depth + max_volume_depth)" : "max_depth") + (pairs ? "^2" : "");
+  return pairs ? events * events : events;
+}
+
 void register_bidirectional(IntegratorRegistry& registry) {
   registry.add("light",
                [](const IntegratorSetup& setup) { return std::make_unique<BidirectionalIntegrator>(setup, true); });

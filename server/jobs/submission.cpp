@@ -87,25 +87,19 @@ class ErrorLocator final : public nlohmann::json_sax<json> {
 
 struct KeyTooLong {};
 
-// Refuses a job whose work is above `max_work` (0: no limit). The work is width x height x spp x the events one path
-// may have: max_depth bounces off surfaces, and in a scene whose media scatter, up to max_volume_depth scattering
-// events and boundary crossings besides (they do not count towards max_depth). BDPT joins every vertex of a sample's
-// camera subpath to every vertex of its light subpath: its work is the events squared.
+// Refuses a job whose work, width x height x spp x what one sample may cost (renderer's sample_work), is above
+// `max_work` (0: no limit).
 std::optional<Problem> check_work(const RenderJob& job, double max_work) {
   const RenderSettings& s = job.settings;
   const bool scatters = job.scene && job.scene->has_scattering_media();
-  const bool bdpt = s.integrator.name == "bdpt";
-  const int path_events = std::max(1, s.integrator.max_depth) + (scatters ? s.integrator.max_volume_depth : 0);
-  const double work =
-      static_cast<double>(s.width) * s.height * s.spp * path_events * (bdpt ? static_cast<double>(path_events) : 1.0);
+  std::string events;
+  const double work = static_cast<double>(s.width) * s.height * s.spp * sample_work(s.integrator, scatters, &events);
   if (max_work <= 0 || work <= max_work) return std::nullopt;
-  const std::string events = scatters ? "(max_depth + max_volume_depth)" : "max_depth";
-  const std::string formula = "width x height x spp x " + events + (bdpt ? "^2 (bdpt joins every pair)" : "") +
-                              (scatters ? ", in a scene whose media scatter," : "");
   return Problem{422,
-                 formula + " is " + std::to_string(static_cast<long long>(work)) + ", above this server's limit of " +
+                 "width x height x spp x " + events + (scatters ? ", in a scene whose media scatter," : "") + " is " +
+                     std::to_string(static_cast<long long>(work)) + ", above this server's limit of " +
                      std::to_string(static_cast<long long>(max_work)) + " (--max-work); lower the resolution, spp or " +
-                     (scatters ? "max_depth or max_volume_depth" : "max_depth") + (bdpt ? ", or use path" : ""),
+                     (scatters ? "max_depth or max_volume_depth" : "max_depth"),
                  "/render"};
 }
 
